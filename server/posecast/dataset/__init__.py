@@ -1,0 +1,1 @@
+"""Training data: canonical clips turned into trackers, features and contact labels."""

@@ -1,0 +1,1 @@
+"""Rotation conversions and forward kinematics (numpy; torch twins for training)."""

@@ -1,0 +1,1 @@
+"""Motion data in: BVH files, rig maps, retargeting onto the canonical skeleton."""

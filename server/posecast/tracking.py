@@ -1,0 +1,104 @@
+"""Tracker slots and the network's input features (paper Sec. 3).
+
+Four tracked points, in this slot order everywhere (wire, features, datasets):
+
+=====  ============  ======================
+slot   name          canonical joint
+=====  ============  ======================
+0      HEAD          ``Joint.HEAD``
+1      LEFT_HAND     ``Joint.LEFT_HAND``
+2      RIGHT_HAND    ``Joint.RIGHT_HAND``
+3      WAIST         ``Joint.PELVIS``
+=====  ============  ======================
+
+A tracker reports a world position (metres) and orientation (xyzw). Synthetic
+trackers for training sit exactly on their joints and take the joint's world
+rotation.
+
+Features: every tracker position is moved into the *character frame* (subtract the
+waist's X and Z, keep Y as height above the floor, turn by the inverse waist yaw),
+together with its velocity in that frame, in m/s. Per tracker ``[px py pz vx vy vz]``,
+4 x 6 = 24 values in slot order. The same function serves a whole clip and one live
+frame, so training and serving cannot drift apart.
+"""
+
+from __future__ import annotations
+
+from enum import IntEnum
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from posecast.geometry.rotations import mat2quat, quat2yaw, quat_apply, yaw2quat
+from posecast.skeleton import Joint
+
+
+class TrackerSlot(IntEnum):
+    HEAD = 0
+    LEFT_HAND = 1
+    RIGHT_HAND = 2
+    WAIST = 3
+
+
+NUM_TRACKERS = len(TrackerSlot)
+FEATURES_PER_TRACKER = 6
+NUM_FEATURES = NUM_TRACKERS * FEATURES_PER_TRACKER  # 24
+
+TRACKER_JOINT: dict[TrackerSlot, Joint] = {
+    TrackerSlot.HEAD: Joint.HEAD,
+    TrackerSlot.LEFT_HAND: Joint.LEFT_HAND,
+    TrackerSlot.RIGHT_HAND: Joint.RIGHT_HAND,
+    TrackerSlot.WAIST: Joint.PELVIS,
+}
+TRACKER_JOINT_INDEX: tuple[int, ...] = tuple(int(TRACKER_JOINT[s]) for s in TrackerSlot)
+
+FEATURE_NAMES: tuple[str, ...] = tuple(
+    f"{slot.name}.{kind}{axis}" for slot in TrackerSlot for kind in ("p", "v") for axis in "xyz"
+)
+
+F = NDArray[np.float64]
+
+
+def trackers_from_pose(world_mat: ArrayLike, world_pos: ArrayLike) -> tuple[F, F]:
+    """Synthetic trackers from a posed skeleton.
+
+    Args:
+        world_mat: ``(..., 19, 3, 3)``; world_pos: ``(..., 19, 3)``.
+
+    Returns:
+        ``(positions (..., 4, 3), orientations (..., 4, 4) xyzw)`` in slot order.
+    """
+    wm = np.asarray(world_mat)
+    wp = np.asarray(world_pos)
+    idx = list(TRACKER_JOINT_INDEX)
+    return wp[..., idx, :], mat2quat(wm[..., idx, :, :])
+
+
+def tracker_features(pos: ArrayLike, prev_pos: ArrayLike, waist_quat: ArrayLike, fps: float) -> F:
+    """Network input for one or many frames.
+
+    Args:
+        pos: ``(..., 4, 3)`` tracker positions this frame, metres.
+        prev_pos: ``(..., 4, 3)`` the previous frame's positions (pass ``pos`` for
+            the first frame: its velocity is zero).
+        waist_quat: ``(..., 4)`` the waist tracker's orientation this frame.
+        fps: frame rate the velocities are measured at (60 for the shipped model).
+
+    Returns:
+        ``(..., 24)`` features in :data:`FEATURE_NAMES` order.
+    """
+    p = np.asarray(pos, dtype=np.float64)
+    pp = np.asarray(prev_pos, dtype=np.float64)
+    inv_yaw = yaw2quat(-quat2yaw(waist_quat))[..., None, :]  # (..., 1, 4)
+    origin = p[..., TrackerSlot.WAIST : TrackerSlot.WAIST + 1, :].copy()
+    origin[..., 1] = 0.0
+    local = quat_apply(inv_yaw, p - origin)
+    vel = quat_apply(inv_yaw, (p - pp) * fps)
+    return np.concatenate([local, vel], axis=-1).reshape(*p.shape[:-2], NUM_FEATURES)
+
+
+def clip_features(pos: ArrayLike, quat: ArrayLike, fps: float) -> F:
+    """Features for a whole clip of trackers ``(F, 4, 3)`` / ``(F, 4, 4)`` -> ``(F, 24)``."""
+    p = np.asarray(pos, dtype=np.float64)
+    prev = np.concatenate([p[:1], p[:-1]], axis=0)
+    return tracker_features(p, prev, np.asarray(quat)[:, TrackerSlot.WAIST], fps)
