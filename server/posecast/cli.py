@@ -56,6 +56,69 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_train(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    torch_threads = args.threads
+    if args.network in ("cvae", "ae"):
+        from posecast.model.cvae import CVAEConfig
+        from posecast.train.cvae_trainer import CVAETrainConfig, train_cvae
+
+        det = args.network == "ae"
+        model_cfg = CVAEConfig(deterministic=det, encoder_sees_pose=not det)
+        cfg = CVAETrainConfig(threads=torch_threads, seed=args.seed)
+        if args.steps:
+            cfg = dataclasses.replace(cfg, steps=args.steps)
+        path = train_cvae(args.data, args.out, model_cfg, cfg, resume=args.resume)
+    else:
+        from posecast.train.anomaly_trainer import AnomalyTrainConfig, train_anomaly
+
+        acfg = AnomalyTrainConfig(threads=torch_threads, seed=args.seed)
+        if args.steps:
+            acfg = dataclasses.replace(acfg, steps=args.steps)
+        path = train_anomaly(args.data, args.out, acfg, resume=args.resume)
+    print(f"checkpoint: {path}")
+    return 0
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from posecast.train.export import export_all, mean_pose_rot6d
+
+    extra = {}
+    if args.data is not None:
+        extra["cvae_decoder"] = {"mean_pose_rot6d": mean_pose_rot6d(args.data)}
+    for path in export_all(args.out, args.cvae, args.ae, args.anomaly, extra):
+        print(f"wrote {path}")
+    return 0
+
+
+def _cmd_eval(args: argparse.Namespace) -> int:
+    import json
+
+    from posecast.evaluation.runner import VARIANTS, evaluate, format_table
+
+    if args.bvh is not None:
+        from posecast.dataset.prepare import find_bvh_files, process_file
+        from posecast.motion.rig import load_rigs
+
+        rigs = load_rigs()
+        clips = [process_file(p, rigs)[1] for p in find_bvh_files(args.bvh)]
+        fps = 60.0
+    else:
+        from posecast.dataset.store import load_split
+
+        split = load_split(args.data, args.split)
+        clips = [split.clip(i) for i in range(split.n_clips)]
+        fps = split.fps
+    variants = args.variants.split(",") if args.variants else list(VARIANTS)
+    report = evaluate(clips, fps, variants, args.models, log=lambda m: print(m, file=sys.stderr))
+    print(format_table(report))
+    if args.json is not None:
+        args.json.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
+        print(f"wrote {args.json}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="posecast", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -73,6 +136,34 @@ def build_parser() -> argparse.ArgumentParser:
     prep.add_argument("--split-file", type=Path, default=None, help="subject split table")
     prep.add_argument("-v", "--verbose", action="store_true", help="log every file")
     prep.set_defaults(func=_cmd_data_prepare)
+
+    train = sub.add_parser("train", help="train a network (needs posecast[train])")
+    train.add_argument("network", choices=("cvae", "ae", "anomaly"))
+    train.add_argument("--data", required=True, type=Path, help="prepared dataset directory")
+    train.add_argument("--out", required=True, type=Path, help="run directory (checkpoint.pt)")
+    train.add_argument("--steps", type=int, default=0, help="iterations (0: the default)")
+    train.add_argument("--resume", action="store_true", help="continue from out/checkpoint.pt")
+    train.add_argument("--threads", type=int, default=2, help="torch CPU threads (default 2)")
+    train.add_argument("--seed", type=int, default=0)
+    train.set_defaults(func=_cmd_train)
+
+    export = sub.add_parser("export", help="checkpoints -> ONNX + JSON sidecars")
+    export.add_argument("--out", type=Path, required=True, help="models directory")
+    export.add_argument("--cvae", type=Path, help="CVAE checkpoint")
+    export.add_argument("--ae", type=Path, help="deterministic AE checkpoint")
+    export.add_argument("--anomaly", type=Path, help="anomaly AE checkpoint")
+    export.add_argument("--data", type=Path, help="prepared dataset (for the mean pose)")
+    export.set_defaults(func=_cmd_export)
+
+    ev = sub.add_parser("eval", help="evaluate the shipped models")
+    src = ev.add_mutually_exclusive_group(required=True)
+    src.add_argument("--bvh", type=Path, help="evaluate every BVH under this directory")
+    src.add_argument("--data", type=Path, help="prepared dataset directory")
+    ev.add_argument("--split", default="test", help="split of --data (default: test)")
+    ev.add_argument("--json", type=Path, help="write the report here")
+    ev.add_argument("--models", type=Path, help="models directory (default: shipped)")
+    ev.add_argument("--variants", help="comma-separated subset of variants")
+    ev.set_defaults(func=_cmd_eval)
 
     demo = sub.add_parser("demo", help="run the bundled demo")
     demo.set_defaults(func=_cmd_demo)

@@ -7,6 +7,7 @@ tools (data preparation, training) use codes of their own so logs stay greppable
 
     PosecastError                     code
     ├── ConfigError                   CONFIG_INVALID
+    ├── ModelError                    MODEL_INVALID    (path)
     └── DataError                     DATA_INVALID
         ├── BvhError                  BVH_INVALID      (file, line)
         ├── RigError                  RIG_UNKNOWN      (file, missing joints)
@@ -36,6 +37,16 @@ class ConfigError(PosecastError):
     """A configuration value is missing, malformed or out of range."""
 
     code = "CONFIG_INVALID"
+
+
+class ModelError(PosecastError):
+    """A model artifact is missing, unreadable or does not match this code."""
+
+    code = "MODEL_INVALID"
+
+    def __init__(self, message: str, *, path: str | Path | None = None):
+        self.path = str(path) if path is not None else None
+        super().__init__((self.path + ": " if self.path else "") + message)
 
 
 class DataError(PosecastError):

@@ -29,7 +29,7 @@ from enum import IntEnum
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from posecast.geometry.rotations import mat2quat, quat2yaw, quat_apply, yaw2quat
+from posecast.geometry.rotations import mat2quat, quat2yaw, quat_apply, quat_mul, yaw2quat
 from posecast.skeleton import Joint
 
 
@@ -102,3 +102,26 @@ def clip_features(pos: ArrayLike, quat: ArrayLike, fps: float) -> F:
     p = np.asarray(pos, dtype=np.float64)
     prev = np.concatenate([p[:1], p[:-1]], axis=0)
     return tracker_features(p, prev, np.asarray(quat)[:, TrackerSlot.WAIST], fps)
+
+
+def character_frame(waist_pos: ArrayLike, waist_quat: ArrayLike) -> tuple[F, F]:
+    """The character frame of a waist pose: ``(origin (..., 3), inverse-yaw quat (..., 4))``.
+
+    The origin is the waist's X and Z at floor height; the frame turns with the
+    waist's heading only, so pitch and roll stay visible to the networks.
+    """
+    origin = np.array(waist_pos, dtype=np.float64, copy=True)
+    origin[..., 1] = 0.0
+    return origin, yaw2quat(-quat2yaw(waist_quat))
+
+
+def to_character_frame(points: ArrayLike, waist_pos: ArrayLike, waist_quat: ArrayLike) -> F:
+    """Points ``(..., K, 3)`` moved into the character frame of the waist ``(..., 3)/(..., 4)``."""
+    origin, inv_yaw = character_frame(waist_pos, waist_quat)
+    return quat_apply(inv_yaw[..., None, :], np.asarray(points) - origin[..., None, :])
+
+
+def deyaw_quat(waist_quat: ArrayLike) -> F:
+    """The waist rotation with its heading removed (what FK uses in the character frame)."""
+    _, inv_yaw = character_frame(np.zeros(3), waist_quat)
+    return quat_mul(inv_yaw, waist_quat)

@@ -20,6 +20,7 @@ from posecast.dataset.frames import Frames, concat_frames, derive_frames
 from posecast.dataset.split import SPLITS, load_split_table, split_of, subject_of
 from posecast.errors import DataError
 from posecast.motion.bvh import read_bvh
+from posecast.motion.clip import CanonicalClip
 from posecast.motion.retarget import TARGET_FPS, retarget
 from posecast.motion.rig import Rig, detect_rig
 
@@ -76,6 +77,16 @@ def find_bvh_files(root: str | Path) -> list[Path]:
     return sorted(p for p in r.rglob("*") if p.is_file() and p.name.endswith((".bvh", ".bvh.gz")))
 
 
+def process_file(
+    path: Path, rigs: list[Rig], rig_name: str | None = None
+) -> tuple[CanonicalClip, Frames, Rig]:
+    """Read, match, retarget and derive one BVH file (raises DataError subclasses)."""
+    bvh = read_bvh(path)
+    rig = detect_rig(bvh, rigs, rig_name)
+    clip = retarget(bvh, rig, name=path.name.split(".")[0], subject=subject_of(path))
+    return clip, derive_frames(clip), rig
+
+
 def prepare(
     bvh_root: str | Path,
     out_dir: str | Path,
@@ -102,11 +113,7 @@ def prepare(
     skipped: list[tuple[str, str]] = []
     for path in files:
         try:
-            bvh = read_bvh(path)
-            rig = detect_rig(bvh, rigs, rig_name)
-            subject = subject_of(path)
-            clip = retarget(bvh, rig, name=path.name.split(".")[0], subject=subject)
-            frames = derive_frames(clip)
+            clip, frames, rig = process_file(path, rigs, rig_name)
         except DataError as exc:
             if not skip_bad:
                 raise
@@ -114,6 +121,7 @@ def prepare(
             if progress:
                 progress(f"skip {path}: {exc}")
             continue
+        subject = clip.subject
         split = split_of(subject, table)
         parts[split].append(frames)
         n = clip.n_frames

@@ -14,20 +14,34 @@ import re
 from importlib import resources
 from pathlib import Path
 
+from posecast.errors import ConfigError
+
 SPLITS = ("train", "val", "test")
 
 
 def load_split_table(path: str | Path | None = None) -> dict[str, str]:
-    """Subject -> split from ``path``, or the committed table."""
+    """Subject -> split from ``path``, or the committed table.
+
+    Raises :class:`~posecast.errors.ConfigError` when ``path`` cannot be read, is not
+    ``{"subjects": {subject: split}}`` or names a split other than train/val/test.
+    """
+    where = "posecast/dataset/split.json" if path is None else str(path)
     if path is None:
         text = (resources.files("posecast") / "dataset" / "split.json").read_text("utf-8")
     else:
-        text = Path(path).read_text("utf-8")
-    table = json.loads(text)["subjects"]
-    bad = {s: v for s, v in table.items() if v not in SPLITS}
+        try:
+            text = Path(path).read_text("utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"{path}: cannot read split table: {exc}") from exc
+    try:
+        table = json.loads(text)["subjects"]
+        items = table.items()
+    except (json.JSONDecodeError, TypeError, KeyError, AttributeError) as exc:
+        raise ConfigError(f"{where}: not a split table ({exc!r})") from exc
+    bad = {s: v for s, v in items if v not in SPLITS}
     if bad:
-        raise ValueError(f"unknown split names {bad}")
-    return {str(k): str(v) for k, v in table.items()}
+        raise ConfigError(f"{where}: unknown split names {bad}; use one of {list(SPLITS)}")
+    return {str(k): str(v) for k, v in items}
 
 
 def hashed_split(subject: str) -> str:

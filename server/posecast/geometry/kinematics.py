@@ -1,6 +1,6 @@
 """Forward kinematics in numpy, batched over any leading shape.
 
-The same math lives in :mod:`posecast.geometry.kinematics_torch` for training; a
+The same math lives in :mod:`posecast.geometry.torch_ops` for training; a
 parity test keeps the two equal to 1e-5.
 """
 

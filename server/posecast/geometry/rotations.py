@@ -241,9 +241,13 @@ def mat2euler(m: ArrayLike, order: str) -> F:
     R = _arr(m)
     i, j, k = (_AXES[c] for c in order)
     sign = 1.0 if (j - i) % 3 == 1 else -1.0
-    sb = np.clip(sign * R[..., i, k], -1.0, 1.0)
-    b = np.arcsin(sb)
-    locked = np.abs(sb) > 1.0 - 1e-9
+    # cos(b) from the other two entries of row i, and b by arctan2: arcsin(sin b) loses
+    # half the digits near +-pi/2, exactly where the lock test needs them.
+    cb = np.hypot(R[..., i, i], R[..., i, j])
+    b = np.arctan2(sign * R[..., i, k], cb)
+    # Locked when a and c turn about the same axis to within 1e-8 rad. A looser test
+    # (such as |sin b| > 1 - 1e-9, cos b up to 4.5e-5) throws that much of c away.
+    locked = cb < 1e-8
     a = np.arctan2(-sign * R[..., j, k], R[..., k, k])
     c = np.arctan2(-sign * R[..., i, j], R[..., i, i])
     # Gimbal lock: a and c turn about the same axis; put it all in a.

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import gzip
 import io
+import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -106,7 +107,7 @@ def read_bvh(path: str | Path) -> Bvh:
     if raw[:2] == b"\x1f\x8b":
         try:
             raw = gzip.decompress(raw)
-        except (OSError, EOFError, gzip.BadGzipFile) as exc:
+        except (OSError, EOFError, zlib.error) as exc:  # BadGzipFile is an OSError
             raise BvhError(f"corrupt gzip stream: {exc}", file=p) from exc
     try:
         text = raw.decode("utf-8")
@@ -242,7 +243,7 @@ def _parse_motion_header(
     lines: Sequence[str], motion_at: int, source: str
 ) -> tuple[int, float, int]:
     i = motion_at + 1
-    values: dict[str, str] = {}
+    values: dict[str, tuple[str, int]] = {}  # key -> (value text, 1-based line)
     for key in ("Frames:", "Frame Time:"):
         while i < len(lines) and not lines[i].strip():
             i += 1
@@ -250,15 +251,22 @@ def _parse_motion_header(
             raise BvhError(
                 f"expected {key!r} after MOTION", file=source, line=min(i + 1, len(lines))
             )
-        values[key] = lines[i].strip()[len(key) :].strip()
+        values[key] = (lines[i].strip()[len(key) :].strip(), i + 1)
         i += 1
+    frames_text, frames_line = values["Frames:"]
+    time_text, time_line = values["Frame Time:"]
     try:
-        n_frames = int(values["Frames:"])
-        frame_time = float(values["Frame Time:"])
+        n_frames = int(frames_text)
     except ValueError:
-        raise BvhError("bad Frames or Frame Time value", file=source, line=motion_at + 2) from None
-    if n_frames < 0 or not (frame_time > 0.0 and np.isfinite(frame_time)):
-        raise BvhError("Frames must be >= 0 and Frame Time > 0", file=source, line=motion_at + 2)
+        raise BvhError(f"bad Frames value {frames_text!r}", file=source, line=frames_line) from None
+    if n_frames < 0:
+        raise BvhError("Frames must be >= 0", file=source, line=frames_line)
+    try:
+        frame_time = float(time_text)
+    except ValueError:
+        raise BvhError(f"bad Frame Time value {time_text!r}", file=source, line=time_line) from None
+    if not (frame_time > 0.0 and np.isfinite(frame_time)):
+        raise BvhError("Frame Time must be > 0", file=source, line=time_line)
     return n_frames, frame_time, i
 
 

@@ -84,6 +84,20 @@ def _leg_length(pelvis_y: float, toe_l_y: float, toe_r_y: float) -> float:
     return pelvis_y - 0.5 * (toe_l_y + toe_r_y)
 
 
+def _nominal_fps(frame_time_s: float) -> float:
+    """The frame rate a BVH frame time stands for.
+
+    Files store the frame time rounded (CMU ``0.0083333``, ``write_bvh`` eight
+    decimals), so ``1 / t`` lands a little off the real rate: enough to resample a
+    clip that is already at the target rate, and to lose its last frame when its
+    duration is a whole number of output frames. A rate within 0.01 % of a whole
+    number is taken to be that number; genuine rates such as 29.97 stay as they are.
+    """
+    fps = 1.0 / frame_time_s
+    whole = round(fps)
+    return float(whole) if whole > 0 and abs(fps - whole) <= 1e-4 * fps else fps
+
+
 def retarget(
     bvh: Bvh, rig: Rig, *, name: str, subject: str, fps: float = TARGET_FPS
 ) -> CanonicalClip:
@@ -131,7 +145,7 @@ def retarget(
     clip = CanonicalClip(
         name=name,
         subject=subject,
-        fps=bvh.fps,
+        fps=_nominal_fps(bvh.frame_time_s),
         local_quat=local_quat,
         root_pos=root,
         rig=rig.name,

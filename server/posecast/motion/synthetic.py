@@ -53,7 +53,7 @@ def walk_clip(
     for side, sign in (("LEFT", 1.0), ("RIGHT", -1.0)):
         ph = s * sign
         e[:, Joint[f"{side}_UPPER_ARM"]] = np.stack(
-            [np.full(n, -1.25 * sign), np.zeros(n), -0.45 * ph * gait * amp], -1
+            [np.full(n, -1.25 * sign), sign * 0.45 * ph * gait * amp, np.zeros(n)], -1
         )
         e[:, Joint[f"{side}_FOREARM"], 1] = sign * (0.3 + 0.2 * gait * np.maximum(ph, 0))
         e[:, Joint[f"{side}_HAND"], 2] = 0.1 * ph

@@ -1,0 +1,54 @@
+"""Pose plausibility scores from the anomaly autoencoder (paper Sec. 3.2.1).
+
+``R`` of a pose is the mean distance, over the 8 lower-body joints, between the pose
+and its reconstruction: positions go into the character frame, through the AE, and
+back through FK with the waist's own (heading-free) rotation.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from posecast.geometry.kinematics import fk_positions
+from posecast.geometry.rotations import quat2mat, r6d2mat
+from posecast.inference.artifact import Artifact
+from posecast.skeleton import LOWER_BODY, NUM_ROTATIONS, Joint, reference_offsets
+from posecast.tracking import character_frame, deyaw_quat
+
+F64 = NDArray[np.floating]
+_LOWER = [int(j) for j in LOWER_BODY]
+
+
+class AnomalyScorer:
+    """Scores batches of world poses; ``threshold_m`` is the p99 error on real poses."""
+
+    def __init__(self, artifact: Artifact) -> None:
+        self.artifact = artifact
+        self.threshold_m = float(artifact.meta.get("implausible_threshold_m", float("nan")))
+        self.offsets = reference_offsets()
+
+    def score(self, world_pos: F64, waist_pos: F64, waist_quat: F64) -> F64:
+        """Lower-body reconstruction error ``R (B,)`` in metres of world poses
+        ``(B, 19, 3)`` with their waist trackers ``(B, 3)`` / ``(B, 4)``."""
+        origin, inv_yaw = character_frame(waist_pos, waist_quat)
+        rel = world_pos - origin[:, None, :]
+        local = _rotate_y(rel, inv_yaw)  # (B, 19, 3)
+        (rot,) = self.artifact.run(
+            local_positions=np.ascontiguousarray(local.reshape(len(local), 57), dtype=np.float32)
+        )
+        mats = r6d2mat(rot.reshape(len(rot), NUM_ROTATIONS, 6).astype(np.float64))
+        root = quat2mat(deyaw_quat(waist_quat))[:, None]
+        rec = fk_positions(
+            np.concatenate([root, mats], axis=1), local[:, Joint.PELVIS], self.offsets
+        )
+        err: F64 = np.linalg.norm(rec[:, _LOWER] - local[:, _LOWER], axis=-1).mean(axis=-1)
+        return err
+
+
+def _rotate_y(v: F64, q_yaw: F64) -> F64:
+    """Rotate ``v (B, K, 3)`` by pure-yaw quaternions ``(B, 4)`` (cheaper than a full apply)."""
+    ang = 2.0 * np.arctan2(q_yaw[:, 1], q_yaw[:, 3])
+    c, s = np.cos(ang)[:, None], np.sin(ang)[:, None]
+    x, z = v[..., 0], v[..., 2]
+    return np.stack([c * x + s * z, v[..., 1], -s * x + c * z], axis=-1)

@@ -1,0 +1,124 @@
+"""Foot-contact IK (paper Sec. 3.1, post-processing), batched over samples.
+
+While a foot's predicted contact exceeds 0.5 the ankle is locked where the contact
+began, and a two-bone solve on thigh and shin puts it there. When contact ends, the
+ankle target slides linearly from the lock back to the network's own ankle over
+``release_frames``, so lifting a foot never pops. The foot keeps its world
+orientation, so the toe follows the ankle.
+
+Everything works on world positions and rotations ``(B, 19, ...)``; the state is a
+few arrays per foot, so thousands of samples step in one vectorised call.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from posecast.geometry.rotations import quat2mat, vecs2quat
+from posecast.skeleton import Joint
+
+F64 = NDArray[np.floating]
+
+LEGS: tuple[tuple[Joint, Joint, Joint, Joint], ...] = (
+    (Joint.LEFT_THIGH, Joint.LEFT_SHIN, Joint.LEFT_FOOT, Joint.LEFT_TOE),
+    (Joint.RIGHT_THIGH, Joint.RIGHT_SHIN, Joint.RIGHT_FOOT, Joint.RIGHT_TOE),
+)
+CONTACT_THRESHOLD = 0.5
+
+
+def two_bone_ik(hip: F64, knee: F64, ankle: F64, target: F64) -> tuple[F64, F64]:
+    """New knee and ankle positions ``(B, 3)`` that bring the ankle to ``target``.
+
+    Bone lengths are kept; the knee stays in the plane spanned by the hip-target line
+    and the old knee, so the leg bends the way it bent. Unreachable targets are
+    approached along the hip-target line with the leg straight.
+    """
+    l1 = np.linalg.norm(knee - hip, axis=-1, keepdims=True)
+    l2 = np.linalg.norm(ankle - knee, axis=-1, keepdims=True)
+    to_t = target - hip
+    d = np.linalg.norm(to_t, axis=-1, keepdims=True)
+    d_c = np.clip(d, np.abs(l1 - l2) + 1e-6, l1 + l2 - 1e-6)
+    u = to_t / np.maximum(d, 1e-9)
+    bend = knee - hip
+    v = bend - np.sum(bend * u, axis=-1, keepdims=True) * u
+    v_n = np.linalg.norm(v, axis=-1, keepdims=True)
+    # A straight leg has no bend plane: bend the knee forward (+Z of the world).
+    fallback = np.broadcast_to(np.array([0.0, 0.0, 1.0]), v.shape)
+    fallback = fallback - np.sum(fallback * u, axis=-1, keepdims=True) * u
+    v = np.where(
+        v_n > 1e-6,
+        v / np.maximum(v_n, 1e-9),
+        fallback / np.maximum(np.linalg.norm(fallback, axis=-1, keepdims=True), 1e-9),
+    )
+    cos_a = np.clip((l1**2 + d_c**2 - l2**2) / (2 * l1 * d_c), -1.0, 1.0)
+    sin_a = np.sqrt(1.0 - cos_a**2)
+    new_knee = hip + l1 * (cos_a * u + sin_a * v)
+    new_ankle = hip + u * d_c
+    return new_knee, new_ankle
+
+
+def apply_leg_ik(world_mat: F64, world_pos: F64, targets: F64, active: NDArray[np.bool_]) -> None:
+    """Move each leg's ankle to ``targets (B, 2, 3)`` where ``active (B, 2)``, in place.
+
+    Thigh and shin world rotations get the smallest swing that points their bones at
+    the new knee and ankle; the foot keeps its world rotation, and the toe follows.
+    """
+    for side, (thigh, shin, foot, toe) in enumerate(LEGS):
+        on = active[:, side]
+        if not np.any(on):
+            continue
+        hip, knee, ankle = world_pos[on, thigh], world_pos[on, shin], world_pos[on, foot]
+        k2, a2 = two_bone_ik(hip, knee, ankle, targets[on, side])
+        swing_thigh = quat2mat(vecs2quat(knee - hip, k2 - hip))  # (b, 3, 3)
+        shin_dir_after_thigh = np.einsum("bij,bj->bi", swing_thigh, ankle - knee)
+        swing_shin = quat2mat(vecs2quat(shin_dir_after_thigh, a2 - k2)) @ swing_thigh
+        toe_off = world_pos[on, toe] - ankle
+        wm_t, wm_s = world_mat[on, thigh], world_mat[on, shin]
+        world_mat[on, thigh] = swing_thigh @ wm_t
+        world_mat[on, shin] = swing_shin @ wm_s
+        world_pos[on, shin] = k2
+        world_pos[on, foot] = a2
+        world_pos[on, toe] = a2 + toe_off
+
+
+@dataclass
+class ContactIK:
+    """Lock/release state of both feet for a batch of samples.
+
+    The arrays may be views into larger engine buffers; :meth:`step` updates them in
+    place. Shapes: ``locked (B, 2)``, ``lock_pos (B, 2, 3)``, ``release_left (B, 2)``
+    (frames of release blending still to go).
+    """
+
+    locked: NDArray[np.bool_]
+    lock_pos: F64
+    release_left: NDArray[np.int64]
+    release_frames: int = 10
+
+    @classmethod
+    def zeros(cls, n: int, release_frames: int = 10) -> ContactIK:
+        return cls(
+            np.zeros((n, 2), dtype=bool),
+            np.zeros((n, 2, 3)),
+            np.zeros((n, 2), dtype=np.int64),
+            release_frames,
+        )
+
+    def step(self, world_mat: F64, world_pos: F64, contact_prob: F64) -> None:
+        """Post-process one frame of ``B`` poses in place: ``(B, 19, 3, 3)``, ``(B, 19, 3)``."""
+        feet = world_pos[:, [LEGS[0][2], LEGS[1][2]]]  # (B, 2, 3) network ankles
+        contact = contact_prob > CONTACT_THRESHOLD
+        starting = contact & ~self.locked
+        self.lock_pos[starting] = feet[starting]
+        ending = ~contact & self.locked
+        self.release_left[ending] = self.release_frames
+        self.release_left[contact] = 0
+        self.locked[...] = contact
+        releasing = self.release_left > 0
+        w = (self.release_left / max(1, self.release_frames))[..., None]  # weight of the lock
+        targets = np.where(contact[..., None], self.lock_pos, w * self.lock_pos + (1 - w) * feet)
+        apply_leg_ik(world_mat, world_pos, targets, contact | releasing)
+        self.release_left[releasing] -= 1

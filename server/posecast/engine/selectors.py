@@ -1,0 +1,90 @@
+"""Sample selectors: which latent sample to show (paper Sec. 3.2.2, 3.2.5, 5.3).
+
+A selector looks at every sample of one player at one frame and answers whether the
+current sample should be left, and for which. Each is a small pure class; the engine
+asks the player's selector once per frame, and a selector can be swapped at any time.
+
+* :class:`AnomalySelector` (default): trimmed estimator on the anomaly error ``R``;
+  the current sample is an outlier when ``R_c > k * (median(R) - min(R))``; the best
+  is ``argmin R`` among the others.
+* :class:`TargetSelector` (eq. 3): ``argmin`` distance from an end effector to a target.
+* :class:`ObstacleSelector` (eq. 4): ``argmax`` distance from a joint to an obstacle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from posecast.skeleton import Joint
+
+F64 = NDArray[np.floating]
+
+
+class Selector(Protocol):
+    def choose(self, current: int, scores: F64, positions: F64) -> int | None:
+        """Return the sample to move to, or ``None`` to stay.
+
+        Args:
+            current: index of the sample shown now.
+            scores: ``(N,)`` anomaly errors ``R`` (metres) of every sample.
+            positions: ``(N, 19, 3)`` post-IK world positions of every sample.
+        """
+        ...
+
+
+@dataclass(frozen=True)
+class AnomalySelector:
+    factor: float = 2.0
+
+    def choose(self, current: int, scores: F64, positions: F64) -> int | None:
+        r = float(np.median(scores) - np.min(scores))
+        if not scores[current] > self.factor * r:
+            return None
+        others = scores.copy()
+        others[current] = np.inf
+        best = int(np.argmin(others))
+        return best if np.isfinite(others[best]) else None
+
+
+@dataclass(frozen=True)
+class TargetSelector:
+    """Hit ``target_m`` (world, metres) with ``joint``; switch when another sample is
+    closer by more than ``margin_m`` (hysteresis, so near-ties don't flap)."""
+
+    joint: Joint
+    target_m: tuple[float, float, float]
+    margin_m: float = 0.02
+
+    def distances(self, positions: F64) -> F64:
+        d: F64 = np.linalg.norm(positions[:, self.joint] - np.asarray(self.target_m), axis=-1)
+        return d
+
+    def choose(self, current: int, scores: F64, positions: F64) -> int | None:
+        d = self.distances(positions)
+        best = int(np.argmin(d))
+        return best if best != current and d[current] - d[best] > self.margin_m else None
+
+
+@dataclass(frozen=True)
+class ObstacleSelector:
+    """Keep ``joint`` away from ``obstacle_m``: when the current sample comes within
+    ``radius_m``, move to the sample whose joint is farthest from it."""
+
+    joint: Joint
+    obstacle_m: tuple[float, float, float]
+    radius_m: float = 0.2
+
+    def distances(self, positions: F64) -> F64:
+        d: F64 = np.linalg.norm(positions[:, self.joint] - np.asarray(self.obstacle_m), axis=-1)
+        return d
+
+    def choose(self, current: int, scores: F64, positions: F64) -> int | None:
+        d = self.distances(positions)
+        if d[current] >= self.radius_m:
+            return None
+        best = int(np.argmax(d))
+        return best if best != current else None

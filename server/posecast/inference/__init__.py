@@ -1,0 +1,1 @@
+"""Shipped model artifacts and their ONNX Runtime sessions."""

@@ -1,0 +1,139 @@
+"""Training arrays: a prepared split, augmented, in the networks' view.
+
+Every array is per frame; clips are concatenated and ``clip_start`` marks them, so
+windows never straddle two clips.
+
+==============  ============  =======================================================
+field           shape         meaning
+==============  ============  =======================================================
+features        (N, 24)       tracker features of the (possibly rescaled) body
+local_pos       (N, 19, 3)    canonical-body joint positions, character frame, metres
+rot6d           (N, 18, 6)    target local rotations
+root_mat        (N, 3, 3)     pelvis rotation in the character frame (heading removed)
+contacts        (N, 2)        foot contact labels
+==============  ============  =======================================================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from posecast.dataset.augment import Augmentation, change_speed, mirror, scale_bones
+from posecast.dataset.frames import derive_frames
+from posecast.dataset.store import SplitData
+from posecast.geometry.rotations import mat2quat, quat2mat, r6d2mat
+from posecast.motion.clip import CanonicalClip
+from posecast.tracking import deyaw_quat, to_character_frame
+
+F32 = NDArray[np.float32]
+
+
+@dataclass(frozen=True)
+class TrainArrays:
+    features: F32
+    local_pos: F32
+    rot6d: F32
+    root_mat: F32
+    contacts: F32
+    clip_start: NDArray[np.int64]
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.features.shape[0])
+
+    def window_starts(self, length: int) -> NDArray[np.int64]:
+        """Every frame index where a window of ``length`` fits inside one clip."""
+        out = [
+            np.arange(a, b - length + 1)
+            for a, b in zip(self.clip_start[:-1], self.clip_start[1:], strict=True)
+            if b - a >= length
+        ]
+        return np.concatenate(out).astype(np.int64) if out else np.zeros(0, np.int64)
+
+
+def clip_from_split(split: SplitData, i: int) -> CanonicalClip:
+    """Rebuild clip ``i`` of a prepared split as a :class:`CanonicalClip`."""
+    fr = split.clip(i)
+    rot = mat2quat(r6d2mat(fr["rot6d"].astype(np.float64)))  # (F, 18, 4)
+    local = np.concatenate([fr["root_quat"][:, None].astype(np.float64), rot], axis=1)
+    meta = split.clips[i]
+    return CanonicalClip(
+        name=str(meta["name"]),
+        subject=str(meta["subject"]),
+        fps=split.fps,
+        local_quat=local,
+        root_pos=fr["root_pos"].astype(np.float64),
+    )
+
+
+def _views(clip: CanonicalClip, body: CanonicalClip) -> dict[str, NDArray[np.floating]]:
+    target = derive_frames(clip)
+    sensed = derive_frames(body) if body is not clip else target
+    root_q = target["root_quat"].astype(np.float64)
+    return {
+        "features": sensed["features"],
+        "local_pos": to_character_frame(target["positions"], target["root_pos"], root_q),
+        "rot6d": target["rot6d"],
+        "root_mat": quat2mat(deyaw_quat(root_q)),
+        "contacts": target["contacts"],
+    }
+
+
+def build_arrays(split: SplitData, aug: Augmentation, seed: int = 0) -> TrainArrays:
+    """All clips of ``split``, each in every augmented variant ``aug`` asks for."""
+    rng = np.random.default_rng(seed)
+    parts: list[dict[str, NDArray[np.floating]]] = []
+    for i in range(split.n_clips):
+        base = clip_from_split(split, i)
+        variants = [base, mirror(base)] if aug.mirror else [base]
+        for v in variants:
+            for speed in aug.speeds:
+                clip = change_speed(v, speed)
+                if clip.n_frames < 2:
+                    continue
+                parts.append(_views(clip, scale_bones(clip, rng, aug)))
+    lengths = [len(p["features"]) for p in parts]
+    starts = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
+
+    def cat(key: str) -> F32:
+        return np.ascontiguousarray(np.concatenate([p[key] for p in parts]), dtype=np.float32)
+
+    return TrainArrays(
+        features=cat("features"),
+        local_pos=cat("local_pos"),
+        rot6d=cat("rot6d"),
+        root_mat=cat("root_mat"),
+        contacts=cat("contacts"),
+        clip_start=starts,
+    )
+
+
+@dataclass(frozen=True)
+class Normalisation:
+    """Mean and standard deviation of the network inputs, from the training arrays."""
+
+    feat_mean: F32
+    feat_std: F32
+    pose_mean: F32
+    pose_std: F32
+
+    @classmethod
+    def fit(cls, arr: TrainArrays) -> Normalisation:
+        pos = arr.local_pos.reshape(len(arr.local_pos), -1)
+        # A floor on the std keeps constant inputs (the waist's own X/Z) finite.
+        return cls(
+            feat_mean=arr.features.mean(0).astype(np.float32),
+            feat_std=np.maximum(arr.features.std(0), 1e-3).astype(np.float32),
+            pose_mean=pos.mean(0).astype(np.float32),
+            pose_std=np.maximum(pos.std(0), 1e-3).astype(np.float32),
+        )
+
+    def to_dict(self) -> dict[str, list[float]]:
+        return {k: [float(v) for v in getattr(self, k)] for k in self.__dataclass_fields__}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, list[float]]) -> Normalisation:
+        return cls(**{k: np.asarray(d[k], dtype=np.float32) for k in cls.__dataclass_fields__})

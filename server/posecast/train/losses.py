@@ -1,0 +1,31 @@
+"""Losses in position space: rotations are scored by where they put the joints."""
+
+from __future__ import annotations
+
+import torch
+
+from posecast.geometry.torch_ops import fk, r6d2mat
+from posecast.skeleton import reference_offsets
+
+
+class PoseFK(torch.nn.Module):
+    """Character-frame joint positions from predicted rotations, on the reference body."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.register_buffer("offsets", torch.tensor(reference_offsets(), dtype=torch.float32))
+
+    def forward(
+        self, rot6d: torch.Tensor, root_mat: torch.Tensor, root_pos: torch.Tensor
+    ) -> torch.Tensor:
+        """``rot6d (..., 108)``, ``root_mat (..., 3, 3)``, ``root_pos (..., 3)``
+        -> positions ``(..., 19, 3)``."""
+        local = r6d2mat(rot6d.reshape(*rot6d.shape[:-1], 18, 6))  # (..., 18, 3, 3)
+        local = torch.cat([root_mat.unsqueeze(-3), local], dim=-3)  # (..., 19, 3, 3)
+        offsets: torch.Tensor = self.offsets  # type: ignore[assignment]
+        return fk(local, root_pos, offsets)[1]
+
+
+def position_mse_cm2(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Mean squared joint position error in cm^2 (positions given in metres)."""
+    return ((pred - target) * 100.0).pow(2).mean()

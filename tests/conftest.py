@@ -1,0 +1,40 @@
+"""Fixtures shared by the whole suite: a seeded generator, a walking clip, BVH files."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from posecast.motion.clip import CanonicalClip
+from posecast.motion.synthetic import walk_clip, write_fixture_bvh
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    """A fresh generator with a fixed seed, so every test sees the same numbers."""
+    return np.random.default_rng(20240611)
+
+
+@pytest.fixture
+def walk() -> CanonicalClip:
+    """Two seconds of the procedural walk at 60 fps (120 frames, feet on the floor)."""
+    return walk_clip(seconds=2.0, fps=60.0, seed=0)
+
+
+@pytest.fixture
+def fixture_bvh(tmp_path: Path) -> Callable[..., Path]:
+    """Factory: ``fixture_bvh(clip, layout="posecast", gz=False)`` writes a BVH file.
+
+    ``layout`` is a built-in rig name (``posecast``, ``cmu_mb``, ``cmu_daz``); see
+    :func:`posecast.motion.synthetic.write_fixture_bvh`.
+    """
+
+    def make(clip: CanonicalClip, layout: str = "posecast", *, gz: bool = False) -> Path:
+        path = tmp_path / f"{clip.name}_{layout}.bvh{'.gz' if gz else ''}"
+        write_fixture_bvh(path, clip, layout)
+        return path
+
+    return make
