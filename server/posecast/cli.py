@@ -119,6 +119,56 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_eval_apps(args: argparse.Namespace) -> int:
+    import json
+
+    from posecast.dataset.store import load_split
+    from posecast.engine.anomaly import AnomalyScorer
+    from posecast.evaluation.applications import table3
+    from posecast.inference.artifact import load_artifact
+
+    kick = None
+    for split_name in ("train", "val", "test"):
+        split = load_split(args.data, split_name)
+        for i, meta in enumerate(split.clips):
+            if meta["name"] == args.clip:
+                kick = split.clip(i)
+    if kick is None:
+        print(f"posecast: clip {args.clip!r} is not in {args.data}", file=sys.stderr)
+        return 2
+    dec = load_artifact("cvae_decoder", args.models, threads=args.threads)
+    scorer = AnomalyScorer(load_artifact("anomaly", args.models, threads=args.threads))
+    counts = [int(c) for c in args.samples.split(",")]
+    report = table3(dec, scorer, kick, sample_counts=counts, runs=args.runs)
+    report["clip"] = args.clip
+    print(json.dumps(report, indent=1))
+    if args.json is not None:
+        args.json.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
+    return 0
+
+
+def _cmd_bench_engine(args: argparse.Namespace) -> int:
+    import json
+
+    from posecast.bench.engine_bench import run
+
+    counts = [int(p) for p in args.players.split(",")]
+    report = run(counts, args.samples, args.threads, args.ticks, args.naive_players)
+    print(f"{'players':>8s} {'p50 ms':>8s} {'p99 ms':>8s} {'GFLOP/s':>8s} {'MB/player':>10s}")
+    for i, p in enumerate(report["players"]):
+        print(
+            f"{p:8d} {report['tick_p50_ms'][i]:8.2f} {report['tick_p99_ms'][i]:8.2f} "
+            f"{report['gflops'][i]:8.1f} {report['rss_mb_per_player'][i]:10.2f}"
+        )
+    print(
+        f"max players at 60 Hz (p99 < 16.7 ms), N={args.samples}: {report['max_realtime_players']}"
+    )
+    print(f"peak: {report['peak_gflops']} GFLOP/s; naive loop: {report['naive_loop']}")
+    if args.json is not None:
+        args.json.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="posecast", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -164,6 +214,27 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--models", type=Path, help="models directory (default: shipped)")
     ev.add_argument("--variants", help="comma-separated subset of variants")
     ev.set_defaults(func=_cmd_eval)
+
+    apps = sub.add_parser("eval-apps", help="Table 3: target hitting and collision avoidance")
+    apps.add_argument("--data", type=Path, required=True, help="prepared dataset directory")
+    apps.add_argument("--clip", default="135_04", help="kick clip name (default: 135_04)")
+    apps.add_argument("--samples", default="1,10,100,1000", help="sample counts")
+    apps.add_argument("--runs", type=int, default=100, help="runs (seeds) per setting")
+    apps.add_argument("--models", type=Path, help="models directory (default: shipped)")
+    apps.add_argument("--threads", type=int, default=2)
+    apps.add_argument("--json", type=Path, help="write the report here")
+    apps.set_defaults(func=_cmd_eval_apps)
+
+    bench = sub.add_parser("bench", help="benchmarks")
+    bench_sub = bench.add_subparsers(dest="bench_command", required=True)
+    be = bench_sub.add_parser("engine", help="per-tick cost of the SSI engine")
+    be.add_argument("--players", default="1,10,50,100,200", help="player counts")
+    be.add_argument("--samples", type=int, default=100, help="latent samples N")
+    be.add_argument("--threads", type=int, default=2, help="ONNX Runtime intra-op threads")
+    be.add_argument("--ticks", type=int, default=120, help="measured ticks per count")
+    be.add_argument("--naive-players", type=int, default=10, help="players for the naive loop")
+    be.add_argument("--json", type=Path, help="write the report here")
+    be.set_defaults(func=_cmd_bench_engine)
 
     demo = sub.add_parser("demo", help="run the bundled demo")
     demo.set_defaults(func=_cmd_demo)

@@ -10,10 +10,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from posecast.geometry.kinematics import fk_positions
-from posecast.geometry.rotations import quat2mat, r6d2mat
+from posecast.engine.kinematics32 import fk32
+from posecast.geometry.rotations import quat2mat
 from posecast.inference.artifact import Artifact
-from posecast.skeleton import LOWER_BODY, NUM_ROTATIONS, Joint, reference_offsets
+from posecast.skeleton import LOWER_BODY, Joint
 from posecast.tracking import character_frame, deyaw_quat
 
 F64 = NDArray[np.floating]
@@ -26,7 +26,6 @@ class AnomalyScorer:
     def __init__(self, artifact: Artifact) -> None:
         self.artifact = artifact
         self.threshold_m = float(artifact.meta.get("implausible_threshold_m", float("nan")))
-        self.offsets = reference_offsets()
 
     def score(self, world_pos: F64, waist_pos: F64, waist_quat: F64) -> F64:
         """Lower-body reconstruction error ``R (B,)`` in metres of world poses
@@ -34,14 +33,10 @@ class AnomalyScorer:
         origin, inv_yaw = character_frame(waist_pos, waist_quat)
         rel = world_pos - origin[:, None, :]
         local = _rotate_y(rel, inv_yaw)  # (B, 19, 3)
-        (rot,) = self.artifact.run(
-            local_positions=np.ascontiguousarray(local.reshape(len(local), 57), dtype=np.float32)
-        )
-        mats = r6d2mat(rot.reshape(len(rot), NUM_ROTATIONS, 6).astype(np.float64))
-        root = quat2mat(deyaw_quat(waist_quat))[:, None]
-        rec = fk_positions(
-            np.concatenate([root, mats], axis=1), local[:, Joint.PELVIS], self.offsets
-        )
+        local = np.ascontiguousarray(local, dtype=np.float32)
+        (rot,) = self.artifact.run(local_positions=local.reshape(len(local), 57))
+        root = quat2mat(deyaw_quat(waist_quat)).astype(np.float32)
+        _, rec = fk32(rot, root, local[:, Joint.PELVIS], want_mats=False)
         err: F64 = np.linalg.norm(rec[:, _LOWER] - local[:, _LOWER], axis=-1).mean(axis=-1)
         return err
 

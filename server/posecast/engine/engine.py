@@ -231,14 +231,16 @@ class Engine:
 
         waist_pos = np.repeat(pos[:, TrackerSlot.WAIST], N, axis=0)  # (P*N, 3)
         waist_quat = np.repeat(quat[:, TrackerSlot.WAIST], N, axis=0)
-        wm, wp = fk32(rot, quat2mat(waist_quat).astype(np.float32), waist_pos.astype(np.float32))
+        _, wp = fk32(
+            rot, quat2mat(waist_quat).astype(np.float32), waist_pos.astype(np.float32), False
+        )
         ik = ContactIK(
             s.view("ik_locked").reshape(P * N, 2),
             s.view("ik_lock_pos").reshape(P * N, 2, 3),
             s.view("ik_release").reshape(P * N, 2),
             self.cfg.ik_release_frames,
         )
-        ik.step(wm, wp, con)
+        ik.step(None, wp, con)
         scores = self.scorer.score(wp, waist_pos, waist_quat).reshape(P, N)
         wp = wp.reshape(P, N, -1, 3)
 
@@ -362,6 +364,7 @@ class Engine:
             quat2mat(quat[:, TrackerSlot.WAIST]).astype(np.float32),
             pos[:, TrackerSlot.WAIST].astype(np.float32),
         )
+        assert wm is not None
         out = []
         for i, (p, k, sample, w) in enumerate(emit):
             p.display_ik.step(wm[i : i + 1], wp[i : i + 1], con[i : i + 1])
@@ -392,3 +395,14 @@ def _identity_quats() -> F64:
     q = np.zeros((4, 4))
     q[:, 3] = 1.0
     return q
+
+
+def load_engine(
+    cfg: EngineConfig | None = None, models_dir: str | None = None, threads: int = 1
+) -> Engine:
+    """An engine on the shipped models (or those in ``models_dir``)."""
+    from posecast.inference.artifact import load_artifact
+
+    decoder = load_artifact("cvae_decoder", models_dir, threads=threads)
+    scorer = AnomalyScorer(load_artifact("anomaly", models_dir, threads=threads))
+    return Engine(decoder, scorer, cfg)

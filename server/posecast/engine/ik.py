@@ -60,11 +60,35 @@ def two_bone_ik(hip: F64, knee: F64, ankle: F64, target: F64) -> tuple[F64, F64]
     return new_knee, new_ankle
 
 
-def apply_leg_ik(world_mat: F64, world_pos: F64, targets: F64, active: NDArray[np.bool_]) -> None:
+def swing_mat(a: F64, b: F64) -> F64:
+    """Smallest rotation matrices ``(B, 3, 3)`` turning directions ``a`` onto ``b``.
+
+    Rodrigues' form ``I + [v]x + [v]x^2 / (1 + c)`` with ``v = a x b``, ``c = a . b``
+    for unit vectors. Legs never fold back on themselves, but a near-opposite pair
+    falls back to the quaternion construction, which handles it.
+    """
+    ua = a / np.maximum(np.linalg.norm(a, axis=-1, keepdims=True), 1e-9)
+    ub = b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-9)
+    v = np.cross(ua, ub)
+    c = np.sum(ua * ub, axis=-1)
+    if np.any(c < -0.999):
+        return quat2mat(vecs2quat(a, b))
+    vx = np.zeros((*v.shape[:-1], 3, 3), dtype=v.dtype)
+    vx[..., 0, 1], vx[..., 0, 2] = -v[..., 2], v[..., 1]
+    vx[..., 1, 0], vx[..., 1, 2] = v[..., 2], -v[..., 0]
+    vx[..., 2, 0], vx[..., 2, 1] = -v[..., 1], v[..., 0]
+    out: F64 = np.eye(3, dtype=v.dtype) + vx + (vx @ vx) / (1.0 + c)[..., None, None]
+    return out
+
+
+def apply_leg_ik(
+    world_mat: F64 | None, world_pos: F64, targets: F64, active: NDArray[np.bool_]
+) -> None:
     """Move each leg's ankle to ``targets (B, 2, 3)`` where ``active (B, 2)``, in place.
 
     Thigh and shin world rotations get the smallest swing that points their bones at
     the new knee and ankle; the foot keeps its world rotation, and the toe follows.
+    With ``world_mat=None`` only positions move (the candidate pool needs no more).
     """
     for side, (thigh, shin, foot, toe) in enumerate(LEGS):
         on = active[:, side]
@@ -72,13 +96,14 @@ def apply_leg_ik(world_mat: F64, world_pos: F64, targets: F64, active: NDArray[n
             continue
         hip, knee, ankle = world_pos[on, thigh], world_pos[on, shin], world_pos[on, foot]
         k2, a2 = two_bone_ik(hip, knee, ankle, targets[on, side])
-        swing_thigh = quat2mat(vecs2quat(knee - hip, k2 - hip))  # (b, 3, 3)
-        shin_dir_after_thigh = np.einsum("bij,bj->bi", swing_thigh, ankle - knee)
-        swing_shin = quat2mat(vecs2quat(shin_dir_after_thigh, a2 - k2)) @ swing_thigh
         toe_off = world_pos[on, toe] - ankle
-        wm_t, wm_s = world_mat[on, thigh], world_mat[on, shin]
-        world_mat[on, thigh] = swing_thigh @ wm_t
-        world_mat[on, shin] = swing_shin @ wm_s
+        if world_mat is not None:
+            swing_thigh = swing_mat(knee - hip, k2 - hip)  # (b, 3, 3)
+            shin_dir_after_thigh = np.einsum("bij,bj->bi", swing_thigh, ankle - knee)
+            swing_shin = swing_mat(shin_dir_after_thigh, a2 - k2) @ swing_thigh
+            wm_t, wm_s = world_mat[on, thigh], world_mat[on, shin]
+            world_mat[on, thigh] = swing_thigh @ wm_t
+            world_mat[on, shin] = swing_shin @ wm_s
         world_pos[on, shin] = k2
         world_pos[on, foot] = a2
         world_pos[on, toe] = a2 + toe_off
@@ -107,12 +132,17 @@ class ContactIK:
             release_frames,
         )
 
-    def step(self, world_mat: F64, world_pos: F64, contact_prob: F64) -> None:
+    def step(self, world_mat: F64 | None, world_pos: F64, contact_prob: F64) -> None:
         """Post-process one frame of ``B`` poses in place: ``(B, 19, 3, 3)``, ``(B, 19, 3)``."""
         feet = world_pos[:, [LEGS[0][2], LEGS[1][2]]]  # (B, 2, 3) network ankles
         contact = contact_prob > CONTACT_THRESHOLD
         starting = contact & ~self.locked
-        self.lock_pos[starting] = feet[starting]
+        # Lock where the ankle would be shown now: the network's ankle, or, for a foot
+        # landing again mid-release, the blend it is on (locking at the network's
+        # ankle there would pop the foot by the remaining lock weight).
+        w = (self.release_left / max(1, self.release_frames))[..., None]
+        shown = w * self.lock_pos + (1 - w) * feet
+        self.lock_pos[starting] = shown[starting]
         ending = ~contact & self.locked
         self.release_left[ending] = self.release_frames
         self.release_left[contact] = 0

@@ -1,8 +1,10 @@
 """Float32 FK for the engine's hot path (thousands of samples per tick).
 
 Same math as :mod:`posecast.geometry.kinematics`, specialised: float32 throughout,
-the reference offsets fixed, and positions computed with one batched matmul per
-joint. ``tests/engine/test_kinematics32.py`` checks it against the float64 reference.
+the reference offsets fixed, and the arrays laid out component-major (``(3, 3, B)``
+per joint). numpy multiplies a batch of 3x3 matrices about 5x faster as nine
+contiguous vector operations than through ``matmul`` on ``(B, 3, 3)`` stacks.
+``tests/engine/test_kinematics32.py`` checks it against the float64 reference.
 """
 
 from __future__ import annotations
@@ -27,21 +29,41 @@ def r6d2mat32(d: F32) -> F32:
     return out
 
 
-def fk32(rot6d: F32, root_mat: F32, root_pos: F32) -> tuple[F32, F32]:
-    """World rotations ``(B, 19, 3, 3)`` and positions ``(B, 19, 3)`` on the reference body.
+def _local_soa(rot6d: F32, B: int) -> F32:
+    """Network 6D rotations ``(B, 108)`` -> local matrices ``(18, 3, 3, B)``."""
+    d = np.ascontiguousarray(rot6d.reshape(B, NUM_ROTATIONS, 6).transpose(1, 2, 0))
+    a1, a2 = d[:, 0:3], d[:, 3:6]  # (18, 3, B)
+    b1 = a1 / np.maximum(np.sqrt((a1 * a1).sum(axis=1, keepdims=True)), 1e-8)
+    b2 = a2 - (b1 * a2).sum(axis=1, keepdims=True) * b1
+    b2 /= np.maximum(np.sqrt((b2 * b2).sum(axis=1, keepdims=True)), 1e-8)
+    b3 = np.cross(b1, b2, axis=1)
+    out: F32 = np.stack([b1, b2, b3], axis=2)  # columns: [j, row, col, b]
+    return out
+
+
+def fk32(
+    rot6d: F32, root_mat: F32, root_pos: F32, want_mats: bool = True
+) -> tuple[F32 | None, F32]:
+    """World rotations ``(B, 19, 3, 3)`` (or ``None``) and positions ``(B, 19, 3)``.
 
     Args:
         rot6d: ``(B, 108)`` or ``(B, 18, 6)`` network rotations.
         root_mat: ``(B, 3, 3)`` pelvis world rotation; root_pos: ``(B, 3)``.
+        want_mats: also return world rotations (the candidate pool needs positions only).
     """
     B = root_pos.shape[0]
-    local = r6d2mat32(rot6d.reshape(B, NUM_ROTATIONS, 6))  # (B, 18, 3, 3)
-    wm = np.empty((B, len(PARENTS), 3, 3), np.float32)
-    wp = np.empty((B, len(PARENTS), 3), np.float32)
-    wm[:, 0] = root_mat
-    wp[:, 0] = root_pos
+    local = _local_soa(rot6d, B)
+    wm = np.empty((len(PARENTS), 3, 3, B), np.float32)
+    wp = np.empty((len(PARENTS), 3, B), np.float32)
+    wm[0] = root_mat.transpose(1, 2, 0)
+    wp[0] = root_pos.T
     for j in range(1, len(PARENTS)):
         p = PARENTS[j]
-        np.matmul(wm[:, p], local[:, j - 1], out=wm[:, j])
-        wp[:, j] = wp[:, p] + wm[:, p] @ _OFFSETS[j]
-    return wm, wp
+        # W_j[i, k] = sum_m W_p[i, m] L_j[m, k]; p_j = p_p + W_p @ offset_j
+        np.sum(wm[p][:, :, None, :] * local[j - 1][None, :, :, :], axis=1, out=wm[j])
+        np.add(wp[p], np.sum(wm[p] * _OFFSETS[j][None, :, None], axis=1), out=wp[j])
+    pos: F32 = np.ascontiguousarray(wp.transpose(2, 0, 1))
+    if not want_mats:
+        return None, pos
+    mats: F32 = np.ascontiguousarray(wm.transpose(3, 0, 1, 2))
+    return mats, pos

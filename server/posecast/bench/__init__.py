@@ -1,0 +1,1 @@
+"""Benchmarks behind ``posecast bench`` (the scripts in ``benchmarks/`` call these)."""

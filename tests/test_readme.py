@@ -1,0 +1,27 @@
+"""The README's quick-start example runs as written."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+README = Path(__file__).resolve().parent.parent / "README.md"
+
+
+def _python_blocks() -> list[str]:
+    return re.findall(r"```python\n(.*?)```", README.read_text("utf-8"), flags=re.DOTALL)
+
+
+def test_readme_has_a_short_example() -> None:
+    blocks = _python_blocks()
+    assert blocks, "README lost its Python example"
+    assert len(blocks[0].strip().splitlines()) <= 16
+
+
+def test_readme_example_runs(capsys: pytest.CaptureFixture[str]) -> None:
+    exec(compile(_python_blocks()[0], str(README), "exec"), {"__name__": "__readme__"})
+    out = capsys.readouterr().out
+    assert re.search(r"frame \d+: sample \d+, head at \[", out)
+    assert re.search(r"\d+ poses, \d+ sample transitions", out)
