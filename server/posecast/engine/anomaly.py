@@ -27,15 +27,22 @@ class AnomalyScorer:
         self.artifact = artifact
         self.threshold_m = float(artifact.meta.get("implausible_threshold_m", float("nan")))
 
-    def score(self, world_pos: F64, waist_pos: F64, waist_quat: F64) -> F64:
+    def score(self, world_pos: F64, waist_pos: F64, waist_quat: F64, repeat: int = 1) -> F64:
         """Lower-body reconstruction error ``R (B,)`` in metres of world poses
-        ``(B, 19, 3)`` with their waist trackers ``(B, 3)`` / ``(B, 4)``."""
+        ``(B, 19, 3)`` with their waist trackers ``(B / repeat, 3)`` / ``(B / repeat, 4)``.
+
+        With ``repeat = N`` consecutive groups of ``N`` poses share one waist (the
+        ``N`` samples of one player), and the frame math runs once per group.
+        """
         origin, inv_yaw = character_frame(waist_pos, waist_quat)
+        root = quat2mat(deyaw_quat(waist_quat)).astype(np.float32)
+        if repeat > 1:
+            origin, inv_yaw = np.repeat(origin, repeat, 0), np.repeat(inv_yaw, repeat, 0)
+            root = np.repeat(root, repeat, 0)
         rel = world_pos - origin[:, None, :]
         local = _rotate_y(rel, inv_yaw)  # (B, 19, 3)
         local = np.ascontiguousarray(local, dtype=np.float32)
         (rot,) = self.artifact.run(local_positions=local.reshape(len(local), 57))
-        root = quat2mat(deyaw_quat(waist_quat)).astype(np.float32)
         _, rec = fk32(rot, root, local[:, Joint.PELVIS], want_mats=False)
         err: F64 = np.linalg.norm(rec[:, _LOWER] - local[:, _LOWER], axis=-1).mean(axis=-1)
         return err

@@ -15,8 +15,10 @@ class EngineConfig:
         samples: latent samples per player, ``N`` (default 100).
         lookahead: ``tau``, frames of look-ahead; output lags input by this (default 10).
         transition_frames: ``T``, frames a transition to a better sample takes (10).
-        outlier_factor: the current sample is an outlier when ``R_c > factor * r``,
-            ``r = median(R) - min(R)`` (2.0).
+        outlier_factor: the current sample is an outlier when
+            ``R_c - min(R) > factor * r``, ``r = median(R) - min(R)`` (2.0).
+        outlier_baseline: ``"min"`` for that rule, ``"zero"`` for the paper's literal
+            ``R_c > factor * r`` (see :mod:`posecast.engine.selectors`).
         ik_release_frames: frames to blend a released foot back to the network (10).
         stale_after_frames: frames without input before a player is marked stale (30).
         waist_filter_hz: cutoff of the waist-orientation low-pass, ``None`` for off.
@@ -27,6 +29,7 @@ class EngineConfig:
     lookahead: int = 10
     transition_frames: int = 10
     outlier_factor: float = 2.0
+    outlier_baseline: str = "min"
     ik_release_frames: int = 10
     stale_after_frames: int = 30
     waist_filter_hz: float | None = None
@@ -39,5 +42,7 @@ class EngineConfig:
             raise ConfigError("lookahead must be >= 0 and transition_frames >= 1")
         if self.outlier_factor <= 0 or self.stale_after_frames < 1:
             raise ConfigError("outlier_factor must be > 0 and stale_after_frames >= 1")
+        if self.outlier_baseline not in ("min", "zero"):
+            raise ConfigError("outlier_baseline must be 'min' or 'zero'")
         if self.waist_filter_hz is not None and not self.waist_filter_hz > 0:
             raise ConfigError("waist_filter_hz must be positive")

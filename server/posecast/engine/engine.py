@@ -168,7 +168,7 @@ class Engine:
         self.players[player] = _Player(
             player,
             slot,
-            selector or AnomalySelector(self.cfg.outlier_factor),
+            selector or AnomalySelector(self.cfg.outlier_factor, self.cfg.outlier_baseline),
             calibration or Calibration(),
             wf,
             display_ik=ContactIK.zeros(1, self.cfg.ik_release_frames),
@@ -229,10 +229,12 @@ class Engine:
         s.view("ring_rot")[rows, ring] = rot.reshape(P, N, 108)
         s.view("ring_con")[rows, ring] = con.reshape(P, N, 2)
 
-        waist_pos = np.repeat(pos[:, TrackerSlot.WAIST], N, axis=0)  # (P*N, 3)
-        waist_quat = np.repeat(quat[:, TrackerSlot.WAIST], N, axis=0)
+        waist_pos, waist_quat = pos[:, TrackerSlot.WAIST], quat[:, TrackerSlot.WAIST]  # (P, ...)
         _, wp = fk32(
-            rot, quat2mat(waist_quat).astype(np.float32), waist_pos.astype(np.float32), False
+            rot,
+            np.repeat(quat2mat(waist_quat).astype(np.float32), N, axis=0),
+            np.repeat(waist_pos.astype(np.float32), N, axis=0),
+            False,
         )
         ik = ContactIK(
             s.view("ik_locked").reshape(P * N, 2),
@@ -241,7 +243,7 @@ class Engine:
             self.cfg.ik_release_frames,
         )
         ik.step(None, wp, con)
-        scores = self.scorer.score(wp, waist_pos, waist_quat).reshape(P, N)
+        scores = self.scorer.score(wp, waist_pos, waist_quat, repeat=N).reshape(P, N)
         wp = wp.reshape(P, N, -1, 3)
 
         started = 0

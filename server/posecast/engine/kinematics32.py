@@ -36,7 +36,10 @@ def _local_soa(rot6d: F32, B: int) -> F32:
     b1 = a1 / np.maximum(np.sqrt((a1 * a1).sum(axis=1, keepdims=True)), 1e-8)
     b2 = a2 - (b1 * a2).sum(axis=1, keepdims=True) * b1
     b2 /= np.maximum(np.sqrt((b2 * b2).sum(axis=1, keepdims=True)), 1e-8)
-    b3 = np.cross(b1, b2, axis=1)
+    b3 = np.empty_like(b1)  # b1 x b2, written out (np.cross is slow on small stacks)
+    b3[:, 0] = b1[:, 1] * b2[:, 2] - b1[:, 2] * b2[:, 1]
+    b3[:, 1] = b1[:, 2] * b2[:, 0] - b1[:, 0] * b2[:, 2]
+    b3[:, 2] = b1[:, 0] * b2[:, 1] - b1[:, 1] * b2[:, 0]
     out: F32 = np.stack([b1, b2, b3], axis=2)  # columns: [j, row, col, b]
     return out
 
