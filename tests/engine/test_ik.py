@@ -121,8 +121,9 @@ def test_apply_leg_ik_moves_only_the_active_leg() -> None:
 
 def test_locked_foot_stays_within_a_millimetre_while_contact_holds() -> None:
     """Contact stays above 0.5 for 30 frames while the network's ankle drifts 37 cm,
-    always within the leg's reach: the shown ankle stays where the contact began."""
-    ik = ContactIK.zeros(1, release_frames=4)
+    always within the leg's reach: the shown ankle stays where the contact began (the
+    paper's rule; the early release on large drift is switched off here)."""
+    ik = ContactIK.zeros(1, release_frames=4, max_drift_m=None)
     wm, wp = crouch(0)
     lock = left_ankle(wp).copy()
     ik.step(wm, wp, contact(0.9))
@@ -203,3 +204,32 @@ def test_contact_ik_works_on_views_of_engine_buffers() -> None:
     ik.step(wm6, wp6, prob)
     assert not locked.any()
     assert release[1, 1, 0] == 3  # one release frame shown, three to go
+
+
+def test_a_lock_the_network_drifted_far_from_is_released_early() -> None:
+    """With ``max_drift_m = 0.2`` the lock holds (within 1 mm) until the network's ankle
+    is over 20 cm away, is then released, blends back, and does not lock again until
+    the predicted contact has ended once."""
+    ik = ContactIK.zeros(1, release_frames=4, max_drift_m=0.2)
+    wm, wp = crouch(0)
+    lock = left_ankle(wp).copy()
+    ik.step(wm, wp, contact(0.9))
+    released_at = None
+    for k in range(1, 31):
+        wm, wp = crouch(k)
+        drift = float(np.linalg.norm(left_ankle(wp) - lock))
+        ik.step(wm, wp, contact(0.9))
+        if released_at is None and drift <= 0.2:
+            assert np.linalg.norm(left_ankle(wp) - lock) < MM
+        elif released_at is None:
+            released_at = k
+    assert released_at is not None
+    assert not ik.locked[0, 0]
+    wm, wp = crouch(30)
+    net = left_ankle(wp).copy()
+    ik.step(wm, wp, contact(0.9))  # still predicted: stays unlocked, back on the network
+    np.testing.assert_allclose(left_ankle(wp), net, atol=1e-9)
+    ik.step(*crouch(30), contact(0.1))  # the contact ends ...
+    wm, wp = crouch(30)
+    ik.step(wm, wp, contact(0.9))  # ... and a new one locks again
+    assert ik.locked[0, 0]

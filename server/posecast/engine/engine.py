@@ -129,6 +129,7 @@ class Engine:
                 "ik_locked": ((N, 2), np.bool_),
                 "ik_lock_pos": ((N, 2, 3), np.float64),
                 "ik_release": ((N, 2), np.int64),
+                "ik_suppressed": ((N, 2), np.bool_),
                 "ring_h": ((L, N, self.hidden), np.float32),  # hidden state before frame
                 "ring_rot": ((L, N, 108), np.float32),
                 "ring_con": ((L, N, 2), np.float32),
@@ -171,7 +172,7 @@ class Engine:
             selector or AnomalySelector(self.cfg.outlier_factor, self.cfg.outlier_baseline),
             calibration or Calibration(),
             wf,
-            display_ik=ContactIK.zeros(1, self.cfg.ik_release_frames),
+            display_ik=ContactIK.zeros(1, self.cfg.ik_release_frames, self.cfg.ik_max_drift_m),
         )
         self._order.append(player)
 
@@ -241,6 +242,8 @@ class Engine:
             s.view("ik_lock_pos").reshape(P * N, 2, 3),
             s.view("ik_release").reshape(P * N, 2),
             self.cfg.ik_release_frames,
+            s.view("ik_suppressed").reshape(P * N, 2),
+            self.cfg.ik_max_drift_m,
         )
         ik.step(None, wp, con)
         scores = self.scorer.score(wp, waist_pos, waist_quat, repeat=N).reshape(P, N)

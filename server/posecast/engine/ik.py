@@ -115,27 +115,46 @@ class ContactIK:
 
     The arrays may be views into larger engine buffers; :meth:`step` updates them in
     place. Shapes: ``locked (B, 2)``, ``lock_pos (B, 2, 3)``, ``release_left (B, 2)``
-    (frames of release blending still to go).
+    (frames of release blending still to go), ``suppressed (B, 2)``.
+
+    A lock the network's own ankle has drifted more than ``max_drift_m`` from is
+    released early (and stays released until the predicted contact ends): holding it
+    would stretch the leg straight toward a spot the body has left, and the knee
+    would snap back when the contact finally ends.
     """
 
     locked: NDArray[np.bool_]
     lock_pos: F64
     release_left: NDArray[np.int64]
     release_frames: int = 10
+    suppressed: NDArray[np.bool_] | None = None
+    max_drift_m: float | None = 0.3
+
+    def __post_init__(self) -> None:
+        if self.suppressed is None:
+            self.suppressed = np.zeros(self.locked.shape, dtype=bool)
 
     @classmethod
-    def zeros(cls, n: int, release_frames: int = 10) -> ContactIK:
+    def zeros(cls, n: int, release_frames: int = 10, max_drift_m: float | None = 0.3) -> ContactIK:
         return cls(
             np.zeros((n, 2), dtype=bool),
             np.zeros((n, 2, 3)),
             np.zeros((n, 2), dtype=np.int64),
             release_frames,
+            np.zeros((n, 2), dtype=bool),
+            max_drift_m,
         )
 
     def step(self, world_mat: F64 | None, world_pos: F64, contact_prob: F64) -> None:
         """Post-process one frame of ``B`` poses in place: ``(B, 19, 3, 3)``, ``(B, 19, 3)``."""
         feet = world_pos[:, [LEGS[0][2], LEGS[1][2]]]  # (B, 2, 3) network ankles
-        contact = contact_prob > CONTACT_THRESHOLD
+        predicted = contact_prob > CONTACT_THRESHOLD
+        assert self.suppressed is not None
+        self.suppressed &= predicted  # a new contact may lock again
+        if self.max_drift_m is not None:
+            drift = np.linalg.norm(feet - self.lock_pos, axis=-1)
+            self.suppressed |= self.locked & predicted & (drift > self.max_drift_m)
+        contact = predicted & ~self.suppressed
         starting = contact & ~self.locked
         # Lock where the ankle would be shown now: the network's ankle, or, for a foot
         # landing again mid-release, the blend it is on (locking at the network's
