@@ -3,6 +3,8 @@
 Subcommands:
 
 * ``posecast data prepare --bvh DIR --out DIR`` - build a cached training dataset
+* ``posecast serve [--dev] [--port N] ...`` - the pose-streaming server (``docs/server.md``)
+* ``posecast token --room R --player P --role player`` - mint a development join token
 * ``posecast demo`` - the data pipeline on a generated fixture (what ``make run`` does
   until the server lands)
 """
@@ -169,6 +171,52 @@ def _cmd_bench_engine(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_serve(args: argparse.Namespace) -> int:
+    import asyncio
+    import os
+
+    from posecast.service.app import serve_until_signal
+    from posecast.service.config import ServerConfig
+    from posecast.service.logging import configure
+
+    overrides = {k: v for k, v in vars(args).items() if k not in ("command", "func")}
+    cfg = ServerConfig.from_sources(os.environ, overrides)
+    configure(cfg.log_level)
+    if cfg.dev and not os.environ.get("POSECAST_TOKEN_SECRET"):
+        print(f"posecast: --dev: token secret for this run: {cfg.token_secret}", flush=True)
+
+    def ready(port: int) -> None:
+        print(f"posecast: listening on ws://{cfg.host}:{port}", flush=True)
+
+    asyncio.run(serve_until_signal(cfg, ready))
+    return 0
+
+
+def _cmd_token(args: argparse.Namespace) -> int:
+    import os
+    import time
+
+    from posecast.auth.tokens import mint
+
+    secret = args.secret or os.environ.get("POSECAST_TOKEN_SECRET", "")
+    if not secret:
+        print("posecast: token: pass --secret or set POSECAST_TOKEN_SECRET", file=sys.stderr)
+        return 2
+    rooms = tuple(r for r in (args.rooms or "").split(",") if r)
+    print(
+        mint(
+            secret.encode("utf-8"),
+            room=args.room,
+            player=args.player,
+            role=args.role,
+            ttl_s=args.ttl,
+            now=time.time(),
+            rooms=rooms,
+        )
+    )
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="posecast", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -235,6 +283,21 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--naive-players", type=int, default=10, help="players for the naive loop")
     be.add_argument("--json", type=Path, help="write the report here")
     be.set_defaults(func=_cmd_bench_engine)
+
+    from posecast.service.config import add_arguments
+
+    serve = sub.add_parser("serve", help="run the pose-streaming server (docs/server.md)")
+    add_arguments(serve)
+    serve.set_defaults(func=_cmd_serve)
+
+    tok = sub.add_parser("token", help="mint a join token (development; the backend mints)")
+    tok.add_argument("--secret", help="HMAC key (default: $POSECAST_TOKEN_SECRET)")
+    tok.add_argument("--room", required=True, help="room the token joins")
+    tok.add_argument("--player", required=True, help="player id (server-unique)")
+    tok.add_argument("--role", default="player", choices=("player", "spectator", "backend"))
+    tok.add_argument("--rooms", help="comma-separated extra rooms a backend may watch")
+    tok.add_argument("--ttl", type=int, default=3600, help="seconds until it expires (3600)")
+    tok.set_defaults(func=_cmd_token)
 
     demo = sub.add_parser("demo", help="run the bundled demo")
     demo.set_defaults(func=_cmd_demo)

@@ -70,6 +70,10 @@ class NoContacts:
         rot, con, h = self.decoder.run(**inputs)
         return [rot, np.zeros_like(con), h]
 
+    def run_into(self, inputs: dict[str, np.ndarray], outputs: dict[str, np.ndarray]) -> None:
+        self.decoder.run_into(inputs, outputs)
+        outputs["contacts"][...] = 0.0
+
 
 def run(engine: Engine, frames: dict[str, list[TrackerFrame]]) -> dict[str, list[PoseOut]]:
     """Push every player's next frame and tick, until the longest walk is through."""
@@ -166,7 +170,7 @@ Corruption = Callable[[Engine, int, int], None]  # (engine, slot, sample)
 
 def corrupt_hidden(value: float | np.ndarray) -> Corruption:
     def apply(engine: Engine, slot: int, sample: int) -> None:
-        engine.slots["h"][slot, sample] = value
+        engine.hidden_state(engine._order[slot])[sample] = value
 
     return apply
 

@@ -23,7 +23,9 @@ new sample is fully in place exactly at the frame where the outlier would have s
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -103,7 +105,6 @@ class _Player:
     missing: int = 0
     stale: bool = False
     transitions: int = 0
-    display_ik: ContactIK = field(default_factory=lambda: ContactIK.zeros(1))
 
 
 class Engine:
@@ -121,23 +122,30 @@ class Engine:
         self.scorer = scorer
         mc = decoder.meta["model_config"]
         self.latent, self.hidden = int(mc["latent"]), int(mc["hidden"])
-        N, L = self.cfg.samples, self.cfg.lookahead + 1
+        N = self.cfg.samples
+        # Ring rows: tau + 1 frames of history, plus the row the decoder writes the next
+        # hidden states into while frame n - tau is still being emitted.
+        L = self._ring = self.cfg.lookahead + 2
+        self._tick = 0
         self.slots = SlotArrays(
             {
                 "eps": ((N, self.latent), np.float32),
-                "h": ((N, self.hidden), np.float32),
                 "ik_locked": ((N, 2), np.bool_),
                 "ik_lock_pos": ((N, 2, 3), np.float64),
                 "ik_release": ((N, 2), np.int64),
                 "ik_suppressed": ((N, 2), np.bool_),
-                "ring_h": ((L, N, self.hidden), np.float32),  # hidden state before frame
-                "ring_rot": ((L, N, 108), np.float32),
-                "ring_con": ((L, N, 2), np.float32),
-                "ring_x": ((L, NUM_FEATURES), np.float32),
-                "ring_pos": ((L, 4, 3), np.float64),  # calibrated tracker positions
-                "ring_quat": ((L, 4, 4), np.float64),
-                "ring_seq": ((L,), np.int64),
-                "ring_held": ((L,), np.bool_),
+                "disp_locked": ((2,), np.bool_),
+                "disp_lock_pos": ((2, 3), np.float64),
+                "disp_release": ((2,), np.int64),
+                "disp_suppressed": ((2,), np.bool_),
+                "ring_h": ((N, self.hidden), np.float32, L),  # hidden state before the frame
+                "ring_rot": ((N, 108), np.float32, L),
+                "ring_con": ((N, 2), np.float32, L),
+                "ring_x": ((NUM_FEATURES,), np.float32, L),
+                "ring_pos": ((4, 3), np.float64, L),  # calibrated tracker positions
+                "ring_quat": ((4, 4), np.float64, L),
+                "ring_seq": ((), np.int64, L),
+                "ring_held": ((), np.bool_, L),
             },
             capacity,
         )
@@ -172,7 +180,6 @@ class Engine:
             selector or AnomalySelector(self.cfg.outlier_factor, self.cfg.outlier_baseline),
             calibration or Calibration(),
             wf,
-            display_ik=ContactIK.zeros(1, self.cfg.ik_release_frames, self.cfg.ik_max_drift_m),
         )
         self._order.append(player)
 
@@ -209,27 +216,28 @@ class Engine:
     def tick(self) -> TickResult:
         P, N = self.slots.count, self.cfg.samples
         if P == 0:
+            self._tick += 1
             return TickResult([], [], 0)
-        events = self._gather_inputs()
-        s = self.slots
-        L = self.cfg.lookahead + 1
-        ring = np.array([self.players[pid].frames % L for pid in self._order])
-        rows = np.arange(P)
-        x = s.view("ring_x")[rows, ring]  # (P, 24)
-        pos = s.view("ring_pos")[rows, ring]  # (P, 4, 3)
-        quat = s.view("ring_quat")[rows, ring]  # (P, 4, 4)
-        h = s.view("h")  # (P, N, H)
-        s.view("ring_h")[rows, ring] = h
-
-        rot, con, h_new = self.decoder.run(
-            features=np.repeat(x, N, axis=0),
-            z=s.view("eps").reshape(P * N, self.latent),
-            h=h.reshape(P * N, self.hidden),
+        s, L = self.slots, self._ring
+        k = self._tick % L
+        events = self._gather_inputs(k)
+        pos, quat = s.row("ring_pos", k), s.row("ring_quat", k)  # (P, 4, 3), (P, 4, 4)
+        # One decoder call for all P*N samples; ONNX Runtime reads the hidden states from
+        # this frame's ring row and writes the next ones straight into the following row.
+        self.decoder.run_into(
+            {
+                "features": np.repeat(s.row("ring_x", k), N, axis=0),
+                "z": s.view("eps").reshape(P * N, self.latent),
+                "h": s.row("ring_h", k).reshape(P * N, self.hidden),
+            },
+            {
+                "rotations": s.row("ring_rot", k).reshape(P * N, 108),
+                "contacts": s.row("ring_con", k).reshape(P * N, 2),
+                "h_out": s.row("ring_h", (k + 1) % L).reshape(P * N, self.hidden),
+            },
         )
-        h[...] = h_new.reshape(P, N, self.hidden)
-        s.view("ring_rot")[rows, ring] = rot.reshape(P, N, 108)
-        s.view("ring_con")[rows, ring] = con.reshape(P, N, 2)
-
+        rot = s.row("ring_rot", k).reshape(P * N, 108)
+        con = s.row("ring_con", k).reshape(P * N, 2)
         waist_pos, waist_quat = pos[:, TrackerSlot.WAIST], quat[:, TrackerSlot.WAIST]  # (P, ...)
         _, wp = fk32(
             rot,
@@ -237,15 +245,7 @@ class Engine:
             np.repeat(waist_pos.astype(np.float32), N, axis=0),
             False,
         )
-        ik = ContactIK(
-            s.view("ik_locked").reshape(P * N, 2),
-            s.view("ik_lock_pos").reshape(P * N, 2, 3),
-            s.view("ik_release").reshape(P * N, 2),
-            self.cfg.ik_release_frames,
-            s.view("ik_suppressed").reshape(P * N, 2),
-            self.cfg.ik_max_drift_m,
-        )
-        ik.step(None, wp, con)
+        self._ik(s.view, P * N).step(None, wp, con)
         scores = self.scorer.score(wp, waist_pos, waist_quat, repeat=N).reshape(P, N)
         wp = wp.reshape(P, N, -1, 3)
 
@@ -255,16 +255,34 @@ class Engine:
         poses = self._emit()
         for pid in self._order:
             self.players[pid].frames += 1
+        self._tick += 1
         return TickResult(poses, events, started)
 
-    def _gather_inputs(self) -> list[EngineEvent]:
-        """Write this frame's inputs into every player's ring; hold missing frames."""
-        L = self.cfg.lookahead + 1
+    def _ik(self, get: Callable[[str], NDArray[Any]], rows: int, prefix: str = "ik") -> ContactIK:
+        """Contact IK over ``rows`` rows of the ``<prefix>_*`` state arrays (views)."""
+        return ContactIK(
+            get(f"{prefix}_locked").reshape(rows, 2),
+            get(f"{prefix}_lock_pos").reshape(rows, 2, 3),
+            get(f"{prefix}_release").reshape(rows, 2),
+            self.cfg.ik_release_frames,
+            get(f"{prefix}_suppressed").reshape(rows, 2),
+            self.cfg.ik_max_drift_m,
+        )
+
+    def hidden_state(self, player: str) -> NDArray[np.float32]:
+        """The GRU states ``(N, 128)`` the next tick decodes from (a writable view)."""
+        out: NDArray[np.float32] = self.slots["ring_h"][
+            self._tick % self._ring, self.players[player].slot
+        ]
+        return out
+
+    def _gather_inputs(self, k: int) -> list[EngineEvent]:
+        """Write this frame's inputs into ring row ``k``; hold missing frames."""
+        kp = (k - 1) % self._ring
         events: list[EngineEvent] = []
         s = self.slots
         for pid in self._order:
             p = self.players[pid]
-            k = p.frames % L
             frame, held = p.pending, False
             if frame is None:
                 held = True
@@ -278,30 +296,27 @@ class Engine:
                     p.stale = False
                     events.append(EngineEvent("active", pid))
             p.pending = None
-            prev_k = (p.frames - 1) % L
             if frame is None and p.last is None:
                 # Nothing ever arrived: stand still at the origin in the rest pose.
                 frame = TrackerFrame(-1, _rest_trackers(), _identity_quats())
             if frame is None:
-                s["ring_x"][p.slot, k] = s["ring_x"][p.slot, prev_k]
-                s["ring_pos"][p.slot, k] = s["ring_pos"][p.slot, prev_k]
-                s["ring_quat"][p.slot, k] = s["ring_quat"][p.slot, prev_k]
-                s["ring_seq"][p.slot, k] = s["ring_seq"][p.slot, prev_k]
+                for name in ("ring_x", "ring_pos", "ring_quat", "ring_seq"):
+                    s[name][k, p.slot] = s[name][kp, p.slot]
             else:
                 q = np.array(frame.quat, dtype=np.float64)
                 if p.waist_filter is not None:
                     q[TrackerSlot.WAIST] = p.waist_filter(q[TrackerSlot.WAIST])
                 cal = p.calibration.apply(np.asarray(frame.pos, dtype=np.float64), q)
-                prev = s["ring_pos"][p.slot, prev_k] if p.last is not None else cal
-                s["ring_x"][p.slot, k] = tracker_features(
+                prev = s["ring_pos"][kp, p.slot] if p.last is not None else cal
+                s["ring_x"][k, p.slot] = tracker_features(
                     cal, prev, q[TrackerSlot.WAIST], self.cfg.fps
                 )
-                s["ring_pos"][p.slot, k] = cal
-                s["ring_quat"][p.slot, k] = q
-                s["ring_seq"][p.slot, k] = frame.seq
+                s["ring_pos"][k, p.slot] = cal
+                s["ring_quat"][k, p.slot] = q
+                s["ring_seq"][k, p.slot] = frame.seq
                 if frame.seq >= 0:
                     p.last = frame
-            s["ring_held"][p.slot, k] = held
+            s["ring_held"][k, p.slot] = held
         return events
 
     def _select(self, p: _Player, scores: F64, positions: F32) -> int:
@@ -319,74 +334,75 @@ class Engine:
         return 1
 
     def _emit(self) -> list[PoseOut]:
-        tau, T, L = self.cfg.lookahead, self.cfg.transition_frames, self.cfg.lookahead + 1
+        tau, T = self.cfg.lookahead, self.cfg.transition_frames
         s = self.slots
-        emit: list[tuple[_Player, int, int, float]] = []  # player, ring index, sample, weight
+        k = (self._tick - tau) % self._ring  # ring row of frame n - tau, for every player
+        emit: list[tuple[_Player, int, float]] = []  # player, sample, weight
         for pid in self._order:
             p = self.players[pid]
             e = p.frames - tau
             if e < 0:
                 continue
-            k = e % L
             if p.plan is None or e < p.plan.start:
-                sample = p.plan.src if p.plan is not None else p.current
-                emit.append((p, k, sample, 0.0))
-                continue
-            w = min(1.0, (e - p.plan.start + 1) / T)
-            emit.append((p, k, p.plan.dst, w))
+                emit.append((p, p.plan.src if p.plan is not None else p.current, 0.0))
+            else:
+                emit.append((p, p.plan.dst, min(1.0, (e - p.plan.start + 1) / T)))
         if not emit:
             return []
-        rot = np.empty((len(emit), 108), np.float32)
-        con = np.empty((len(emit), 2), np.float32)
-        interp = [i for i, (_, _, _, w) in enumerate(emit) if 0.0 < w < 1.0]
-        for i, (p, k, sample, _) in enumerate(emit):
-            rot[i] = s["ring_rot"][p.slot, k, sample]
-            con[i] = s["ring_con"][p.slot, k, sample]
+        slots = np.array([p.slot for p, _, _ in emit])
+        samples = np.array([sample for _, sample, _ in emit])
+        rot = s["ring_rot"][k, slots, samples]  # (E, 108) copies
+        con = s["ring_con"][k, slots, samples]
+        interp = [i for i, (_, _, w) in enumerate(emit) if 0.0 < w < 1.0]
         if interp:
-            xs, zs, hs = [], [], []
+            zs, hs = [], []
             for i in interp:
-                p, k, _, w = emit[i]
+                p, _, w = emit[i]
                 assert p.plan is not None
-                eps, hr = s["eps"][p.slot], s["ring_h"][p.slot, k]
+                eps, hr = s["eps"][p.slot], s["ring_h"][k, p.slot]
                 zs.append((1 - w) * eps[p.plan.src] + w * eps[p.plan.dst])
                 hs.append((1 - w) * hr[p.plan.src] + w * hr[p.plan.dst])
-                xs.append(s["ring_x"][p.slot, k])
             r, c, _ = self.decoder.run(
-                features=np.asarray(xs, np.float32),
+                features=s["ring_x"][k, slots[interp]],
                 z=np.asarray(zs, np.float32),
                 h=np.asarray(hs, np.float32),
             )
             rot[interp], con[interp] = r, c
-        for p, _, _, w in emit:
+        for p, _, w in emit:
             if p.plan is not None and w >= 1.0:
                 p.plan = None
-        slots = np.array([p.slot for p, *_ in emit])
-        ks = np.array([k for _, k, _, _ in emit])
-        pos = s["ring_pos"][slots, ks]
-        quat = s["ring_quat"][slots, ks]
+        pos, quat = s["ring_pos"][k, slots], s["ring_quat"][k, slots]
         wm, wp = fk32(
             rot,
             quat2mat(quat[:, TrackerSlot.WAIST]).astype(np.float32),
             pos[:, TrackerSlot.WAIST].astype(np.float32),
         )
         assert wm is not None
-        out = []
-        for i, (p, k, sample, w) in enumerate(emit):
-            p.display_ik.step(wm[i : i + 1], wp[i : i + 1], con[i : i + 1])
-            scale = p.calibration.scale
-            out.append(
-                PoseOut(
-                    player=p.id,
-                    seq=int(s["ring_seq"][p.slot, k]),
-                    positions=(wp[i] / scale).astype(np.float32),
-                    rotations=mat2quat(wm[i]).astype(np.float32),
-                    contacts=con[i].copy(),
-                    sample=sample,
-                    transitioning=0.0 < w < 1.0,
-                    held=bool(s["ring_held"][p.slot, k]),
-                )
+        # The players' own display IK, batched: gather their states, step, scatter back.
+        state = {n: s[n][slots] for n in _DISPLAY_IK}
+        self._ik(state.__getitem__, len(emit), "disp").step(wm, wp, con)
+        for n in _DISPLAY_IK:
+            s[n][slots] = state[n]
+        scale = np.array([p.calibration.scale for p, _, _ in emit], np.float32)
+        positions = wp / scale[:, None, None]
+        rotations = mat2quat(wm).astype(np.float32)
+        seqs, held = s["ring_seq"][k, slots], s["ring_held"][k, slots]
+        return [
+            PoseOut(
+                player=p.id,
+                seq=int(seqs[i]),
+                positions=positions[i],
+                rotations=rotations[i],
+                contacts=con[i],
+                sample=sample,
+                transitioning=0.0 < w < 1.0,
+                held=bool(held[i]),
             )
-        return out
+            for i, (p, sample, w) in enumerate(emit)
+        ]
+
+
+_DISPLAY_IK = ("disp_locked", "disp_lock_pos", "disp_release", "disp_suppressed")
 
 
 def _rest_trackers() -> F64:

@@ -50,6 +50,21 @@ class Artifact:
         out: list[np.ndarray] = self.session.run(None, inputs)
         return out
 
+    def run_into(self, inputs: dict[str, np.ndarray], outputs: dict[str, np.ndarray]) -> None:
+        """Run with every output written into the given float32 C-contiguous arrays.
+
+        No output is allocated or copied: ONNX Runtime writes straight into the
+        caller's buffers (the engine's ring rows).
+        """
+        binding = self.session.io_binding()
+        for name, arr in inputs.items():
+            binding.bind_cpu_input(name, np.ascontiguousarray(arr, dtype=np.float32))
+        for name, arr in outputs.items():
+            if arr.dtype != np.float32 or not arr.flags.c_contiguous:
+                raise ValueError(f"output {name} must be float32 and C-contiguous")
+            binding.bind_output(name, "cpu", 0, np.float32, list(arr.shape), arr.ctypes.data)
+        self.session.run_with_iobinding(binding)
+
     @property
     def output_names(self) -> list[str]:
         return [o.name for o in self.session.get_outputs()]

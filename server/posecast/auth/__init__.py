@@ -1,0 +1,1 @@
+"""Join tokens: minting (the game backend, ``posecast token``) and verification."""

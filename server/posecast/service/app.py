@@ -1,0 +1,248 @@
+"""The asyncio shell: a ``websockets`` server that only moves bytes.
+
+Per connection, two tasks: the handler reads messages and hands them to the
+:class:`~posecast.service.hub.Hub`; the writer sleeps until its outbox has something,
+takes everything (control messages first, then one pose per avatar) and sends it. A
+writer that a slow client blocks delays nobody else: the tick keeps filling that
+client's latest-wins slots, and the hub cuts the client off when it stays behind.
+
+The same port answers plain HTTP: ``/healthz`` (the process is up), ``/readyz`` (the
+engine is loaded and the server is not shutting down) and ``/metrics`` (Prometheus).
+
+Lifecycle: :meth:`PosecastServer.start` binds, loads the engine in the engine thread
+and starts ticking; :meth:`PosecastServer.stop` stops accepting, says ``bye`` to
+everyone, waits up to ``drain_timeout_s`` for the writers to flush, then closes.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import signal
+import socket
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+from websockets.asyncio.server import Server, ServerConnection, serve
+from websockets.datastructures import Headers
+from websockets.exceptions import ConnectionClosed
+from websockets.http11 import Request, Response
+from websockets.typing import Subprotocol
+
+from posecast.engine.config import EngineConfig
+from posecast.engine.engine import Engine, load_engine
+from posecast.protocol.messages import SUBPROTOCOL
+from posecast.service.config import ServerConfig
+from posecast.service.hub import Hub
+from posecast.service.metrics import CONTENT_TYPE, Metrics
+from posecast.service.ratelimit import IpLimiter
+from posecast.service.ticker import EngineWorker, run_ticks
+
+log = logging.getLogger("posecast.server")
+_HTTP_PATHS = ("/healthz", "/readyz", "/metrics")
+
+
+@dataclass
+class _Client:
+    ws: ServerConnection
+    wake: asyncio.Event
+    writer: asyncio.Task[None] | None = None
+
+
+class PosecastServer:
+    """One server instance: its own hub, metrics registry, engine thread and socket."""
+
+    def __init__(
+        self, cfg: ServerConfig, *, engine_factory: Callable[[], Engine] | None = None
+    ) -> None:
+        self.cfg = cfg
+        self.metrics = Metrics()
+        self.hub = Hub(cfg, self.metrics, wall_offset_s=time.time() - time.monotonic())
+        self.ip_limiter = IpLimiter(cfg.conn_per_ip_per_min)
+        self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="posecast-engine")
+        self._engine_factory = engine_factory or self._default_engine
+        self._clients: dict[int, _Client] = {}
+        self._server: Server | None = None
+        self._ticks: asyncio.Task[None] | None = None
+        self._stop_ticks = asyncio.Event()
+        self.ready = False
+        self.stopping = False
+        self.port = 0
+
+    def _default_engine(self) -> Engine:
+        ecfg = EngineConfig(
+            samples=self.cfg.samples, lookahead=self.cfg.lookahead, fps=self.cfg.tick_hz
+        )
+        return load_engine(ecfg, self.cfg.models_dir, threads=self.cfg.engine_threads)
+
+    # --- lifecycle ----------------------------------------------------------------------
+
+    async def start(self) -> None:
+        loop = asyncio.get_running_loop()
+        self._server = await serve(
+            self._handle,
+            self.cfg.host,
+            self.cfg.port,
+            process_request=self._http,
+            subprotocols=[Subprotocol(SUBPROTOCOL)],  # a client offering none gets HTTP 400
+            compression=None,  # poses are quantised binary; deflate per client costs CPU
+            max_size=max(4 * self.cfg.max_message_bytes, 65_536),  # the codec says TOO_LARGE
+            max_queue=64,
+            open_timeout=self.cfg.hello_timeout_s,
+            close_timeout=self.cfg.close_timeout_s,
+        )
+        self.port = self._server.sockets[0].getsockname()[1]
+        engine = await loop.run_in_executor(self.executor, self._engine_factory)
+        worker = EngineWorker(engine)
+        self._ticks = asyncio.create_task(
+            run_ticks(
+                period_s=1.0 / self.cfg.tick_hz,
+                executor=self.executor,
+                worker=worker,
+                take_input=self.hub.take_tick_input,
+                deliver=self.hub.deliver,
+                after=self._after_tick,
+                overrun=self.metrics.tick_overruns.inc,
+                stop=self._stop_ticks,
+            )
+        )
+        self.ready = True
+        log.info("listening", extra={"host": self.cfg.host, "port": self.port})
+
+    async def stop(self) -> None:
+        """Graceful shutdown: stop accepting, ``bye`` to all, drain, close."""
+        if self.stopping:
+            return
+        self.stopping, self.ready = True, False
+        assert self._server is not None
+        self._server.close(close_connections=False)  # no new connections from here on
+        self.hub.shutdown(time.monotonic())
+        self._flush()
+        deadline = time.monotonic() + self.cfg.drain_timeout_s
+        while self._clients and time.monotonic() < deadline:
+            await asyncio.sleep(0.01)
+        for client in list(self._clients.values()):  # past the deadline: cut them off
+            client.ws.transport.abort()
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(self._server.wait_closed(), self.cfg.close_timeout_s)
+        self._stop_ticks.set()
+        if self._ticks is not None:
+            await self._ticks
+        self.executor.shutdown(wait=True)
+        log.info("stopped", extra={"port": self.port})
+
+    # --- HTTP on the same port ------------------------------------------------------------
+
+    def _http(self, connection: ServerConnection, request: Request) -> Response | None:
+        path = request.path.split("?", 1)[0]
+        if path == "/healthz":
+            return connection.respond(200, "ok\n")
+        if path == "/readyz":
+            return connection.respond(200, "ready\n") if self.ready else _unavailable(connection)
+        if path == "/metrics":
+            body = self.metrics.render()
+            headers = Headers([("Content-Type", CONTENT_TYPE), ("Content-Length", str(len(body)))])
+            return Response(200, "OK", headers, body)
+        if not self.ready:
+            self.metrics.connects.labels("unavailable").inc()
+            return _unavailable(connection)
+        ip = _ip(connection)
+        if not self.ip_limiter.allow(ip, time.monotonic()):
+            self.metrics.connects.labels("rate_limited").inc()
+            log.info("connection refused", extra={"ip": ip, "reason": "per-IP rate"})
+            return connection.respond(429, "too many connection attempts\n")
+        if len(self._clients) >= self.cfg.max_connections:
+            self.metrics.connects.labels("full").inc()
+            return _unavailable(connection)
+        self.metrics.connects.labels("accepted").inc()
+        return None  # go on with the WebSocket handshake
+
+    # --- one connection ---------------------------------------------------------------------
+
+    async def _handle(self, ws: ServerConnection) -> None:
+        sock = ws.transport.get_extra_info("socket")
+        if self.cfg.socket_sndbuf_bytes and sock is not None:
+            # Bound the kernel's backlog too, or a stalled client would sit on seconds
+            # of stale poses there before its outbox ever saw back-pressure.
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, self.cfg.socket_sndbuf_bytes)
+        conn = self.hub.connect(_ip(ws), time.monotonic())
+        client = _Client(ws, asyncio.Event())
+        client.writer = asyncio.create_task(self._write(conn, client))
+        self._clients[conn] = client
+        try:
+            async for data in ws:
+                self.hub.receive(conn, data, time.monotonic())
+                self._flush()
+        except ConnectionClosed:
+            pass
+        finally:
+            self.hub.disconnect(conn, time.monotonic())
+            del self._clients[conn]
+            client.writer.cancel()
+            with contextlib.suppress(asyncio.CancelledError, ConnectionClosed):
+                await client.writer
+            self._flush()
+
+    async def _write(self, conn: int, client: _Client) -> None:
+        box = self.hub.outbox(conn)
+        assert box is not None
+        while True:
+            await client.wake.wait()
+            client.wake.clear()
+            for data in box.take():
+                await client.ws.send(data)
+                self.metrics.bytes_out.inc(len(data))
+            box.sent(time.monotonic())
+            if box.closed and not box.pending:
+                await client.ws.close(box.close_code, box.close_reason)
+                return
+
+    def _flush(self) -> None:
+        """Wake the writers the hub queued for, and cut off the clients it gave up on."""
+        for conn in self.hub.pop_dirty():
+            client = self._clients.get(conn)
+            if client is not None:
+                client.wake.set()
+        for conn in self.hub.pop_aborts():
+            client = self._clients.get(conn)
+            if client is not None:
+                asyncio.get_running_loop().create_task(self._cut_off(client))
+
+    async def _cut_off(self, client: _Client) -> None:
+        """Give the writer a moment to get the final error out, then drop the socket."""
+        if client.writer is not None:
+            with contextlib.suppress(TimeoutError, asyncio.CancelledError, ConnectionClosed):
+                await asyncio.wait_for(asyncio.shield(client.writer), 0.25)
+        client.ws.transport.abort()
+
+    def _after_tick(self, now: float) -> None:
+        self.hub.check_timeouts(now)
+        self._flush()
+
+
+def _unavailable(connection: ServerConnection) -> Response:
+    return connection.respond(503, "not ready\n")
+
+
+def _ip(connection: ServerConnection) -> str:
+    addr = connection.remote_address
+    return str(addr[0]) if addr else "?"
+
+
+async def serve_until_signal(cfg: ServerConfig, on_ready: Callable[[int], None]) -> None:
+    """``posecast serve``: run until SIGTERM or SIGINT, then shut down gracefully."""
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        loop.add_signal_handler(sig, stop.set)
+    server = PosecastServer(cfg)
+    await server.start()
+    on_ready(server.port)
+    try:
+        await stop.wait()
+        log.info("signal received: shutting down")
+    finally:
+        await server.stop()

@@ -1,0 +1,79 @@
+"""Prometheus metrics of one server instance, on a registry the instance owns.
+
+Not the process-global default registry: two servers in one process (the tests run
+many) each count their own, and nothing leaks between them. ``/metrics`` serves
+:meth:`Metrics.render`.
+"""
+
+from __future__ import annotations
+
+from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
+from prometheus_client.exposition import CONTENT_TYPE_LATEST
+
+CONTENT_TYPE = CONTENT_TYPE_LATEST
+_TICK_BUCKETS = (0.001, 0.002, 0.004, 0.008, 0.012, 0.0167, 0.025, 0.05, 0.1, 0.25, 1.0)
+_BATCH_BUCKETS = (0, 1, 2, 4, 8, 16, 32, 64, 128, 256, 512)
+_DRIFT_BUCKETS = (1, 10, 50, 100, 200, 500, 1000, 10_000)
+
+
+class Metrics:
+    """Every metric ``posecast serve`` exports (names are ``posecast_*``)."""
+
+    def __init__(self) -> None:
+        r = self.registry = CollectorRegistry(auto_describe=True)
+        self.connections = Gauge(
+            "posecast_connections", "Open WebSocket connections, by role", ["role"], registry=r
+        )
+        self.players = Gauge("posecast_players", "Players in the engine", registry=r)
+        self.rooms = Gauge("posecast_rooms", "Rooms open", registry=r)
+        self.connects = Counter(
+            "posecast_connects", "Connection attempts, by result", ["result"], registry=r
+        )
+        self.tick_seconds = Histogram(
+            "posecast_tick_seconds",
+            "Wall time of one engine tick (engine thread)",
+            buckets=_TICK_BUCKETS,
+            registry=r,
+        )
+        self.tick_overruns = Counter(
+            "posecast_tick_overruns", "Ticks that started late by a whole period", registry=r
+        )
+        self.batch_size = Histogram(
+            "posecast_engine_batch_size", "Players per engine step", buckets=_BATCH_BUCKETS,
+            registry=r,
+        )  # fmt: skip
+        self.transitions = Counter(
+            "posecast_ssi_transitions", "SSI sample transitions started", registry=r
+        )
+        self.frames_in = Counter("posecast_frames", "Tracker frames accepted", registry=r)
+        self.frames_dropped = Counter(
+            "posecast_frames_dropped",
+            "Tracker frames dropped, by reason",
+            ["reason"],
+            registry=r,
+        )
+        self.poses_superseded = Counter(
+            "posecast_poses_superseded",
+            "Poses replaced in a client's outbox before it could be sent",
+            registry=r,
+        )
+        self.errors = Counter(
+            "posecast_errors", "Protocol errors, by wire code", ["code"], registry=r
+        )
+        self.bytes_in = Counter("posecast_bytes_in", "WebSocket payload bytes in", registry=r)
+        self.bytes_out = Counter("posecast_bytes_out", "WebSocket payload bytes out", registry=r)
+        self.clock_drift = Histogram(
+            "posecast_clock_drift_ppm",
+            "Absolute client clock drift at session end, ppm",
+            buckets=_DRIFT_BUCKETS,
+            registry=r,
+        )
+
+    def render(self) -> bytes:
+        out: bytes = generate_latest(self.registry)
+        return out
+
+    def value(self, name: str, labels: dict[str, str] | None = None) -> float:
+        """One sample's current value (0 when absent); for tests and logs."""
+        v = self.registry.get_sample_value(name, labels or {})
+        return 0.0 if v is None else float(v)
