@@ -32,6 +32,8 @@ class CVAETrainConfig:
     batch: int = 128
     window: int = 60
     lr: float = 2e-4  # paper Sec. 4.3
+    decay_from: float = 0.7  # linear decay to lr * final_lr_ratio over the last 30 %
+    final_lr_ratio: float = 0.1
     kl_weight: float = 1.0
     contact_weight: float = 5.0
     seed: int = 0
@@ -141,6 +143,8 @@ def train_cvae(
     frames_since = 0
     model.train()
     while step < cfg.steps:
+        for group in opt.param_groups:
+            group["lr"] = learning_rate(cfg, step)
         b = _batch(train, rng.choice(starts, cfg.batch), norm, cfg.window)
         parts = _losses(model, fk, b, cfg)
         opt.zero_grad(set_to_none=True)
@@ -167,6 +171,18 @@ def train_cvae(
         if step % cfg.ckpt_every == 0 or step == cfg.steps:
             save()
     return ckpt_path
+
+
+def learning_rate(cfg: CVAETrainConfig, step: int) -> float:
+    """Constant, then linear decay to ``lr * final_lr_ratio`` from ``decay_from * steps``.
+
+    Computed from the step alone, so a resumed run with more steps continues smoothly.
+    """
+    start = cfg.decay_from * cfg.steps
+    if step < start:
+        return cfg.lr
+    frac = min(1.0, (step - start) / max(1.0, cfg.steps - start))
+    return cfg.lr * (1.0 - frac * (1.0 - cfg.final_lr_ratio))
 
 
 @torch.no_grad()
