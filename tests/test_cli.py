@@ -134,3 +134,23 @@ def test_demo_runs(capsys) -> None:
     stdout = capsys.readouterr().out
     assert "generated 4 procedural BVH clips" in stdout
     assert "data pipeline OK" in stdout
+
+
+def test_token_mints_a_token_the_server_verifies(capsys, monkeypatch) -> None:
+    import time
+
+    from posecast.auth.tokens import verify
+
+    monkeypatch.setenv("POSECAST_TOKEN_SECRET", "e" * 32)
+    args = ["token", "--room", "R", "--player", "P", "--role", "backend", "--rooms", "A,B"]
+    assert main([*args, "--ttl", "60"]) == 0
+    claims = verify(b"e" * 32, capsys.readouterr().out.strip(), now=time.time())
+    assert (claims.room, claims.player, claims.role, claims.rooms) == (
+        "R",
+        "P",
+        "backend",
+        ("A", "B"),
+    )
+    assert claims.exp - claims.iat == 60
+    monkeypatch.delenv("POSECAST_TOKEN_SECRET")
+    assert main(["token", "--room", "R", "--player", "P"]) == 2

@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+import itertools
+
 import pytest
 
 from posecast.train.cvae_trainer import CVAETrainConfig, learning_rate
@@ -11,7 +13,7 @@ def test_constant_then_linear_decay() -> None:
     assert learning_rate(cfg, 850) == pytest.approx(1e-3 * (1 - 0.5 * 0.9))
     assert learning_rate(cfg, 1000) == pytest.approx(1e-4)
     rates = [learning_rate(cfg, s) for s in range(700, 1001)]
-    assert all(a >= b for a, b in zip(rates, rates[1:], strict=False))
+    assert all(a >= b for a, b in itertools.pairwise(rates))
 
 
 def test_more_steps_on_resume_moves_the_decay() -> None:

@@ -91,6 +91,7 @@ class Hub:
         self._dirty: set[int] = set()
         self._aborts: set[int] = set()
         self.shutting_down = False
+        self._superseded = metrics.frames_dropped.labels("superseded")  # hot path: bind once
 
     # --- connections ------------------------------------------------------------------
 
@@ -148,7 +149,7 @@ class Hub:
         s = c.session
         if isinstance(action, FrameIn):
             if self._latest.get(s.player) is not None:
-                self.metrics.frames_dropped.labels("superseded").inc()
+                self._superseded.inc()
             self._latest[s.player] = action.frame
             self.metrics.frames_in.inc()
         elif isinstance(action, Join):
@@ -184,17 +185,16 @@ class Hub:
             and old.session.role == "player"
             and self.rooms.room_of(claims.player) == room
         )
-        if old is not None and not takeover:
-            # Another role or room: the old connection leaves first (presence, engine).
-            self._end(old, now, final=Error.from_exception(ReplacedError("joined elsewhere")))
-        if not takeover:
+        if not takeover:  # ROOM_FULL before anyone is displaced
             if claims.role == "player":
                 self.rooms.check_join(room, as_player=True)
             else:
                 self.rooms.check_join(room, join.rooms[1:], as_player=False)
-        if old is not None and takeover:
-            old.replaced = True
-            replaced = Error.from_exception(ReplacedError("the player joined again"))
+        if old is not None:
+            # A takeover keeps the player in its room and the engine; otherwise (another
+            # role or room) the old connection leaves first: presence, engine removal.
+            old.replaced = takeover
+            replaced = Error.from_exception(ReplacedError("the same player joined again"))
             self._end(old, now, final=replaced)
         c.session.joined(join)
         self.by_player[claims.player] = c.session.conn
@@ -323,6 +323,7 @@ class Hub:
 
     def deliver(self, out: TickOutput, now: float) -> None:
         """Route one tick's poses to their rooms' audiences, and stale/active presence."""
+        superseded = 0
         for player, data in out.poses:
             room = self.rooms.room_of(player)
             if room is None:
@@ -330,11 +331,13 @@ class Hub:
             for member in self.rooms.audience(room):
                 conn = self.by_player.get(member)
                 if conn is not None:
-                    self.conns[conn].outbox.put_pose(player, data, now)
+                    superseded += self.conns[conn].outbox.put_pose(player, data, now)
                     self._dirty.add(conn)
         for ev in out.events:
             self._presence_event(ev, now)
         m = self.metrics
+        if superseded:
+            m.poses_superseded.inc(superseded)
         m.tick_seconds.observe(out.seconds)
         m.batch_size.observe(out.batch)
         if out.transitions:

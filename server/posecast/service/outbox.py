@@ -31,14 +31,16 @@ class Outbox:
     close_code: int = 1000  # WebSocket close code once the final message is out
     close_reason: str = ""
 
-    def put_pose(self, player: str, data: bytes, now: float) -> None:
-        """Queue ``player``'s newest pose, replacing any unsent one of the same player."""
+    def put_pose(self, player: str, data: bytes, now: float) -> bool:
+        """Queue ``player``'s newest pose, replacing any unsent one of the same player;
+        ``True`` when one was replaced."""
         if self.closed:
-            return
-        if self._poses.pop(player, None) is not None:
-            self.superseded += 1
+            return False
+        replaced = self._poses.pop(player, None) is not None
+        self.superseded += replaced
         self._poses[player] = data  # re-inserted last: slots go out oldest-update first
         self._mark(now)
+        return replaced
 
     def put_reliable(self, data: bytes, now: float) -> bool:
         """Queue a control message; ``False`` (and :attr:`overflowed`) when full."""

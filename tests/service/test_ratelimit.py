@@ -1,0 +1,36 @@
+"""Rate limits (posecast.service.ratelimit)."""
+
+from __future__ import annotations
+
+from posecast.service.ratelimit import IpLimiter, TokenBucket
+
+
+def test_bucket_allows_the_rate_and_a_burst_then_refuses() -> None:
+    b = TokenBucket(rate_hz=60, burst=5)
+    assert all(b.allow(0.0) for _ in range(5))
+    assert not b.allow(0.0)
+    assert b.allow(1 / 60)  # one token back after one period
+    assert not b.allow(1 / 60)
+
+
+def test_bucket_sustains_exactly_its_rate() -> None:
+    b = TokenBucket(rate_hz=60, burst=2)
+    sent = sum(b.allow(i / 60) for i in range(600))
+    assert sent == 600
+    b2 = TokenBucket(rate_hz=60, burst=2)
+    sent = sum(b2.allow(i / 120) for i in range(1200))  # twice the rate for 10 s
+    assert 600 <= sent <= 603
+
+
+def test_ip_limiter_slides_per_ip() -> None:
+    lim = IpLimiter(per_minute=3)
+    assert [lim.allow("a", t) for t in (0, 1, 2, 3)] == [True, True, True, False]
+    assert lim.allow("b", 3)
+    assert lim.allow("a", 60.5)  # the first attempt left the window
+
+
+def test_ip_limiter_memory_is_bounded() -> None:
+    lim = IpLimiter(per_minute=1, max_ips=10)
+    for i in range(100):
+        lim.allow(f"10.0.0.{i}", 0.0)
+    assert len(lim._seen) == 10
