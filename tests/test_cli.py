@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -129,11 +130,17 @@ def test_a_missing_bvh_directory_is_an_error(tmp_path: Path, capsys) -> None:
     assert "[DATA_INVALID]" in capsys.readouterr().err
 
 
-def test_demo_runs(capsys) -> None:
-    assert main(["demo"]) == 0
+def test_demo_runs_a_room(capsys) -> None:
+    """make run: the server, two simulated headsets and a spectator on loopback."""
+    assert main(["demo", "--port", "0", "--seconds", "5", "--samples", "8"]) == 0
     stdout = capsys.readouterr().out
-    assert "generated 4 procedural BVH clips" in stdout
-    assert "data pipeline OK" in stdout
+    assert "posecast demo: server on ws://127.0.0.1:" in stdout
+    rates = {
+        m.group(1): float(m.group(2))
+        for m in re.finditer(r"^(alice|bob):\s+([\d.]+) poses/s", stdout, flags=re.MULTILINE)
+    }
+    assert set(rates) == {"alice", "bob"}, stdout
+    assert all(r > 20 for r in rates.values()), rates
 
 
 def test_token_mints_a_token_the_server_verifies(capsys, monkeypatch) -> None:

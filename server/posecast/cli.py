@@ -12,8 +12,8 @@ Subcommands:
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -40,21 +40,12 @@ def _cmd_data_prepare(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from posecast.dataset.prepare import prepare
-    from posecast.motion.rig import load_rigs
-    from posecast.motion.synthetic import walk_clip, write_fixture_bvh
+    import asyncio
 
-    with tempfile.TemporaryDirectory() as tmp:
-        root = Path(tmp) / "bvh"
-        for i, layout in enumerate(("cmu_mb", "cmu_daz", "cmu_mb", "cmu_daz")):
-            folder = root / layout / f"9{i}"
-            folder.mkdir(parents=True)
-            clip = walk_clip(seconds=6.0, fps=120.0, seed=i)
-            write_fixture_bvh(folder / f"9{i}_01.bvh.gz", clip, layout)
-        print(f"generated 4 procedural BVH clips under {root}")
-        report = prepare(root, Path(tmp) / "prepared", load_rigs())
-        print(report.table())
-    print("posecast demo: data pipeline OK (the server, viewer and simulated player come next)")
+    from posecast.demo import run
+
+    with contextlib.suppress(KeyboardInterrupt):
+        asyncio.run(run(args.port, args.seconds, args.bvh, args.samples))
     return 0
 
 
@@ -299,7 +290,11 @@ def build_parser() -> argparse.ArgumentParser:
     tok.add_argument("--ttl", type=int, default=3600, help="seconds until it expires (3600)")
     tok.set_defaults(func=_cmd_token)
 
-    demo = sub.add_parser("demo", help="run the bundled demo")
+    demo = sub.add_parser("demo", help="server + two simulated headsets + a spectator (make run)")
+    demo.add_argument("--port", type=int, default=8765, help="port (0: any free one)")
+    demo.add_argument("--seconds", type=float, default=None, help="stop after this long")
+    demo.add_argument("--bvh", type=Path, default=None, help="replay this BVH file")
+    demo.add_argument("--samples", type=int, default=100, help="latent samples N")
     demo.set_defaults(func=_cmd_demo)
     return parser
 

@@ -1,0 +1,120 @@
+"""``posecast demo`` (what ``make run`` starts): the server with the shipped model, two
+simulated headsets replaying motion at 60 Hz, and a spectator that reports what the
+room receives.
+
+The headsets replay a BVH file when given one (``--bvh``), else a generated walk.
+Everything runs on loopback in this process; Ctrl-C (or ``--seconds``) stops it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import secrets
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+from websockets.asyncio.client import connect
+from websockets.exceptions import ConnectionClosed
+from websockets.typing import Subprotocol
+
+from posecast.auth.tokens import mint
+from posecast.dataset.frames import Frames, derive_frames
+from posecast.motion.synthetic import walk_clip
+from posecast.protocol import decode, encode
+from posecast.protocol.messages import SUBPROTOCOL, Frame, Hello, Pose, Presence, Welcome
+from posecast.service.app import PosecastServer
+from posecast.service.config import ServerConfig
+from posecast.skeleton import Joint
+
+
+def motion(bvh: Path | None, seed: int) -> Frames:
+    """Tracker frames to replay: a BVH clip, or a generated walk."""
+    if bvh is None:
+        return derive_frames(walk_clip(seconds=12.0, fps=60.0, seed=seed))
+    from posecast.dataset.prepare import process_file
+    from posecast.motion.rig import load_rigs
+
+    return process_file(bvh, load_rigs())[1]
+
+
+async def headset(url: str, token: str, name: str, frames: Frames, offset_m: float) -> None:
+    """Connect, join, and send frames at 60 Hz forever (looping the clip)."""
+    async with connect(url, subprotocols=[Subprotocol(SUBPROTOCOL)]) as ws:
+        await ws.send(encode(Hello(1, token, "demo", name)))
+        reply = await ws.recv()
+        welcome = decode(reply if isinstance(reply, bytes) else reply.encode())
+        if not isinstance(welcome, Welcome):
+            raise RuntimeError(f"{name}: server refused: {welcome}")
+        shift = np.array([offset_m, 0.0, 0.0])
+        t0, seq = time.monotonic(), 0
+        with contextlib.suppress(ConnectionClosed):
+            while True:
+                i = seq % len(frames["features"])
+                pos = frames["tracker_pos"][i].astype(np.float64) + shift
+                quat = frames["tracker_quat"][i].astype(np.float64)
+                await ws.send(encode(Frame(seq, time.monotonic() - t0, pos, quat)))
+                seq += 1
+                await asyncio.sleep(max(0.0, t0 + seq / 60.0 - time.monotonic()))
+
+
+async def spectator(url: str, token: str, every_s: float = 2.0) -> None:
+    """Print, every ``every_s``, how many poses per second each player's avatar gets."""
+    async with connect(url, subprotocols=[Subprotocol(SUBPROTOCOL)]) as ws:
+        await ws.send(encode(Hello(1, token, "demo", "spectator")))
+        counts: dict[str, int] = {}
+        heads: dict[str, np.ndarray] = {}
+        last = time.monotonic()
+        async for data in ws:
+            assert isinstance(data, bytes)
+            msg = decode(data)
+            if isinstance(msg, Pose):
+                counts[msg.player] = counts.get(msg.player, 0) + 1
+                heads[msg.player] = msg.positions[Joint.HEAD]
+            elif isinstance(msg, Presence):
+                print(f"presence: {msg.event} {msg.player}", flush=True)
+            now = time.monotonic()
+            if now - last >= every_s:
+                for player, n in sorted(counts.items()):
+                    head = np.round(heads[player], 2)
+                    print(
+                        f"{player}: {n / (now - last):5.1f} poses/s, head at {head} m", flush=True
+                    )
+                counts.clear()
+                last = now
+
+
+async def run(port: int, seconds: float | None, bvh: Path | None, samples: int) -> None:
+    secret = secrets.token_urlsafe(32)
+    cfg = ServerConfig.from_sources({}, {"dev": True, "token_secret": secret, "port": port})
+    cfg = replace(cfg, samples=samples)
+    server = PosecastServer(cfg)
+    await server.start()
+    url = f"ws://127.0.0.1:{server.port}/"
+    print(
+        f"posecast demo: server on {url}  (health: http://127.0.0.1:{server.port}/healthz,"
+        f" metrics: http://127.0.0.1:{server.port}/metrics)",
+        flush=True,
+    )
+    now = time.time()
+
+    def token(player: str, role: str = "player") -> str:
+        return mint(secret.encode(), room="demo", player=player, role=role, ttl_s=3600, now=now)
+
+    tasks = [
+        asyncio.create_task(headset(url, token("alice"), "Alice", motion(bvh, 1), -0.8)),
+        asyncio.create_task(headset(url, token("bob"), "Bob", motion(bvh, 2), 0.8)),
+        asyncio.create_task(spectator(url, token("viewer", "spectator"))),
+    ]
+    try:
+        if seconds is None:
+            await asyncio.gather(*tasks)
+        else:
+            await asyncio.sleep(seconds)
+    finally:
+        for t in tasks:
+            t.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        await server.stop()
