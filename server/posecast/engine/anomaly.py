@@ -18,6 +18,7 @@ from posecast.tracking import character_frame, deyaw_quat
 
 F64 = NDArray[np.floating]
 _LOWER = [int(j) for j in LOWER_BODY]
+_LOWER_T = tuple(_LOWER)
 
 
 class AnomalyScorer:
@@ -43,7 +44,7 @@ class AnomalyScorer:
         local = _rotate_y(rel, inv_yaw)  # (B, 19, 3)
         local = np.ascontiguousarray(local, dtype=np.float32)
         (rot,) = self.artifact.run(local_positions=local.reshape(len(local), 57))
-        _, rec = fk32(rot, root, local[:, Joint.PELVIS], want_mats=False)
+        _, rec = fk32(rot, root, local[:, Joint.PELVIS], want_mats=False, joints=_LOWER_T)
         err: F64 = np.linalg.norm(rec[:, _LOWER] - local[:, _LOWER], axis=-1).mean(axis=-1)
         return err
 
