@@ -281,6 +281,7 @@ class Engine:
         kp = (k - 1) % self._ring
         events: list[EngineEvent] = []
         s = self.slots
+        fresh: list[tuple[_Player, NDArray[np.float64], NDArray[np.float64]]] = []
         for pid in self._order:
             p = self.players[pid]
             frame, held = p.pending, False
@@ -308,15 +309,21 @@ class Engine:
                     q[TrackerSlot.WAIST] = p.waist_filter(q[TrackerSlot.WAIST])
                 cal = p.calibration.apply(np.asarray(frame.pos, dtype=np.float64), q)
                 prev = s["ring_pos"][kp, p.slot] if p.last is not None else cal
-                s["ring_x"][k, p.slot] = tracker_features(
-                    cal, prev, q[TrackerSlot.WAIST], self.cfg.fps
-                )
                 s["ring_pos"][k, p.slot] = cal
                 s["ring_quat"][k, p.slot] = q
                 s["ring_seq"][k, p.slot] = frame.seq
+                fresh.append((p, cal, prev))
                 if frame.seq >= 0:
                     p.last = frame
             s["ring_held"][k, p.slot] = held
+        if fresh:  # the features of every fresh frame in one vectorised call
+            idx = [p.slot for p, _, _ in fresh]
+            s["ring_x"][k, idx] = tracker_features(
+                np.stack([c for _, c, _ in fresh]),
+                np.stack([v for _, _, v in fresh]),
+                s["ring_quat"][k, idx, TrackerSlot.WAIST],
+                self.cfg.fps,
+            )
         return events
 
     def _select(self, p: _Player, scores: F64, positions: F32) -> int:

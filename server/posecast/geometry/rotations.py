@@ -77,10 +77,19 @@ def quat_mul(a: ArrayLike, b: ArrayLike) -> F:
 def quat_apply(q: ArrayLike, v: ArrayLike) -> F:
     """Rotate vectors ``v (..., 3)`` by quaternions ``q (..., 4)``."""
     qa, va = _arr(q), _arr(v)
-    u = qa[..., :3]
-    w = qa[..., 3:]
-    t = 2.0 * np.cross(u, va)
-    return va + w * t + np.cross(u, t)
+    x, y, z, w = qa[..., 0:1], qa[..., 1:2], qa[..., 2:3], qa[..., 3:4]
+    vx, vy, vz = va[..., 0:1], va[..., 1:2], va[..., 2:3]
+    # t = 2 u x v, then v + w t + u x t (np.cross is slow on small stacks)
+    tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
+    out: F = np.concatenate(
+        [
+            vx + w * tx + (y * tz - z * ty),
+            vy + w * ty + (z * tx - x * tz),
+            vz + w * tz + (x * ty - y * tx),
+        ],
+        axis=-1,
+    )
+    return out
 
 
 def quat_slerp(q0: ArrayLike, q1: ArrayLike, t: ArrayLike) -> F:
