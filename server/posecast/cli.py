@@ -103,8 +103,18 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         split = load_split(args.data, args.split)
         clips = [split.clip(i) for i in range(split.n_clips)]
         fps = split.fps
+    from posecast.engine.config import EngineConfig
+
     variants = args.variants.split(",") if args.variants else list(VARIANTS)
-    report = evaluate(clips, fps, variants, args.models, log=lambda m: print(m, file=sys.stderr))
+    engine_cfg = EngineConfig(samples=args.samples, outlier_baseline=args.outlier_baseline)
+    report = evaluate(
+        clips,
+        fps,
+        variants,
+        args.models,
+        log=lambda m: print(m, file=sys.stderr),
+        engine_cfg=engine_cfg,
+    )
     print(format_table(report))
     if args.json is not None:
         args.json.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
@@ -252,6 +262,13 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--json", type=Path, help="write the report here")
     ev.add_argument("--models", type=Path, help="models directory (default: shipped)")
     ev.add_argument("--variants", help="comma-separated subset of variants")
+    ev.add_argument("--samples", type=int, default=100, help="SSI latent samples N (100)")
+    ev.add_argument(
+        "--outlier-baseline",
+        default="min",
+        choices=("min", "zero"),
+        help="SSI outlier rule: R_c - min R > 2r (min, default) or R_c > 2r (zero, the paper)",
+    )
     ev.set_defaults(func=_cmd_eval)
 
     apps = sub.add_parser("eval-apps", help="Table 3: target hitting and collision avoidance")

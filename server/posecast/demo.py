@@ -3,6 +3,8 @@ simulated headsets replaying motion at 60 Hz, and a spectator that reports what 
 room receives.
 
 The headsets replay a BVH file when given one (``--bvh``), else a generated walk.
+The printed ``viewer:`` URL opens the live 3D viewer on the room (the demo runs with
+dev settings, so the page gets its spectator token from the server itself).
 Everything runs on loopback in this process; Ctrl-C (or ``--seconds``) stops it.
 """
 
@@ -98,6 +100,7 @@ async def run(port: int, seconds: float | None, bvh: Path | None, samples: int) 
         f" metrics: http://127.0.0.1:{server.port}/metrics)",
         flush=True,
     )
+    print(f"viewer: http://127.0.0.1:{server.port}/viewer?room=demo", flush=True)
     now = time.time()
 
     def token(player: str, role: str = "player") -> str:

@@ -7,7 +7,9 @@ writer that a slow client blocks delays nobody else: the tick keeps filling that
 client's latest-wins slots, and the hub cuts the client off when it stays behind.
 
 The same port answers plain HTTP: ``/healthz`` (the process is up), ``/readyz`` (the
-engine is loaded and the server is not shutting down) and ``/metrics`` (Prometheus).
+engine is loaded, the server is not shutting down and, with ``--redis``, the bus to
+the other nodes is up) and ``/metrics`` (Prometheus). A node whose bus is down still
+accepts connections and serves its local rooms (``docs/scale-out.md``).
 
 Lifecycle: :meth:`PosecastServer.start` binds, loads the engine in the engine thread
 and starts ticking; :meth:`PosecastServer.stop` stops accepting, says ``bye`` to
@@ -35,6 +37,8 @@ from websockets.typing import Subprotocol
 from posecast.engine.config import EngineConfig
 from posecast.engine.engine import Engine, load_engine
 from posecast.protocol.messages import SUBPROTOCOL
+from posecast.service import viewer
+from posecast.service.bus import create_bus
 from posecast.service.config import ServerConfig
 from posecast.service.hub import Hub
 from posecast.service.metrics import CONTENT_TYPE, Metrics
@@ -60,7 +64,11 @@ class PosecastServer:
     ) -> None:
         self.cfg = cfg
         self.metrics = Metrics()
-        self.hub = Hub(cfg, self.metrics, wall_offset_s=time.time() - time.monotonic())
+        self.bus = create_bus(cfg, self.metrics, clock=time.monotonic)
+        self.hub = Hub(
+            cfg, self.metrics, wall_offset_s=time.time() - time.monotonic(), bus=self.bus
+        )
+        self.bus.after = self._flush  # what other nodes sent lands in outboxes: wake writers
         self.ip_limiter = IpLimiter(cfg.conn_per_ip_per_min)
         self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="posecast-engine")
         self._engine_factory = engine_factory or self._default_engine
@@ -109,8 +117,11 @@ class PosecastServer:
                 stop=self._stop_ticks,
             )
         )
+        await self.bus.start()
         self.ready = True
-        log.info("listening", extra={"host": self.cfg.host, "port": self.port})
+        log.info(
+            "listening", extra={"host": self.cfg.host, "port": self.port, "node": self.bus.node}
+        )
 
     async def stop(self) -> None:
         """Graceful shutdown: stop accepting, ``bye`` to all, drain, close."""
@@ -121,6 +132,7 @@ class PosecastServer:
         self._server.close(close_connections=False)  # no new connections from here on
         self.hub.shutdown(time.monotonic())
         self._flush()
+        bus_stopped = asyncio.create_task(self.bus.stop())  # other nodes hear the leaves now
         deadline = time.monotonic() + self.cfg.drain_timeout_s
         while self._clients and time.monotonic() < deadline:
             await asyncio.sleep(0.01)
@@ -131,6 +143,7 @@ class PosecastServer:
         self._stop_ticks.set()
         if self._ticks is not None:
             await self._ticks
+        await bus_stopped
         self.executor.shutdown(wait=True)
         log.info("stopped", extra={"port": self.port})
 
@@ -141,11 +154,15 @@ class PosecastServer:
         if path == "/healthz":
             return connection.respond(200, "ok\n")
         if path == "/readyz":
+            if self.ready and not self.bus.healthy:
+                return connection.respond(503, f"not ready: {self.bus.status}\n")
             return connection.respond(200, "ready\n") if self.ready else _unavailable(connection)
         if path == "/metrics":
             body = self.metrics.render()
             headers = Headers([("Content-Type", CONTENT_TYPE), ("Content-Length", str(len(body)))])
             return Response(200, "OK", headers, body)
+        if viewer.handles(path):  # the live viewer page and its assets (service/viewer.py)
+            return viewer.respond(connection, request, self.cfg, self.hub.rooms)
         if not self.ready:
             self.metrics.connects.labels("unavailable").inc()
             return _unavailable(connection)

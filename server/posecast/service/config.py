@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any
@@ -20,11 +21,13 @@ from posecast.errors import ConfigError
 from posecast.protocol.messages import Limits
 
 ENV_PREFIX = "POSECAST_"
+_ID = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 MIN_SECRET_CHARS = 16
 
 
-def _opt(default: Any, help: str, **extra: Any) -> Any:
-    return field(default=default, metadata={"help": help}, **extra)
+def _opt(default: Any, help: str, flags: tuple[str, ...] = (), **extra: Any) -> Any:
+    """A config field; ``flags`` are extra spellings of its command-line flag."""
+    return field(default=default, metadata={"help": help, "flags": flags}, **extra)
 
 
 @dataclass(frozen=True)
@@ -61,6 +64,17 @@ class ServerConfig:
     drain_timeout_s: float = _opt(5.0, "seconds shutdown waits for clients to drain")
     close_timeout_s: float = _opt(2.0, "seconds to wait for a closing handshake")
     log_level: str = _opt("INFO", "DEBUG, INFO, WARNING or ERROR (JSON lines on stderr)")
+    # Scale-out (docs/scale-out.md). Empty redis_url: one embedded node, no Redis.
+    redis_url: str = _opt(
+        "", "Redis URL shared by all nodes, e.g. redis://redis:6379/0 (empty: one node)",
+        repr=False, flags=("--redis",),
+    )  # fmt: skip
+    node_id: str = _opt("", "this node's id on the bus (empty: hostname plus a random suffix)")
+    redis_prefix: str = _opt("posecast", "prefix of every Redis key and channel of this cluster")
+    redis_heartbeat_s: float = _opt(1.0, "seconds between presence heartbeats and resyncs")
+    redis_node_ttl_s: float = _opt(3.0, "seconds a silent node's players survive it")
+    redis_timeout_s: float = _opt(2.0, "seconds one Redis round trip may take before a reconnect")
+    redis_backoff_max_s: float = _opt(5.0, "longest wait between Redis reconnect attempts")
 
     def __post_init__(self) -> None:
         if not self.token_secret:
@@ -82,7 +96,8 @@ class ServerConfig:
                 raise ConfigError(f"{name} must be >= 1")
         seconds = (
             "token_leeway_s control_rate_hz error_rate_hz slow_consumer_s hello_timeout_s "
-            "idle_timeout_s drain_timeout_s close_timeout_s"
+            "idle_timeout_s drain_timeout_s close_timeout_s redis_heartbeat_s redis_timeout_s "
+            "redis_backoff_max_s"
         )
         for name in seconds.split():
             if not getattr(self, name) > 0:
@@ -93,6 +108,12 @@ class ServerConfig:
             raise ConfigError("lookahead must be >= 0")
         if self.log_level.upper() not in ("DEBUG", "INFO", "WARNING", "ERROR"):
             raise ConfigError(f"log_level {self.log_level!r} unknown")
+        if self.redis_node_ttl_s < 2 * self.redis_heartbeat_s:
+            raise ConfigError("redis_node_ttl_s must be at least twice redis_heartbeat_s")
+        if self.redis_url and not self.redis_url.startswith(("redis://", "rediss://", "unix://")):
+            raise ConfigError("redis_url must start with redis://, rediss:// or unix://")
+        if not _ID.fullmatch(self.node_id or "x") or not _ID.fullmatch(self.redis_prefix):
+            raise ConfigError("node_id and redis_prefix: 1 to 64 of A-Z a-z 0-9 _ . -")
         self.limits()  # the protocol ranges (message size, rate, room size) hold
 
     def limits(self) -> Limits:
@@ -154,13 +175,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     for f in fields(ServerConfig):
         if f.name == "token_secret":
             continue
-        flag = "--" + f.name.replace("_", "-")
+        flags = ("--" + f.name.replace("_", "-"), *f.metadata["flags"])
         text = f"{f.metadata['help']} [{ENV_PREFIX}{f.name.upper()}, default {f.default!r}]"
         if str(f.type) == "bool":
-            parser.add_argument(flag, action="store_true", default=None, help=text)
+            parser.add_argument(*flags, action="store_true", default=None, help=text)
         else:
             kind = {"int": int, "float": float}.get(str(f.type), str)
-            parser.add_argument(flag, type=kind, default=None, help=text, metavar="V")
+            parser.add_argument(*flags, type=kind, default=None, help=text, metavar="V")
 
 
 def _parse(f: dataclasses.Field[Any], raw: str) -> Any:

@@ -7,11 +7,19 @@ Data path through the hub::
         join/leave  -> Rooms, presence to the room's audience, engine add/remove ops
         selector, calibrate, kick -> engine ops / ending another connection
     TickOutput (encoded poses, stale/active) -> deliver() -> each audience's Outbox
+                                                     + bus: one batch per room
+    bus (other nodes' joins, leaves, batches) -> remote_*() -> each audience's Outbox
 
 The hub decides, the asyncio shell (:mod:`posecast.service.app`) only moves bytes:
 after each call it wakes the writers in :meth:`pop_dirty` and aborts the sockets in
 :meth:`pop_aborts`. A connection whose outbox is :attr:`Outbox.closed` is closed by
 its writer once the final message is out. Nothing here blocks or reads a clock.
+
+Other nodes (``docs/scale-out.md``) reach the hub only through its :class:`Bus`: the
+hub tells the bus which rooms it has an audience in, who joined and left here, and
+each tick's poses per room; the bus calls the ``remote_*`` methods (the
+:class:`~posecast.service.bus.BusSink` side) with what the other nodes did. Remote
+players are members of a room (``welcome``, presence, capacity) but no audience.
 """
 
 from __future__ import annotations
@@ -19,15 +27,17 @@ from __future__ import annotations
 import logging
 import secrets
 import zlib
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from posecast.auth.tokens import ReplayGuard
-from posecast.engine.engine import EngineEvent, TrackerFrame
+from posecast.engine.engine import TrackerFrame
 from posecast.errors import (
     MalformedError,
     NotFoundError,
     ProtocolError,
     ReplacedError,
+    RoomFullError,
     SlowConsumerError,
     TimedOutError,
 )
@@ -41,10 +51,12 @@ from posecast.protocol.messages import (
     Presence,
     Welcome,
 )
+from posecast.service.bus import Bus, MemoryBus
 from posecast.service.config import ServerConfig
 from posecast.service.metrics import Metrics
 from posecast.service.outbox import Outbox
 from posecast.service.ratelimit import TokenBucket
+from posecast.service.remote import RemoteRooms
 from posecast.service.rooms import Rooms
 from posecast.service.session import (
     Action,
@@ -74,9 +86,16 @@ class Conn:
 
 
 class Hub:
-    def __init__(self, cfg: ServerConfig, metrics: Metrics, wall_offset_s: float = 0.0) -> None:
+    def __init__(
+        self,
+        cfg: ServerConfig,
+        metrics: Metrics,
+        wall_offset_s: float = 0.0,
+        bus: Bus | None = None,
+    ) -> None:
         """``now`` everywhere is server time (monotonic seconds, what ``pose.t`` carries);
-        ``wall_offset_s`` turns it into Unix time for token expiry."""
+        ``wall_offset_s`` turns it into Unix time for token expiry. Without a ``bus``
+        the hub is one embedded node."""
         self.cfg = cfg
         self.wall_offset_s = wall_offset_s
         self.metrics = metrics
@@ -92,6 +111,10 @@ class Hub:
         self._aborts: set[int] = set()
         self.shutting_down = False
         self._superseded = metrics.frames_dropped.labels("superseded")  # hot path: bind once
+        self.bus = bus or MemoryBus(clock=lambda: 0.0)
+        self.bus.attach(self)
+        self.remote = RemoteRooms()
+        self._watched: set[str] = set()  # rooms the bus delivers to this node
 
     # --- connections ------------------------------------------------------------------
 
@@ -188,6 +211,11 @@ class Hub:
         if not takeover:  # ROOM_FULL before anyone is displaced
             if claims.role == "player":
                 self.rooms.check_join(room, as_player=True)
+                if (
+                    len(self.rooms.members(room)) + self.remote.count(room)
+                    >= self.limits.max_players
+                ):
+                    raise RoomFullError(f"room {room!r} is full across nodes", field="room")
             else:
                 self.rooms.check_join(room, join.rooms[1:], as_player=False)
         if old is not None:
@@ -204,13 +232,14 @@ class Hub:
             self.rooms.add_player(room, claims.player, join.hello.name)
             seed = zlib.crc32(claims.player.encode())
             self._ops.append(EngineOp("add", claims.player, seed=seed))
+            self.bus.joined(room, claims.player, join.hello.name)
             join_msg = Presence("join", room, claims.player, join.hello.name)
             self._to_room(room, join_msg, now, skip=claims.player)
         elif claims.role != "player":
             self.rooms.add_watcher(join.rooms, claims.player)
-        self._send(c, self._welcome(c.session, self.rooms.members(room), now), now)
+        self._send(c, self._welcome(c.session, self._members(room), now), now)
         for extra in join.rooms[1:]:  # a backend learns who is in the rooms it watches
-            for m in self.rooms.members(extra):
+            for m in self._members(extra):
                 self._send(c, Presence("join", extra, m.player, m.name), now)
         self._gauges()
         log.info(
@@ -229,7 +258,7 @@ class Hub:
             t=now,
             rate_hz=self.cfg.tick_hz,
             lookahead_frames=self.cfg.lookahead,
-            members=members,
+            members=members[: self.limits.max_players],  # a cross-node race can overfill
             limits=self.limits,
         )
 
@@ -287,6 +316,7 @@ class Hub:
         if played is not None:
             self._latest.pop(s.player, None)
             self._ops.append(EngineOp("remove", s.player))
+            self.bus.left(played, s.player)
             if not self.shutting_down:
                 self._to_room(played, Presence("leave", played, s.player, s.name), now)
         self._gauges()
@@ -324,17 +354,22 @@ class Hub:
     def deliver(self, out: TickOutput, now: float) -> None:
         """Route one tick's poses to their rooms' audiences, and stale/active presence."""
         superseded = 0
+        batches: dict[str, tuple[list[tuple[str, bytes]], list[bytes]]] = {}
         for player, data in out.poses:
             room = self.rooms.room_of(player)
             if room is None:
                 continue  # left while the tick ran
-            for member in self.rooms.audience(room):
-                conn = self.by_player.get(member)
-                if conn is not None:
-                    superseded += self.conns[conn].outbox.put_pose(player, data, now)
-                    self._dirty.add(conn)
+            batches.setdefault(room, ([], []))[0].append((player, data))
+            superseded += self._pose_to_room(room, player, data, now)
         for ev in out.events:
-            self._presence_event(ev, now)
+            room = self.rooms.room_of(ev.player)
+            if room is not None:
+                name = self.rooms.name_of(ev.player)
+                data = encode(Presence(ev.kind, room, ev.player, name))
+                batches.setdefault(room, ([], []))[1].append(data)
+                self._bytes_to_room(room, data, now)
+        for room, (poses, events) in batches.items():
+            self.bus.publish(room, poses, events)  # ONE message per room per tick
         m = self.metrics
         if superseded:
             m.poses_superseded.inc(superseded)
@@ -343,11 +378,70 @@ class Hub:
         if out.transitions:
             m.transitions.inc(out.transitions)
 
-    def _presence_event(self, ev: EngineEvent, now: float) -> None:
-        room = self.rooms.room_of(ev.player)
-        if room is not None:
-            name = self.rooms.name_of(ev.player)
-            self._to_room(room, Presence(ev.kind, room, ev.player, name), now)
+    # --- other nodes: the BusSink side (posecast.service.bus) ----------------------------
+
+    def remote_join(self, room: str, player: str, name: str, node: str, now: float) -> None:
+        local = self.conns.get(self.by_player.get(player, -1))
+        if local is not None and local.session.role == "player":
+            # The same player joined on another node (a reconnect through the balancer
+            # landed elsewhere): that one wins, as a takeover does on one node.
+            replaced = ReplacedError("the same player joined on another node")
+            self._end(local, now, final=Error.from_exception(replaced))
+        if room in self._watched and self.remote.join(room, player, node, name, now):
+            self._to_room(room, Presence("join", room, player, name), now)
+            self._gauges()
+
+    def remote_leave(self, room: str, player: str, node: str, now: float) -> None:
+        gone = self.remote.leave(room, player, node, now)
+        if gone is not None:
+            self._to_room(room, Presence("leave", room, player, gone.name), now)
+            self._gauges()
+
+    def remote_tick(
+        self,
+        room: str,
+        node: str,
+        poses: Sequence[tuple[str, bytes]],
+        events: Sequence[bytes],
+        now: float,
+    ) -> None:
+        unknown = superseded = 0
+        for player, data in poses:
+            m = self.remote.get(room, player)
+            if m is None or m.node != node:
+                unknown += 1  # not (yet) a member here: its join or the snapshot comes first
+                continue
+            superseded += self._pose_to_room(room, player, data, now)
+        for data in events:
+            self._bytes_to_room(room, data, now)
+        if unknown:
+            self.metrics.bus_dropped.labels("unknown_player").inc(unknown)
+        if superseded:
+            self.metrics.poses_superseded.inc(superseded)
+
+    def remote_snapshot(
+        self, room: str, live: Mapping[str, tuple[str, str]], issued_at: float, now: float
+    ) -> None:
+        if room not in self._watched:
+            return
+        r = self.rooms.rooms.get(room)
+        local = r.players if r is not None else {}
+        others = {p: v for p, v in live.items() if p not in local}
+        joined, left = self.remote.snapshot(room, others, issued_at)
+        for m in left:
+            self._to_room(room, Presence("leave", room, m.player, m.name), now)
+        for m in joined:
+            self._to_room(room, Presence("join", room, m.player, m.name), now)
+        if joined or left:
+            self._gauges()
+
+    def remote_lost(self, now: float) -> None:
+        """The bus has been down past the node TTL: remote players count as gone."""
+        for room in self.remote.rooms:
+            self.remote_snapshot(room, {}, float("inf"), now)
+
+    def local_rooms(self) -> dict[str, dict[str, str]]:
+        return {name: dict(r.players) for name, r in self.rooms.rooms.items()}
 
     # --- sending ------------------------------------------------------------------------
 
@@ -356,16 +450,38 @@ class Hub:
         self._dirty.add(c.session.conn)
 
     def _to_room(self, room: str, msg: Message, now: float, skip: str | None = None) -> None:
-        data = encode(msg)
+        self._bytes_to_room(room, encode(msg), now, skip)
+
+    def _bytes_to_room(self, room: str, data: bytes, now: float, skip: str | None = None) -> None:
         for member in self.rooms.audience(room):
             conn = self.by_player.get(member)
             if member != skip and conn is not None:
                 self.conns[conn].outbox.put_reliable(data, now)
                 self._dirty.add(conn)
 
+    def _pose_to_room(self, room: str, player: str, data: bytes, now: float) -> int:
+        superseded = 0
+        for member in self.rooms.audience(room):
+            conn = self.by_player.get(member)
+            if conn is not None:
+                superseded += self.conns[conn].outbox.put_pose(player, data, now)
+                self._dirty.add(conn)
+        return superseded
+
+    def _members(self, room: str) -> tuple[Member, ...]:
+        return self.rooms.members(room) + self.remote.members(room)
+
     def _gauges(self) -> None:
         self.metrics.players.set(self.rooms.player_count)
         self.metrics.rooms.set(len(self.rooms.rooms))
+        rooms = set(self.rooms.rooms)
+        new, gone, self._watched = rooms - self._watched, self._watched - rooms, rooms
+        for room in gone:
+            self.bus.unwatch(room)
+            self.remote.drop_room(room)
+        for room in new:
+            self.bus.watch(room)  # may report the room's remote members at once
+        self.metrics.remote_players.set(self.remote.total)
 
 
 def _close_code(final: Message) -> tuple[int, str]:

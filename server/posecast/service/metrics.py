@@ -14,6 +14,7 @@ CONTENT_TYPE = CONTENT_TYPE_LATEST
 _TICK_BUCKETS = (0.001, 0.002, 0.004, 0.008, 0.012, 0.0167, 0.025, 0.05, 0.1, 0.25, 1.0)
 _BATCH_BUCKETS = (0, 1, 2, 4, 8, 16, 32, 64, 128, 256, 512)
 _DRIFT_BUCKETS = (1, 10, 50, 100, 200, 500, 1000, 10_000)
+_BUS_BUCKETS = (0.0005, 0.001, 0.002, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 1.0)
 
 
 class Metrics:
@@ -67,6 +68,38 @@ class Metrics:
             "Absolute client clock drift at session end, ppm",
             buckets=_DRIFT_BUCKETS,
             registry=r,
+        )
+
+        # The bus between nodes (docs/scale-out.md); the embedded node reports connected.
+        self.bus_connected = Gauge(
+            "posecast_bus_connected", "1 while cross-node traffic flows, else 0", registry=r
+        )
+        self.bus_reconnects = Counter(
+            "posecast_bus_reconnects", "Connections to the bus's store (Redis) made", registry=r
+        )
+        self.bus_messages = Counter(
+            "posecast_bus_messages", "Bus messages, by direction and kind", ["direction", "kind"],
+            registry=r,
+        )  # fmt: skip
+        self.bus_bytes = Counter(
+            "posecast_bus_bytes", "Bus message payload bytes, by direction", ["direction"],
+            registry=r,
+        )  # fmt: skip
+        self.bus_dropped = Counter(
+            "posecast_bus_dropped",
+            "Bus messages not sent or not used, by reason (superseded, disconnected, "
+            "unknown_player, undecodable)",
+            ["reason"],
+            registry=r,
+        )
+        self.bus_roundtrip = Histogram(
+            "posecast_bus_roundtrip_seconds",
+            "Wall time of one pipelined round trip to the bus's store",
+            buckets=_BUS_BUCKETS,
+            registry=r,
+        )
+        self.remote_players = Gauge(
+            "posecast_remote_players", "Players on other nodes in this node's rooms", registry=r
         )
 
     def render(self) -> bytes:

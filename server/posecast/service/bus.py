@@ -1,0 +1,237 @@
+"""The bus between posecast nodes: room presence and one pose batch per room per tick.
+
+Backends by name, chosen once from the config (:func:`create_bus`):
+
+* ``memory`` (the default, no ``redis_url``): an in-process :class:`MemoryBroker`.
+  ``posecast serve`` gives it a broker of its own, so it is one embedded node with
+  nothing to talk to; tests hand several hubs one broker to run many nodes in one
+  process, without sockets.
+* ``redis`` (``--redis URL``): :class:`~posecast.service.redis_bus.RedisBus`, Redis
+  pub/sub for announcements and pose batches, Redis hashes with heartbeats for the
+  authoritative member lists. ``docs/scale-out.md`` has the design.
+
+The hub drives a bus with plain, non-blocking calls (:meth:`Bus.watch`,
+:meth:`Bus.joined`, :meth:`Bus.left`, :meth:`Bus.publish`); the bus calls back into
+a :class:`BusSink` (the hub) with what other nodes did, then calls :attr:`Bus.after`
+(the shell wakes the writers). What the bus carries is :class:`BusMessage`, encoded
+once by :func:`encode_message` (msgpack).
+"""
+
+from __future__ import annotations
+
+import os
+import secrets
+import socket
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import msgpack
+
+from posecast.errors import ConfigError
+from posecast.service.config import ServerConfig
+from posecast.service.metrics import Metrics
+
+BUS_VERSION = 1
+
+
+class BusSink(Protocol):
+    """What a bus reports to (the hub). ``node`` is always another node's id."""
+
+    def remote_join(self, room: str, player: str, name: str, node: str, now: float) -> None: ...
+
+    def remote_leave(self, room: str, player: str, node: str, now: float) -> None: ...
+
+    def remote_tick(
+        self,
+        room: str,
+        node: str,
+        poses: Sequence[tuple[str, bytes]],
+        events: Sequence[bytes],
+        now: float,
+    ) -> None: ...
+
+    def remote_snapshot(
+        self, room: str, live: Mapping[str, tuple[str, str]], issued_at: float, now: float
+    ) -> None: ...
+
+    def remote_lost(self, now: float) -> None: ...
+
+    def local_rooms(self) -> Mapping[str, Mapping[str, str]]:
+        """Every room with a local audience -> its local players (id -> name)."""
+        ...
+
+
+@dataclass(frozen=True)
+class BusMessage:
+    """One message on a room's channel. ``kind``: ``tick`` (poses and stale/active
+    presence of one node's players in one tick), ``join`` or ``leave``."""
+
+    kind: str
+    node: str
+    player: str = ""
+    name: str = ""
+    poses: tuple[tuple[str, bytes], ...] = ()  # (player, encoded pose message)
+    events: tuple[bytes, ...] = ()  # encoded presence messages
+
+
+def encode_message(m: BusMessage) -> bytes:
+    body: dict[str, Any] = {"v": BUS_VERSION, "k": m.kind, "n": m.node}
+    if m.kind == "tick":
+        body["p"] = [list(p) for p in m.poses]
+        if m.events:
+            body["e"] = list(m.events)
+    else:
+        body["p"] = m.player
+        if m.kind == "join":
+            body["m"] = m.name
+    out: bytes = msgpack.packb(body, use_bin_type=True)
+    return out
+
+
+def decode_message(data: bytes) -> BusMessage | None:
+    """The message, or ``None`` for anything this version does not understand (a
+    newer node's message is skipped, not fatal: rolling upgrades)."""
+    try:
+        body = msgpack.unpackb(data, raw=False)
+        if not isinstance(body, dict) or body.get("v") != BUS_VERSION:
+            return None
+        kind, node = str(body["k"]), str(body["n"])
+        if kind == "tick":
+            poses = tuple((str(p), bytes(d)) for p, d in body["p"])
+            return BusMessage(kind, node, poses=poses, events=tuple(body.get("e", ())))
+        if kind in ("join", "leave"):
+            return BusMessage(kind, node, str(body["p"]), str(body.get("m", "")))
+    except (ValueError, KeyError, TypeError, msgpack.UnpackException):
+        pass
+    return None
+
+
+def deliver(sink: BusSink, room: str, m: BusMessage, now: float) -> None:
+    """Hand one decoded message from another node to ``sink``."""
+    if m.kind == "tick":
+        sink.remote_tick(room, m.node, m.poses, m.events, now)
+    elif m.kind == "join":
+        sink.remote_join(room, m.player, m.name, m.node, now)
+    elif m.kind == "leave":
+        sink.remote_leave(room, m.player, m.node, now)
+
+
+def default_node_id() -> str:
+    host = "".join(c if c.isalnum() or c in "_.-" else "-" for c in socket.gethostname())
+    return f"{host[:40] or 'node'}-{os.getpid()}-{secrets.token_hex(3)}"
+
+
+class Bus:
+    """The interface every backend implements; also the no-op base."""
+
+    def __init__(self, node: str) -> None:
+        self.node = node
+        self.sink: BusSink | None = None
+        self.after: Callable[[], None] = lambda: None  # called after delivering to the sink
+
+    def attach(self, sink: BusSink) -> None:
+        self.sink = sink
+
+    @property
+    def healthy(self) -> bool:
+        """Cross-node traffic flows (``/readyz`` reports it)."""
+        return True
+
+    @property
+    def status(self) -> str:
+        return "ok"
+
+    async def start(self) -> None:
+        """Begin (re)connecting in the background; never waits for a remote store."""
+
+    async def stop(self) -> None:
+        """Flush announcements already made (the shutdown's leaves), then disconnect."""
+
+    def watch(self, room: str) -> None:
+        """This node now has a local audience in ``room``: receive it."""
+
+    def unwatch(self, room: str) -> None:
+        """No local audience is left in ``room``: stop receiving it."""
+
+    def joined(self, room: str, player: str, name: str) -> None:
+        """A local player joined ``room``."""
+
+    def left(self, room: str, player: str) -> None:
+        """A local player left ``room``."""
+
+    def publish(self, room: str, poses: list[tuple[str, bytes]], events: list[bytes]) -> None:
+        """This tick's poses (and stale/active presence) of ``room``'s local players."""
+
+
+@dataclass
+class MemoryBroker:
+    """Redis's role, in process: member lists and per-room subscriptions."""
+
+    members: dict[str, dict[str, tuple[str, str]]] = field(default_factory=dict)
+    subscribers: dict[str, list[MemoryBus]] = field(default_factory=dict)
+    messages: int = 0  # published, for tests
+
+
+class MemoryBus(Bus):
+    """In-process backend. Delivery is synchronous: a publish reaches every other
+    subscribed node before it returns (deterministic tests, no event loop needed)."""
+
+    def __init__(
+        self, broker: MemoryBroker | None = None, node: str = "local", *, clock: Callable[[], float]
+    ) -> None:
+        super().__init__(node)
+        self.broker = broker or MemoryBroker()
+        self.clock = clock
+
+    def watch(self, room: str) -> None:
+        self.broker.subscribers.setdefault(room, []).append(self)
+        if self.sink is not None:
+            now = self.clock()
+            live = {p: v for p, v in self.broker.members.get(room, {}).items() if v[0] != self.node}
+            self.sink.remote_snapshot(room, live, now, now)
+            self.after()
+
+    def unwatch(self, room: str) -> None:
+        subs = self.broker.subscribers.get(room, [])
+        if self in subs:
+            subs.remove(self)
+
+    def joined(self, room: str, player: str, name: str) -> None:
+        self.broker.members.setdefault(room, {})[player] = (self.node, name)
+        self._send(room, BusMessage("join", self.node, player, name))
+
+    def left(self, room: str, player: str) -> None:
+        members = self.broker.members.get(room, {})
+        if members.get(player, ("",))[0] == self.node:
+            del members[player]
+        self._send(room, BusMessage("leave", self.node, player))
+
+    def publish(self, room: str, poses: list[tuple[str, bytes]], events: list[bytes]) -> None:
+        if len(self.broker.subscribers.get(room, ())) > 1:  # someone besides this node
+            self._send(
+                room, BusMessage("tick", self.node, poses=tuple(poses), events=tuple(events))
+            )
+
+    def _send(self, room: str, m: BusMessage) -> None:
+        data = encode_message(m)
+        self.broker.messages += 1
+        for bus in list(self.broker.subscribers.get(room, ())):
+            decoded = decode_message(data)
+            if bus is not self and bus.sink is not None and decoded is not None:
+                deliver(bus.sink, room, decoded, bus.clock())
+                bus.after()
+
+
+def create_bus(cfg: ServerConfig, metrics: Metrics, clock: Callable[[], float]) -> Bus:
+    """The backend ``cfg`` names: Redis when ``redis_url`` is set, else in-memory."""
+    node = cfg.node_id or default_node_id()
+    if not cfg.redis_url:
+        metrics.bus_connected.set(1)
+        return MemoryBus(node=node, clock=clock)
+    try:
+        from posecast.service.redis_bus import RedisBus
+    except ImportError as exc:  # the serving image installs posecast[redis]
+        msg = f"--redis needs the redis client: pip install 'posecast[redis]' ({exc})"
+        raise ConfigError(msg) from None
+    return RedisBus(cfg, metrics, node=node)
