@@ -106,7 +106,11 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     from posecast.engine.config import EngineConfig
 
     variants = args.variants.split(",") if args.variants else list(VARIANTS)
-    engine_cfg = EngineConfig(samples=args.samples, outlier_baseline=args.outlier_baseline)
+    engine_cfg = EngineConfig(
+        samples=args.samples,
+        outlier_baseline=args.outlier_baseline,
+        outlier_factor=args.outlier_factor,
+    )
     report = evaluate(
         clips,
         fps,
@@ -263,11 +267,12 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--models", type=Path, help="models directory (default: shipped)")
     ev.add_argument("--variants", help="comma-separated subset of variants")
     ev.add_argument("--samples", type=int, default=100, help="SSI latent samples N (100)")
+    ev.add_argument("--outlier-factor", type=float, default=2.0, help="SSI outlier factor (2)")
     ev.add_argument(
         "--outlier-baseline",
-        default="min",
+        default="zero",
         choices=("min", "zero"),
-        help="SSI outlier rule: R_c - min R > 2r (min, default) or R_c > 2r (zero, the paper)",
+        help="SSI outlier rule: R_c > 2r (zero, the paper; default) or R_c - min R > 2r (min)",
     )
     ev.set_defaults(func=_cmd_eval)
 

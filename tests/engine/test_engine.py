@@ -217,10 +217,10 @@ def inject(
 
 
 def is_outlier(scores: np.ndarray, current: int) -> bool:
-    """The engine's default trimmed estimator: ``R_c - min R > 2 (median R - min R)``
+    """The engine's default trimmed estimator (paper eq. 2): ``R_c > 2 (median R - min R)``
     (computed as the selector does, in the scores' own dtype)."""
     low = float(np.min(scores))
-    return bool(scores[current] - low > 2.0 * (float(np.median(scores)) - low))
+    return bool(scores[current] > 2.0 * (float(np.median(scores)) - low))
 
 
 def test_an_implausible_sample_triggers_a_transition_to_the_best(

@@ -25,14 +25,15 @@ def poses_with(joint: Joint, points: list[tuple[float, float, float]]) -> np.nda
 
 
 # --- AnomalySelector: r = median R - min R; outlier when R_c - base > 2r -----------------
-# The paper's literal rule (base 0) is ``baseline="zero"``; the default measures from min R.
+# The paper's literal rule (base 0) is the default; ``baseline="min"`` measures from min R.
 LITERAL = AnomalySelector(baseline="zero")
+FROM_MIN = AnomalySelector(baseline="min")
 
 
 def test_anomaly_outlier_moves_to_the_best_other_sample() -> None:
     scores = np.array([0.02, 0.01, 0.03, 0.02, 0.30])  # median 0.02, min 0.01: 2r = 0.02
     assert LITERAL.choose(4, scores, NO_POSES) == 1
-    assert AnomalySelector().choose(4, scores, NO_POSES) == 1  # 0.29 > 0.02 too
+    assert FROM_MIN.choose(4, scores, NO_POSES) == 1  # 0.29 > 0.02 too
 
 
 def test_anomaly_best_is_the_argmin_among_the_others() -> None:
@@ -40,14 +41,14 @@ def test_anomaly_best_is_the_argmin_among_the_others() -> None:
     scores = np.array([0.25, 0.5, 0.5, 0.75, 1.0])  # r = 0.25, 2r = 0.5
     assert LITERAL.choose(3, scores, NO_POSES[:5]) == 0
     assert LITERAL.choose(4, scores, NO_POSES[:5]) == 0
-    assert AnomalySelector().choose(4, scores, NO_POSES[:5]) == 0  # 1.0 - 0.25 > 0.5
+    assert FROM_MIN.choose(4, scores, NO_POSES[:5]) == 0  # 1.0 - 0.25 > 0.5
 
 
 def test_anomaly_stays_when_not_an_outlier() -> None:
     scores = np.array([0.25, 0.5, 0.5, 0.75, 1.0])  # 2r = 0.5 exactly
     assert LITERAL.choose(1, scores, NO_POSES) is None  # R_c == 2r: not above
     assert LITERAL.choose(0, scores, NO_POSES) is None
-    assert AnomalySelector().choose(3, scores, NO_POSES) is None  # 0.75 - 0.25 == 2r
+    assert FROM_MIN.choose(3, scores, NO_POSES) is None  # 0.75 - 0.25 == 2r
 
 
 def test_anomaly_factor_sets_the_threshold() -> None:
@@ -57,12 +58,16 @@ def test_anomaly_factor_sets_the_threshold() -> None:
         assert AnomalySelector(3.0, baseline).choose(4, scores, NO_POSES) is None
 
 
-def test_default_rule_ignores_a_tight_cluster() -> None:
+def test_the_default_is_the_papers_rule() -> None:
+    assert AnomalySelector() == LITERAL
+
+
+def test_measuring_from_min_ignores_a_tight_cluster() -> None:
     """Samples within millimetres of each other: the literal rule calls every one an
     outlier (R_c > 2r holds for all), measuring from min R calls none."""
     scores = np.array([0.100, 0.101, 0.102, 0.1025, 0.103])  # r = 0.002
     assert LITERAL.choose(0, scores, NO_POSES) == 1  # even the best sample hops away
-    assert all(AnomalySelector().choose(c, scores, NO_POSES) is None for c in range(5))
+    assert all(FROM_MIN.choose(c, scores, NO_POSES) is None for c in range(5))
 
 
 def test_unknown_baseline_is_refused() -> None:

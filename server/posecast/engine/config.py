@@ -15,10 +15,10 @@ class EngineConfig:
         samples: latent samples per player, ``N`` (default 100).
         lookahead: ``tau``, frames of look-ahead; output lags input by this (default 10).
         transition_frames: ``T``, frames a transition to a better sample takes (10).
-        outlier_factor: the current sample is an outlier when
-            ``R_c - min(R) > factor * r``, ``r = median(R) - min(R)`` (2.0).
-        outlier_baseline: ``"min"`` for that rule, ``"zero"`` for the paper's literal
-            ``R_c > factor * r`` (see :mod:`posecast.engine.selectors`).
+        outlier_factor: the current sample is an outlier when ``R_c > factor * r``,
+            ``r = median(R) - min(R)`` (2.0, the paper's trimmed estimator).
+        outlier_baseline: ``"zero"`` for that rule, ``"min"`` to measure from the best
+            sample, ``R_c - min(R) > factor * r`` (see :mod:`posecast.engine.selectors`).
         ik_release_frames: frames to blend a released foot back to the network (10).
         ik_max_drift_m: release a foot lock early once the network's ankle is this far
             from it (0.3 m; ``None`` keeps every lock for the whole predicted contact).
@@ -31,7 +31,7 @@ class EngineConfig:
     lookahead: int = 10
     transition_frames: int = 10
     outlier_factor: float = 2.0
-    outlier_baseline: str = "min"
+    outlier_baseline: str = "zero"
     ik_release_frames: int = 10
     ik_max_drift_m: float | None = 0.3
     stale_after_frames: int = 30
