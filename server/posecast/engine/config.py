@@ -21,7 +21,8 @@ class EngineConfig:
             sample, ``R_c - min(R) > factor * r`` (see :mod:`posecast.engine.selectors`).
         ik_release_frames: frames to blend a released foot back to the network (10).
         ik_max_drift_m: release a foot lock early once the network's ankle is this far
-            from it (0.3 m; ``None`` keeps every lock for the whole predicted contact).
+            from it (0.2 m, chosen on the validation split, see docs/evaluation.md;
+            ``None`` keeps every lock for the whole predicted contact, as the paper).
         stale_after_frames: frames without input before a player is marked stale (30).
         waist_filter_hz: cutoff of the waist-orientation low-pass, ``None`` for off.
         fps: tick rate the model was trained at (60).
@@ -33,7 +34,7 @@ class EngineConfig:
     outlier_factor: float = 2.0
     outlier_baseline: str = "zero"
     ik_release_frames: int = 10
-    ik_max_drift_m: float | None = 0.3
+    ik_max_drift_m: float | None = 0.2
     stale_after_frames: int = 30
     waist_filter_hz: float | None = None
     fps: float = 60.0
