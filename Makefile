@@ -15,15 +15,15 @@ $(PY):
 	$(PY) -m pip install --quiet --upgrade pip
 
 $(STAMP): $(PY) pyproject.toml
-	$(PY) -m pip install --quiet -e ".[dev]"
+	$(PY) -m pip install --quiet -e ".[dev]" -e "client_sdk/python[serial,hid]"
 	rm -f $(VENV)/.installed-*
 	touch $(STAMP)
 
 venv: $(STAMP)
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check server tests benchmarks
-	$(VENV)/bin/ruff format --check server tests benchmarks
+	$(VENV)/bin/ruff check server tests benchmarks client_sdk/python
+	$(VENV)/bin/ruff format --check server tests benchmarks client_sdk/python
 
 typecheck: $(STAMP)
 	$(VENV)/bin/mypy
@@ -31,7 +31,19 @@ typecheck: $(STAMP)
 pytest: $(STAMP)
 	$(PY) -m pytest -q
 
-test: lint typecheck pytest
+# The TypeScript SDK (client_sdk/typescript): npm ci when the lock file changed, strict
+# tsc, then the proto vectors, unit, integration (a real .venv posecast) and README tests.
+TS_DIR := client_sdk/typescript
+.PHONY: ts-test
+
+$(TS_DIR)/node_modules/.installed: $(TS_DIR)/package-lock.json
+	cd $(TS_DIR) && npm ci --no-audit --no-fund
+	touch $@
+
+ts-test: $(STAMP) $(TS_DIR)/node_modules/.installed
+	cd $(TS_DIR) && npm run --silent typecheck && npm test --silent
+
+test: lint typecheck ts-test pytest
 
 run: $(STAMP)
 	$(PY) -m posecast demo

@@ -25,3 +25,21 @@ def test_readme_example_runs(capsys: pytest.CaptureFixture[str]) -> None:
     out = capsys.readouterr().out
     assert re.search(r"frame \d+: sample \d+, head at \[", out)
     assert re.search(r"\d+ poses, \d+ sample transitions", out)
+
+
+def _first_block(path: Path, lang: str) -> str:
+    blocks = re.findall(rf"```{lang}\n(.*?)```", path.read_text("utf-8"), flags=re.DOTALL)
+    assert blocks, f"{path} lost its {lang} example"
+    return str(blocks[0])
+
+
+def test_sdk_snippets_match_the_sdk_readmes() -> None:
+    """The SDK quick starts in this README are the ones the SDKs' own tests run."""
+    root = README.parent
+    text = README.read_text("utf-8")
+    python = _first_block(root / "client_sdk" / "python" / "README.md", "python")
+    typescript = _first_block(root / "client_sdk" / "typescript" / "README.md", "ts")
+    assert f"```python\n{python}```" in text
+    assert f"```ts\n{typescript}```" in text
+    for code in (python, typescript):
+        assert len([line for line in code.splitlines() if line.strip()]) <= 15

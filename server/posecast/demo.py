@@ -18,7 +18,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from websockets.asyncio.client import connect
+from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed
 from websockets.typing import Subprotocol
 
@@ -52,14 +52,26 @@ async def headset(url: str, token: str, name: str, frames: Frames, offset_m: flo
             raise RuntimeError(f"{name}: server refused: {welcome}")
         shift = np.array([offset_m, 0.0, 0.0])
         t0, seq = time.monotonic(), 0
-        with contextlib.suppress(ConnectionClosed):
-            while True:
-                i = seq % len(frames["features"])
-                pos = frames["tracker_pos"][i].astype(np.float64) + shift
-                quat = frames["tracker_quat"][i].astype(np.float64)
-                await ws.send(encode(Frame(seq, time.monotonic() - t0, pos, quat)))
-                seq += 1
-                await asyncio.sleep(max(0.0, t0 + seq / 60.0 - time.monotonic()))
+        # A player receives every pose of its room: read (and drop) them, or the server
+        # cuts this headset off as a SLOW_CONSUMER once the socket buffers fill (~30 s).
+        drain = asyncio.create_task(_drain(ws))
+        try:
+            with contextlib.suppress(ConnectionClosed):
+                while True:
+                    i = seq % len(frames["features"])
+                    pos = frames["tracker_pos"][i].astype(np.float64) + shift
+                    quat = frames["tracker_quat"][i].astype(np.float64)
+                    await ws.send(encode(Frame(seq, time.monotonic() - t0, pos, quat)))
+                    seq += 1
+                    await asyncio.sleep(max(0.0, t0 + seq / 60.0 - time.monotonic()))
+        finally:
+            drain.cancel()
+
+
+async def _drain(ws: ClientConnection) -> None:
+    with contextlib.suppress(ConnectionClosed):
+        async for _ in ws:
+            pass
 
 
 async def spectator(url: str, token: str, every_s: float = 2.0) -> None:

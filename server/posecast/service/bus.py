@@ -57,6 +57,10 @@ class BusSink(Protocol):
 
     def remote_lost(self, now: float) -> None: ...
 
+    def remote_burn(self, jti: str, exp: int, now: float) -> None:
+        """Another node ended a session with ``bye`` or a kick: refuse its token here too."""
+        ...
+
     def local_rooms(self) -> Mapping[str, Mapping[str, str]]:
         """Every room with a local audience -> its local players (id -> name)."""
         ...
@@ -64,8 +68,9 @@ class BusSink(Protocol):
 
 @dataclass(frozen=True)
 class BusMessage:
-    """One message on a room's channel. ``kind``: ``tick`` (poses and stale/active
-    presence of one node's players in one tick), ``join`` or ``leave``."""
+    """One message on a room's channel (``kind``: ``tick``, the poses and stale/active
+    presence of one node's players in one tick; ``join``; ``leave``) or on the
+    cluster's control channel (``burn``: a token id ``player`` and its expiry ``exp``)."""
 
     kind: str
     node: str
@@ -73,6 +78,7 @@ class BusMessage:
     name: str = ""
     poses: tuple[tuple[str, bytes], ...] = ()  # (player, encoded pose message)
     events: tuple[bytes, ...] = ()  # encoded presence messages
+    exp: int = 0  # burn: Unix time the token expires
 
 
 def encode_message(m: BusMessage) -> bytes:
@@ -85,6 +91,8 @@ def encode_message(m: BusMessage) -> bytes:
         body["p"] = m.player
         if m.kind == "join":
             body["m"] = m.name
+        elif m.kind == "burn":
+            body["x"] = m.exp
     out: bytes = msgpack.packb(body, use_bin_type=True)
     return out
 
@@ -102,6 +110,8 @@ def decode_message(data: bytes) -> BusMessage | None:
             return BusMessage(kind, node, poses=poses, events=tuple(body.get("e", ())))
         if kind in ("join", "leave"):
             return BusMessage(kind, node, str(body["p"]), str(body.get("m", "")))
+        if kind == "burn":
+            return BusMessage(kind, node, str(body["p"]), exp=int(body["x"]))
     except (ValueError, KeyError, TypeError, msgpack.UnpackException):
         pass
     return None
@@ -115,6 +125,8 @@ def deliver(sink: BusSink, room: str, m: BusMessage, now: float) -> None:
         sink.remote_join(room, m.player, m.name, m.node, now)
     elif m.kind == "leave":
         sink.remote_leave(room, m.player, m.node, now)
+    elif m.kind == "burn":
+        sink.remote_burn(m.player, m.exp, now)
 
 
 def default_node_id() -> str:
@@ -163,6 +175,9 @@ class Bus:
     def publish(self, room: str, poses: list[tuple[str, bytes]], events: list[bytes]) -> None:
         """This tick's poses (and stale/active presence) of ``room``'s local players."""
 
+    def burned(self, jti: str, exp: int) -> None:
+        """A session ended with ``bye`` or a kick: its token id is burned everywhere."""
+
 
 @dataclass
 class MemoryBroker:
@@ -170,6 +185,7 @@ class MemoryBroker:
 
     members: dict[str, dict[str, tuple[str, str]]] = field(default_factory=dict)
     subscribers: dict[str, list[MemoryBus]] = field(default_factory=dict)
+    burned: dict[str, int] = field(default_factory=dict)  # token id -> expiry
     messages: int = 0  # published, for tests
 
 
@@ -212,6 +228,12 @@ class MemoryBus(Bus):
             self._send(
                 room, BusMessage("tick", self.node, poses=tuple(poses), events=tuple(events))
             )
+
+    def burned(self, jti: str, exp: int) -> None:
+        self.broker.burned[jti] = exp
+        for bus in {b for subs in self.broker.subscribers.values() for b in subs} - {self}:
+            if bus.sink is not None:
+                bus.sink.remote_burn(jti, exp, bus.clock())
 
     def _send(self, room: str, m: BusMessage) -> None:
         data = encode_message(m)

@@ -30,7 +30,7 @@ import zlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
-from posecast.auth.tokens import ReplayGuard
+from posecast.auth.tokens import Claims, ReplayGuard
 from posecast.engine.engine import TrackerFrame
 from posecast.errors import (
     MalformedError,
@@ -301,6 +301,7 @@ class Hub:
             return
         if burn and s.claims is not None:
             self.replay.end(s.claims, now + self.wall_offset_s)
+            self.bus.burned(s.claims.jti, s.claims.exp)
         drift = s.clock.drift_ppm
         if drift is not None:
             self.metrics.clock_drift.observe(abs(drift))
@@ -439,6 +440,9 @@ class Hub:
         """The bus has been down past the node TTL: remote players count as gone."""
         for room in self.remote.rooms:
             self.remote_snapshot(room, {}, float("inf"), now)
+
+    def remote_burn(self, jti: str, exp: int, now: float) -> None:
+        self.replay.end(Claims("", "", "", 0, exp, jti), now + self.wall_offset_s)
 
     def local_rooms(self) -> dict[str, dict[str, str]]:
         return {name: dict(r.players) for name, r in self.rooms.rooms.items()}

@@ -4,7 +4,8 @@ Redis holds, per room, a hash of who plays in it where and, per node, a heartbea
 key that expires ``redis_node_ttl_s`` after the node's last heartbeat. Pub/sub
 carries one channel per room: ``join``/``leave`` announcements and one ``tick``
 batch per node per tick. A node subscribes only to the rooms it has a local
-audience in. ``docs/scale-out.md`` gives the reasoning, key names and bounds.
+audience in. Key names and commands are :mod:`posecast.service.redis_store`'s;
+``docs/scale-out.md`` gives the reasoning and the bounds.
 
 Three tasks per connection, under a supervisor that reconnects with jittered
 exponential backoff: ``_commands`` owns the command connection and sends, in
@@ -34,23 +35,14 @@ from redis.asyncio.client import PubSub
 from redis.asyncio.retry import Retry
 from redis.backoff import NoBackoff
 
-from posecast.service.bus import Bus, BusMessage, decode_message, deliver, encode_message
+from posecast.service.bus import Bus, BusMessage, decode_message, deliver
 from posecast.service.config import ServerConfig
 from posecast.service.metrics import Metrics
+from posecast.service.redis_store import RedisStore
 
 log = logging.getLogger("posecast.bus")
 _POLL_S = 0.05  # longest wait before a (un)subscription is sent; messages never wait
 _MAX_EVENTS = 64  # stale/active presence kept per room while a round trip is in flight
-
-# Delete a member entry only if ``node`` still owns it (the player may have moved to
-# another node since), then announce the leave; one atomic round trip.
-_LEAVE_LUA = """
-local v = redis.call('HGET', KEYS[1], ARGV[1])
-if v and string.sub(v, 1, #ARGV[2] + 1) == ARGV[2] .. '\\t' then
-  redis.call('HDEL', KEYS[1], ARGV[1])
-end
-return redis.call('PUBLISH', ARGV[3], ARGV[4])
-"""
 
 
 @dataclass
@@ -63,8 +55,7 @@ class RedisBus(Bus):
     def __init__(self, cfg: ServerConfig, metrics: Metrics, node: str) -> None:
         super().__init__(node)
         self.cfg, self.metrics = cfg, metrics
-        self._prefix = cfg.redis_prefix
-        self._ttl_ms = int(cfg.redis_node_ttl_s * 1000)
+        self.store = RedisStore(cfg.redis_prefix, node, cfg.redis_node_ttl_s, metrics)
         self._watched: dict[str, bytes] = {}  # room -> its channel
         self._rooms: dict[bytes, str] = {}  # channel -> room
         self._ops: deque[tuple[Any, ...]] = deque()
@@ -76,20 +67,10 @@ class RedisBus(Bus):
         self._task: asyncio.Task[None] | None = None
         self._lost: asyncio.TimerHandle | None = None
         self._last_error = "not connected yet"
-        self._leave_sha = ""  # _LEAVE_LUA, loaded on every (re)connect
         self._idle = True
         self._failures = 0  # connection attempts failed since the last success
-
-    # --- names ----------------------------------------------------------------------------
-
-    def channel(self, room: str) -> str:
-        return f"{self._prefix}:room:{{{room}}}"  # {room}: one Cluster slot per room
-
-    def members_key(self, room: str) -> str:
-        return f"{self._prefix}:members:{{{room}}}"
-
-    def node_key(self, node: str) -> str:
-        return f"{self._prefix}:node:{node}"
+        self._load_burned = False
+        self._ctl = self.store.ctl_channel.encode()
 
     # --- what the hub calls (never blocks) -----------------------------------------------
 
@@ -102,7 +83,7 @@ class RedisBus(Bus):
         return "ok" if self._connected else f"redis unavailable: {self._last_error}"
 
     def watch(self, room: str) -> None:
-        self._watched[room] = ch = self.channel(room).encode()
+        self._watched[room] = ch = self.store.channel(room).encode()
         self._rooms[ch] = room
         self._queue(("sync", (room,), False))
 
@@ -116,6 +97,9 @@ class RedisBus(Bus):
 
     def left(self, room: str, player: str) -> None:
         self._queue(("leave", room, player, self.node))
+
+    def burned(self, jti: str, exp: int) -> None:
+        self._queue(("burn", jti, exp))  # lost while disconnected: docs/scale-out.md
 
     def publish(self, room: str, poses: list[tuple[str, bytes]], events: list[bytes]) -> None:
         if not self._connected:
@@ -133,6 +117,8 @@ class RedisBus(Bus):
     def _queue(self, op: tuple[Any, ...]) -> None:
         if not self._connected:
             return  # the heartbeat after the reconnect re-asserts the whole local state
+        if op[0] == "sync" and self._stopping:
+            return  # the goodbye deleted the node key: no heartbeat may restore it
         if op[0] == "sync" and op[2]:
             if self._full_sync_queued:
                 return
@@ -186,8 +172,9 @@ class RedisBus(Bus):
         pubsub = client.pubsub()
         try:
             await client.ping()
-            await pubsub.subscribe(f"{self._prefix}:ctl")  # opens the pub/sub connection
-            self._leave_sha = await client.script_load(_LEAVE_LUA)
+            await pubsub.subscribe(self.store.ctl_channel)  # also opens the pub/sub connection
+            self._load_burned = True
+            await self.store.prepare(client)
             self._set_connected(True)
             async with asyncio.TaskGroup() as tg:
                 tg.create_task(self._commands(client))
@@ -228,109 +215,63 @@ class RedisBus(Bus):
     # --- the three tasks of one connection -----------------------------------------------
 
     async def _heartbeat(self) -> None:
-        while True:
+        period = self.cfg.redis_heartbeat_s
+        next_at = time.monotonic()
+        while True:  # at a fixed rate: the node key's TTL budget assumes it
             self._queue(("sync", (), True))
-            await asyncio.sleep(self.cfg.redis_heartbeat_s)
+            next_at = max(next_at + period, time.monotonic())
+            await asyncio.sleep(next_at - time.monotonic())
 
     async def _commands(self, client: Redis) -> None:
+        store = self.store
         while True:
-            self._idle = True
-            await self._wake.wait()
+            if not self._ops and not self._ticks:
+                self._idle = True  # what stop() waits for: everything queued is sent
+                await self._wake.wait()
             self._wake.clear()
             self._idle = False
             while self._ops or self._ticks:
                 pipe = client.pipeline(transaction=False)
                 while self._ops:
-                    op = self._ops.popleft()
-                    if op[0] == "sync":
-                        await self._execute(pipe)
+                    op, *args = self._ops.popleft()
+                    if op == "sync":
+                        await store.execute(pipe)  # what came before it, in order
                         pipe = client.pipeline(transaction=False)
-                        await self._sync(client, op[1], full=op[2])
-                    else:
-                        self._op(pipe, op)
+                        await self._sync(client, *args)
+                    elif op == "join":
+                        store.join(pipe, *args)
+                    elif op == "leave":
+                        store.leave(pipe, *args)
+                    elif op == "burn":
+                        store.burn(pipe, *args)
+                    elif op == "bye":
+                        store.goodbye(pipe)
                 ticks, self._ticks = self._ticks, {}
                 for room, b in ticks.items():
-                    m = BusMessage(
-                        "tick", self.node, poses=tuple(b.poses.items()), events=(*b.events,)
+                    poses, events = tuple(b.poses.items()), tuple(b.events)
+                    store.publish(
+                        pipe, room, BusMessage("tick", self.node, poses=poses, events=events)
                     )
-                    self._publish(pipe, room, m)
-                await self._execute(pipe)
+                await store.execute(pipe)
 
-    def _op(self, pipe: Any, op: tuple[Any, ...]) -> None:
-        if op[0] == "join":
-            _, room, player, name = op
-            key = self.members_key(room)
-            pipe.hset(key, player, f"{self.node}\t{name}")
-            pipe.pexpire(key, 2 * self._ttl_ms)
-            self._publish(pipe, room, BusMessage("join", self.node, player, name))
-        elif op[0] == "leave":
-            _, room, player, node = op
-            data = encode_message(BusMessage("leave", node, player))
-            self._count("out", "leave", data)
-            key, channel = self.members_key(room), self.channel(room)
-            pipe.evalsha(self._leave_sha, 1, key, player, node, channel, data)
-        elif op[0] == "bye":
-            pipe.delete(self.node_key(self.node))
-
-    def _publish(self, pipe: Any, room: str, m: BusMessage) -> None:
-        data = encode_message(m)
-        self._count("out", m.kind, data)
-        pipe.publish(self.channel(room), data)
-
-    def _count(self, direction: str, kind: str, data: bytes) -> None:
-        self.metrics.bus_messages.labels(direction, kind).inc()
-        self.metrics.bus_bytes.labels(direction).inc(len(data))
-
-    async def _execute(self, pipe: Any) -> list[Any]:
-        if not len(pipe):
-            return []
-        t0 = time.perf_counter()
-        out: list[Any] = await pipe.execute()
-        self.metrics.bus_roundtrip.observe(time.perf_counter() - t0)
-        return out
-
-    async def _sync(self, client: Redis, only: tuple[str, ...], *, full: bool) -> None:
-        """Re-assert this node (``full``), then reconcile the watched rooms in ``only``
-        (all of them when empty) with Redis, and report each to the hub."""
-        if self.sink is None:
+    async def _sync(self, client: Redis, only: tuple[str, ...], heartbeat: bool) -> None:
+        """Reconcile the watched rooms in ``only`` (all when empty) with Redis and report
+        each to the hub; a ``heartbeat`` also re-asserts this node and its players."""
+        sink = self.sink
+        if sink is None:
             return
-        if full:
+        if heartbeat:
             self._full_sync_queued = False
+        if heartbeat and self._load_burned:  # after a (re)connect: the burns made meanwhile
+            self._load_burned = False
+            for jti, exp in await self.store.burns(client, self.cfg.replay_cache):
+                sink.remote_burn(jti, exp, time.monotonic())
         issued = time.monotonic()
-        local = self.sink.local_rooms()
         rooms = [r for r in (only or tuple(self._watched)) if r in self._watched]
-        pipe = client.pipeline(transaction=False)
-        if full:
-            pipe.set(self.node_key(self.node), b"1", px=self._ttl_ms)
-            for room, players in local.items():
-                if players:
-                    key = self.members_key(room)
-                    pipe.hset(key, mapping={p: f"{self.node}\t{n}" for p, n in players.items()})
-                    pipe.pexpire(key, 2 * self._ttl_ms)
-        first = len(pipe)
-        for room in rooms:
-            pipe.hgetall(self.members_key(room))
-        replies = (await self._execute(pipe))[first:]
-        tables = {room: _parse_members(raw) for room, raw in zip(rooms, replies, strict=True)}
-        nodes = sorted({n for t in tables.values() for n, _ in t.values()} - {self.node})
-        pipe = client.pipeline(transaction=False)
-        for n in nodes:
-            pipe.exists(self.node_key(n))
-        alive = {n for n, up in zip(nodes, await self._execute(pipe), strict=True) if up}
-        pipe = client.pipeline(transaction=False)
-        local = self.sink.local_rooms()  # now, after the reads: who is still here
-        for room, table in tables.items():
-            mine = local.get(room, {})
-            for player, (node, _) in table.items():
-                if (node == self.node and player not in mine) or (
-                    node != self.node and node not in alive
-                ):
-                    self._op(pipe, ("leave", room, player, node))  # reaped, and announced
-        await self._execute(pipe)
+        live = await self.store.reconcile(client, rooms, sink.local_rooms, heartbeat=heartbeat)
         now = time.monotonic()
-        for room, table in tables.items():
-            live = {p: v for p, v in table.items() if v[0] in alive}
-            self.sink.remote_snapshot(room, live, issued, now)
+        for room, members in live.items():
+            sink.remote_snapshot(room, members, issued, now)
         self.after()
 
     async def _listen(self, pubsub: PubSub) -> None:
@@ -345,6 +286,8 @@ class RedisBus(Bus):
             msg = await pubsub.get_message(timeout=_POLL_S)
             delivered = False
             while msg is not None:
+                if msg["channel"] == self._ctl and msg["type"] == "message":
+                    self._receive("", msg["data"])
                 room = self._rooms.get(msg["channel"])
                 if room is not None and msg["type"] == "message":
                     delivered |= self._receive(room, msg["data"])
@@ -361,17 +304,9 @@ class RedisBus(Bus):
             return False
         if m.node == self.node or self.sink is None:
             return False  # our own publish, echoed by the channel
-        self._count("in", m.kind, data)
+        self.store.count("in", m.kind, data)
         deliver(self.sink, room, m, time.monotonic())
         return True
-
-
-def _parse_members(raw: dict[bytes, bytes]) -> dict[str, tuple[str, str]]:
-    out = {}
-    for player, value in raw.items():
-        node, _, name = value.decode("utf-8", "replace").partition("\t")
-        out[player.decode("utf-8", "replace")] = (node, name)
-    return out
 
 
 def _describe(exc: BaseException) -> str:

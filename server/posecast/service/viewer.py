@@ -38,9 +38,9 @@ import time
 from functools import cache
 from http import HTTPStatus
 from importlib import resources
+from typing import Any, Protocol
 from urllib.parse import parse_qs, urlsplit
 
-from websockets.asyncio.server import ServerConnection
 from websockets.datastructures import Headers
 from websockets.http11 import Request, Response
 
@@ -62,14 +62,19 @@ _PAGE_CSP = (
 )
 
 
+class Peer(Protocol):
+    """The one thing asked of the connection (a websockets ``ServerConnection``)."""
+
+    @property
+    def remote_address(self) -> Any: ...
+
+
 def handles(path: str) -> bool:
     """Whether ``path`` (without the query) is one of the viewer's routes."""
     return path == PREFIX or path.startswith(PREFIX + "/")
 
 
-def respond(
-    connection: ServerConnection, request: Request, cfg: ServerConfig, rooms: Rooms
-) -> Response:
+def respond(connection: Peer, request: Request, cfg: ServerConfig, rooms: Rooms) -> Response:
     """The answer to a GET of a viewer route (``handles(path)`` is true)."""
     url = urlsplit(request.path)
     if url.path == PREFIX:
@@ -90,7 +95,7 @@ def respond(
         if sub == "rooms":
             open_rooms = sorted(rooms.rooms.items())
             return _json([{"room": name, "players": len(r.players)} for name, r in open_rooms])
-        room = parse_qs(url.query).get("room", ["demo"])[0]
+        room = parse_qs(url.query, keep_blank_values=True).get("room", ["demo"])[0]
         if len(room.encode()) > MAX_ROOM_BYTES or ID_PATTERN.fullmatch(room) is None:
             return _text(400, "room must be 1 to 64 bytes of A-Z a-z 0-9 _ . : -\n")
         player = f"viewer-{secrets.token_hex(4)}"
@@ -116,7 +121,7 @@ def _asset_gzip(name: str) -> bytes:
     return gzip.compress(_asset(name), compresslevel=9, mtime=0)
 
 
-def _is_loopback(connection: ServerConnection) -> bool:
+def _is_loopback(connection: Peer) -> bool:
     addr = connection.remote_address
     try:
         return addr is not None and ipaddress.ip_address(str(addr[0])).is_loopback

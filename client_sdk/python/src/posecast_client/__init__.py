@@ -1,0 +1,116 @@
+"""posecast client SDK: stream VR trackers to a posecast server, receive full-body poses.
+
+Quick start (a dev server prints its token secret: ``posecast serve --dev``)::
+
+    import posecast_client as pc
+
+    token = pc.mint_token(secret, room="lobby", player="ada")
+    async with pc.connect("ws://127.0.0.1:8765/", token) as client:
+        await client.join("lobby", "Ada")
+        streaming = asyncio.create_task(client.stream(pc.WalkSource(seconds=3.0)))
+        async for event in client.events(until=streaming):
+            if isinstance(event, pc.Pose):
+                print(event.player, event.positions[pc.Joint.HEAD])
+
+Layers: :mod:`~posecast_client.codec` (bytes <-> messages, pure),
+:mod:`~posecast_client.session` (protocol state, pure), :mod:`~posecast_client.client`
+(the asyncio shell), :mod:`~posecast_client.sources` (trackers: replay, serial, HID),
+:mod:`~posecast_client.recording` (room recordings and BVH export).
+"""
+
+from posecast_client.client import Client, Connecting, connect
+from posecast_client.clock import ClockSample, ClockSync
+from posecast_client.codec import decode, encode, to_wire
+from posecast_client.errors import (
+    ERRORS,
+    BvhError,
+    ClientClosedError,
+    ConnectionLostError,
+    PosecastClientError,
+    ProtocolError,
+)
+from posecast_client.protocol import (
+    DEFAULT_LIMITS,
+    SUBPROTOCOL,
+    Bye,
+    Calibrate,
+    Error,
+    Frame,
+    Hello,
+    Kick,
+    Limits,
+    Member,
+    Message,
+    Ping,
+    Pong,
+    Pose,
+    Presence,
+    Selector,
+    Welcome,
+    seq_delta,
+    seq_next,
+)
+from posecast_client.session import Event, Reconnecting, Stats
+from posecast_client.skeleton import JOINT_NAMES, Joint, TrackerSlot
+from posecast_client.sources import (
+    BvhReplaySource,
+    HidTrackerSource,
+    ReplaySource,
+    SerialTrackerSource,
+    TrackerSample,
+    TrackerSource,
+    WalkSource,
+)
+from posecast_client.tokens import mint_token
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "DEFAULT_LIMITS",
+    "ERRORS",
+    "JOINT_NAMES",
+    "SUBPROTOCOL",
+    "BvhError",
+    "BvhReplaySource",
+    "Bye",
+    "Calibrate",
+    "Client",
+    "ClientClosedError",
+    "ClockSample",
+    "ClockSync",
+    "Connecting",
+    "ConnectionLostError",
+    "Error",
+    "Event",
+    "Frame",
+    "Hello",
+    "HidTrackerSource",
+    "Joint",
+    "Kick",
+    "Limits",
+    "Member",
+    "Message",
+    "Ping",
+    "Pong",
+    "Pose",
+    "PosecastClientError",
+    "Presence",
+    "ProtocolError",
+    "Reconnecting",
+    "ReplaySource",
+    "Selector",
+    "SerialTrackerSource",
+    "Stats",
+    "TrackerSample",
+    "TrackerSlot",
+    "TrackerSource",
+    "WalkSource",
+    "Welcome",
+    "connect",
+    "decode",
+    "encode",
+    "mint_token",
+    "seq_delta",
+    "seq_next",
+    "to_wire",
+]

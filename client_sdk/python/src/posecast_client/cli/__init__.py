@@ -1,0 +1,1 @@
+"""Console scripts: ``posecast-sim`` and ``posecast-record``."""

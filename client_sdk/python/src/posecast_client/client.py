@@ -1,0 +1,538 @@
+"""The asyncio client: a thin shell that moves bytes between a WebSocket and the
+pure :class:`~posecast_client.session.ClientSession`.
+
+Lifecycle::
+
+    connect ──> join ──> (send_frame | stream)* + events ──> close
+                  │
+                  └─ connection lost / SERVER_SHUTDOWN / TIMED_OUT / SLOW_CONSUMER:
+                     Reconnecting(attempt, delay) ... back-off ... rejoin ──> Welcome
+
+**Reconnect and resume.** When a joined connection ends for a retryable reason (the
+socket dropped, the server said ``bye`` or sent ``SERVER_SHUTDOWN``, ``TIMED_OUT``,
+``SLOW_CONSUMER`` or ``INTERNAL``), the client waits an exponential back-off with
+jitter (``backoff_initial_s`` doubling up to ``backoff_max_s``), opens a new
+connection and sends the same ``hello`` again: same token (or a fresh one from a
+token callable), room, name, layout and rate. Frames sent meanwhile are dropped, not
+queued (a newer frame supersedes them), but their ``seq`` is used up, so ``seq``
+keeps increasing across connections. Errors that a retry cannot fix (a refused or
+expired token, ``FORBIDDEN``, ``ROOM_FULL``, ``KICKED``, ``REPLACED``, ...) end the
+client: :meth:`Client.events` and :meth:`Client.send_frame` raise the typed error.
+
+Three tasks run per client: the connection task (reads, decodes, reconnects), the
+pinger (clock sync: four pings right after each join, then one every
+``ping_interval_s``) and whatever the application runs itself.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import inspect
+import logging
+import random
+import time
+from collections import deque
+from collections.abc import AsyncIterable, AsyncIterator, Awaitable, Callable, Generator
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+from websockets.asyncio.client import ClientConnection
+from websockets.asyncio.client import connect as ws_connect
+from websockets.exceptions import ConnectionClosed, InvalidHandshake
+from websockets.typing import Subprotocol
+
+from posecast_client.clock import ClockSync
+from posecast_client.codec import decode, encode
+from posecast_client.errors import (
+    ClientClosedError,
+    ConnectionLostError,
+    ProtocolError,
+    VersionUnsupportedError,
+)
+from posecast_client.protocol import (
+    ALL_VALID,
+    SUBPROTOCOL,
+    Bye,
+    Calibrate,
+    Message,
+    Ping,
+    Welcome,
+)
+from posecast_client.session import (
+    ClientSession,
+    Event,
+    Reconnecting,
+    Stats,
+    backoff_delay,
+    classify_join_reply,
+    is_retryable,
+)
+from posecast_client.sources.base import TrackerSample
+
+log = logging.getLogger("posecast_client")
+Token = str | Callable[[], str | Awaitable[str]]
+_TRANSPORT_ERRORS = (OSError, TimeoutError, ConnectionClosed, InvalidHandshake)
+
+
+class Client:
+    """One connection to a posecast server, kept alive across drops. Make it with
+    :func:`connect`. Options (keyword-only, with their defaults):
+
+    Args:
+        url: the server's WebSocket URL, e.g. ``ws://127.0.0.1:8765/``.
+        token: the join token, or a callable returning one (called at every join, so
+            a long session can fetch a fresh token before rejoining).
+        reconnect: rejoin after retryable losses (True).
+        backoff_initial_s: the first reconnect delay (0.25 s), doubling per attempt...
+        backoff_max_s: ...up to this (8 s).
+        max_reconnect_attempts: give up after this many failed attempts in a row
+            (``None``: never).
+        ping_interval_s: seconds between clock-sync pings (2 s; 0 turns pings off).
+        open_timeout_s: limit for the TCP + WebSocket handshake (5 s).
+        join_timeout_s: limit for the ``welcome`` after ``hello`` (5 s).
+        keepalive_s: WebSocket ping interval and timeout, to notice a dead link (5 s).
+        max_events: events kept for :meth:`events` before the oldest are dropped (4096).
+        seq0: ``seq`` of the first frame (0).
+    """
+
+    def __init__(
+        self,
+        url: str,
+        token: Token,
+        *,
+        reconnect: bool = True,
+        backoff_initial_s: float = 0.25,
+        backoff_max_s: float = 8.0,
+        max_reconnect_attempts: int | None = None,
+        ping_interval_s: float = 2.0,
+        open_timeout_s: float = 5.0,
+        join_timeout_s: float = 5.0,
+        keepalive_s: float = 5.0,
+        max_events: int = 4096,
+        seq0: int = 0,
+    ) -> None:
+        self.url = url
+        self._token = token
+        self.reconnect = reconnect
+        self.backoff_initial_s, self.backoff_max_s = backoff_initial_s, backoff_max_s
+        self.max_reconnect_attempts = max_reconnect_attempts
+        self.ping_interval_s = ping_interval_s
+        self.open_timeout_s, self.join_timeout_s = open_timeout_s, join_timeout_s
+        self.keepalive_s = keepalive_s
+        self.session = ClientSession(seq0=seq0)
+        self._rng = random.Random()
+        self._ws: ClientConnection | None = None
+        self._hello_args: dict[str, Any] | None = None
+        self._events: deque[Event] = deque()
+        self._max_events = max_events
+        self._wake = asyncio.Event()
+        self._joined = asyncio.Event()
+        self._tasks: list[asyncio.Task[None]] = []
+        self._failure: BaseException | None = None
+        self._closing = False
+
+    # --- state -------------------------------------------------------------------------
+
+    @property
+    def welcome(self) -> Welcome | None:
+        """The latest ``welcome`` (it changes on every rejoin)."""
+        return self.session.welcome
+
+    @property
+    def player(self) -> str | None:
+        """This client's player id, once joined."""
+        return None if self.session.welcome is None else self.session.welcome.player
+
+    @property
+    def connected(self) -> bool:
+        """Joined right now (False while reconnecting)."""
+        return self._joined.is_set()
+
+    @property
+    def clock(self) -> ClockSync:
+        """Offset between this client's ``time.monotonic()`` and the server's clock."""
+        return self.session.clock
+
+    @property
+    def stats(self) -> Stats:
+        return self.session.stats
+
+    def sent_at(self, seq: int) -> float | None:
+        """``time.monotonic()`` when the frame ``seq`` was sent (the last 1024 frames);
+        a pose with that ``seq`` arriving now took ``time.monotonic() - sent_at`` end to
+        end, the server's look-ahead included."""
+        return self.session.sent_at(seq)
+
+    # --- connecting and joining ----------------------------------------------------------
+
+    async def _open(self) -> ClientConnection:
+        ws = await ws_connect(
+            self.url,
+            subprotocols=[Subprotocol(SUBPROTOCOL)],
+            compression=None,  # poses are quantised binary: deflate costs CPU for little
+            open_timeout=self.open_timeout_s,
+            ping_interval=self.keepalive_s or None,
+            ping_timeout=self.keepalive_s or None,
+            max_size=65_536,  # v1 messages are at most 8192 bytes; the codec says TOO_LARGE
+        )
+        if ws.subprotocol != SUBPROTOCOL:
+            await ws.close()
+            raise VersionUnsupportedError(f"the server did not select {SUBPROTOCOL}")
+        return ws
+
+    async def _handshake(self, ws: ClientConnection) -> Welcome:
+        """Send ``hello`` on ``ws`` and read up to its ``welcome`` (or refusal)."""
+        assert self._hello_args is not None
+        token = self._token() if callable(self._token) else self._token
+        if inspect.isawaitable(token):
+            token = await token
+        await ws.send(encode(self.session.hello(str(token), **self._hello_args)))
+        async with asyncio.timeout(self.join_timeout_s):
+            while True:
+                data = await ws.recv()
+                if not isinstance(data, bytes):
+                    raise ConnectionLostError("the server sent a text message")
+                reply = classify_join_reply(decode(data))
+                if isinstance(reply, ProtocolError):
+                    raise reply
+                if reply is not None:
+                    self.session.connected()
+                    self.session.receive(reply, time.monotonic())
+                    return reply
+
+    async def join(
+        self,
+        room: str,
+        name: str,
+        *,
+        layout: str = "hmd3+waist",
+        rate_hz: float | None = None,
+        watch: tuple[str, ...] = (),
+    ) -> Welcome:
+        """Join ``room`` as ``name`` (shown to others) and start receiving.
+
+        Args:
+            layout: the tracked points; ``hmd3+waist`` (head, both hands, waist) is
+                the layout served now.
+            rate_hz: frames per second this client will send (absent: 60).
+            watch: further rooms to watch (backend tokens only).
+
+        Raises:
+            ProtocolError: the typed refusal (``UnauthenticatedError``,
+                ``ForbiddenError``, ``RoomFullError``...).
+        """
+        if self._closing:
+            raise ClientClosedError("the client is closed")
+        if self._ws is None or self._hello_args is not None:
+            raise RuntimeError("join() once per client, after `await connect(...)`")
+        self._hello_args = {"room": room, "name": name, "layout": layout, "rate_hz": rate_hz,
+                            "watch": watch}  # fmt: skip
+        if layout == "hmd3+waist":
+            self._hello_args["layout"] = None  # the default: canonical hellos leave it out
+        try:
+            welcome = await self._handshake(self._ws)
+        except BaseException:
+            self._hello_args = None
+            raise
+        self._joined.set()
+        self._tasks = [asyncio.create_task(self._run(self._ws), name="posecast-client")]
+        if self.ping_interval_s > 0:
+            self._tasks.append(asyncio.create_task(self._pinger(), name="posecast-pinger"))
+        return welcome
+
+    # --- the connection task -------------------------------------------------------------
+
+    async def _run(self, ws: ClientConnection) -> None:
+        """Read the joined connection; when it ends, reconnect and rejoin (or give up)."""
+        while True:
+            cause = await self._read(ws)
+            if self._ws is ws:
+                self._ws = None
+            self._joined.clear()
+            if self._closing:
+                return
+            if not (self.reconnect and _retryable(cause)):
+                self._fail(cause)
+                return
+            log.info("connection lost (%r); reconnecting", cause)
+            new = await self._reconnect(cause)
+            if new is None:
+                return
+            ws = self._ws = new
+            self._joined.set()
+
+    async def _read(self, ws: ClientConnection) -> BaseException:
+        """Decode and dispatch messages until the connection ends; returns why it did."""
+        cause: BaseException | None = None
+        try:
+            async for data in ws:
+                if not isinstance(data, bytes):
+                    cause = ConnectionLostError("the server sent a text message")
+                    await ws.close(1003)
+                    break
+                try:
+                    msg = decode(data)
+                except ProtocolError as exc:
+                    self.session.stats.bad_messages += 1
+                    log.warning("skipping a server message: %r", exc)
+                    continue
+                event, end = self.session.receive(msg, time.monotonic())
+                if event is not None:
+                    self._push(event)
+                if end is not None and cause is None:
+                    cause = end  # the server closes right after; keep reading until it does
+        except ConnectionClosed as exc:
+            if cause is None:
+                lost = ConnectionLostError(f"connection closed ({exc.rcvd or 'no close frame'})")
+                lost.__cause__ = exc
+                cause = lost
+        return cause or ConnectionLostError("connection closed")
+
+    async def _reconnect(self, cause: BaseException) -> ClientConnection | None:
+        attempt = 0
+        while not self._closing:
+            attempt += 1
+            if self.max_reconnect_attempts is not None and attempt > self.max_reconnect_attempts:
+                self._fail(cause)
+                return None
+            delay = backoff_delay(attempt, self.backoff_initial_s, self.backoff_max_s, self._rng)
+            self._push(Reconnecting(attempt, delay, cause))
+            await asyncio.sleep(delay)
+            ws: ClientConnection | None = None
+            try:
+                ws = await self._open()
+                welcome = await self._handshake(ws)
+            except asyncio.CancelledError:  # close() while rejoining: drop the new socket
+                if ws is not None:
+                    ws.transport.abort()
+                raise
+            except (*_TRANSPORT_ERRORS, ProtocolError, ConnectionLostError) as exc:
+                if ws is not None:
+                    await ws.close()
+                if not _retryable(exc):
+                    self._fail(exc)
+                    return None
+                cause = exc
+                continue
+            self.session.stats.reconnects += 1
+            self._push(welcome)
+            return ws
+        return None
+
+    async def _pinger(self) -> None:
+        while not self._closing:
+            await self._joined.wait()
+            for k in range(4):  # a quick burst after each join: an estimate in ~0.3 s
+                await self._ping()
+                await asyncio.sleep(0.1 if k < 3 else 0.0)
+            while self._joined.is_set() and not self._closing:
+                await asyncio.sleep(self.ping_interval_s)
+                await self._ping()
+
+    async def _ping(self) -> None:
+        if self._ws is not None:
+            with contextlib.suppress(ConnectionClosed):
+                await self._ws.send(encode(Ping(time.monotonic())))
+
+    def _push(self, event: Event) -> None:
+        if len(self._events) >= self._max_events:
+            self._events.popleft()
+            self.session.stats.events_dropped += 1
+        self._events.append(event)
+        self._wake.set()
+
+    def _fail(self, cause: BaseException) -> None:
+        log.info("session ended: %r", cause)
+        self._failure = cause
+        self._wake.set()
+
+    # --- the application's side ------------------------------------------------------------
+
+    def _check_usable(self) -> None:
+        if self._failure is not None:
+            raise self._failure
+        if self._closing:
+            raise ClientClosedError("the client is closed")
+        if self._hello_args is None:
+            raise RuntimeError("join() first")
+
+    async def send(self, msg: Message) -> bool:
+        """Send any client message (``calibrate``, ``selector``, ``kick``...).
+
+        Returns False when it was dropped because the client is reconnecting.
+        """
+        self._check_usable()
+        ws = self._ws
+        if ws is None:
+            return False
+        try:
+            await ws.send(encode(msg))
+        except ConnectionClosed:
+            return False  # the connection task notices and reconnects
+        return True
+
+    async def send_frame(
+        self,
+        positions: ArrayLike,
+        orientations: ArrayLike,
+        *,
+        valid: int = ALL_VALID,
+        seq: int | None = None,
+        t: float | None = None,
+    ) -> int | None:
+        """Send one tracker frame; returns its ``seq``, or ``None`` if it was dropped
+        because the client is reconnecting (its seq is used up all the same).
+
+        Args:
+            positions: ``(4, 3)`` world metres in slot order HEAD, LEFT_HAND,
+                RIGHT_HAND, WAIST.
+            orientations: ``(4, 4)`` world quaternions xyzw; normalised before sending.
+            valid: bit ``i`` set means slot ``i`` is tracked (15: all).
+            seq: the frame counter (default: one more than the last, from ``seq0``);
+                an explicit seq must be newer than the last one.
+            t: the sample time on this client's ``time.monotonic()`` clock (default:
+                now); it must not go backwards.
+
+        Raises:
+            OutOfRangeError, NotNormalisedError, OutOfOrderError, DuplicateError:
+                the frame is unusable (nothing is sent).
+            ProtocolError, ConnectionLostError: the session ended for good.
+            ClientClosedError: after :meth:`close`.
+        """
+        self._check_usable()
+        now = time.monotonic()
+        frame = self.session.frame(positions, orientations, now=now, valid=valid, seq=seq, t=t)
+        if await self.send(frame):
+            self.session.sent(frame, now)
+            return frame.seq
+        self.session.dropped(frame)
+        return None
+
+    async def stream(self, source: AsyncIterable[TrackerSample]) -> int:
+        """Send every sample of ``source`` (a :class:`TrackerSource`) as it comes;
+        returns how many frames were sent when the source ends."""
+        sent = 0
+        async for s in source:
+            if await self.send_frame(s.positions, s.orientations, valid=s.valid, t=s.t) is not None:
+                sent += 1
+        return sent
+
+    async def calibrate(
+        self, *, height_m: float | None = None, tpose: TrackerSample | None = None
+    ) -> bool:
+        """Calibrate the avatar by standing height (metres) or by a T-pose sample."""
+        if (height_m is None) == (tpose is None):
+            raise ValueError("give height_m or tpose")
+        if tpose is not None:
+            q = np.asarray(tpose.orientations, dtype=np.float64)
+            q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+            return await self.send(Calibrate(positions=np.asarray(tpose.positions), orientations=q))
+        return await self.send(Calibrate(height_m=height_m))
+
+    async def events(self, *, until: asyncio.Future[Any] | None = None) -> AsyncIterator[Event]:
+        """Everything the server sends the application, in order: ``Pose``,
+        ``Presence``, non-fatal ``Error`` messages, a ``Welcome`` after each rejoin,
+        and ``Reconnecting`` while the connection is down.
+
+        Ends after :meth:`close`, or once ``until`` (e.g. the task streaming frames) is
+        done and the events so far are delivered. One reader at a time.
+
+        Raises:
+            ProtocolError: the error that ended the session (``KickedError``...).
+            ConnectionLostError: the connection is gone and reconnecting gave up.
+        """
+        while True:
+            while self._events:
+                yield self._events.popleft()
+            if self._failure is not None:
+                raise self._failure
+            if self._closing or (until is not None and until.done()):
+                return
+            self._wake.clear()
+            waiter = asyncio.ensure_future(self._wake.wait())
+            try:
+                await asyncio.wait([waiter] if until is None else [waiter, until],
+                                   return_when=asyncio.FIRST_COMPLETED)  # fmt: skip
+            finally:
+                waiter.cancel()
+
+    async def close(self, reason: str | None = None) -> None:
+        """Say ``bye`` and close. The server then refuses this token for good (it
+        guards against replays), so a closed client cannot rejoin with it."""
+        if self._closing:
+            return
+        self._closing = True
+        self._wake.set()
+        ws, self._ws = self._ws, None
+        if ws is not None:
+            with contextlib.suppress(*_TRANSPORT_ERRORS):
+                if self._hello_args is not None:
+                    await ws.send(encode(Bye(reason)))
+                await ws.close()
+        for task in self._tasks:
+            task.cancel()
+        for task in self._tasks:
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        self._joined.clear()
+
+    async def __aenter__(self) -> Client:
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        await self.close()
+
+
+def _retryable(exc: BaseException) -> bool:
+    """The session's rule, plus the WebSocket library's own failures (a refused
+    handshake: 503 while a server starts, 429 when reconnecting too fast)."""
+    return is_retryable(exc) or isinstance(exc, ConnectionClosed | InvalidHandshake)
+
+
+class Connecting:
+    """What :func:`connect` returns: ``await`` it for a :class:`Client`, or use it as
+    ``async with connect(...) as client:`` to close the client on the way out."""
+
+    def __init__(self, client: Client) -> None:
+        self._client = client
+
+    async def _connect(self) -> Client:
+        self._client._ws = await self._client._open()
+        return self._client
+
+    def __await__(self) -> Generator[Any, None, Client]:
+        return self._connect().__await__()
+
+    async def __aenter__(self) -> Client:
+        return await self._connect()
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        await self._client.close()
+
+
+def connect(url: str, token: Token, **options: Any) -> Connecting:
+    """Open a WebSocket to a posecast server (subprotocol ``posecast.v1``).
+
+    ``await connect(url, token)`` gives a :class:`Client`; then :meth:`Client.join`.
+    The token travels in ``hello``, never in the URL. ``options`` are the keyword
+    options of :class:`Client` (reconnect, back-off, pings, timeouts).
+
+    Raises:
+        OSError, TimeoutError, websockets.InvalidHandshake: the server is unreachable
+            or refused the WebSocket (HTTP 429 when connecting too often, 503 when it
+            is not ready). The first connection is never retried.
+    """
+    return Connecting(Client(url, token, **options))

@@ -1,0 +1,265 @@
+"""Wire protocol v1 as typed values: constants, limits and one dataclass per message.
+
+The spec is ``proto/README.md``; :mod:`posecast_client.codec` turns these values into
+canonical msgpack bytes and back. Units: metres, seconds, hertz. World frame:
+right-handed, +Y up, a character faces +Z. Quaternions are xyzw (scalar last).
+
+Arrays are numpy ``float64``: tracker ``positions (4, 3)`` and ``orientations
+(4, 4)`` in :class:`~posecast_client.skeleton.TrackerSlot` order; pose
+``positions (19, 3)`` and ``rotations (19, 4)`` in :class:`~posecast_client.skeleton.Joint`
+order. Messages that hold arrays compare by identity; compare their wire maps
+(:func:`posecast_client.codec.to_wire`) instead.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from posecast_client.errors import ProtocolError
+
+F64 = NDArray[np.float64]
+
+PROTOCOL_VERSION = 1
+SUBPROTOCOL = "posecast.v1"
+LAYOUTS = ("hmd3+waist", "hmd3")  # hmd3 decodes but servers refuse it for now
+ROLES = ("player", "spectator", "backend")
+PRESENCE_EVENTS = ("join", "leave", "stale", "active")
+SELECTOR_KINDS = ("anomaly", "target", "obstacle")
+
+MAX_COORD_M = 1000.0  # |x|, |y|, |z| of any position on the wire
+QUAT_TOLERANCE = 1e-3  # | |q| - 1 | beyond this is NOT_NORMALISED
+MAX_TIME_S = 1e12  # times are seconds in [0, MAX_TIME_S]
+MIN_HEIGHT_M, MAX_HEIGHT_M = 0.9, 2.5  # calibrate.height_m
+MAX_ID_BYTES = 64  # player and session ids
+UINT32_MAX = 2**32 - 1
+ALL_VALID = 0b1111  # frame.valid with all four trackers tracked
+POS_UNIT_M = 0.001  # one int16 step of pose.pos_mm
+ROT_SCALE = 32767.0  # one int16 step of pose.rot is 1 / ROT_SCALE
+
+# Structural bounds of every v1 message (not configurable).
+MAX_DEPTH = 8  # maps and arrays, the root map is depth 1; deeper is MALFORMED
+MAX_ARRAY_LEN, MAX_MAP_LEN, MAX_STR_BYTES, MAX_BIN_BYTES = 64, 32, 4096, 256  # TOO_LARGE
+
+# Which messages each role may send (the server answers FORBIDDEN to the rest).
+ROLE_MAY_SEND: dict[str, frozenset[str]] = {
+    "player": frozenset({"hello", "calibrate", "frame", "ping", "bye"}),
+    "spectator": frozenset({"hello", "ping", "bye"}),
+    "backend": frozenset({"hello", "selector", "kick", "ping", "bye"}),
+}
+
+# (floor, v1 maximum) of each limit, in canonical order; the defaults are the maxima.
+LIMIT_RANGES: dict[str, tuple[int, int]] = {
+    "max_message_bytes": (1024, 8192),
+    "max_rate_hz": (1, 120),
+    "max_players": (1, 32),
+    "max_name_bytes": (1, 64),
+    "max_room_bytes": (1, 64),
+    "max_token_bytes": (0, 4096),
+    "max_text_bytes": (64, 512),
+    "max_watch_rooms": (0, 16),
+}
+
+
+@dataclass(frozen=True, slots=True)
+class Limits:
+    """The limits in force (``welcome.limits``). Defaults: the v1 maxima, which a
+    client assumes until its ``welcome`` arrives. Servers may only lower them."""
+
+    max_message_bytes: int = 8192  # bytes of one WebSocket message
+    max_rate_hz: int = 120  # frames per second one player may send
+    max_players: int = 32  # players in one room
+    max_name_bytes: int = 64  # UTF-8 bytes of a display name
+    max_room_bytes: int = 64  # UTF-8 bytes of a room name
+    max_token_bytes: int = 4096  # UTF-8 bytes of hello.token
+    max_text_bytes: int = 512  # UTF-8 bytes of free text (error.message, reasons)
+    max_watch_rooms: int = 16  # extra rooms one backend may watch
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            lo, hi = LIMIT_RANGES[f.name]
+            if not lo <= getattr(self, f.name) <= hi:
+                raise ValueError(f"limit {f.name} outside [{lo}, {hi}]")
+
+
+DEFAULT_LIMITS = Limits()
+
+
+def seq_next(seq: int) -> int:
+    """The ``seq`` after ``seq``: uint32, wrapping from 2**32 - 1 to 0."""
+    return (seq + 1) & UINT32_MAX
+
+
+def seq_delta(new: int, old: int) -> int:
+    """``new - old`` in serial-number arithmetic (RFC 1982), in ``[-2**31, 2**31)``.
+
+    Positive: ``new`` is newer. Zero: a duplicate. Negative: out of order.
+    """
+    d = (new - old) & UINT32_MAX
+    return d - 2**32 if d >= 2**31 else d
+
+
+@dataclass(frozen=True, slots=True)
+class Hello:
+    """Client -> server, first message. ``watch``: further rooms (backends only)."""
+
+    TYPE: ClassVar[str] = "hello"
+    token: str
+    room: str
+    name: str
+    layout: str | None = None  # absent: hmd3+waist
+    rate_hz: float | None = None  # frames per second the client will send; absent: 60
+    watch: tuple[str, ...] = ()
+    version: int = PROTOCOL_VERSION
+
+
+@dataclass(frozen=True, slots=True)
+class Member:
+    player: str
+    name: str
+
+
+@dataclass(frozen=True, slots=True)
+class Welcome:
+    """Server -> client: the answer to a good ``hello``."""
+
+    TYPE: ClassVar[str] = "welcome"
+    version: int
+    player: str  # this connection's player id
+    session: str  # opaque connection id, for logs and support
+    role: str
+    room: str
+    t: float  # server time at send, seconds
+    rate_hz: float  # the room's pose rate
+    lookahead_frames: int  # a pose lags its source frame by this many frames
+    members: tuple[Member, ...]
+    limits: Limits
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Calibrate:
+    """Player -> server: by standing height, or by a T-pose frame (all four trackers)."""
+
+    TYPE: ClassVar[str] = "calibrate"
+    height_m: float | None = None
+    positions: F64 | None = None  # (4, 3) metres: the T-pose frame
+    orientations: F64 | None = None  # (4, 4) xyzw
+
+    @property
+    def tpose(self) -> bool:
+        return self.positions is not None
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Frame:
+    """Player -> server: one tracker sample. Untracked slots read as origin + identity."""
+
+    TYPE: ClassVar[str] = "frame"
+    seq: int
+    t: float  # client time the trackers were sampled, seconds
+    positions: F64  # (4, 3) metres, TrackerSlot order
+    orientations: F64  # (4, 4) xyzw, unit length
+    valid: int = ALL_VALID  # bit i set: slot i is tracked
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Pose:
+    """Server -> client: one player's reconstructed avatar (quantised on the wire)."""
+
+    TYPE: ClassVar[str] = "pose"
+    player: str
+    seq: int  # seq of the source frame (lags it by lookahead_frames)
+    t: float  # server time of the tick that made it, seconds
+    positions: F64  # (19, 3) world metres, Joint order
+    rotations: F64 | None = None  # (19, 4) world xyzw, not renormalised
+
+
+@dataclass(frozen=True, slots=True)
+class Presence:
+    """Server -> client: ``join``, ``leave``, ``stale`` or ``active``."""
+
+    TYPE: ClassVar[str] = "presence"
+    event: str
+    room: str
+    player: str
+    name: str
+
+
+@dataclass(frozen=True, slots=True)
+class Selector:
+    """Backend -> server: how a player's samples are selected (``anomaly``: ``factor``;
+    ``target``: ``joint``, ``point``, ``margin_m``; ``obstacle``: ``joint``, ``point``,
+    ``radius_m``)."""
+
+    TYPE: ClassVar[str] = "selector"
+    player: str
+    kind: str
+    joint: str | None = None
+    point: tuple[float, float, float] | None = None  # world metres
+    radius_m: float | None = None
+    margin_m: float | None = None
+    factor: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Kick:
+    TYPE: ClassVar[str] = "kick"
+    player: str
+    reason: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Ping:
+    TYPE: ClassVar[str] = "ping"
+    t0: float  # client time at send
+
+
+@dataclass(frozen=True, slots=True)
+class Pong:
+    TYPE: ClassVar[str] = "pong"
+    t0: float  # the ping's t0, echoed
+    t1: float  # server time the ping arrived
+    t2: float  # server time the pong left
+
+
+@dataclass(frozen=True, slots=True)
+class Error:
+    """Server -> client: a refused message (``fatal``: and the end of the connection)."""
+
+    TYPE: ClassVar[str] = "error"
+    code: str
+    message: str
+    fatal: bool
+    field: str | None = None
+    ref_seq: int | None = None
+
+    def exception(self) -> ProtocolError:
+        """The typed exception of this error (:class:`ProtocolError` for unknown codes)."""
+        return ProtocolError.from_wire(
+            self.code, self.message, fatal=self.fatal, field=self.field, ref_seq=self.ref_seq
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class Bye:
+    TYPE: ClassVar[str] = "bye"
+    reason: str | None = None
+
+
+Message = (
+    Hello
+    | Welcome
+    | Calibrate
+    | Frame
+    | Pose
+    | Presence
+    | Selector
+    | Kick
+    | Ping
+    | Pong
+    | Error
+    | Bye
+)

@@ -1,0 +1,75 @@
+"""Minting join tokens, for development and tests.
+
+In production the game backend mints tokens and keeps the secret; a client only
+passes its token on. For a ``posecast serve --dev`` server (which prints its secret)
+and for simulators, this mints tokens in the server's format::
+
+    base64url(JSON claims, compact, sorted keys) "." base64url(HMAC-SHA256(secret, first part))
+
+without padding. Claims: ``v`` (1), ``room``, ``player``, ``role``, ``iat`` and
+``exp`` (Unix seconds), ``jti`` (a unique id) and, for backends only, ``rooms``.
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import hmac
+import json
+import secrets
+import time
+from typing import Any
+
+from posecast_client.protocol import ROLES
+
+MAX_TTL_S = 7 * 24 * 3600  # what the server's minting tool allows
+
+
+def _b64(raw: bytes) -> str:
+    return base64.urlsafe_b64encode(raw).rstrip(b"=").decode("ascii")
+
+
+def mint_token(
+    secret: str | bytes,
+    *,
+    room: str,
+    player: str,
+    role: str = "player",
+    ttl_s: int = 3600,
+    rooms: tuple[str, ...] = (),
+    now: float | None = None,
+    jti: str | None = None,
+) -> str:
+    """A join token for ``player`` in ``room``, valid ``ttl_s`` seconds from ``now``.
+
+    Args:
+        secret: the server's token secret (``POSECAST_TOKEN_SECRET``); text is UTF-8.
+        role: ``player``, ``spectator`` or ``backend``.
+        rooms: further rooms a backend may watch.
+        now: Unix time of issue (default: the wall clock).
+        jti: the token's unique id (default: random).
+    """
+    key = secret.encode("utf-8") if isinstance(secret, str) else secret
+    if not key:
+        raise ValueError("the token secret must not be empty")
+    if role not in ROLES:
+        raise ValueError(f"role must be one of {ROLES}, not {role!r}")
+    if rooms and role != "backend":
+        raise ValueError("only a backend token may list extra rooms")
+    if not 0 < ttl_s <= MAX_TTL_S:
+        raise ValueError(f"ttl_s must be in (0, {MAX_TTL_S}]")
+    iat = int(time.time() if now is None else now)
+    claims: dict[str, Any] = {
+        "v": 1,
+        "room": room,
+        "player": player,
+        "role": role,
+        "iat": iat,
+        "exp": iat + ttl_s,
+        "jti": jti or secrets.token_urlsafe(12),
+    }
+    if rooms:
+        claims["rooms"] = list(rooms)
+    payload = _b64(json.dumps(claims, separators=(",", ":"), sort_keys=True).encode())
+    mac = hmac.new(key, payload.encode("ascii"), hashlib.sha256).digest()
+    return payload + "." + _b64(mac)

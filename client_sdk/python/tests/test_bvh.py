@@ -1,0 +1,96 @@
+"""The minimal BVH reader and writer: hand-checked FK, round trips, errors with lines."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from posecast_client.bvh import parse_bvh, read_bvh, write_bvh
+from posecast_client.errors import BvhError
+from posecast_client.rotations import fk, quat2mat, quat_normalize
+from posecast_client.skeleton import JOINT_NAMES, PARENTS, reference_offsets
+
+TWO_BONES = """HIERARCHY
+ROOT Hips
+{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  JOINT Arm
+  {
+    OFFSET 10 0 0
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    End Site
+    {
+      OFFSET 5 0 0
+    }
+  }
+}
+MOTION
+Frames: 2
+Frame Time: 0.5
+0 100 0  0 0 0   0 0 0
+1 100 0  90 0 0  0 0 90
+"""
+
+
+def test_forward_kinematics_by_hand() -> None:
+    bvh = parse_bvh(TWO_BONES)
+    assert bvh.names == ("Hips", "Arm") and bvh.parents == (-1, 0)
+    assert bvh.joints[1].end_site == (5.0, 0.0, 0.0) and bvh.frame_time_s == 0.5
+    world, pos = bvh.fk(unit_m=0.01)
+    np.testing.assert_allclose(pos[0], np.array([[0, 1, 0], [0.1, 1, 0]]), atol=1e-12)
+    # frame 1: the hips turn 90 degrees about Z, so the arm (10 cm along +X) points up
+    np.testing.assert_allclose(pos[1], [[0.01, 1, 0], [0.01, 1.1, 0]], atol=1e-12)
+    # the arm's own 90 degrees about Y, after the parent's turn about Z
+    np.testing.assert_allclose(world[1, 1] @ [1.0, 0, 0], [0, 0, -1], atol=1e-12)
+
+
+def test_write_then_read_gives_the_same_motion(tmp_path: Path, rng: np.random.Generator) -> None:
+    quat = quat_normalize(rng.normal(size=(6, 19, 4)) * [0.3, 0.3, 0.3, 1] + [0, 0, 0, 2])
+    root = rng.normal(size=(6, 3))
+    path = tmp_path / "canon.bvh.gz"
+    write_bvh(path, names=JOINT_NAMES, parents=PARENTS, offsets=reference_offsets(),
+              root_pos=root, local_quat=quat, frame_time_s=1 / 60)  # fmt: skip
+    assert path.read_bytes()[:2] == b"\x1f\x8b"
+    bvh = read_bvh(path)
+    assert bvh.names == JOINT_NAMES and bvh.n_frames == 6
+    _, pos = bvh.fk()
+    _, want = fk(quat2mat(quat), root, reference_offsets(), PARENTS)
+    np.testing.assert_allclose(pos, want, atol=2e-6)  # 6 decimals in the file
+
+
+def test_the_server_reads_what_the_sdk_writes(tmp_path: Path, rng: np.random.Generator) -> None:
+    server_bvh = pytest.importorskip("posecast.motion.bvh")
+    quat = quat_normalize(rng.normal(size=(3, 19, 4)))
+    path = tmp_path / "x.bvh"
+    write_bvh(path, names=JOINT_NAMES, parents=PARENTS, offsets=reference_offsets(),
+              root_pos=np.zeros((3, 3)), local_quat=quat, frame_time_s=1 / 60)  # fmt: skip
+    theirs = server_bvh.read_bvh(path)
+    assert theirs.names == JOINT_NAMES
+    np.testing.assert_allclose(theirs.motion, read_bvh(path).motion)
+
+
+@pytest.mark.parametrize(
+    ("text", "line"),
+    [
+        ("HIERARCHY\nROOT a\n{\nOFFSET 0 0 x\n}\nMOTION\nFrames: 1\nFrame Time: 1\n\n", 4),
+        ("HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 1 Wrotation\n}\nMOTION\n", 5),
+        ("HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nBOGUS\n}\nMOTION\nFrames: 1\nFrame Time: 1\n", 5),
+        ("HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 1 Xposition\n}\nMOTION\n"
+         "Frames: 2\nFrame Time: 0.1\n1\n", 10),  # truncated: the last line
+        ("not bvh at all\nMOTION\n", 1),
+    ],
+)  # fmt: skip
+def test_errors_name_the_line(text: str, line: int) -> None:
+    with pytest.raises(BvhError) as info:
+        parse_bvh(text, source="x.bvh")
+    assert info.value.line == line and "x.bvh" in str(info.value)
+
+
+def test_missing_motion_and_files(tmp_path: Path) -> None:
+    with pytest.raises(BvhError):
+        parse_bvh("HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\n}\n")
+    with pytest.raises(BvhError):
+        read_bvh(tmp_path / "nope.bvh")

@@ -1,0 +1,122 @@
+"""``posecast-sim`` and ``posecast-record`` end to end against a real server."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from importlib.metadata import entry_points
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from posecast_client.bvh import read_bvh
+from posecast_client.cli import record, sim
+from posecast_client.protocol import Pose, Presence, Welcome
+from posecast_client.recording import read_recording
+from posecast_client.skeleton import JOINT_NAMES
+from sdk_helpers import DevServer
+
+DATA = Path(__file__).resolve().parent / "data"
+
+
+def test_console_scripts_are_installed() -> None:
+    scripts = {e.name: e.value for e in entry_points(group="console_scripts")}
+    assert scripts["posecast-sim"] == "posecast_client.cli.sim:main"
+    assert scripts["posecast-record"] == "posecast_client.cli.record:main"
+
+
+def test_sim_and_record_end_to_end(dev_server: DevServer, tmp_path: Path, uid: str) -> None:
+    env = dict(os.environ, POSECAST_URL=dev_server.url, POSECAST_TOKEN_SECRET=dev_server.secret)
+    room = f"e2e-{uid}-0"
+    rec_file, bvh_dir, report = tmp_path / "room.pcrec", tmp_path / "bvh", tmp_path / "sim.json"
+    recorder = subprocess.Popen(
+        [sys.executable, "-m", "posecast_client.cli.record", "--room", room,
+         "--out", str(rec_file), "--seconds", "4.5", "--bvh", str(bvh_dir)],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        time.sleep(1.0)  # let the recorder join first
+        done = subprocess.run(
+            [sys.executable, "-m", "posecast_client.cli.sim", "--players", "2",
+             "--room-prefix", f"e2e-{uid}", "--duration", "2.5", "--json", str(report)],
+            env=env, capture_output=True, text=True, timeout=60,
+        )  # fmt: skip
+        out, err = recorder.communicate(timeout=30)
+    finally:
+        recorder.kill()
+        recorder.wait()
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "poses received" in done.stdout and "latency" in done.stdout
+    summary = json.loads(report.read_text())
+    assert summary["failed"] == {} and summary["players"] == 2
+    assert 200 <= summary["frames_sent"] <= 310  # 2 x 2.5 s x 60 Hz
+    for seen in summary["poses_from"].values():  # each player sees both avatars
+        assert len(seen) == 2 and min(seen.values()) > 60, summary["poses_from"]
+    assert summary["poses_per_s"] > 100, summary
+    assert 50.0 < summary["latency_ms_p50"] <= summary["latency_ms_p99"] < 2000.0
+    assert abs(summary["clock_offset_ms"]) < 5.0
+
+    assert recorder.returncode == 0, err
+    rec = read_recording(rec_file)
+    assert rec.header["room"] == room and rec.rate_hz == 60.0
+    kinds = {type(m) for _, m in rec.messages}
+    assert {Welcome, Pose, Presence} <= kinds
+    poses = rec.poses()
+    assert len(poses) == 2
+    for player, mine in poses.items():
+        bvh = read_bvh(bvh_dir / f"{player}.bvh")
+        assert bvh.names == JOINT_NAMES and bvh.frame_time_s == pytest.approx(1 / 60)
+        assert bvh.n_frames >= len({p.t for p in mine}) > 60
+        _, fk_pos = bvh.fk()
+        t0 = min(p.t for p in mine)
+        frame = [round((p.t - t0) * 60) for p in mine]
+        err = np.linalg.norm(fk_pos[frame] - np.stack([p.positions for p in mine]), axis=-1)
+        assert np.median(err) < 0.005  # the exported skeleton reproduces the poses
+        assert f"{player}: {bvh_dir / (player + '.bvh')}" in out
+
+
+def test_sim_replays_bvh_with_noise_and_dropout(
+    dev_server: DevServer, capsys: pytest.CaptureFixture[str], uid: str
+) -> None:
+    clip = str(DATA / "walk_cmu_mb.bvh")
+    code = sim.main(
+        ["--url", dev_server.url, "--secret", dev_server.secret, "--room-prefix", f"bvh-{uid}",
+         "--players", "2", "--rooms", "2", "--duration", "1.5", "--bvh", clip,
+         "--noise-m", "0.002", "--noise-deg", "1", "--dropout", "0.05", "-q"]
+    )  # fmt: skip
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "2 players in 2 rooms" in out and "failed players 0" in out
+
+
+def test_sim_reports_refused_players(
+    dev_server: DevServer, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code = sim.main(["--url", dev_server.url, "--secret", "wrong-secret-xxxxxxxx", "--players", "1",
+                     "--duration", "1"])  # fmt: skip
+    assert code == 1
+    assert "UnauthenticatedError" in capsys.readouterr().out
+
+
+def test_record_exports_an_existing_recording(
+    dev_server: DevServer, tmp_path: Path, uid: str
+) -> None:
+    """``--export`` alone (no server): a recording made here, then exported."""
+    room = f"exp-{uid}-0"  # the sim's first room with prefix exp-UID
+    rec_file = tmp_path / "r.pcrec"
+    env = dict(os.environ, POSECAST_URL=dev_server.url, POSECAST_TOKEN_SECRET=dev_server.secret)
+    recorder = subprocess.Popen(
+        [sys.executable, "-m", "posecast_client.cli.record", "--room", room, "--out",
+         str(rec_file), "--seconds", "2.5"],
+        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+    time.sleep(0.8)
+    assert sim.main(["--url", dev_server.url, "--secret", dev_server.secret, "--players", "1",
+                     "--room-prefix", f"exp-{uid}", "--duration", "1", "-q"]) == 0  # fmt: skip
+    assert recorder.wait(30) == 0
+    assert record.main(["--export", str(rec_file), "--bvh", str(tmp_path / "out")]) == 0
+    assert len(list((tmp_path / "out").glob("*.bvh"))) == 1

@@ -1,0 +1,169 @@
+"""The asyncio client against a real ``posecast serve --dev``: join, stream, clock
+sync, typed refusals, kicks, and reconnect-and-resume across server restarts."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import secrets
+import signal
+import time
+from collections.abc import Callable, Coroutine
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+import posecast_client as pc
+from posecast_client import errors
+from sdk_helpers import DevServer, EventLog, start_server
+
+
+def run(coro: Coroutine[Any, Any, None], timeout_s: float = 30.0) -> None:
+    asyncio.run(asyncio.wait_for(coro, timeout_s))
+
+
+def test_join_stream_receive_and_sync_clocks(dev_server: DevServer, uid: str) -> None:
+    room = f"room-{uid}"
+
+    async def main() -> None:
+        ada = await pc.connect(dev_server.url, dev_server.token(room, f"ada-{uid}"))
+        bob = await pc.connect(dev_server.url, dev_server.token(room, f"bob-{uid}"))
+        async with ada, bob:
+            welcome = await ada.join(room, "Ada")
+            assert (welcome.player, welcome.role, welcome.room) == (f"ada-{uid}", "player", room)
+            assert welcome.limits.max_players >= 1 and welcome.rate_hz == 60.0
+            ada_log = EventLog(ada)
+            await bob.join(room, "Bob")
+            streaming = asyncio.create_task(ada.stream(pc.WalkSource(seconds=1.5)))
+            bob_poses = [e async for e in bob.events(until=streaming) if isinstance(e, pc.Pose)]
+            assert await streaming == 90
+            await ada_log.wait_for(lambda e: isinstance(e, pc.Pose) and e.seq >= 60)
+            own = [e for e in ada_log.events if isinstance(e, pc.Pose)]
+            assert {p.player for p in own} == {f"ada-{uid}"}
+            assert all(ada.sent_at(p.seq) is not None for p in own)  # seq names a sent frame
+            assert len(bob_poses) > 40  # bob sees ada's avatar
+            assert np.all(np.diff([p.seq for p in own]) > 0)
+            seen = [(e.event, e.player) for e in ada_log.events if isinstance(e, pc.Presence)]
+            assert seen[0] == ("join", f"bob-{uid}")  # (then stale: bob sends no frames)
+            # Both clocks are this machine's monotonic clock: the offset is about 0.
+            offset, rtt = ada.clock.offset_s, ada.clock.rtt_s
+            assert offset is not None and rtt is not None
+            assert abs(offset) <= rtt / 2 + 0.002 and rtt < 0.25
+            ada_log.stop()
+
+    run(main())
+
+
+@pytest.mark.parametrize(
+    ("case", "expected"),
+    [
+        ("other_room", errors.ForbiddenError),
+        ("wrong_secret", errors.UnauthenticatedError),
+        ("expired", errors.TokenExpiredError),
+        ("hmd3", errors.LayoutUnsupportedError),
+    ],
+)
+def test_refusals_raise_typed_errors(
+    dev_server: DevServer, uid: str, case: str, expected: type[errors.ProtocolError]
+) -> None:
+    room = f"room-{uid}"
+    tokens: dict[str, Callable[[], str]] = {
+        "other_room": lambda: dev_server.token("elsewhere", f"p-{uid}"),
+        "wrong_secret": lambda: pc.mint_token("not-the-secret-at-all", room=room, player="p"),
+        "expired": lambda: dev_server.token(room, f"p-{uid}", now=time.time() - 7200),
+        "hmd3": lambda: dev_server.token(room, f"p-{uid}"),
+    }
+
+    async def main() -> None:
+        async with pc.connect(dev_server.url, tokens[case]()) as client:
+            with pytest.raises(expected) as info:
+                await client.join(room, "P", layout="hmd3" if case == "hmd3" else "hmd3+waist")
+            assert info.value.fatal and not info.value.retryable
+
+    run(main())
+
+
+def test_a_kick_ends_the_session_for_good(dev_server: DevServer, uid: str) -> None:
+    room = f"room-{uid}"
+
+    async def main() -> None:
+        player = await pc.connect(dev_server.url, dev_server.token(room, f"p-{uid}"),
+                                  backoff_initial_s=0.05)  # fmt: skip
+        backend = await pc.connect(dev_server.url, dev_server.token(room, f"b-{uid}", "backend"))
+        async with player, backend:
+            await player.join(room, "P")
+            await backend.join(room, "Ops")
+            await player.send_frame(np.full((4, 3), 1.0), np.tile([0, 0, 0, 1.0], (4, 1)))
+            assert await backend.send(pc.Kick(f"p-{uid}", "cheating"))
+            with pytest.raises(errors.KickedError, match="cheating"):
+                async for _ in player.events():
+                    pass
+            with pytest.raises(errors.KickedError):
+                await player.send_frame(np.zeros((4, 3)), np.tile([0, 0, 0, 1.0], (4, 1)))
+            assert player.stats.reconnects == 0
+
+    run(main())
+
+
+def test_closed_clients_refuse_to_send(dev_server: DevServer, uid: str) -> None:
+    async def main() -> None:
+        client = await pc.connect(dev_server.url, dev_server.token("r", f"p-{uid}"))
+        await client.join("r", "P")
+        await client.close()
+        with pytest.raises(pc.ClientClosedError):
+            await client.send_frame(np.zeros((4, 3)), np.tile([0, 0, 0, 1.0], (4, 1)))
+        assert [e async for e in client.events()] == []
+
+    run(main())
+
+
+def newer_than(seq: int) -> Callable[[pc.Event], bool]:
+    return lambda e: isinstance(e, pc.Pose) and e.seq > seq
+
+
+def test_reconnect_and_resume_across_server_restarts(tmp_path: Path, uid: str) -> None:
+    """A graceful restart (bye SERVER_SHUTDOWN) and a crash (SIGKILL): each time the
+    client backs off, rejoins the same room with the same token, and its seqs go on."""
+    log = tmp_path / "server.log"
+    secret = secrets.token_urlsafe(24)
+    first = start_server(log, secret=secret)
+    servers = [first]
+    room, player = f"room-{uid}", f"p-{uid}"
+
+    async def main() -> None:
+        token = first.token(room, player)
+        client = await pc.connect(first.url, token, backoff_initial_s=0.1, backoff_max_s=0.4)
+        async with client:
+            await client.join(room, "P")
+            events = EventLog(client)
+            streaming = asyncio.create_task(client.stream(pc.WalkSource(seconds=30.0, loop=True)))
+            for how, cause in ((signal.SIGTERM, errors.ServerShutdownError),
+                               (signal.SIGKILL, errors.ConnectionLostError)):  # fmt: skip
+                mark = len(events.events)
+                await events.wait_for(lambda e: isinstance(e, pc.Pose), start=mark)
+                last_seq = max(e.seq for e in events.events if isinstance(e, pc.Pose))
+                await asyncio.to_thread(servers[-1].stop, how)  # the client keeps reading
+                lost = await events.wait_for(lambda e: isinstance(e, pc.Reconnecting), start=mark)
+                assert isinstance(lost, pc.Reconnecting) and isinstance(lost.cause, cause)
+                assert not client.connected
+                await asyncio.sleep(0.3)
+                servers.append(
+                    await asyncio.to_thread(start_server, log, port=first.port, secret=secret)
+                )
+                back = await events.wait_for(lambda e: isinstance(e, pc.Welcome), start=mark)
+                assert isinstance(back, pc.Welcome) and back.player == player
+                pose = await events.wait_for(newer_than(last_seq), start=mark)
+                assert isinstance(pose, pc.Pose) and client.sent_at(pose.seq) is not None
+            assert client.stats.reconnects == 2 and client.connected
+            streaming.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await streaming
+            events.stop()
+
+    try:
+        run(main(), 60.0)
+    finally:
+        for s in servers:
+            s.stop()

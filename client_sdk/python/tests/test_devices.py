@@ -1,0 +1,236 @@
+"""Serial framing and HID reports: round trips, resynchronisation, and fuzzing.
+
+The promise under test: corrupt bytes are skipped and never read as data. Every
+decoded sample equals one that was sent, and every intact frame is found again.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import re
+import zlib
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from posecast_client.rotations import quat_normalize
+from posecast_client.sources import HidTrackerSource, SerialTrackerSource, TrackerSample
+from posecast_client.sources.framing import (
+    HID_REPORT_BYTES,
+    SERIAL_FRAME_BYTES,
+    SERIAL_SYNC,
+    HidReportDecoder,
+    SerialFrameDecoder,
+    crc8,
+    encode_hid_report,
+    encode_serial_frame,
+)
+
+Sent = dict[int, tuple[np.ndarray, np.ndarray, int]]
+
+
+def random_sample(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, int]:
+    pos = rng.uniform(-3.0, 3.0, (4, 3))
+    quat = quat_normalize(rng.normal(size=(4, 4)))
+    return pos, quat, int(rng.integers(0, 16))
+
+
+def expected(pos: np.ndarray, quat: np.ndarray, valid: int, step: float | None) -> np.ndarray:
+    """What a decoder must return: the wire precision, untracked slots as identity."""
+    if step is None:  # float32 on the serial line
+        p, q = pos.astype(np.float32).astype(np.float64), quat.astype(np.float32).astype(np.float64)
+    else:  # HID: millimetres and int16 quaternions
+        p, q = np.rint(pos * 1000) * 0.001, np.rint(quat * 32767) / 32767
+    for i in range(4):
+        if not valid >> i & 1:
+            p[i], q[i] = 0.0, (0.0, 0.0, 0.0, 1.0)
+    return np.hstack([p, q])
+
+
+def assert_sample(s: TrackerSample, sent: Sent, step: float | None) -> None:
+    assert s.device_seq is not None and s.device_seq in sent, s.device_seq
+    pos, quat, valid = sent[s.device_seq]
+    assert s.valid == valid
+    got = np.hstack([s.positions, s.orientations])
+    np.testing.assert_allclose(got, expected(pos, quat, valid, step), rtol=0, atol=1e-12)
+
+
+# --- serial ------------------------------------------------------------------------
+
+
+def test_serial_frame_round_trip(rng: np.random.Generator) -> None:
+    pos, quat, valid = random_sample(rng)
+    frame = encode_serial_frame(7, 1_234_567, pos, quat, valid)
+    assert len(frame) == SERIAL_FRAME_BYTES and frame.startswith(SERIAL_SYNC)
+    dec = SerialFrameDecoder()
+    (s,) = dec.feed(frame, now=5.0)
+    assert (s.t, s.device_seq) == (5.0, 7) and s.device_t == pytest.approx(1.234567)
+    assert_sample(s, {7: (pos, quat, valid)}, None)
+    assert dec.feed(frame[:50]) == [] and len(dec.feed(frame[50:])) == 1  # split reads
+    assert dec.feed(frame[1:]) == [] and len(dec.feed(frame)) == 1  # no sync: skipped
+
+
+def test_serial_fuzz_garbage_cut_and_corrupt_frames(rng: np.random.Generator) -> None:
+    sent: Sent = {}
+    intact: set[int] = set()
+    stream = bytearray()
+    for seq in range(600):
+        if rng.random() < 0.4:  # garbage, with stray sync bytes and lengths in it
+            junk = bytearray(rng.integers(0, 256, int(rng.integers(1, 300)), dtype=np.uint8))
+            for _ in range(int(rng.integers(0, 3))):
+                at = int(rng.integers(0, len(junk)))
+                junk[at:at] = SERIAL_SYNC + bytes([1, int(rng.integers(0, 256))])
+            stream += junk
+        pos, quat, valid = random_sample(rng)
+        sent[seq] = (pos, quat, valid)
+        frame = bytearray(encode_serial_frame(seq, seq * 16_667, pos, quat, valid))
+        fate = rng.random()
+        if fate < 0.1:
+            frame = frame[: int(rng.integers(1, len(frame)))]  # cut short
+        elif fate < 0.2:
+            at = int(rng.integers(0, len(frame)))
+            frame[at] ^= 1 << int(rng.integers(0, 8))  # one bit flipped
+        else:
+            intact.add(seq)
+        stream += frame
+    dec = SerialFrameDecoder()
+    got: list[TrackerSample] = []
+    i = 0
+    while i < len(stream):  # arbitrary read sizes
+        n = int(rng.integers(1, 400))
+        got += dec.feed(bytes(stream[i : i + n]))
+        i += n
+    for s in got:
+        assert_sample(s, sent, None)
+    assert [s.device_seq for s in got] == sorted(intact)
+    assert dec.stats.samples == len(intact) and dec.stats.bad_checksum > 0
+
+
+def test_serial_random_garbage_alone_yields_nothing(rng: np.random.Generator) -> None:
+    dec = SerialFrameDecoder()
+    for _ in range(50):
+        junk = rng.integers(0, 256, 4000, dtype=np.uint8).tobytes()
+        assert dec.feed(junk.replace(b"\xa5", b"\xa5\x5a\x01\x7d")) == []
+
+
+def test_serial_source_reads_a_loop_port(rng: np.random.Generator) -> None:
+    pytest.importorskip("serial")
+    sent: Sent = {k: random_sample(rng) for k in range(30)}
+    source = SerialTrackerSource("loop://", timeout_s=0.02)
+    port: Any = source.port  # a pyserial loop port: what is written comes back
+
+    def write_all() -> None:  # the loop port's buffer is small: write while reading
+        for seq, (pos, quat, valid) in sent.items():
+            port.write(rng.integers(0, 256, int(rng.integers(0, 40)), dtype=np.uint8).tobytes())
+            port.write(encode_serial_frame(seq, seq * 1000, pos, quat, valid))
+
+    async def read_all() -> list[TrackerSample]:
+        got: list[TrackerSample] = []
+        writer = asyncio.create_task(asyncio.to_thread(write_all))
+        async with source:
+            async for s in source:
+                got.append(s)
+                if len(got) == len(sent):
+                    break
+        await writer
+        return got
+
+    got = asyncio.run(asyncio.wait_for(read_all(), 10.0))
+    for s in got:
+        assert_sample(s, sent, None)
+        assert s.t is not None
+    assert [s.device_seq for s in got] == list(sent)
+
+
+# --- HID ---------------------------------------------------------------------------
+
+
+class FakeHid:
+    """Stands in for ``hid.device``: hands out queued reports, then times out."""
+
+    def __init__(self, reports: list[bytes]) -> None:
+        self.reports = list(reports)
+        self.closed = False
+
+    def read(self, max_length: int, timeout_ms: int = 0) -> list[int]:
+        if not self.reports:
+            return []
+        return list(self.reports.pop(0)[:max_length])
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def test_hid_report_layout(rng: np.random.Generator) -> None:
+    pos, quat, valid = random_sample(rng)
+    report = encode_hid_report(300, 2**32 + 5, pos, quat, valid)  # both wrap
+    assert len(report) == HID_REPORT_BYTES and report[0] == 1 and report[1] == 0x10 | valid
+    assert (report[2], report[3]) == (300 & 0xFF, crc8(report[:3] + report[4:]))
+    s = HidReportDecoder().decode(report, now=1.0)
+    assert s is not None
+    assert_sample(s, {44: (pos, quat, valid)}, 0.001)
+    assert crc8(b"123456789") == 0xF4  # the CRC-8/SMBUS check value
+    with pytest.raises(ValueError):
+        encode_hid_report(0, 0, pos + 40.0, quat)
+
+
+def test_hid_source_skips_garbage_and_unwraps_counters(rng: np.random.Generator) -> None:
+    sent: Sent = {}
+    reports: list[bytes] = []
+    good = 0
+    for k in range(600):
+        seq, t_us = 250 + k, (2**32 - 5_000_000 + k * 16_667)  # both wrap around mid-way
+        pos, quat, valid = random_sample(rng)
+        report = bytearray(encode_hid_report(seq, t_us, pos, quat, valid))
+        fate = rng.random()
+        if fate < 0.1:
+            report[int(rng.integers(0, 64))] ^= 1 << int(rng.integers(0, 8))
+        elif fate < 0.15:
+            report = report[: int(rng.integers(1, 64))]
+        elif fate < 0.2:
+            report = bytearray(rng.integers(0, 256, 64, dtype=np.uint8).tobytes())
+        else:
+            sent[seq] = (pos, quat, valid)
+            good += 1
+        reports.append(bytes(report))
+    device = FakeHid(reports)
+    source = HidTrackerSource(device=device, timeout_ms=1)
+
+    async def read_all() -> list[TrackerSample]:
+        got: list[TrackerSample] = []
+        async with source:
+            async for s in source:
+                got.append(s)
+                if len(got) == good:
+                    break
+        return got
+
+    got = asyncio.run(asyncio.wait_for(read_all(), 20.0))
+    assert device.closed
+    for s in got:
+        assert_sample(s, sent, 0.001)
+    assert [s.device_seq for s in got] == sorted(sent)
+    times = np.array([s.device_t for s in got], dtype=float)
+    assert (np.diff(times) > 0).all()  # the 32-bit microsecond clock unwrapped
+
+
+def test_hid_source_opens_by_vendor_and_product_id() -> None:
+    pytest.importorskip("hid")
+    with pytest.raises(OSError):  # no such device here
+        HidTrackerSource(0x1209, 0x0001)
+
+
+def test_the_examples_in_devices_md_are_what_the_encoders_write() -> None:
+    doc = Path(__file__).resolve().parents[3] / "proto" / "devices.md"
+    if not doc.exists():
+        pytest.skip("proto/devices.md not found (repo only)")
+    blocks = [b for b in re.findall(r"```\n(.*?)```", doc.read_text("utf-8"), re.DOTALL)
+              if re.fullmatch(r"[0-9a-f\s]+", b)]  # fmt: skip
+    serial_hex, hid_hex = ("".join(b.split()) for b in blocks)
+    pos = np.array([[0, 1.6, 0], [0.3, 1.0, 0.1], [-0.3, 1.0, 0.1], [0, 1.0, 0]])
+    quat = np.tile([0.0, 0.0, 0.0, 1.0], (4, 1))
+    assert encode_serial_frame(1, 16667, pos, quat).hex() == serial_hex
+    assert encode_hid_report(1, 16667, pos, quat).hex() == hid_hex
+    assert zlib.crc32(b"123456789") == 0xCBF43926

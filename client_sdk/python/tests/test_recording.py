@@ -1,0 +1,93 @@
+"""Recordings: the file format, truncated tails, and the BVH export."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import msgpack
+import numpy as np
+import pytest
+
+from posecast_client.bvh import read_bvh
+from posecast_client.protocol import Limits, Member, Pose, Presence, Welcome
+from posecast_client.recording import (
+    RecordingWriter,
+    export_bvh,
+    poses2bvh,
+    read_recording,
+    world_rotations,
+)
+from posecast_client.rotations import fk, mat2quat, quat2mat
+from posecast_client.skeleton import PARENTS, reference_offsets
+from posecast_client.sources.walk import walk_motion
+
+
+def walk_poses(seconds: float = 1.0, with_rotations: bool = True) -> list[Pose]:
+    root, local = walk_motion(seconds, 60.0, seed=3)
+    world, pos = fk(quat2mat(local), root, reference_offsets(), PARENTS)
+    rot = mat2quat(world)
+    return [
+        Pose("p-1", 100 + k, 50.0 + k / 60.0, pos[k], rot[k] if with_rotations else None)
+        for k in range(len(pos))
+    ]
+
+
+def test_write_then_read(tmp_path: Path) -> None:
+    path = tmp_path / "r.pcrec"
+    w = RecordingWriter(path, url="ws://x/", room="lobby", flush_every=2)
+    welcome = Welcome(1, "rec", "s", "spectator", "lobby", 1.0, 60.0, 10,
+                      (Member("p-1", "P"),), Limits())  # fmt: skip
+    w.write(welcome)
+    w.write(Presence("join", "lobby", "p-1", "P"))
+    for p in walk_poses(0.2):
+        w.write(p)
+    w.close()
+    rec = read_recording(path)
+    assert rec.header["room"] == "lobby" and rec.header["version"] == 1
+    assert len(rec.messages) == 2 + 12 and rec.rate_hz == 60.0
+    times = [t for t, _ in rec.messages]
+    assert times == sorted(times) and times[0] >= 0.0
+    assert len(rec.poses()["p-1"]) == 12
+    data = path.read_bytes()
+    path.write_bytes(data[:-7])  # killed mid-record: the partial record is ignored
+    assert len(read_recording(path).messages) == 13
+    (tmp_path / "bad.pcrec").write_bytes(msgpack.packb({"format": "other"}))
+    with pytest.raises(ValueError):
+        read_recording(tmp_path / "bad.pcrec")
+
+
+def test_positions_become_rotations_that_reproduce_them() -> None:
+    poses = walk_poses(2.0, with_rotations=False)
+    pos = np.stack([p.positions for p in poses])
+    world = world_rotations(pos)
+    local = world.copy()
+    for j, p in enumerate(PARENTS):
+        if p >= 0:
+            local[:, j] = np.swapaxes(world[:, p], -1, -2) @ world[:, j]
+    _, again = fk(local, pos[:, 0], reference_offsets(), PARENTS)
+    np.testing.assert_allclose(again, pos, atol=1e-9)
+
+
+@pytest.mark.parametrize("with_rotations", [True, False])
+def test_export_fills_gaps_on_the_tick_timeline(tmp_path: Path, with_rotations: bool) -> None:
+    poses = walk_poses(1.0, with_rotations)
+    kept = poses[:20] + poses[30:]  # the player went stale for 10 ticks
+    n = poses2bvh(kept, tmp_path / "p.bvh", 60.0)
+    assert n == len(poses)
+    _, fk_pos = read_bvh(tmp_path / "p.bvh").fk()
+    want = np.stack([p.positions for p in poses])
+    held = want.copy()
+    held[20:30] = want[19]  # a gap holds the last pose
+    np.testing.assert_allclose(fk_pos, held, atol=2e-5)
+
+
+def test_export_writes_one_file_per_player(tmp_path: Path) -> None:
+    path = tmp_path / "r.pcrec"
+    w = RecordingWriter(path, url="ws://x/", room="r")
+    for p in walk_poses(0.5):
+        w.write(p)
+        w.write(Pose("a:b", p.seq, p.t, p.positions + 1.0, p.rotations))
+    w.close()
+    paths = export_bvh(read_recording(path), tmp_path / "out")
+    assert sorted(paths) == ["a:b", "p-1"] and paths["a:b"].name == "a_b.bvh"
+    assert all(read_bvh(p).n_frames == 30 for p in paths.values())

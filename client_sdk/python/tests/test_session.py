@@ -1,0 +1,101 @@
+"""The pure client session: frame checks, seq and time rules, what server messages mean."""
+
+from __future__ import annotations
+
+import random
+
+import numpy as np
+import pytest
+
+from posecast_client.errors import (
+    ConnectionLostError,
+    DuplicateError,
+    KickedError,
+    NotNormalisedError,
+    OutOfOrderError,
+    OutOfRangeError,
+    ServerShutdownError,
+)
+from posecast_client.protocol import Bye, Error, Pong, Pose, Presence
+from posecast_client.session import ClientSession, backoff_delay, is_retryable
+
+POS = np.array([[0.0, 1.6, 0.0], [0.3, 1.0, 0.1], [-0.3, 1.0, 0.1], [0.0, 1.0, 0.0]])
+QUAT = np.tile([0.0, 0.0, 0.0, 1.0], (4, 1))
+
+
+def test_seq_counts_from_seq0_and_continues_across_dropped_frames() -> None:
+    s = ClientSession(seq0=2**32 - 2)
+    f = s.frame(POS, QUAT, now=1.0)
+    s.sent(f, 1.0)
+    g = s.frame(POS, QUAT, now=1.1)
+    s.dropped(g)  # no connection: the seq is used up all the same
+    h = s.frame(POS, QUAT, now=1.2)
+    assert (f.seq, g.seq, h.seq) == (2**32 - 2, 2**32 - 1, 0)
+    assert (s.stats.frames_sent, s.stats.frames_dropped) == (1, 1)
+    assert s.sent_at(f.seq) == 1.0 and s.sent_at(g.seq) is None
+
+
+def test_explicit_seq_must_be_newer() -> None:
+    s = ClientSession()
+    s.sent(s.frame(POS, QUAT, now=1.0, seq=10), 1.0)
+    with pytest.raises(DuplicateError):
+        s.frame(POS, QUAT, now=1.1, seq=10)
+    with pytest.raises(OutOfOrderError):
+        s.frame(POS, QUAT, now=1.1, seq=9)
+    assert s.frame(POS, QUAT, now=1.1, seq=15).seq == 15  # gaps are fine
+    with pytest.raises(ValueError):
+        s.frame(POS, QUAT, now=1.1, seq=-1)
+
+
+def test_time_must_not_go_backwards() -> None:
+    s = ClientSession()
+    s.sent(s.frame(POS, QUAT, now=5.0), 5.0)
+    with pytest.raises(ValueError):
+        s.frame(POS, QUAT, now=6.0, t=4.0)
+
+
+def test_tracked_slots_are_checked_and_normalised_untracked_ones_ignored() -> None:
+    s = ClientSession()
+    quat = QUAT * 3.0
+    pos = POS.copy()
+    pos[3] = np.nan  # the waist is lost
+    f = s.frame(pos, quat, now=1.0, valid=0b0111)
+    np.testing.assert_allclose(np.linalg.norm(f.orientations, axis=1), 1.0)
+    assert f.positions[3].tolist() == [0.0, 0.0, 0.0]
+    with pytest.raises(OutOfRangeError) as info:
+        s.frame(pos, QUAT, now=1.0)
+    assert info.value.field == "trackers[3]"
+    with pytest.raises(NotNormalisedError):
+        s.frame(POS, np.zeros((4, 4)), now=1.0)
+    with pytest.raises(ValueError):
+        s.frame(POS[:3], QUAT, now=1.0)
+    with pytest.raises(ValueError):
+        s.frame(POS, QUAT, now=1.0, valid=16)
+
+
+def test_what_server_messages_mean() -> None:
+    s = ClientSession()
+    pose = Pose("p", 1, 1.0, np.zeros((19, 3)))
+    assert s.receive(pose, 1.0) == (pose, None) and s.stats.poses == 1
+    presence = Presence("join", "r", "p", "P")
+    assert s.receive(presence, 1.0) == (presence, None)
+    soft = Error("RATE_LIMITED", "slow down", False)
+    assert s.receive(soft, 1.0) == (soft, None)
+    event, end = s.receive(Error("KICKED", "out", True), 1.0)
+    assert event is None and isinstance(end, KickedError) and not is_retryable(end)
+    _, end = s.receive(Bye("SERVER_SHUTDOWN"), 1.0)
+    assert isinstance(end, ServerShutdownError) and is_retryable(end)
+    _, end = s.receive(Bye(), 1.0)
+    assert isinstance(end, ConnectionLostError) and is_retryable(end)
+    assert s.receive(Pong(1.0, 11.0, 11.0), 1.002) == (None, None)
+    assert s.clock.offset_s == pytest.approx(9.999)
+
+
+def test_backoff_doubles_with_jitter_up_to_the_cap() -> None:
+    rng = random.Random(1)
+    for attempt in range(1, 12):
+        nominal = min(8.0, 0.25 * 2 ** (attempt - 1))
+        d = backoff_delay(attempt, 0.25, 8.0, rng)
+        assert nominal / 2 <= d <= nominal
+    assert is_retryable(OSError()) and is_retryable(TimeoutError())
+    assert not is_retryable(ValueError())

@@ -1,0 +1,591 @@
+/**
+ * The posecast client: a thin WebSocket shell around the pure codec, clock and queue.
+ *
+ * ```ts
+ * const client = await connect("ws://127.0.0.1:8765/", token, { WebSocket });
+ * await client.join("lobby", "Ada");              // hello -> welcome
+ * client.sendFrame({ head, leftHand, rightHand, waist });
+ * for await (const ev of client) { ... }          // poses, presence, errors, reconnects
+ * await client.close();                           // bye
+ * ```
+ *
+ * Lifecycle: `connect` opens the socket; `join` says `hello` and resolves with the
+ * `welcome` (or rejects with the typed error the server answered). If the connection
+ * is later lost, or the server shuts down, the client reconnects with exponential
+ * back-off and full jitter, says `hello` again for the same room, name and layout
+ * (asking the token source again), and carries on: a `reconnecting` event per attempt,
+ * then a `welcome` event with `resumed: true`. Frames sent while disconnected are
+ * dropped (`sendFrame` returns `undefined`), and `seq` keeps counting across
+ * connections (as in the Python SDK), so a pose's `seq` names one frame sent.
+ * Errors that retrying cannot fix (KICKED, REPLACED, UNAUTHENTICATED, FORBIDDEN,
+ * ROOM_FULL, ...) end the event stream by throwing that error.
+ */
+
+import { ClockSync } from "./clock.js";
+import { decode, encode } from "./codec.js";
+import {
+  ConnectionClosedError,
+  errorFromMessage,
+  ForbiddenError,
+  PosecastError,
+  ProtocolError,
+  ServerShutdownError,
+} from "./errors.js";
+import { clearTimer, globalWebSocket, monotonicS, setTimer, type TimerId } from "./env.js";
+import { type ClientEvent, EventQueue } from "./events.js";
+import {
+  DEFAULT_LIMITS,
+  type Layout,
+  type Limits,
+  MAX_TIME_S,
+  type Member,
+  type Message,
+  type Pose,
+  PROTOCOL_VERSION,
+  type Role,
+  seqNext,
+  SUBPROTOCOL,
+  type Welcome,
+} from "./messages.js";
+import { type FrameInput, toTrackers } from "./trackers.js";
+
+/** The members of a WebSocket the client uses (browser `WebSocket`, `ws`, undici). */
+export interface WebSocketLike {
+  binaryType: string;
+  readonly readyState: number;
+  readonly protocol: string;
+  send(data: Uint8Array): void;
+  close(code?: number, reason?: string): void;
+  onopen: ((ev: unknown) => void) | null;
+  onmessage: ((ev: { readonly data: unknown }) => void) | null;
+  onclose: ((ev: { readonly code: number; readonly reason: string }) => void) | null;
+  onerror: ((ev: unknown) => void) | null;
+}
+
+/** A WebSocket class: `globalThis.WebSocket` in browsers, or `WebSocket` from `ws` in Node. */
+export type WebSocketConstructor = abstract new (url: string, protocols?: string[]) => object;
+
+/** A join token, or a function that fetches a fresh one (asked again on each reconnect). */
+export type TokenSource = string | (() => string | Promise<string>);
+
+export interface ReconnectOptions {
+  /** Back-off before the first retry, seconds (before jitter). Default 0.25. */
+  readonly initialDelayS?: number;
+  /** Longest back-off, seconds. Default 10. */
+  readonly maxDelayS?: number;
+  /** Back-off growth per failed attempt. Default 2. */
+  readonly factor?: number;
+  /** Consecutive failed attempts before giving up. Default Infinity. */
+  readonly maxAttempts?: number;
+}
+
+export interface ConnectOptions {
+  /** The WebSocket class; default `globalThis.WebSocket` (browsers, Node >= 22). */
+  readonly WebSocket?: WebSocketConstructor;
+  /** Reconnect after a lost connection (default on), or `false`. */
+  readonly reconnect?: boolean | ReconnectOptions;
+  /** Seconds between clock-sync pings once joined; 0 turns them off. Default 2. */
+  readonly pingIntervalS?: number;
+  /** Seconds to wait for the socket to open, and for the `welcome`. Default 10. */
+  readonly timeoutS?: number;
+  /** Non-pose events kept for a reader that falls behind. Default 1024. */
+  readonly maxQueuedEvents?: number;
+  /** The client's monotonic clock in seconds. Default `performance.now() / 1000`. */
+  readonly clock?: () => number;
+  /** Random numbers in [0, 1) for the back-off jitter. Default `Math.random`. */
+  readonly random?: () => number;
+}
+
+export interface JoinOptions {
+  /** Frames per second this client will send (announced in `hello`). Absent: 60. */
+  readonly rateHz?: number;
+  /** Backends only: further rooms to watch. */
+  readonly watch?: readonly string[];
+}
+
+export type ClientState = "open" | "joining" | "joined" | "reconnecting" | "closed";
+
+/** Codes a reconnect can cure: the server went away or gave up on this connection. */
+const RETRYABLE_CODES: ReadonlySet<string> = new Set([
+  "CONNECTION_CLOSED",
+  "SERVER_SHUTDOWN",
+  "TIMED_OUT",
+  "SLOW_CONSUMER",
+  "INTERNAL",
+]);
+const PING_BURST = 4; // pings right after each welcome, so the clock converges at once
+const PING_BURST_GAP_S = 0.05;
+const WS_OPEN = 1;
+
+/**
+ * Open a WebSocket to a posecast server (subprotocol `posecast.v1`). Resolves once
+ * the socket is open; call {@link PosecastClient.join} next.
+ *
+ * @param url e.g. `wss://host/v1` (the path is up to the deployment)
+ * @param token the join token, or a function returning a fresh one
+ */
+export async function connect(
+  url: string,
+  token: TokenSource,
+  options: ConnectOptions = {},
+): Promise<PosecastClient> {
+  const client = new PosecastClient(url, token, options);
+  await client.open();
+  return client;
+}
+
+export class PosecastClient implements AsyncIterable<ClientEvent> {
+  /** Clock sync from ping/pong: `clock.toClient(pose.t)`, `clock.offsetS`, `clock.rttS`. */
+  readonly clock = new ClockSync();
+  private readonly queue: EventQueue;
+  private readonly now: () => number;
+  private readonly WebSocketClass: new (url: string, protocols?: string[]) => WebSocketLike;
+  private readonly reconnectOptions: Required<ReconnectOptions> | undefined;
+  private ws: WebSocketLike | undefined;
+  private generation = 0;
+  private stateNow: ClientState = "open";
+  private joinArgs: { room: string; name: string; layout?: Layout; options: JoinOptions } | undefined;
+  private welcomeNow: Welcome | undefined;
+  private limitsNow: Limits = DEFAULT_LIMITS;
+  private readonly membersNow = new Map<string, Member>();
+  private readonly posesNow = new Map<string, Pose>();
+  private seq = 0;
+  private lastFrameT = 0;
+  private pending:
+    | { resolve(w: Welcome): void; reject(e: PosecastError): void; timer: TimerId }
+    | undefined;
+  private fatal: PosecastError | undefined;
+  private pingTimer: TimerId | undefined;
+  private sleepTimer: { id: TimerId; wake(): void } | undefined;
+  private closing = false;
+  private closed: Promise<void> | undefined;
+
+  /** Use {@link connect}. */
+  constructor(
+    readonly url: string,
+    private readonly token: TokenSource,
+    private readonly options: ConnectOptions = {},
+  ) {
+    const ctor = options.WebSocket ?? globalWebSocket();
+    if (typeof ctor !== "function") {
+      throw new TypeError(
+        "no global WebSocket (Node < 22): pass { WebSocket } from the 'ws' package",
+      );
+    }
+    this.WebSocketClass = ctor as new (url: string, protocols?: string[]) => WebSocketLike;
+    this.queue = new EventQueue(options.maxQueuedEvents ?? 1024);
+    this.now = options.clock ?? monotonicS;
+    const r = options.reconnect ?? true;
+    this.reconnectOptions =
+      r === false
+        ? undefined
+        : {
+            initialDelayS: 0.25,
+            maxDelayS: 10,
+            factor: 2,
+            maxAttempts: Infinity,
+            ...(r === true ? {} : r),
+          };
+  }
+
+  // --- state ------------------------------------------------------------------------------
+
+  get state(): ClientState {
+    return this.stateNow;
+  }
+
+  /** The latest `welcome` (a resume replaces it). */
+  get welcome(): Welcome | undefined {
+    return this.welcomeNow;
+  }
+
+  /** This connection's player id (from the welcome). */
+  get player(): string | undefined {
+    return this.welcomeNow?.player;
+  }
+
+  get role(): Role | undefined {
+    return this.welcomeNow?.role;
+  }
+
+  /** The limits in force (the v1 defaults until the welcome). */
+  get limits(): Limits {
+    return this.limitsNow;
+  }
+
+  /** The players in the room now, by id (kept up to date from presence). */
+  get members(): ReadonlyMap<string, Member> {
+    return this.membersNow;
+  }
+
+  /** The newest pose of each player, by id, whether or not the events are read. */
+  get poses(): ReadonlyMap<string, Pose> {
+    return this.posesNow;
+  }
+
+  /** Events dropped because the reader fell behind (never poses: those coalesce). */
+  get droppedEvents(): number {
+    return this.queue.dropped;
+  }
+
+  // --- the public calls ---------------------------------------------------------------------
+
+  /** Open the socket (called by {@link connect}). */
+  async open(): Promise<void> {
+    await this.openSocket();
+  }
+
+  /**
+   * Say `hello` and wait for the `welcome`.
+   *
+   * @param room the room to join (the token must allow it)
+   * @param name display name shown to the others (1 to 64 UTF-8 bytes)
+   * @param layout tracked points; absent, the server takes `hmd3+waist`
+   * @throws ProtocolError the server's answer (e.g. UnauthenticatedError, RoomFullError)
+   * @throws ConnectionClosedError the socket closed or no welcome came in `timeoutS`
+   */
+  async join(room: string, name: string, layout?: Layout, options: JoinOptions = {}): Promise<Welcome> {
+    if (this.joinArgs !== undefined) throw new Error("join() was already called on this client");
+    if (this.stateNow !== "open") throw new ConnectionClosedError("the client is closed");
+    // hmd3+waist is what an absent layout means: leave it out, as the Python SDK does.
+    this.joinArgs =
+      layout === undefined || layout === "hmd3+waist"
+        ? { room, name, options }
+        : { room, name, layout, options };
+    this.stateNow = "joining";
+    try {
+      const welcome = await this.handshake();
+      this.joined(welcome, false);
+      return welcome;
+    } catch (err) {
+      this.ws?.close(1000, "join failed");
+      this.finish(undefined);
+      throw err;
+    }
+  }
+
+  /**
+   * Send one tracker frame (players only). Returns its `seq`, or `undefined` when it
+   * was dropped because the client is reconnecting (a newer frame supersedes it; its
+   * `seq` is used up all the same). `seq` keeps counting across reconnects, so a
+   * pose's `seq` always names one frame this client sent.
+   *
+   * @throws OutOfRangeError, NotNormalisedError a tracked slot is unusable (see
+   *   `toTrackers`); nothing is sent.
+   * @throws RangeError `t` outside [0, 1e12] s or before the previous frame's.
+   */
+  sendFrame(input: FrameInput): number | undefined {
+    if (this.welcomeNow !== undefined && this.welcomeNow.role !== "player") {
+      throw new ForbiddenError(`a ${this.welcomeNow.role} may not send frames`);
+    }
+    const { trackers, valid } = toTrackers(input);
+    const t = input.t ?? this.now();
+    if (!(t >= this.lastFrameT && t <= MAX_TIME_S)) {
+      throw new RangeError(`frame time ${t} s is outside [${this.lastFrameT}, ${MAX_TIME_S}]`);
+    }
+    const seq = this.seq;
+    this.seq = seqNext(seq);
+    if (this.stateNow !== "joined") return undefined;
+    this.lastFrameT = t;
+    return this.send({ type: "frame", seq, t, trackers, valid }) ? seq : undefined;
+  }
+
+  /**
+   * Calibrate the avatar: by standing height in metres (floor to the top of the head,
+   * 0.9 to 2.5), or by a frame of the user standing in a T-pose (all four trackers).
+   * False when not connected.
+   */
+  calibrate(how: { readonly heightM: number } | { readonly tpose: FrameInput }): boolean {
+    if ("heightM" in how) return this.send({ type: "calibrate", height_m: how.heightM });
+    return this.send({ type: "calibrate", tpose: true, trackers: toTrackers(how.tpose).trackers });
+  }
+
+  /** Send any v1 message as is (backends: `selector`, `kick`). False when not connected. */
+  send(msg: Message): boolean {
+    const ws = this.ws;
+    if (ws === undefined || ws.readyState !== WS_OPEN) return false;
+    ws.send(encode(msg));
+    return true;
+  }
+
+  /**
+   * Say `bye` and close. The event stream ends (without an error). Resolves once the
+   * socket has closed, or after `timeoutS`. Note that the server remembers the token
+   * of a session that said `bye`: the same token cannot join again.
+   */
+  close(reason = "bye"): Promise<void> {
+    if (this.closed !== undefined) return this.closed;
+    this.closing = true;
+    this.sleepTimer?.wake();
+    const ws = this.ws;
+    this.closed = new Promise<void>((resolve) => {
+      if (ws === undefined || ws.readyState > WS_OPEN) {
+        resolve();
+        return;
+      }
+      const timer = setTimer(resolve, this.options.timeoutS ?? 10);
+      const previous = ws.onclose;
+      ws.onclose = (ev) => {
+        previous?.(ev);
+        clearTimer(timer);
+        resolve();
+      };
+      if (ws.readyState === WS_OPEN && this.joinArgs !== undefined) {
+        this.send({ type: "bye", reason });
+      }
+      ws.close(1000, reason);
+    });
+    this.finish(undefined);
+    return this.closed;
+  }
+
+  /** The event stream: poses, presence, non-fatal errors, welcomes, reconnects. */
+  events(): AsyncIterableIterator<ClientEvent> {
+    const queue = this.queue;
+    return {
+      next: () => queue.next(),
+      return: async () => ({ value: undefined, done: true }),
+      [Symbol.asyncIterator]() {
+        return this;
+      },
+    };
+  }
+
+  [Symbol.asyncIterator](): AsyncIterator<ClientEvent> {
+    return this.events();
+  }
+
+  // --- one socket -----------------------------------------------------------------------------
+
+  private openSocket(): Promise<WebSocketLike> {
+    const gen = ++this.generation;
+    const ws = new this.WebSocketClass(this.url, [SUBPROTOCOL]);
+    ws.binaryType = "arraybuffer";
+    this.ws = ws;
+    this.fatal = undefined;
+    return new Promise<WebSocketLike>((resolve, reject) => {
+      const timer = setTimer(() => {
+        ws.close();
+        reject(new ConnectionClosedError(`no connection to ${this.url} in time`));
+      }, this.options.timeoutS ?? 10);
+      ws.onerror = () => {}; // a close event follows every error
+      ws.onclose = (ev) => {
+        clearTimer(timer);
+        reject(
+          new ConnectionClosedError(
+            `could not connect to ${this.url} (close code ${ev.code})`,
+            ev.code,
+            ev.reason,
+          ),
+        );
+      };
+      ws.onopen = () => {
+        clearTimer(timer);
+        ws.onmessage = (ev) => this.onData(gen, ev.data);
+        ws.onclose = (ev) => this.onClose(gen, ev.code, ev.reason);
+        if (ws.protocol !== SUBPROTOCOL) {
+          ws.close(1002, "subprotocol");
+          reject(new ConnectionClosedError(`server did not select ${SUBPROTOCOL}`, 1002));
+          return;
+        }
+        resolve(ws);
+      };
+    });
+  }
+
+  private async handshake(): Promise<Welcome> {
+    const args = this.joinArgs!;
+    const token = typeof this.token === "string" ? this.token : await this.token();
+    return new Promise<Welcome>((resolve, reject) => {
+      const timer = setTimer(() => {
+        this.pending = undefined;
+        this.ws?.close(1000, "no welcome");
+        reject(new ConnectionClosedError("no welcome in time"));
+      }, this.options.timeoutS ?? 10);
+      this.pending = { resolve, reject, timer };
+      const hello = {
+        type: "hello",
+        version: PROTOCOL_VERSION,
+        token,
+        room: args.room,
+        name: args.name,
+        ...(args.layout === undefined ? {} : { layout: args.layout }),
+        ...(args.options.rateHz === undefined ? {} : { rate_hz: args.options.rateHz }),
+        ...(args.options.watch === undefined ? {} : { watch: args.options.watch }),
+      } as const;
+      if (!this.send(hello)) {
+        clearTimer(timer);
+        this.pending = undefined;
+        reject(new ConnectionClosedError("the socket closed before hello"));
+      }
+    });
+  }
+
+  private onData(gen: number, data: unknown): void {
+    if (gen !== this.generation) return;
+    let bytes: Uint8Array;
+    if (data instanceof ArrayBuffer) bytes = new Uint8Array(data);
+    else if (ArrayBuffer.isView(data)) {
+      bytes = new Uint8Array(data.buffer, data.byteOffset, data.byteLength);
+    } else return; // v1 servers send binary messages only
+    let msg: Message;
+    try {
+      msg = decode(bytes, { limits: this.limitsNow });
+    } catch (err) {
+      if (err instanceof ProtocolError) this.queue.push({ type: "error", error: err });
+      return;
+    }
+    this.onMessage(msg);
+  }
+
+  private onMessage(msg: Message): void {
+    switch (msg.type) {
+      case "welcome": {
+        const pending = this.pending;
+        this.pending = undefined;
+        if (pending !== undefined) {
+          clearTimer(pending.timer);
+          pending.resolve(msg);
+        }
+        return;
+      }
+      case "pose":
+        this.posesNow.set(msg.player, msg);
+        this.queue.push(msg);
+        return;
+      case "presence":
+        if (msg.room === this.welcomeNow?.room) {
+          if (msg.event === "leave") {
+            this.membersNow.delete(msg.player);
+            this.posesNow.delete(msg.player);
+          } else this.membersNow.set(msg.player, { player: msg.player, name: msg.name });
+        }
+        this.queue.push(msg);
+        return;
+      case "pong":
+        this.clock.add(msg.t0, msg.t1, msg.t2, this.now());
+        return;
+      case "error": {
+        const error = errorFromMessage(msg);
+        if (!error.fatal) this.queue.push({ type: "error", error });
+        else this.fatal = error;
+        if (this.pending !== undefined && error.fatal) {
+          clearTimer(this.pending.timer);
+          this.pending.reject(error);
+          this.pending = undefined;
+        }
+        return;
+      }
+      case "bye":
+        if (msg.reason === ServerShutdownError.code) {
+          this.fatal = new ServerShutdownError("the server is shutting down", { fatal: true });
+        }
+        return;
+      default:
+        return; // client-bound v1 messages only; anything else is ignored
+    }
+  }
+
+  private onClose(gen: number, code: number, reason: string): void {
+    if (gen !== this.generation) return;
+    clearTimer(this.pingTimer);
+    const cause =
+      this.fatal ?? new ConnectionClosedError(`connection closed (${code} ${reason})`, code, reason);
+    if (this.pending !== undefined) {
+      clearTimer(this.pending.timer);
+      this.pending.reject(cause);
+      this.pending = undefined;
+      return; // join() or the reconnect loop decides
+    }
+    if (this.closing || this.stateNow !== "joined") return;
+    if (this.retryable(cause)) void this.reconnect(cause);
+    else this.finish(this.fatal === undefined && code === 1000 ? undefined : cause);
+  }
+
+  // --- joined, resumed, closed ----------------------------------------------------------------
+
+  private joined(welcome: Welcome, resumed: boolean): void {
+    this.welcomeNow = welcome;
+    this.limitsNow = welcome.limits;
+    this.membersNow.clear();
+    for (const m of welcome.members) this.membersNow.set(m.player, m);
+    for (const player of [...this.posesNow.keys()]) {
+      if (!this.membersNow.has(player)) this.posesNow.delete(player);
+    }
+    if (resumed) this.clock.reset(); // it may be a new server process, with a new epoch
+    this.stateNow = "joined";
+    this.queue.push({ type: "welcome", welcome, resumed });
+    this.schedulePings(PING_BURST);
+  }
+
+  private schedulePings(burst: number): void {
+    const every = this.options.pingIntervalS ?? 2;
+    if (burst <= 0 && !(every > 0)) return;
+    const gen = this.generation;
+    this.pingTimer = setTimer(
+      () => {
+        if (gen !== this.generation || this.stateNow !== "joined") return;
+        this.send({ type: "ping", t0: this.now() });
+        this.schedulePings(burst - 1);
+      },
+      burst > 0 ? (burst === PING_BURST ? 0 : PING_BURST_GAP_S) : every,
+      true,
+    );
+  }
+
+  private retryable(err: unknown): boolean {
+    if (this.reconnectOptions === undefined || this.closing) return false;
+    if (!(err instanceof PosecastError)) return false;
+    if (err.code === "TOKEN_EXPIRED") return typeof this.token === "function";
+    return RETRYABLE_CODES.has(err.code);
+  }
+
+  private async reconnect(cause: PosecastError): Promise<void> {
+    const opts = this.reconnectOptions!;
+    this.stateNow = "reconnecting";
+    for (let attempt = 1; !this.closing; attempt++) {
+      if (attempt > opts.maxAttempts) {
+        this.finish(cause);
+        return;
+      }
+      const cap = Math.min(opts.maxDelayS, opts.initialDelayS * opts.factor ** (attempt - 1));
+      const delayS = cap * (this.options.random ?? Math.random)(); // full jitter
+      this.queue.push({ type: "reconnecting", attempt, delayS, cause });
+      await this.sleep(delayS);
+      if (this.closing) break;
+      try {
+        await this.openSocket();
+        const welcome = await this.handshake();
+        this.joined(welcome, true);
+        return;
+      } catch (err) {
+        this.ws?.close();
+        if (!this.retryable(err)) {
+          this.finish(err);
+          return;
+        }
+        cause = err as PosecastError;
+      }
+    }
+    this.finish(undefined);
+  }
+
+  private sleep(seconds: number): Promise<void> {
+    return new Promise<void>((resolve) => {
+      const wake = (): void => {
+        clearTimer(this.sleepTimer?.id);
+        this.sleepTimer = undefined;
+        resolve();
+      };
+      this.sleepTimer = { id: setTimer(wake, seconds), wake };
+    });
+  }
+
+  private finish(error: unknown): void {
+    if (this.stateNow === "closed") return;
+    this.stateNow = "closed";
+    clearTimer(this.pingTimer);
+    this.generation++; // late events from the last socket are ignored from here on
+    this.queue.end(error);
+  }
+}

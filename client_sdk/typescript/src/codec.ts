@@ -1,0 +1,476 @@
+/**
+ * Bytes <-> messages for protocol v1. Pure functions: no sockets, no clocks, no state.
+ *
+ * {@link encode} writes the canonical bytes (`proto/README.md`, "Canonical encoding"):
+ * a msgpack map, `type` first and then the fields in spec order, absent optionals
+ * left out, every float field as float64, everything else in its smallest form.
+ *
+ * {@link decode} accepts every valid encoding and checks, in the spec's order: size
+ * (TOO_LARGE), msgpack syntax and structural bounds (MALFORMED / TOO_LARGE), that the
+ * root is a map, nesting depth (MALFORMED), `type` (BAD_FIELD / UNKNOWN_TYPE), then
+ * the fields of that type. The per-type code mirrors `posecast/protocol/wire.py`.
+ */
+
+import {
+  BadFieldError,
+  MalformedError,
+  ProtocolError,
+  TooLargeError,
+  UnknownTypeError,
+  VersionUnsupportedError,
+} from "./errors.js";
+import {
+  asBin,
+  asBool,
+  asEnum,
+  asFloat,
+  asId,
+  asInt,
+  asList,
+  asMap,
+  asName,
+  asPoint,
+  asStr,
+  asTrackers,
+  CODE_PATTERN,
+  has,
+} from "./fields.js";
+import {
+  ALL_TRACKERS_VALID,
+  type Bye,
+  type Calibrate,
+  DEFAULT_LIMITS,
+  type ErrorMessage,
+  type Frame,
+  type Hello,
+  JOINT_NAMES,
+  type Kick,
+  LAYOUTS,
+  LIMIT_RANGES,
+  type Limits,
+  MAX_HEIGHT_M,
+  MAX_ID_BYTES,
+  MAX_LOOKAHEAD_FRAMES,
+  MAX_TIME_S,
+  type Member,
+  type Message,
+  MIN_HEIGHT_M,
+  type Ping,
+  type Pong,
+  type Pose,
+  PRESENCE_EVENTS,
+  type Presence,
+  PROTOCOL_VERSION,
+  ROLES,
+  SELECTOR_KINDS,
+  type Selector,
+  type Trackers,
+  UINT32_MAX,
+  type Welcome,
+} from "./messages.js";
+import { Float64, pack, unpack, type Wire, type WireMap } from "./msgpack.js";
+import { mm2pos, POS_BYTES, pos2mm, quat2snorm, ROT_BYTES, snorm2quat } from "./quantize.js";
+
+export interface DecodeOptions {
+  /** The limits in force; before a `welcome`, the v1 defaults. */
+  limits?: Limits;
+  /** A tighter size cap than `limits.max_message_bytes`. */
+  maxBytes?: number;
+}
+
+/** The canonical bytes of `msg`. */
+export function encode(msg: Message): Uint8Array {
+  return pack(toWire(msg));
+}
+
+/**
+ * Parse and validate one WebSocket message.
+ *
+ * @throws ProtocolError the subclass for the first rule broken, with `field` (and
+ *   `refSeq` for a frame whose `seq` was readable) set where they apply.
+ */
+export function decode(data: Uint8Array, options: DecodeOptions = {}): Message {
+  const limits = options.limits ?? DEFAULT_LIMITS;
+  const cap = Math.min(options.maxBytes ?? Infinity, limits.max_message_bytes);
+  if (data.length > cap) throw new TooLargeError(`message of ${data.length} bytes, limit ${cap}`);
+  const { value, tooDeep } = unpack(data);
+  if (!(value instanceof Map)) throw new MalformedError("a message is a msgpack map");
+  if (tooDeep) throw new MalformedError("nested deeper than 8 maps and arrays");
+  return fromWire(value, limits);
+}
+
+/** Validate an unpacked wire map into a message (the second half of {@link decode}). */
+export function fromWire(m: WireMap, limits: Limits = DEFAULT_LIMITS): Message {
+  const kind = m.get("type");
+  if (typeof kind !== "string") {
+    throw new BadFieldError("missing or non-string field type", { field: "type" });
+  }
+  const decoder = Object.hasOwn(DECODERS, kind) ? DECODERS[kind] : undefined;
+  if (decoder === undefined) {
+    throw new UnknownTypeError(`unknown message type ${JSON.stringify(kind.slice(0, 40))}`, {
+      field: "type",
+    });
+  }
+  return decoder(m, limits);
+}
+
+// --- decoders, one per type -------------------------------------------------------------
+
+type Decoder = (m: WireMap, lim: Limits) => Message;
+type Mutable<T> = { -readonly [K in keyof T]: T[K] };
+const T_RANGE = [0, MAX_TIME_S] as const;
+const SELECTOR_FIELDS: Readonly<Record<string, readonly string[]>> = {
+  anomaly: ["factor"],
+  target: ["joint", "point", "margin_m"],
+  obstacle: ["joint", "point", "radius_m"],
+};
+
+function text(m: WireMap, key: string, lim: Limits): string | undefined {
+  return has(m, key) ? asStr(m, key, lim.max_text_bytes, 0) : undefined;
+}
+
+function optFloat(m: WireMap, key: string, lo: number, hi: number): number | undefined {
+  return has(m, key) ? asFloat(m, key, lo, hi) : undefined;
+}
+
+/** Copy the defined entries of `fields` onto `base` (exactOptionalPropertyTypes-safe). */
+function withOptional<T>(base: T, fields: Record<string, unknown>): T {
+  const out: Record<string, unknown> = { ...(base as Record<string, unknown>) };
+  for (const [k, v] of Object.entries(fields)) if (v !== undefined) out[k] = v;
+  return out as T;
+}
+
+function withRefSeq(err: unknown, seq: number): unknown {
+  if (!(err instanceof ProtocolError)) return err;
+  const cls = err.constructor as typeof ProtocolError;
+  return new cls(err.message, { field: err.field, refSeq: seq, fatal: err.fatal }, err.code);
+}
+
+function decodeHello(m: WireMap, lim: Limits): Hello {
+  const version = m.get("version");
+  if (typeof version !== "number") {
+    throw new BadFieldError("field version must be an integer", { field: "version" });
+  }
+  if (version !== PROTOCOL_VERSION) {
+    throw new VersionUnsupportedError(
+      `version ${version} is not supported (this peer speaks ${PROTOCOL_VERSION})`,
+      { field: "version" },
+    );
+  }
+  let watch: string[] | undefined;
+  if (has(m, "watch")) {
+    watch = asList(m, "watch", lim.max_watch_rooms).map((v, i) =>
+      asId(new Map([[`watch[${i}]`, v]]), `watch[${i}]`, lim.max_room_bytes),
+    );
+  }
+  return withOptional<Hello>(
+    {
+      type: "hello",
+      version,
+      token: asStr(m, "token", lim.max_token_bytes, 0),
+      room: asId(m, "room", lim.max_room_bytes),
+      name: asName(m, "name", lim.max_name_bytes),
+    },
+    {
+      layout: has(m, "layout") ? asEnum(m, "layout", LAYOUTS) : undefined,
+      rate_hz: optFloat(m, "rate_hz", 1, lim.max_rate_hz),
+      watch: watch !== undefined && watch.length > 0 ? watch : undefined,
+    },
+  );
+}
+
+function decodeWelcome(m: WireMap, lim: Limits): Welcome {
+  const members: Member[] = asList(m, "members", lim.max_players).map((item, i) => {
+    if (!(item instanceof Map)) {
+      throw new BadFieldError(`members[${i}]: expected a map`, { field: `members[${i}]` });
+    }
+    const at = `members[${i}].`;
+    return {
+      player: asId(item, "player", MAX_ID_BYTES, at),
+      name: asName(item, "name", lim.max_name_bytes, at),
+    };
+  });
+  const lm = asMap(m, "limits");
+  const limits: Partial<Mutable<Limits>> = {};
+  for (const [k, [lo, hi]] of Object.entries(LIMIT_RANGES)) {
+    limits[k as keyof Limits] = asInt(lm, k, lo, hi, "limits.");
+  }
+  return {
+    type: "welcome",
+    version: asInt(m, "version", 1, 255),
+    player: asId(m, "player", MAX_ID_BYTES),
+    session: asId(m, "session", MAX_ID_BYTES),
+    role: asEnum(m, "role", ROLES),
+    room: asId(m, "room", lim.max_room_bytes),
+    t: asFloat(m, "t", ...T_RANGE),
+    rate_hz: asFloat(m, "rate_hz", 1, 1000),
+    lookahead_frames: asInt(m, "lookahead_frames", 0, MAX_LOOKAHEAD_FRAMES),
+    members,
+    limits: limits as Limits,
+  };
+}
+
+function decodeCalibrate(m: WireMap): Calibrate {
+  const hasHeight = has(m, "height_m");
+  const hasTpose = has(m, "tpose");
+  if (hasTpose && !asBool(m, "tpose")) {
+    throw new BadFieldError("tpose, when present, must be true", { field: "tpose" });
+  }
+  if (hasHeight && hasTpose) {
+    throw new BadFieldError("give height_m or tpose, not both", { field: "tpose" });
+  }
+  if (hasHeight) {
+    return { type: "calibrate", height_m: asFloat(m, "height_m", MIN_HEIGHT_M, MAX_HEIGHT_M) };
+  }
+  if (!hasTpose) {
+    throw new BadFieldError("calibrate needs height_m or tpose: true", { field: "height_m" });
+  }
+  return { type: "calibrate", tpose: true, trackers: asTrackers(m, "trackers") };
+}
+
+function decodeFrame(m: WireMap): Frame {
+  const seq = asInt(m, "seq", 0, UINT32_MAX);
+  try {
+    const t = asFloat(m, "t", ...T_RANGE);
+    const valid = has(m, "valid") ? asInt(m, "valid", 0, ALL_TRACKERS_VALID) : ALL_TRACKERS_VALID;
+    const trackers = asTrackers(m, "trackers", valid);
+    return withOptional<Frame>(
+      { type: "frame", seq, t, trackers },
+      { valid: valid === ALL_TRACKERS_VALID ? undefined : valid },
+    );
+  } catch (err) {
+    throw withRefSeq(err, seq);
+  }
+}
+
+function decodePose(m: WireMap): Pose {
+  const root = asPoint(m, "root");
+  const rot = has(m, "rot") ? asBin(m, "rot", ROT_BYTES) : undefined;
+  return withOptional<Pose>(
+    {
+      type: "pose",
+      player: asId(m, "player", MAX_ID_BYTES),
+      seq: asInt(m, "seq", 0, UINT32_MAX),
+      t: asFloat(m, "t", ...T_RANGE),
+      positions: mm2pos(root, asBin(m, "pos_mm", POS_BYTES)),
+    },
+    { rotations: rot === undefined ? undefined : snorm2quat(rot) },
+  );
+}
+
+function decodePresence(m: WireMap, lim: Limits): Presence {
+  return {
+    type: "presence",
+    event: asEnum(m, "event", PRESENCE_EVENTS),
+    room: asId(m, "room", lim.max_room_bytes),
+    player: asId(m, "player", MAX_ID_BYTES),
+    name: asName(m, "name", lim.max_name_bytes),
+  };
+}
+
+function decodeSelector(m: WireMap): Selector {
+  const player = asId(m, "player", MAX_ID_BYTES);
+  const kind = asEnum(m, "kind", SELECTOR_KINDS);
+  for (const key of ["joint", "point", "radius_m", "margin_m", "factor"]) {
+    if (has(m, key) && !SELECTOR_FIELDS[kind]!.includes(key)) {
+      throw new BadFieldError(`${key} does not apply to a ${kind} selector`, { field: key });
+    }
+  }
+  const aimed = kind !== "anomaly";
+  return withOptional<Selector>(
+    { type: "selector", player, kind },
+    {
+      joint: aimed ? asEnum(m, "joint", JOINT_NAMES) : undefined,
+      point: aimed ? asPoint(m, "point") : undefined,
+      radius_m: optFloat(m, "radius_m", 0.001, 10),
+      margin_m: optFloat(m, "margin_m", 0, 10),
+      factor: optFloat(m, "factor", 0.1, 100),
+    },
+  );
+}
+
+function decodeError(m: WireMap, lim: Limits): ErrorMessage {
+  const code = asStr(m, "code", 32);
+  if (!CODE_PATTERN.test(code)) {
+    throw new BadFieldError("code must be upper-case letters, digits and _", { field: "code" });
+  }
+  return withOptional<ErrorMessage>(
+    {
+      type: "error",
+      code,
+      message: asStr(m, "message", lim.max_text_bytes, 0),
+      fatal: asBool(m, "fatal"),
+    },
+    {
+      field: text(m, "field", lim),
+      ref_seq: has(m, "ref_seq") ? asInt(m, "ref_seq", 0, UINT32_MAX) : undefined,
+    },
+  );
+}
+
+const DECODERS: Readonly<Record<string, Decoder>> = {
+  hello: decodeHello,
+  welcome: decodeWelcome,
+  calibrate: decodeCalibrate,
+  frame: decodeFrame,
+  pose: decodePose,
+  presence: decodePresence,
+  selector: decodeSelector,
+  kick: (m, lim): Kick =>
+    withOptional<Kick>(
+      { type: "kick", player: asId(m, "player", MAX_ID_BYTES) },
+      { reason: text(m, "reason", lim) },
+    ),
+  ping: (m): Ping => ({ type: "ping", t0: asFloat(m, "t0", ...T_RANGE) }),
+  pong: (m): Pong => ({
+    type: "pong",
+    t0: asFloat(m, "t0", ...T_RANGE),
+    t1: asFloat(m, "t1", ...T_RANGE),
+    t2: asFloat(m, "t2", ...T_RANGE),
+  }),
+  error: decodeError,
+  bye: (m, lim): Bye => withOptional<Bye>({ type: "bye" }, { reason: text(m, "reason", lim) }),
+};
+
+/** The v1 message types, in spec order. */
+export const MESSAGE_TYPES: readonly string[] = Object.keys(DECODERS);
+
+// --- encoders -----------------------------------------------------------------------------
+
+const f = (v: number): Float64 => new Float64(v);
+
+/** Build a map in the given (canonical) order, leaving out undefined values. */
+function wireMap(entries: readonly (readonly [string, Wire | undefined])[]): Map<string, Wire> {
+  const out = new Map<string, Wire>();
+  for (const [k, v] of entries) if (v !== undefined) out.set(k, v);
+  return out;
+}
+
+function trackersWire(trackers: Trackers): Wire[] {
+  return trackers.map((row) => row.map(f));
+}
+
+function toWireOf(msg: Message): Map<string, Wire> {
+  switch (msg.type) {
+    case "hello":
+      return wireMap([
+        ["type", "hello"],
+        ["version", msg.version],
+        ["token", msg.token],
+        ["room", msg.room],
+        ["name", msg.name],
+        ["layout", msg.layout],
+        ["rate_hz", msg.rate_hz === undefined ? undefined : f(msg.rate_hz)],
+        ["watch", msg.watch !== undefined && msg.watch.length > 0 ? [...msg.watch] : undefined],
+      ]);
+    case "welcome":
+      return wireMap([
+        ["type", "welcome"],
+        ["version", msg.version],
+        ["player", msg.player],
+        ["session", msg.session],
+        ["role", msg.role],
+        ["room", msg.room],
+        ["t", f(msg.t)],
+        ["rate_hz", f(msg.rate_hz)],
+        ["lookahead_frames", msg.lookahead_frames],
+        [
+          "members",
+          msg.members.map((p) =>
+            wireMap([
+              ["player", p.player],
+              ["name", p.name],
+            ]),
+          ),
+        ],
+        ["limits", wireMap(Object.keys(LIMIT_RANGES).map((k) => [k, msg.limits[k as keyof Limits]]))],
+      ]);
+    case "calibrate":
+      return "height_m" in msg
+        ? wireMap([
+            ["type", "calibrate"],
+            ["height_m", f(msg.height_m)],
+          ])
+        : wireMap([
+            ["type", "calibrate"],
+            ["tpose", true],
+            ["trackers", trackersWire(msg.trackers)],
+          ]);
+    case "frame":
+      return wireMap([
+        ["type", "frame"],
+        ["seq", msg.seq],
+        ["t", f(msg.t)],
+        ["trackers", trackersWire(msg.trackers)],
+        ["valid", msg.valid === undefined || msg.valid === ALL_TRACKERS_VALID ? undefined : msg.valid],
+      ]);
+    case "pose": {
+      const [root, posMm] = pos2mm(msg.positions);
+      return wireMap([
+        ["type", "pose"],
+        ["player", msg.player],
+        ["seq", msg.seq],
+        ["t", f(msg.t)],
+        ["root", root.map(f)],
+        ["pos_mm", posMm],
+        ["rot", msg.rotations === undefined ? undefined : quat2snorm(msg.rotations)],
+      ]);
+    }
+    case "presence":
+      return wireMap([
+        ["type", "presence"],
+        ["event", msg.event],
+        ["room", msg.room],
+        ["player", msg.player],
+        ["name", msg.name],
+      ]);
+    case "selector":
+      return wireMap([
+        ["type", "selector"],
+        ["player", msg.player],
+        ["kind", msg.kind],
+        ["joint", msg.joint],
+        ["point", msg.point?.map(f)],
+        ["radius_m", msg.radius_m === undefined ? undefined : f(msg.radius_m)],
+        ["margin_m", msg.margin_m === undefined ? undefined : f(msg.margin_m)],
+        ["factor", msg.factor === undefined ? undefined : f(msg.factor)],
+      ]);
+    case "kick":
+      return wireMap([
+        ["type", "kick"],
+        ["player", msg.player],
+        ["reason", msg.reason],
+      ]);
+    case "ping":
+      return wireMap([
+        ["type", "ping"],
+        ["t0", f(msg.t0)],
+      ]);
+    case "pong":
+      return wireMap([
+        ["type", "pong"],
+        ["t0", f(msg.t0)],
+        ["t1", f(msg.t1)],
+        ["t2", f(msg.t2)],
+      ]);
+    case "error":
+      return wireMap([
+        ["type", "error"],
+        ["code", msg.code],
+        ["message", msg.message],
+        ["fatal", msg.fatal],
+        ["field", msg.field],
+        ["ref_seq", msg.ref_seq],
+      ]);
+    case "bye":
+      return wireMap([
+        ["type", "bye"],
+        ["reason", msg.reason],
+      ]);
+  }
+}
+
+/** The canonical wire map of `msg` (keys in canonical order, floats as {@link Float64}). */
+export function toWire(msg: Message): WireMap {
+  return toWireOf(msg);
+}

@@ -1,0 +1,43 @@
+/**
+ * `@posecast/client`: stream VR tracker frames to a posecast server and receive every
+ * player's full-body pose (wire protocol v1, `proto/README.md`). Browser and Node.
+ *
+ * - {@link connect} / {@link PosecastClient}: join, send frames, read events, reconnect.
+ * - {@link fromXRFrame}: a WebXR frame as posecast trackers.
+ * - {@link encode} / {@link decode}: the canonical codec, for tools and tests.
+ * - Errors: one class per wire code ({@link ProtocolError} and subclasses).
+ */
+
+export {
+  connect,
+  PosecastClient,
+  type ClientState,
+  type ConnectOptions,
+  type JoinOptions,
+  type ReconnectOptions,
+  type TokenSource,
+  type WebSocketConstructor,
+  type WebSocketLike,
+} from "./client.js";
+export { ClockSync, type ClockSample } from "./clock.js";
+export { decode, encode, fromWire, toWire, MESSAGE_TYPES, type DecodeOptions } from "./codec.js";
+export * from "./errors.js";
+export type { ClientEvent, ErrorEvent, ReconnectingEvent, WelcomeEvent } from "./events.js";
+export * from "./messages.js";
+export { Float64, pack, unpack, type Wire, type WireMap } from "./msgpack.js";
+export {
+  jointPosition,
+  jointRotation,
+  toTrackers,
+  type FrameInput,
+  type TrackerPose,
+} from "./trackers.js";
+export {
+  fromXRFrame,
+  xrToPosecast,
+  type FromXRFrameOptions,
+  type XRFrameLike,
+  type XRInputSourceLike,
+  type XRPoseLike,
+  type XRRigidTransformLike,
+} from "./webxr.js";

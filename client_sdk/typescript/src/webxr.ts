@@ -1,0 +1,125 @@
+/**
+ * WebXR -> posecast frames: {@link fromXRFrame} turns one `XRFrame` into the trackers
+ * of one `frame` message.
+ *
+ * Conventions. A WebXR reference space is right-handed with +Y up, in metres, and
+ * the viewer looks down its own -Z axis. The posecast world is also right-handed
+ * with +Y up, in metres, so **positions pass through unchanged**. Only the
+ * *character forward* convention differs: a posecast tracker orientation is the
+ * rotation of a body part whose rest pose faces **+Z** (`proto/README.md`, World
+ * frame), while a WebXR pose at identity faces **-Z**. So every orientation is
+ * turned 180 degrees about its own Y axis: `q_posecast = q_webxr * (0, 1, 0, 0)`
+ * (xyzw), which maps the viewer's forward (-Z) onto posecast forward (+Z) and the
+ * viewer's right (+X) onto the character's right (-X); up stays up.
+ *
+ * What goes where:
+ *
+ * - HEAD: the viewer pose (`frame.getViewerPose`), the point between the eyes.
+ * - LEFT_HAND / RIGHT_HAND: each input source's **grip** pose (`gripSpace`) by
+ *   `handedness`. The grip sits in the palm, a few centimetres from the wrist joint
+ *   the model was trained on; the model uses hand positions only (orientations ride
+ *   along for display), and the grip is what every runtime reports.
+ * - WAIST: WebXR has no waist, so the caller supplies one if it has a tracker: an
+ *   `XRSpace` (located in `refSpace` each frame) or a pose already in `refSpace`, in
+ *   WebXR's -Z-forward convention like every other WebXR pose.
+ *
+ * A slot the frame cannot locate is left out (its `valid` bit is cleared when the
+ * client sends the frame). Use a **floor-level** reference space (`local-floor` or
+ * `bounded-floor`): the model reads Y as height above the floor.
+ */
+
+import type { FrameInput, TrackerPose } from "./trackers.js";
+
+/** A `DOMPointReadOnly`. */
+export interface XRPointLike {
+  readonly x: number;
+  readonly y: number;
+  readonly z: number;
+  readonly w: number;
+}
+
+/** An `XRRigidTransform`: a position and an orientation (xyzw), in the reference space. */
+export interface XRRigidTransformLike {
+  readonly position: XRPointLike;
+  readonly orientation: XRPointLike;
+}
+
+/** An `XRPose` (or `XRViewerPose`). */
+export interface XRPoseLike {
+  readonly transform: XRRigidTransformLike;
+}
+
+/** An `XRInputSource`: only handedness and the grip space are read. */
+export interface XRInputSourceLike {
+  readonly handedness: string;
+  readonly gripSpace?: object | null | undefined;
+}
+
+/** The part of `XRFrame` that {@link fromXRFrame} uses; a real `XRFrame` satisfies it. */
+export interface XRFrameLike {
+  readonly session: { readonly inputSources: Iterable<XRInputSourceLike> };
+  /** Milliseconds on the `performance.now()` timeline, where the browser provides it. */
+  readonly predictedDisplayTime?: number;
+  getViewerPose(referenceSpace: object): XRPoseLike | null | undefined;
+  getPose(space: object, baseSpace: object): XRPoseLike | null | undefined;
+}
+
+export interface FromXRFrameOptions {
+  /**
+   * A tracked waist: an `XRSpace` to locate in `refSpace`, or an `XRRigidTransform`-like
+   * pose already in `refSpace` (WebXR convention, -Z forward). Absent: no waist slot.
+   */
+  readonly waist?: object | XRRigidTransformLike | null;
+}
+
+/**
+ * The posecast trackers of one WebXR frame (see the module comment for conventions).
+ *
+ * `t` is the frame's `predictedDisplayTime` in seconds when the browser gives one
+ * (the `performance.now()` timeline, which is also the client's default clock), so
+ * `client.sendFrame(fromXRFrame(frame, refSpace))` stamps the frame with the moment
+ * its poses are for.
+ */
+export function fromXRFrame(
+  frame: XRFrameLike,
+  refSpace: object,
+  options: FromXRFrameOptions = {},
+): FrameInput {
+  const out: { -readonly [K in keyof FrameInput]: FrameInput[K] } = {};
+  const viewer = frame.getViewerPose(refSpace);
+  if (viewer) out.head = xrToPosecast(viewer.transform);
+  for (const source of frame.session.inputSources) {
+    if (!source.gripSpace || (source.handedness !== "left" && source.handedness !== "right")) {
+      continue;
+    }
+    const grip = frame.getPose(source.gripSpace, refSpace);
+    if (!grip) continue;
+    if (source.handedness === "left") out.leftHand = xrToPosecast(grip.transform);
+    else out.rightHand = xrToPosecast(grip.transform);
+  }
+  const waist = options.waist;
+  if (waist) {
+    if (isTransform(waist)) out.waist = xrToPosecast(waist);
+    else {
+      const pose = frame.getPose(waist, refSpace);
+      if (pose) out.waist = xrToPosecast(pose.transform);
+    }
+  }
+  if (typeof frame.predictedDisplayTime === "number") out.t = frame.predictedDisplayTime / 1000;
+  return out;
+}
+
+/**
+ * One WebXR pose as a posecast tracker: the position unchanged, the orientation
+ * turned 180 degrees about its local Y (`q * (0, 1, 0, 0)`, i.e.
+ * `(x, y, z, w) -> (-z, w, x, -y)`), from -Z forward to +Z forward.
+ */
+export function xrToPosecast(transform: XRRigidTransformLike): TrackerPose {
+  const p = transform.position;
+  const { x, y, z, w } = transform.orientation;
+  return { position: [p.x, p.y, p.z], orientation: [-z, w, x, -y] };
+}
+
+function isTransform(v: object): v is XRRigidTransformLike {
+  return "position" in v && "orientation" in v;
+}

@@ -1,0 +1,317 @@
+/**
+ * PosecastClient against a scripted in-process server (the `ws` package): join,
+ * events, clock sync, typed refusals, and reconnect with back-off and resume. The
+ * real server is in integration.test.ts.
+ */
+
+import assert from "node:assert/strict";
+import { once } from "node:events";
+import type { AddressInfo } from "node:net";
+import { test } from "node:test";
+
+import WebSocket, { WebSocketServer, type WebSocket as ServerSocket } from "ws";
+
+import { connect, type ConnectOptions, PosecastClient } from "../src/client.js";
+import { decode, encode } from "../src/codec.js";
+import {
+  ConnectionClosedError,
+  ForbiddenError,
+  KickedError,
+  NotNormalisedError,
+  OutOfRangeError,
+  UnauthenticatedError,
+} from "../src/errors.js";
+import type { ClientEvent } from "../src/events.js";
+import {
+  DEFAULT_LIMITS,
+  type Hello,
+  type Message,
+  type Role,
+  SUBPROTOCOL,
+  type Welcome,
+} from "../src/messages.js";
+
+interface Peer {
+  ws: ServerSocket;
+  hello: Hello;
+  received: Message[];
+  send(msg: Message): void;
+}
+
+/** A server that answers hello with welcome (or `refuse`), pings with pongs (+100 s). */
+class FakeServer {
+  readonly peers: Peer[] = [];
+  refuse: { code: string; fatal: boolean } | undefined;
+  role: Role = "player";
+  private readonly wss: WebSocketServer;
+  private readonly waiters: (() => void)[] = [];
+
+  constructor(port = 0) {
+    this.wss = new WebSocketServer({
+      port,
+      host: "127.0.0.1",
+      handleProtocols: (offered) => (offered.has(SUBPROTOCOL) ? SUBPROTOCOL : false),
+    });
+    this.wss.on("connection", (ws) => this.accept(ws));
+  }
+
+  async ready(): Promise<this> {
+    await once(this.wss, "listening");
+    return this;
+  }
+
+  get port(): number {
+    return (this.wss.address() as AddressInfo).port;
+  }
+
+  get url(): string {
+    return `ws://127.0.0.1:${this.port}/`;
+  }
+
+  /** Resolves once `n` peers have said hello. */
+  async peer(n: number): Promise<Peer> {
+    while (this.peers.length < n) await new Promise<void>((r) => this.waiters.push(r));
+    return this.peers[n - 1]!;
+  }
+
+  async close(): Promise<void> {
+    for (const c of this.wss.clients) c.terminate();
+    await new Promise((r) => this.wss.close(r));
+  }
+
+  private accept(ws: ServerSocket): void {
+    const received: Message[] = [];
+    ws.on("message", (data: Buffer) => {
+      const msg = decode(new Uint8Array(data));
+      received.push(msg);
+      const send = (m: Message): void => ws.send(encode(m));
+      if (msg.type === "hello") {
+        if (this.refuse !== undefined) {
+          send({ type: "error", code: this.refuse.code, message: "refused", fatal: this.refuse.fatal });
+          ws.close(1008, this.refuse.code);
+          return;
+        }
+        const n = this.peers.length + 1;
+        send(welcome(`p${n}`, msg.room, this.role));
+        this.peers.push({ ws, hello: msg, received, send });
+        this.waiters.splice(0).forEach((w) => w());
+      } else if (msg.type === "ping") {
+        send({ type: "pong", t0: msg.t0, t1: msg.t0 + 100.01, t2: msg.t0 + 100.011 });
+      } else if (msg.type === "bye") {
+        send({ type: "bye", reason: "bye" });
+        ws.close(1000);
+      }
+    });
+  }
+}
+
+function welcome(player: string, room: string, role: Role): Welcome {
+  return {
+    type: "welcome", version: 1, player, session: "s1", role, room, t: 50, rate_hz: 60,
+    lookahead_frames: 10, members: [{ player, name: "Ada" }], limits: DEFAULT_LIMITS,
+  };
+}
+
+const positions = (x: number): Float64Array => Float64Array.from({ length: 57 }, (_, i) => (i % 3 === 0 ? x : 1));
+const FAST: ConnectOptions = {
+  WebSocket, timeoutS: 2, random: () => 0.999,
+  reconnect: { initialDelayS: 0.05, maxDelayS: 0.2, maxAttempts: 4 },
+};
+
+async function take(it: AsyncIterator<ClientEvent>, type: ClientEvent["type"]): Promise<ClientEvent> {
+  for (;;) {
+    const r = await it.next();
+    assert.ok(!r.done, `stream ended while waiting for ${type}`);
+    if (r.value.type === type) return r.value;
+  }
+}
+
+test("join, frames out, poses and presence in, clock synced, bye on close", async () => {
+  const server = await new FakeServer().ready();
+  try {
+    let now = 5;
+    const client = await connect(server.url, "tok", { ...FAST, clock: () => now });
+    const w = await client.join("lobby", "Ada", "hmd3+waist", { rateHz: 72 });
+    assert.equal(w.player, "p1");
+    const peer = await server.peer(1);
+    assert.deepEqual(
+      [peer.hello.token, peer.hello.room, peer.hello.name, peer.hello.layout, peer.hello.rate_hz],
+      ["tok", "lobby", "Ada", undefined, 72], // hmd3+waist is the default: left out
+    );
+    const at = { position: [0, 1.6, 0], orientation: [0, 0, 0, 1] } as const;
+    assert.equal(client.sendFrame({ head: at, waist: at }), 0);
+    assert.equal(client.sendFrame({ head: at, waist: at, t: 7.5 }), 1);
+    assert.throws(() => client.sendFrame({ head: at, t: 7 }), RangeError); // time went back
+    const nan = { position: [0, Number.NaN, 0], orientation: [0, 0, 0, 1] } as const;
+    assert.throws(() => client.sendFrame({ head: at, waist: nan, t: 8 }), (e: unknown) =>
+      e instanceof OutOfRangeError && e.field === "trackers[3]");
+    const zero = { position: [0, 1, 0], orientation: [0, 0, 0, 0] } as const;
+    assert.throws(() => client.sendFrame({ leftHand: zero, t: 8 }), NotNormalisedError);
+    const tilted = { position: [0, 1, 0], orientation: [0, 0, 0, 2] } as const;
+    client.calibrate({ heightM: 1.8 });
+    peer.send({ type: "presence", event: "join", room: "lobby", player: "p9", name: "Bob" });
+    peer.send({ type: "pose", player: "p9", seq: 3, t: 51, positions: positions(2) });
+    const it = client.events();
+    assert.equal((await take(it, "welcome")).type, "welcome");
+    const presence = await take(it, "presence");
+    assert.equal(presence.type === "presence" && presence.name, "Bob");
+    const pose = await take(it, "pose");
+    assert.ok(pose.type === "pose" && pose.player === "p9" && pose.positions[0] === 2);
+    assert.deepEqual([...client.members.keys()], ["p1", "p9"]);
+    assert.equal(client.poses.get("p9")?.seq, 3);
+    peer.send({ type: "error", code: "RATE_LIMITED", message: "slow down", fatal: false });
+    const err = await take(it, "error");
+    assert.ok(err.type === "error" && err.error.code === "RATE_LIMITED");
+    assert.equal(client.sendFrame({ rightHand: tilted, t: 9 }), 2); // normalised, not refused
+    await sleep(0.05);
+    const frames = peer.received.filter((m) => m.type === "frame");
+    assert.deepEqual(frames.map((f) => [f.seq, f.t, f.valid]), [[0, 5, 0b1001], [1, 7.5, 0b1001], [2, 9, 0b0100]]);
+    assert.deepEqual(frames[2]!.trackers[2], [0, 1, 0, 0, 0, 0, 1]);
+    assert.ok(peer.received.some((m) => m.type === "calibrate" && "height_m" in m && m.height_m === 1.8));
+    // The first pings go out at once; the fake server's clock runs 100 s ahead.
+    for (let i = 0; i < 50 && client.clock.offsetS === undefined; i++) await sleep(0.01);
+    assert.ok(Math.abs(client.clock.offsetS! - 100.0105) < 1e-9);
+    now = 6;
+    await client.close();
+    assert.equal(client.state, "closed");
+    assert.equal(peer.received.at(-1)?.type, "bye");
+    assert.equal((await it.next()).done, true);
+  } finally {
+    await server.close();
+  }
+});
+
+test("a refused hello rejects join with the typed error and closes the client", async () => {
+  const server = await new FakeServer().ready();
+  try {
+    server.refuse = { code: "UNAUTHENTICATED", fatal: true };
+    const client = await connect(server.url, "forged", FAST);
+    await assert.rejects(client.join("lobby", "Ada"), UnauthenticatedError);
+    assert.equal(client.state, "closed");
+    assert.equal(client.sendFrame({}), undefined);
+  } finally {
+    await server.close();
+  }
+});
+
+test("connect fails with ConnectionClosedError when nobody listens", async () => {
+  const server = await new FakeServer().ready();
+  const url = server.url;
+  await server.close();
+  await assert.rejects(connect(url, "tok", FAST), ConnectionClosedError);
+});
+
+test("a lost connection is resumed: back-off, a fresh token, hello again, seq goes on", async () => {
+  const server = await new FakeServer().ready();
+  try {
+    let tokens = 0;
+    const client = await connect(server.url, () => `tok${++tokens}`, FAST);
+    await client.join("lobby", "Ada");
+    const it = client.events();
+    await take(it, "welcome");
+    const at = { position: [0, 1, 0], orientation: [0, 0, 0, 1] } as const;
+    client.sendFrame({ head: at });
+    client.sendFrame({ head: at });
+    (await server.peer(1)).ws.terminate(); // the network goes away: no close frame
+    const rec = await take(it, "reconnecting");
+    assert.ok(rec.type === "reconnecting" && rec.attempt === 1 && rec.cause instanceof ConnectionClosedError);
+    assert.ok(Math.abs(rec.delayS - 0.05 * 0.999) < 1e-9);
+    assert.equal(client.sendFrame({ head: at }), undefined); // dropped while away
+    const resumed = await take(it, "welcome");
+    assert.ok(resumed.type === "welcome" && resumed.resumed && resumed.welcome.player === "p2");
+    const peer = await server.peer(2);
+    assert.equal(peer.hello.token, "tok2");
+    assert.equal(peer.hello.room, "lobby");
+    assert.equal(client.sendFrame({ head: at }), 3); // 2 was dropped while away
+    assert.equal(client.state, "joined");
+    await client.close();
+  } finally {
+    await server.close();
+  }
+});
+
+test("SERVER_SHUTDOWN is resumed on the next server; back-off grows until it is up", async () => {
+  const first = await new FakeServer().ready();
+  const port = first.port;
+  const client = await connect(first.url, "tok", FAST);
+  await client.join("lobby", "Ada");
+  const it = client.events();
+  await take(it, "welcome");
+  const peer = await first.peer(1);
+  peer.send({ type: "bye", reason: "SERVER_SHUTDOWN" });
+  await sleep(0.01);
+  await first.close();
+  const delays: number[] = [];
+  for (let i = 0; i < 2; i++) {
+    const rec = await take(it, "reconnecting");
+    assert.ok(rec.type === "reconnecting");
+    delays.push(rec.delayS);
+    if (i === 0) assert.equal(rec.cause.code, "SERVER_SHUTDOWN");
+  }
+  assert.ok(delays[1]! > delays[0]! * 1.9, `${delays}`);
+  const second = await new FakeServer(port).ready();
+  try {
+    const resumed = await take(it, "welcome");
+    assert.ok(resumed.type === "welcome" && resumed.resumed);
+    await client.close();
+  } finally {
+    await second.close();
+  }
+});
+
+test("KICKED ends the stream with KickedError; no reconnect", async () => {
+  const server = await new FakeServer().ready();
+  try {
+    const client = await connect(server.url, "tok", FAST);
+    await client.join("lobby", "Ada");
+    const peer = await server.peer(1);
+    peer.send({ type: "error", code: "KICKED", message: "be nice", fatal: true });
+    peer.ws.close(1008, "KICKED");
+    const seen: string[] = [];
+    await assert.rejects(async () => {
+      for await (const ev of client) seen.push(ev.type);
+    }, (err: unknown) => err instanceof KickedError && err.message === "be nice");
+    assert.deepEqual(seen, ["welcome"]);
+    assert.equal(client.state, "closed");
+    assert.equal(server.peers.length, 1);
+  } finally {
+    await server.close();
+  }
+});
+
+test("giving up after maxAttempts throws the last cause", async () => {
+  const server = await new FakeServer().ready();
+  const client = await connect(server.url, "tok", FAST);
+  await client.join("lobby", "Ada");
+  await server.close();
+  const attempts: number[] = [];
+  await assert.rejects(async () => {
+    for await (const ev of client) if (ev.type === "reconnecting") attempts.push(ev.attempt);
+  }, ConnectionClosedError);
+  assert.deepEqual(attempts, [1, 2, 3, 4]);
+});
+
+test("spectators may not send frames; a missing WebSocket class is explained", async () => {
+  const server = await new FakeServer().ready();
+  try {
+    server.role = "spectator";
+    const client = await connect(server.url, "tok", FAST);
+    await client.join("lobby", "Watcher");
+    assert.throws(() => client.sendFrame({}), ForbiddenError);
+    await client.close();
+  } finally {
+    await server.close();
+  }
+  const g = globalThis as { WebSocket?: unknown };
+  const saved = g.WebSocket;
+  delete g.WebSocket;
+  try {
+    assert.throws(() => new PosecastClient("ws://x/", "t"), /pass \{ WebSocket \} from the 'ws'/);
+  } finally {
+    if (saved !== undefined) g.WebSocket = saved;
+  }
+});
+
+function sleep(s: number): Promise<void> {
+  return new Promise((r) => setTimeout(r, s * 1000));
+}
