@@ -17,11 +17,10 @@ import numpy as np
 import torch
 
 from posecast.dataset.augment import Augmentation
-from posecast.dataset.store import load_split, read_manifest
 from posecast.model.anomaly import AnomalyAE, AnomalyConfig
 from posecast.skeleton import LOWER_BODY
 from posecast.train.checkpoint import load_checkpoint, save_checkpoint
-from posecast.train.data import Normalisation, TrainArrays, build_arrays
+from posecast.train.data import Normalisation, TrainArrays, load_train_val
 from posecast.train.losses import PoseFK, position_mse_cm2
 
 
@@ -75,10 +74,8 @@ def train_anomaly(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     ckpt_path = out / "checkpoint.pt"
-    manifest = read_manifest(data_dir)
     aug = Augmentation(mirror=cfg.mirror, speeds=cfg.speeds)
-    train = build_arrays(load_split(data_dir, "train"), aug, seed=cfg.seed)
-    val = build_arrays(load_split(data_dir, "val"), Augmentation.none(), seed=cfg.seed)
+    manifest, train, val = load_train_val(data_dir, aug, cfg.seed)
     log(f"data: {train.n_frames} train frames, {val.n_frames} val frames")
     torch.manual_seed(cfg.seed)
     model_cfg = AnomalyConfig()

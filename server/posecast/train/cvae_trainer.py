@@ -19,10 +19,9 @@ import numpy as np
 import torch
 
 from posecast.dataset.augment import Augmentation
-from posecast.dataset.store import load_split, read_manifest
 from posecast.model.cvae import CVAE, CVAEConfig
 from posecast.train.checkpoint import load_checkpoint, save_checkpoint
-from posecast.train.data import Normalisation, TrainArrays, build_arrays
+from posecast.train.data import Normalisation, TrainArrays, load_train_val
 from posecast.train.losses import PoseFK, position_mse_cm2
 
 
@@ -92,10 +91,8 @@ def train_cvae(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     ckpt_path = out / "checkpoint.pt"
-    manifest = read_manifest(data_dir)
     t0 = time.perf_counter()
-    train = build_arrays(load_split(data_dir, "train"), cfg.augmentation(), seed=cfg.seed)
-    val = build_arrays(load_split(data_dir, "val"), Augmentation.none(), seed=cfg.seed)
+    manifest, train, val = load_train_val(data_dir, cfg.augmentation(), cfg.seed)
     log(
         f"data: {train.n_frames} train frames after augmentation, {val.n_frames} val frames "
         f"({time.perf_counter() - t0:.1f} s)"

@@ -17,13 +17,14 @@ contacts        (N, 2)        foot contact labels
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
 from posecast.dataset.augment import Augmentation, change_speed, mirror, scale_bones
 from posecast.dataset.frames import derive_frames
-from posecast.dataset.store import SplitData
+from posecast.dataset.store import SplitData, load_split, read_manifest
 from posecast.geometry.rotations import mat2quat, quat2mat, r6d2mat
 from posecast.motion.clip import CanonicalClip
 from posecast.tracking import deyaw_quat, to_character_frame
@@ -137,3 +138,13 @@ class Normalisation:
     @classmethod
     def from_dict(cls, d: dict[str, list[float]]) -> Normalisation:
         return cls(**{k: np.asarray(d[k], dtype=np.float32) for k in cls.__dataclass_fields__})
+
+
+def load_train_val(
+    data_dir: str | Path, aug: Augmentation, seed: int
+) -> tuple[dict[str, object], TrainArrays, TrainArrays]:
+    """The prepared dataset's manifest, its augmented train split and its plain val split."""
+    manifest = read_manifest(data_dir)
+    train = build_arrays(load_split(data_dir, "train"), aug, seed=seed)
+    val = build_arrays(load_split(data_dir, "val"), Augmentation.none(), seed=seed)
+    return manifest, train, val
