@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from posecast.geometry.rotations import mat2quat, quat_apply, quat_mul, yaw2quat
+from posecast.geometry.rotations import mat2quat, quat_apply, quat_mul, quat_normalize, yaw2quat
 from posecast.motion.synthetic import walk_clip
 from posecast.skeleton import Joint
 from posecast.tracking import (
@@ -14,6 +14,8 @@ from posecast.tracking import (
     TRACKER_JOINT,
     TrackerSlot,
     clip_features,
+    from_character_frame,
+    to_character_frame,
     tracker_features,
     trackers_from_pose,
 )
@@ -182,3 +184,14 @@ def test_streaming_one_frame_at_a_time_equals_the_batch(walk_trackers) -> None:
         prev = pos[t - 1] if t > 0 else pos[t]
         one = tracker_features(pos[t], prev, quat[t, TrackerSlot.WAIST], FPS)
         np.testing.assert_allclose(one, batch[t], rtol=0, atol=1e-12, err_msg=f"frame {t}")
+
+
+def test_from_character_frame_inverts_to_character_frame() -> None:
+    rng = np.random.default_rng(3)
+    points = rng.normal(size=(5, 3))
+    waist_pos = np.array([1.5, 0.9, -2.0])
+    waist_quat = quat_normalize(rng.normal(size=4))
+    local = to_character_frame(points, waist_pos, waist_quat)
+    np.testing.assert_allclose(
+        from_character_frame(local, waist_pos, waist_quat), points, atol=1e-12
+    )

@@ -29,7 +29,14 @@ from enum import IntEnum
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from posecast.geometry.rotations import mat2quat, quat2yaw, quat_apply, quat_mul, yaw2quat
+from posecast.geometry.rotations import (
+    mat2quat,
+    quat2yaw,
+    quat_apply,
+    quat_conj,
+    quat_mul,
+    yaw2quat,
+)
 from posecast.skeleton import Joint
 
 
@@ -119,6 +126,13 @@ def to_character_frame(points: ArrayLike, waist_pos: ArrayLike, waist_quat: Arra
     """Points ``(..., K, 3)`` moved into the character frame of the waist ``(..., 3)/(..., 4)``."""
     origin, inv_yaw = character_frame(waist_pos, waist_quat)
     return quat_apply(inv_yaw[..., None, :], np.asarray(points) - origin[..., None, :])
+
+
+def from_character_frame(points: ArrayLike, waist_pos: ArrayLike, waist_quat: ArrayLike) -> F:
+    """Inverse of :func:`to_character_frame`: points ``(..., 3)`` back into the world,
+    for a waist ``(..., 3)`` / ``(..., 4)`` that broadcasts against them."""
+    origin, inv_yaw = character_frame(waist_pos, waist_quat)
+    return quat_apply(quat_conj(inv_yaw), np.asarray(points)) + origin
 
 
 def deyaw_quat(waist_quat: ArrayLike) -> F:

@@ -126,10 +126,6 @@ def run(
 ) -> dict[str, Any]:
     results = [bench(p, samples, ticks=ticks, threads=threads) for p in player_counts]
     ok = [r.players for r in results if r.realtime()]
-    best = results[0]
-    for r in results:
-        if r.gflops > best.gflops:
-            best = r
     return {
         "players": [r.players for r in results],
         "samples": samples,

@@ -51,10 +51,9 @@ class Calibration:
             raise ConfigError(f"T-pose head height {head_y:.2f} m is implausible")
         scale = REFERENCE_HEAD_HEIGHT_M / head_y
         waist = pos[TrackerSlot.WAIST] * scale
-        expected = np.array([waist[0], REST_PELVIS_HEIGHT_M, waist[2]])
-        # Horizontal offset: the waist should sit under the head in a T-pose.
         head = pos[TrackerSlot.HEAD] * scale
-        expected[0], expected[2] = head[0], head[2]
+        # In a T-pose the pelvis stands under the head, at the reference pelvis height.
+        expected = np.array([head[0], REST_PELVIS_HEIGHT_M, head[2]])
         offset = quat_apply(quat_conj(quat[TrackerSlot.WAIST]), waist - expected)
         return cls(scale=scale, waist_offset_m=tuple(float(v) for v in offset))  # type: ignore[arg-type]
 

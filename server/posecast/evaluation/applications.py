@@ -30,7 +30,7 @@ from posecast.engine.engine import Engine, TrackerFrame
 from posecast.engine.selectors import ObstacleSelector, Selector, TargetSelector
 from posecast.inference.artifact import Artifact
 from posecast.skeleton import Joint
-from posecast.tracking import TrackerSlot, to_character_frame
+from posecast.tracking import TrackerSlot, from_character_frame, to_character_frame
 
 
 @dataclass(frozen=True)
@@ -86,20 +86,9 @@ def kick_targets(fr: Frames, foot: Joint) -> tuple[int, dict[str, tuple[float, f
     targets = {}
     for label, height in (("low", 0.45), ("high", 1.05)):
         local = np.array([local_foot[0], height, max(local_foot[2], 0.4)])
-        world = _from_character_frame(local, waist_pos, waist_quat)
+        world = from_character_frame(local, waist_pos, waist_quat)
         targets[label] = (float(world[0]), float(world[1]), float(world[2]))
     return apex, targets
-
-
-def _from_character_frame(
-    p: np.ndarray, waist_pos: np.ndarray, waist_quat: np.ndarray
-) -> np.ndarray:
-    from posecast.geometry.rotations import quat2yaw, quat_apply, yaw2quat
-
-    world = quat_apply(yaw2quat(quat2yaw(waist_quat)), p)
-    world[0] += waist_pos[0]
-    world[2] += waist_pos[2]
-    return world
 
 
 def _constant(selector: Selector) -> Callable[[int], Selector]:
@@ -128,7 +117,7 @@ def table3(
     side = 1.0 if knee.name.startswith("LEFT") else -1.0
     obstacle_local = local_knee + np.array([0.05 * side, 0.0, 0.0])
     obstacles = np.stack(
-        [_from_character_frame(obstacle_local, wp[t], wq[t]) for t in range(len(gt))]
+        [from_character_frame(obstacle_local, wp[t], wq[t]) for t in range(len(gt))]
     )
     radius = 0.2
     gt_share = float((np.linalg.norm(gt[:, knee] - obstacles, axis=-1) < radius).mean())
