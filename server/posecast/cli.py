@@ -54,11 +54,21 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
     torch_threads = args.threads
     if args.network in ("cvae", "ae"):
+        from posecast.layout import Layout, spec
         from posecast.model.cvae import CVAEConfig
         from posecast.train.cvae_trainer import CVAETrainConfig, train_cvae
 
         det = args.network == "ae"
-        model_cfg = CVAEConfig(deterministic=det, encoder_sees_pose=not det)
+        if det and args.layout != Layout.HMD3_WAIST:
+            raise SystemExit("the AE ablation exists for the 4-point layout only")
+        ls = spec(args.layout)
+        model_cfg = CVAEConfig(
+            n_features=ls.n_features,
+            deterministic=det,
+            encoder_sees_pose=not det,
+            layout=str(ls.layout),
+            root_outputs=ls.root_outputs,
+        )
         cfg = CVAETrainConfig(threads=torch_threads, seed=args.seed)
         if args.steps:
             cfg = dataclasses.replace(cfg, steps=args.steps)
@@ -248,6 +258,12 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--resume", action="store_true", help="continue from out/checkpoint.pt")
     train.add_argument("--threads", type=int, default=2, help="torch CPU threads (default 2)")
     train.add_argument("--seed", type=int, default=0)
+    train.add_argument(
+        "--layout",
+        default="hmd3+waist",
+        choices=("hmd3+waist", "hmd3"),
+        help="tracker layout the CVAE serves (default hmd3+waist)",
+    )
     train.set_defaults(func=_cmd_train)
 
     export = sub.add_parser("export", help="checkpoints -> ONNX + JSON sidecars")

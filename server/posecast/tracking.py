@@ -31,6 +31,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from posecast.geometry.rotations import (
     mat2quat,
+    quat2r6d,
     quat2yaw,
     quat_apply,
     quat_conj,
@@ -139,3 +140,50 @@ def deyaw_quat(waist_quat: ArrayLike) -> F:
     """The waist rotation with its heading removed (what FK uses in the character frame)."""
     _, inv_yaw = character_frame(np.zeros(3), waist_quat)
     return quat_mul(inv_yaw, waist_quat)
+
+
+# --- headset-only layout ("hmd3": head and both hands, no waist) -------------------------
+
+HMD3_SLOTS: tuple[TrackerSlot, ...] = (
+    TrackerSlot.HEAD,
+    TrackerSlot.LEFT_HAND,
+    TrackerSlot.RIGHT_HAND,
+)
+FEATURES_PER_TRACKER_HMD3 = 12  # position, velocity, 6D orientation
+NUM_FEATURES_HMD3 = len(HMD3_SLOTS) * FEATURES_PER_TRACKER_HMD3  # 36
+
+FEATURE_NAMES_HMD3: tuple[str, ...] = tuple(
+    f"{slot.name}.{name}"
+    for slot in HMD3_SLOTS
+    for name in (*(f"{k}{a}" for k in ("p", "v") for a in "xyz"), *(f"r{i}" for i in range(6)))
+)
+
+
+def hmd3_features(pos: ArrayLike, prev_pos: ArrayLike, quat: ArrayLike, fps: float) -> F:
+    """Network input of the headset-only model, for one or many frames.
+
+    Everything is in the *head frame*: origin at the head's X and Z on the floor,
+    turned by the inverse head yaw. Per tracker (head, left hand, right hand):
+    position, velocity (m/s) and the orientation as 6D, 12 values, 36 in all. The
+    orientations are what a waistless model has instead of the waist: the head's
+    pitch and roll show leaning and bending, the hands' show the forearms.
+
+    Args:
+        pos, prev_pos: ``(..., 4, 3)`` or ``(..., 3, 3)`` positions (slot order; a
+            waist slot, if present, is ignored).
+        quat: ``(..., 4, 4)`` or ``(..., 3, 4)`` orientations, xyzw.
+        fps: frame rate the velocities are measured at.
+
+    Returns:
+        ``(..., 36)`` in :data:`FEATURE_NAMES_HMD3` order.
+    """
+    p = np.asarray(pos, dtype=np.float64)[..., :3, :]
+    pp = np.asarray(prev_pos, dtype=np.float64)[..., :3, :]
+    q = np.asarray(quat, dtype=np.float64)[..., :3, :]
+    origin, inv_yaw = character_frame(p[..., TrackerSlot.HEAD, :], q[..., TrackerSlot.HEAD, :])
+    iy = inv_yaw[..., None, :]
+    local = quat_apply(iy, p - origin[..., None, :])
+    vel = quat_apply(iy, (p - pp) * fps)
+    rot = quat2r6d(quat_mul(iy, q))
+    feats = np.concatenate([local, vel, rot], axis=-1)  # (..., 3, 12)
+    return feats.reshape(*p.shape[:-2], NUM_FEATURES_HMD3)

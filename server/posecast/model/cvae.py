@@ -11,6 +11,10 @@ The paper's Sec. 4.2 says the pose head has "54 outputs", but Sec. 3 defines
 ``r_t`` in R^(18x6) = 108; 54 is the decoder's *input* size (24 + 30). posecast's pose
 head has 108 outputs (see docs/skeleton.md).
 
+Headset-only variant (``layout="hmd3"``, ``root_outputs=9``): the features are the 36
+head-frame values of :func:`posecast.tracking.hmd3_features` and the pose head has 9
+more outputs, the pelvis rotation (6D) and position (metres), in the head's yaw frame.
+
 Encoder: the paper lists a 24-input encoder that sees only the trackers. A recognition
 network that never sees the pose gives the latent nothing to explain, so ``z`` can only
 act as noise the decoder learns to ignore. posecast's encoder also reads the target pose
@@ -37,6 +41,8 @@ class CVAEConfig:
     n_rot: int = 18
     deterministic: bool = False  # the AE ablation: mu/sigma replaced by one FC layer
     encoder_sees_pose: bool = True
+    layout: str = "hmd3+waist"  # posecast.layout.Layout value
+    root_outputs: int = 0  # 9 when the decoder predicts the pelvis pose (layout hmd3)
 
     def __post_init__(self) -> None:
         if self.deterministic and self.encoder_sees_pose:
@@ -76,7 +82,9 @@ class Decoder(nn.Module):
         super().__init__()
         self.fc = nn.Linear(cfg.n_features + cfg.latent, cfg.hidden)
         self.gru = nn.GRU(cfg.hidden, cfg.hidden, batch_first=True)
-        self.pose = nn.Linear(cfg.hidden, cfg.n_rot * 6)
+        # For a model that predicts the pelvis, its 6D rotation and position (head
+        # frame) follow the 108 joint-rotation outputs in the same head.
+        self.pose = nn.Linear(cfg.hidden, cfg.n_rot * 6 + cfg.root_outputs)
         self.contact = nn.Linear(cfg.hidden, 2)
         self.cfg = cfg
 
@@ -84,7 +92,7 @@ class Decoder(nn.Module):
         self, x: torch.Tensor, z: torch.Tensor, h0: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Whole sequence: ``x (B, T, 24)``, ``z (B, T, 30)`` ->
-        ``(rot (B, T, 108), contact logits (B, T, 2), h_T (1, B, 128))``."""
+        ``(rot (B, T, 108 [+ 9]), contact logits (B, T, 2), h_T (1, B, 128))``."""
         f = torch.relu(self.fc(torch.cat([x, z], dim=-1)))  # (B, T, 128)
         h, hT = self.gru(f, h0)  # (B, T, 128)
         a = torch.relu(h)

@@ -22,7 +22,7 @@ from posecast.dataset.augment import Augmentation
 from posecast.model.cvae import CVAE, CVAEConfig
 from posecast.train.checkpoint import load_checkpoint, save_checkpoint
 from posecast.train.data import Normalisation, TrainArrays, load_train_val
-from posecast.train.losses import PoseFK, position_mse_cm2
+from posecast.train.losses import PoseFK, position_mse_cm2, split_root
 
 
 @dataclass(frozen=True)
@@ -68,8 +68,8 @@ def _batch(
 def _losses(
     model: CVAE, fk: PoseFK, b: dict[str, torch.Tensor], cfg: CVAETrainConfig, sample: bool = True
 ) -> dict[str, torch.Tensor]:
-    rot, logits, kl = model(b["x"], b["pose_in"], sample=sample)
-    pred = fk(rot, b["root_mat"], b["pos"][..., 0, :])  # (B, T, 19, 3)
+    out, logits, kl = model(b["x"], b["pose_in"], sample=sample)
+    pred = fk(*split_root(out, b["root_mat"], b["pos"][..., 0, :]))  # (B, T, 19, 3)
     mse = position_mse_cm2(pred, b["pos"])
     bce = torch.nn.functional.binary_cross_entropy_with_logits(logits, b["contacts"])
     klm = kl.mean()
@@ -92,7 +92,7 @@ def train_cvae(
     out.mkdir(parents=True, exist_ok=True)
     ckpt_path = out / "checkpoint.pt"
     t0 = time.perf_counter()
-    manifest, train, val = load_train_val(data_dir, cfg.augmentation(), cfg.seed)
+    manifest, train, val = load_train_val(data_dir, cfg.augmentation(), cfg.seed, model_cfg.layout)
     log(
         f"data: {train.n_frames} train frames after augmentation, {val.n_frames} val frames "
         f"({time.perf_counter() - t0:.1f} s)"
@@ -199,7 +199,7 @@ def evaluate_val(
         z = torch.zeros(*b["x"].shape[:2], model.cfg.latent)
         if model.cfg.deterministic:
             z, _, _ = model.encoder(b["x"])
-        rot, _, _ = model.decoder(b["x"], z)
-        pred = fk(rot, b["root_mat"], b["pos"][..., 0, :])
+        out, _, _ = model.decoder(b["x"], z)
+        pred = fk(*split_root(out, b["root_mat"], b["pos"][..., 0, :]))
         errs.append((pred - b["pos"]).norm(dim=-1).mean(dim=(1, 2)) * 100.0)
     return float(torch.cat(errs).mean()) if errs else float("nan")

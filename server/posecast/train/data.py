@@ -6,10 +6,12 @@ windows never straddle two clips.
 ==============  ============  =======================================================
 field           shape         meaning
 ==============  ============  =======================================================
-features        (N, 24)       tracker features of the (possibly rescaled) body
-local_pos       (N, 19, 3)    canonical-body joint positions, character frame, metres
+features        (N, F)        tracker features of the (possibly rescaled) body (F: 24
+                              for ``hmd3+waist``, 36 for ``hmd3``)
+local_pos       (N, 19, 3)    canonical-body joint positions in the layout's frame
+                              (the waist's or the head's yaw frame), metres
 rot6d           (N, 18, 6)    target local rotations
-root_mat        (N, 3, 3)     pelvis rotation in the character frame (heading removed)
+root_mat        (N, 3, 3)     pelvis rotation in that frame
 contacts        (N, 2)        foot contact labels
 ==============  ============  =======================================================
 """
@@ -25,9 +27,10 @@ from numpy.typing import NDArray
 from posecast.dataset.augment import Augmentation, change_speed, mirror, scale_bones
 from posecast.dataset.frames import derive_frames
 from posecast.dataset.store import SplitData, load_split, read_manifest
-from posecast.geometry.rotations import mat2quat, quat2mat, r6d2mat
+from posecast.geometry.rotations import mat2quat, quat2mat, quat_mul, r6d2mat
+from posecast.layout import Layout, LayoutSpec, spec
 from posecast.motion.clip import CanonicalClip
-from posecast.tracking import deyaw_quat, to_character_frame
+from posecast.tracking import character_frame, to_character_frame
 
 F32 = NDArray[np.float32]
 
@@ -70,21 +73,34 @@ def clip_from_split(split: SplitData, i: int) -> CanonicalClip:
     )
 
 
-def _views(clip: CanonicalClip, body: CanonicalClip) -> dict[str, NDArray[np.floating]]:
+def _views(
+    clip: CanonicalClip, body: CanonicalClip, ls: LayoutSpec
+) -> dict[str, NDArray[np.floating]]:
     target = derive_frames(clip)
     sensed = derive_frames(body) if body is not clip else target
     root_q = target["root_quat"].astype(np.float64)
+    frame_pos = target["tracker_pos"][:, ls.frame_slot].astype(np.float64)
+    frame_quat = target["tracker_quat"][:, ls.frame_slot].astype(np.float64)
+    _, inv_yaw = character_frame(frame_pos, frame_quat)
+    if ls.layout is Layout.HMD3_WAIST:
+        features = sensed["features"]  # derived once, at prepare time
+    else:
+        features = ls.clip_features(sensed["tracker_pos"], sensed["tracker_quat"], clip.fps)
     return {
-        "features": sensed["features"],
-        "local_pos": to_character_frame(target["positions"], target["root_pos"], root_q),
+        "features": features,
+        "local_pos": to_character_frame(target["positions"], frame_pos, frame_quat),
         "rot6d": target["rot6d"],
-        "root_mat": quat2mat(deyaw_quat(root_q)),
+        "root_mat": quat2mat(quat_mul(inv_yaw, root_q)),
         "contacts": target["contacts"],
     }
 
 
-def build_arrays(split: SplitData, aug: Augmentation, seed: int = 0) -> TrainArrays:
-    """All clips of ``split``, each in every augmented variant ``aug`` asks for."""
+def build_arrays(
+    split: SplitData, aug: Augmentation, seed: int = 0, layout: str = Layout.HMD3_WAIST
+) -> TrainArrays:
+    """All clips of ``split``, each in every augmented variant ``aug`` asks for, in the
+    view of ``layout``'s model."""
+    ls = spec(layout)
     rng = np.random.default_rng(seed)
     parts: list[dict[str, NDArray[np.floating]]] = []
     for i in range(split.n_clips):
@@ -95,7 +111,7 @@ def build_arrays(split: SplitData, aug: Augmentation, seed: int = 0) -> TrainArr
                 clip = change_speed(v, speed)
                 if clip.n_frames < 2:
                     continue
-                parts.append(_views(clip, scale_bones(clip, rng, aug)))
+                parts.append(_views(clip, scale_bones(clip, rng, aug), ls))
     lengths = [len(p["features"]) for p in parts]
     starts = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
 
@@ -141,10 +157,10 @@ class Normalisation:
 
 
 def load_train_val(
-    data_dir: str | Path, aug: Augmentation, seed: int
+    data_dir: str | Path, aug: Augmentation, seed: int, layout: str = Layout.HMD3_WAIST
 ) -> tuple[dict[str, object], TrainArrays, TrainArrays]:
     """The prepared dataset's manifest, its augmented train split and its plain val split."""
     manifest = read_manifest(data_dir)
-    train = build_arrays(load_split(data_dir, "train"), aug, seed=seed)
-    val = build_arrays(load_split(data_dir, "val"), Augmentation.none(), seed=seed)
+    train = build_arrays(load_split(data_dir, "train"), aug, seed=seed, layout=layout)
+    val = build_arrays(load_split(data_dir, "val"), Augmentation.none(), seed, layout)
     return manifest, train, val

@@ -26,6 +26,20 @@ class PoseFK(torch.nn.Module):
         return fk(local, root_pos, offsets)[1]
 
 
+def split_root(
+    out: torch.Tensor, root_mat: torch.Tensor, root_pos: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The decoder's pose output and the pelvis pose FK should use.
+
+    ``out (..., 108)``: the pelvis comes from the data (``root_mat``, ``root_pos``, the
+    waist tracker's at serving time). ``out (..., 117)``: the model predicts it, 6D
+    rotation then position, in the same frame as the targets.
+    """
+    if out.shape[-1] == 108:
+        return out, root_mat, root_pos
+    return out[..., :108], r6d2mat(out[..., 108:114]), out[..., 114:117]
+
+
 def position_mse_cm2(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     """Mean squared joint position error in cm^2 (positions given in metres)."""
     return ((pred - target) * 100.0).pow(2).mean()
