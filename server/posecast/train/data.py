@@ -82,6 +82,7 @@ def _views(
     frame_pos = target["tracker_pos"][:, ls.frame_slot].astype(np.float64)
     frame_quat = target["tracker_quat"][:, ls.frame_slot].astype(np.float64)
     _, inv_yaw = character_frame(frame_pos, frame_quat)
+    features: NDArray[np.floating]
     if ls.layout is Layout.HMD3_WAIST:
         features = sensed["features"]  # derived once, at prepare time
     else:
