@@ -69,7 +69,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
             layout=str(ls.layout),
             root_outputs=ls.root_outputs,
         )
-        cfg = CVAETrainConfig(threads=torch_threads, seed=args.seed)
+        cfg = CVAETrainConfig(threads=torch_threads, seed=args.seed, rot_weight=args.rot_weight)
         if args.steps:
             cfg = dataclasses.replace(cfg, steps=args.steps)
         path = train_cvae(args.data, args.out, model_cfg, cfg, resume=args.resume)
@@ -90,7 +90,9 @@ def _cmd_export(args: argparse.Namespace) -> int:
     extra = {}
     if args.data is not None:
         extra["cvae_decoder"] = {"mean_pose_rot6d": mean_pose_rot6d(args.data)}
-    for path in export_all(args.out, args.cvae, args.ae, args.anomaly, extra):
+    for path in export_all(
+        args.out, args.cvae, args.ae, args.anomaly, extra, cvae_hmd3=args.cvae_hmd3
+    ):
         print(f"wrote {path}")
     return 0
 
@@ -116,6 +118,8 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     from posecast.engine.config import EngineConfig
 
     variants = args.variants.split(",") if args.variants else list(VARIANTS)
+    if args.layout != "hmd3+waist" and not args.variants:
+        variants.remove("ae_ik")  # the AE ablation is a 4-point model
     engine_cfg = EngineConfig(
         samples=args.samples,
         outlier_baseline=args.outlier_baseline,
@@ -128,6 +132,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         args.models,
         log=lambda m: print(m, file=sys.stderr),
         engine_cfg=engine_cfg,
+        layout=args.layout,
     )
     print(format_table(report))
     if args.json is not None:
@@ -259,6 +264,13 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--threads", type=int, default=2, help="torch CPU threads (default 2)")
     train.add_argument("--seed", type=int, default=0)
     train.add_argument(
+        "--rot-weight",
+        type=float,
+        default=0.0,
+        help="weight of the local-rotation loss (0: positions only, as the shipped 4-point "
+        "model; the headset-only model uses 10)",
+    )
+    train.add_argument(
         "--layout",
         default="hmd3+waist",
         choices=("hmd3+waist", "hmd3"),
@@ -269,6 +281,7 @@ def build_parser() -> argparse.ArgumentParser:
     export = sub.add_parser("export", help="checkpoints -> ONNX + JSON sidecars")
     export.add_argument("--out", type=Path, required=True, help="models directory")
     export.add_argument("--cvae", type=Path, help="CVAE checkpoint")
+    export.add_argument("--cvae-hmd3", type=Path, help="headset-only (hmd3) CVAE checkpoint")
     export.add_argument("--ae", type=Path, help="deterministic AE checkpoint")
     export.add_argument("--anomaly", type=Path, help="anomaly AE checkpoint")
     export.add_argument("--data", type=Path, help="prepared dataset (for the mean pose)")
@@ -282,6 +295,12 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--json", type=Path, help="write the report here")
     ev.add_argument("--models", type=Path, help="models directory (default: shipped)")
     ev.add_argument("--variants", help="comma-separated subset of variants")
+    ev.add_argument(
+        "--layout",
+        default="hmd3+waist",
+        choices=("hmd3+waist", "hmd3"),
+        help="tracker layout, i.e. which model (default hmd3+waist)",
+    )
     ev.add_argument("--samples", type=int, default=100, help="SSI latent samples N (100)")
     ev.add_argument("--outlier-factor", type=float, default=2.0, help="SSI outlier factor (2)")
     ev.add_argument(

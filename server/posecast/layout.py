@@ -22,12 +22,14 @@ from enum import StrEnum
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from posecast.geometry.rotations import quat2mat, quat_conj, r6d2mat
 from posecast.tracking import (
     FEATURE_NAMES,
     FEATURE_NAMES_HMD3,
     NUM_FEATURES,
     NUM_FEATURES_HMD3,
     TrackerSlot,
+    character_frame,
     hmd3_features,
     tracker_features,
 )
@@ -96,6 +98,16 @@ SPECS: dict[Layout, LayoutSpec] = {
 }
 assert SPECS[Layout.HMD3_WAIST].n_features == NUM_FEATURES
 assert SPECS[Layout.HMD3].n_features == NUM_FEATURES_HMD3
+
+
+def pelvis_from_head(root_out: ArrayLike, head_pos: ArrayLike, head_quat: ArrayLike) -> tuple[F, F]:
+    """World pelvis rotations ``(R, 3, 3)`` and positions ``(R, 3)`` from the headset-only
+    decoder's ``root`` outputs ``(R, 9)`` and the head trackers ``(R, 3)`` / ``(R, 4)``:
+    the outputs live in the head's yaw frame (origin on the floor under the head)."""
+    origin, inv_yaw = character_frame(head_pos, head_quat)
+    yaw = quat2mat(quat_conj(inv_yaw))  # (R, 3, 3)
+    out = np.asarray(root_out, dtype=np.float64)
+    return yaw @ r6d2mat(out[:, :6]), origin + (yaw @ out[:, 6:9, None])[..., 0]
 
 
 def spec(layout: str | Layout) -> LayoutSpec:

@@ -27,6 +27,25 @@ def walk_pose_batch(walk_arrays: Walk) -> tuple[np.ndarray, np.ndarray, np.ndarr
     )
 
 
+def test_score_mats_ignores_heading_and_place(walk_arrays: Walk, rng: np.random.Generator) -> None:
+    """Scores from pelvis matrices (the headset-only model's path) depend on the pose,
+    not on where the player stands or which way it faces: turning and moving the poses
+    and their pelvis together changes no score."""
+    from posecast.geometry.rotations import quat2mat
+    from posecast.inference.artifact import load_artifact
+
+    scorer = AnomalyScorer(load_artifact("anomaly"))
+    pos, waist_pos, waist_quat = walk_pose_batch(walk_arrays)
+    pos, waist_pos, waist_quat = pos[:32], waist_pos[:32], waist_quat[:32]
+    root = quat2mat(waist_quat)
+    a = scorer.score_mats(pos, waist_pos, root)
+    turn, shift = quat2mat(yaw2quat(1.1)), np.array([3.0, 0.0, -2.0])
+    b = scorer.score_mats(pos @ turn.T + shift, waist_pos @ turn.T + shift, turn @ root)
+    np.testing.assert_allclose(a, b, atol=1e-5)
+    c = scorer.score_mats(pos, waist_pos, quat2mat(normalize(rng.normal(size=(32, 4)))))
+    assert np.abs(c - a).max() > 1e-2  # a wrong pelvis rotation does change the scores
+
+
 def test_rotate_y_matches_to_character_frame(rng: np.random.Generator) -> None:
     """The scorer's cheap yaw-only rotation equals the general character-frame move,
     for waists that pitch and roll as well as turn."""
@@ -34,7 +53,8 @@ def test_rotate_y_matches_to_character_frame(rng: np.random.Generator) -> None:
     waist_pos = rng.normal(size=(16, 3))
     waist_quat = normalize(rng.normal(size=(16, 4)))
     origin, inv_yaw = character_frame(waist_pos, waist_quat)
-    got = _rotate_y(points - origin[:, None, :], inv_yaw)
+    angle = 2.0 * np.arctan2(inv_yaw[:, 1], inv_yaw[:, 3])
+    got = _rotate_y(points - origin[:, None, :], angle)
     np.testing.assert_allclose(got, to_character_frame(points, waist_pos, waist_quat), atol=1e-12)
 
 

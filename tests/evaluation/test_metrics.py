@@ -71,3 +71,45 @@ def test_accumulator_weights_by_count() -> None:
     acc.add("x", (10.0, 10))
     acc.add("x", (0.0, 30))
     assert acc.means()["x"] == pytest.approx(0.25)
+
+
+def test_root_and_hand_errors_read_their_own_joints() -> None:
+    from posecast.skeleton import Joint
+
+    gt = np.zeros((5, 19, 3))
+    pred = gt.copy()
+    pred[:, Joint.PELVIS, 0] = 0.03
+    pred[:, Joint.LEFT_HAND, 1] = 0.10
+    s, n = m.root_pe(pred, gt)
+    assert s / n == pytest.approx(3.0)
+    s, n = m.hand_pe(pred, gt)
+    assert s / n == pytest.approx(5.0)  # one hand 10 cm off, the other exact
+
+
+def test_mpjre_is_the_local_rotation_angle_in_degrees() -> None:
+    from posecast.geometry.rotations import axis_mat
+    from posecast.skeleton import Joint
+
+    world = np.broadcast_to(np.eye(3), (4, 19, 3, 3)).copy()
+    s, n = m.mpjre(world, world)
+    assert s == pytest.approx(0.0, abs=1e-9) and n == 4 * 19
+    # Twist the left forearm by 30 degrees about its bone (a positions-only error
+    # measure would not see it); its children turn with it, so only one local differs.
+    turned = world.copy()
+    twist = axis_mat("X", np.radians(30.0))
+    for j in (Joint.LEFT_FOREARM, Joint.LEFT_HAND):
+        turned[:, j] = twist
+    s, n = m.mpjre(turned, world)
+    assert s / n == pytest.approx(30.0 / 19, rel=1e-6)
+
+
+def test_jitter_is_zero_for_constant_velocity_and_exact_for_a_cubic() -> None:
+    t = np.arange(20) / 60.0
+    line = np.zeros((20, 19, 3))
+    line[..., 0] = 2.0 * t[:, None]
+    s, n = m.jitter(line, 60.0)
+    assert s / n == pytest.approx(0.0, abs=1e-6)
+    cubic = np.zeros((20, 19, 3))
+    cubic[..., 1] = 0.5 * t[:, None] ** 3  # jerk = 3 m/s^3 everywhere
+    s, n = m.jitter(cubic, 60.0)
+    assert s / n == pytest.approx(3.0, rel=1e-6)

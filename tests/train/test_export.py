@@ -116,3 +116,35 @@ def test_export_all_writes_sidecars(tmp_path: Path) -> None:
     assert meta["training"]["steps"] == 3
     assert meta["mean_pose_rot6d"] == [0.0] * 108
     assert meta["git_revision"]
+
+
+def test_hmd3_decoder_parity_and_sidecar(tmp_path: Path) -> None:
+    """The headset-only decoder: 36 features in, the pelvis as its own ``root`` output,
+    equal to torch's 9 extra pose-head outputs."""
+    from posecast.tracking import FEATURE_NAMES_HMD3
+
+    torch.manual_seed(1)
+    rng = np.random.default_rng(1)
+    model = CVAE(CVAEConfig(n_features=36, layout="hmd3", root_outputs=9)).eval()
+    ckpt = {"model": model.state_dict(), "config": model.cfg.to_dict(), "norm": _norm(rng, 36)}
+    x = rng.normal(size=(8, 36)).astype(np.float32)
+    z = rng.normal(size=(8, 30)).astype(np.float32)
+    h = rng.normal(size=(8, 128)).astype(np.float32) * 0.5
+    sess = _session(build_decoder(ckpt))
+    assert [o.name for o in sess.get_outputs()] == ["rotations", "root", "contacts", "h_out"]
+    rot, root, con, h_out = sess.run(None, {"features": x, "z": z, "h": h})
+    xn = (x - _n(ckpt, "feat_mean")) / _n(ckpt, "feat_std")
+    with torch.no_grad():
+        r, c, hh = model.decoder.step(
+            torch.from_numpy(xn), torch.from_numpy(z), torch.from_numpy(h)
+        )
+    np.testing.assert_allclose(rot, r[:, :108].numpy(), atol=ATOL, rtol=0)
+    np.testing.assert_allclose(root, r[:, 108:].numpy(), atol=ATOL, rtol=0)
+    np.testing.assert_allclose(con, c.numpy(), atol=ATOL, rtol=0)
+    np.testing.assert_allclose(h_out, hh.numpy(), atol=ATOL, rtol=0)
+    save_checkpoint(tmp_path / "c3.pt", ckpt)
+    export_all(tmp_path / "models", cvae_hmd3=tmp_path / "c3.pt")
+    meta = json.loads((tmp_path / "models" / "cvae_decoder_hmd3.json").read_text())
+    assert meta["layout"] == "hmd3" and meta["feature_layout"] == list(FEATURE_NAMES_HMD3)
+    assert meta["outputs"]["root"] == ["B", 9]
+    assert sorted(meta["tracker_slots"]) == ["HEAD", "LEFT_HAND", "RIGHT_HAND"]

@@ -57,3 +57,20 @@ def test_resume_continues_where_it_stopped(prepared_dir: Path, tmp_path: Path) -
     assert any("resumed" in line and "step 20" in line for line in logs)
     steps = [h["step"] for h in load_checkpoint(ckpt)["history"]]
     assert steps == list(range(1, 41))
+
+
+def test_hmd3_cvae_learns_the_pelvis_and_rotations(prepared_dir: Path, tmp_path: Path) -> None:
+    """The headset-only CVAE: 36 inputs, 117 pose outputs (the pelvis included), the
+    rotation term logged and falling with the position loss."""
+    import dataclasses
+
+    cfg = CVAEConfig(n_features=36, layout="hmd3", root_outputs=9)
+    train_cfg = dataclasses.replace(SMALL, rot_weight=10.0)
+    ckpt = train_cvae(prepared_dir, tmp_path, cfg, train_cfg, log=lambda _: None)
+    loss, rot = _losses(ckpt), _losses(ckpt, "rot_frob2")
+    assert loss[-5:].mean() < 0.5 * loss[:5].mean()
+    assert rot[-5:].mean() < rot[:5].mean()
+    state = load_checkpoint(ckpt)
+    assert state["model"]["decoder.pose.weight"].shape == (117, 128)
+    assert state["model"]["decoder.fc.weight"].shape == (128, 36 + 30)
+    assert state["config"]["layout"] == "hmd3"

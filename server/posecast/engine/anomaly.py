@@ -14,7 +14,6 @@ from posecast.engine.kinematics32 import fk32
 from posecast.geometry.rotations import quat2mat
 from posecast.inference.artifact import Artifact
 from posecast.skeleton import LOWER_BODY, Joint
-from posecast.tracking import character_frame, deyaw_quat
 
 F64 = NDArray[np.floating]
 _LOWER = [int(j) for j in LOWER_BODY]
@@ -35,13 +34,25 @@ class AnomalyScorer:
         With ``repeat = N`` consecutive groups of ``N`` poses share one waist (the
         ``N`` samples of one player), and the frame math runs once per group.
         """
-        origin, inv_yaw = character_frame(waist_pos, waist_quat)
-        root = quat2mat(deyaw_quat(waist_quat)).astype(np.float32)
+        return self.score_mats(world_pos, waist_pos, quat2mat(waist_quat), repeat)
+
+    def score_mats(self, world_pos: F64, root_pos: F64, root_mat: F64, repeat: int = 1) -> F64:
+        """:meth:`score` with the pelvis pose as ``(B / repeat, 3)`` positions and
+        ``(B / repeat, 3, 3)`` rotation matrices (one per pose for a model that
+        predicts the pelvis itself)."""
+        yaw = np.arctan2(root_mat[:, 0, 2], root_mat[:, 2, 2])  # heading of the +Z axis
+        c, s = np.cos(yaw), np.sin(yaw)
+        z, o = np.zeros_like(c), np.ones_like(c)
+        inv_yaw = np.stack([c, z, -s, z, o, z, s, z, c], axis=-1).reshape(-1, 3, 3)
+        root = (inv_yaw @ root_mat).astype(np.float32)  # heading removed
+        origin = np.array(root_pos, dtype=np.float64, copy=True)
+        origin[:, 1] = 0.0
+        angle = -yaw
         if repeat > 1:
-            origin, inv_yaw = np.repeat(origin, repeat, 0), np.repeat(inv_yaw, repeat, 0)
+            origin, angle = np.repeat(origin, repeat, 0), np.repeat(angle, repeat, 0)
             root = np.repeat(root, repeat, 0)
         rel = world_pos - origin[:, None, :]
-        local = _rotate_y(rel, inv_yaw)  # (B, 19, 3)
+        local = _rotate_y(rel, angle)  # (B, 19, 3)
         local = np.ascontiguousarray(local, dtype=np.float32)
         (rot,) = self.artifact.run(local_positions=local.reshape(len(local), 57))
         _, rec = fk32(rot, root, local[:, Joint.PELVIS], want_mats=False, joints=_LOWER_T)
@@ -49,9 +60,8 @@ class AnomalyScorer:
         return err
 
 
-def _rotate_y(v: F64, q_yaw: F64) -> F64:
-    """Rotate ``v (B, K, 3)`` by pure-yaw quaternions ``(B, 4)`` (cheaper than a full apply)."""
-    ang = 2.0 * np.arctan2(q_yaw[:, 1], q_yaw[:, 3])
-    c, s = np.cos(ang)[:, None], np.sin(ang)[:, None]
+def _rotate_y(v: F64, angle: F64) -> F64:
+    """Rotate ``v (B, K, 3)`` about +Y by ``angle (B,)`` radians."""
+    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
     x, z = v[..., 0], v[..., 2]
     return np.stack([c * x + s * z, v[..., 1], -s * x + c * z], axis=-1)

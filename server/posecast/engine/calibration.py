@@ -44,17 +44,21 @@ class Calibration:
         return cls(scale=(REFERENCE_HEAD_HEIGHT_M + HEAD_TOP_ABOVE_JOINT_M) / height_m)
 
     @classmethod
-    def from_tpose(cls, pos: F64, quat: F64) -> Calibration:
-        """From one frame of the user standing in a T-pose: ``(4, 3)`` / ``(4, 4)``."""
+    def from_tpose(cls, pos: F64, quat: F64, waist: bool = True) -> Calibration:
+        """From one frame of the user standing in a T-pose: ``(4, 3)`` / ``(4, 4)``.
+
+        ``waist=False`` (a headset-only player): the scale alone, from the head."""
         head_y = float(pos[TrackerSlot.HEAD, 1])
         if not MIN_HEIGHT_M - HEAD_TOP_ABOVE_JOINT_M < head_y < MAX_HEIGHT_M:
             raise ConfigError(f"T-pose head height {head_y:.2f} m is implausible")
         scale = REFERENCE_HEAD_HEIGHT_M / head_y
-        waist = pos[TrackerSlot.WAIST] * scale
+        if not waist:
+            return cls(scale=scale)
+        waist_pos = pos[TrackerSlot.WAIST] * scale
         head = pos[TrackerSlot.HEAD] * scale
         # In a T-pose the pelvis stands under the head, at the reference pelvis height.
         expected = np.array([head[0], REST_PELVIS_HEIGHT_M, head[2]])
-        offset = quat_apply(quat_conj(quat[TrackerSlot.WAIST]), waist - expected)
+        offset = quat_apply(quat_conj(quat[TrackerSlot.WAIST]), waist_pos - expected)
         return cls(scale=scale, waist_offset_m=tuple(float(v) for v in offset))  # type: ignore[arg-type]
 
     def apply(self, pos: F64, quat: F64) -> F64:

@@ -2,9 +2,12 @@
 
 Per tick, for all ``P`` players x ``N`` samples at once:
 
-1. tracker frames -> calibrated positions -> features ``(P, 24)``
-2. one decoder call on ``P*N`` rows -> rotations, contacts, next hidden states
-3. FK with the root from the waist tracker, then per-sample contact IK
+1. tracker frames -> calibrated positions -> features ``(P, 24)`` (``(P, 36)`` for the
+   headset-only layout, see :mod:`posecast.layout`)
+2. one decoder call on ``P*N`` rows -> rotations, contacts, next hidden states (and,
+   for ``hmd3``, each sample's pelvis pose in the head's yaw frame)
+3. FK with the root from the waist tracker (``hmd3``: from the sample's own pelvis
+   output), then per-sample contact IK
 4. anomaly error ``R`` of every sample, and each player's selector decides whether
    its current sample must give way (detected at frame ``n``, the newest)
 5. emit frame ``n - tau`` per player: the current sample's pose, or during a
@@ -12,7 +15,9 @@ Per tick, for all ``P`` players x ``N`` samples at once:
    (one more batched call), then that player's own display IK
 
 The engine is pure: frames go in with :meth:`Engine.push`, :meth:`Engine.tick`
-returns poses and events. No sockets, no clocks, no threads.
+returns poses and events. No sockets, no clocks, no threads. One engine serves one
+model (one layout); :class:`posecast.engine.multi.MultiEngine` batches each model's
+players together when a server serves both.
 
 Look-ahead (paper Sec. 3.2.4): each player keeps a ring of ``tau + 1`` frames of
 inputs, pre-step hidden states and raw outputs for all samples. An outlier found at
@@ -40,8 +45,9 @@ from posecast.engine.slots import SlotArrays
 from posecast.geometry.kinematics import fk_positions
 from posecast.geometry.rotations import mat2quat, quat2mat
 from posecast.inference.artifact import Artifact
+from posecast.layout import Layout, pelvis_from_head, spec
 from posecast.skeleton import NUM_JOINTS, REST_PELVIS_HEIGHT_M, reference_offsets
-from posecast.tracking import NUM_FEATURES, TRACKER_JOINT_INDEX, TrackerSlot, tracker_features
+from posecast.tracking import TRACKER_JOINT_INDEX, TrackerSlot
 
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
@@ -49,7 +55,8 @@ F64 = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class TrackerFrame:
-    """One frame from a headset: 4 trackers in slot order, world metres, xyzw."""
+    """One frame from a headset: 4 trackers in slot order, world metres, xyzw (a
+    headset-only player's waist slot is ignored)."""
 
     seq: int
     pos: F64  # (4, 3)
@@ -122,6 +129,8 @@ class Engine:
         self.scorer = scorer
         mc = decoder.meta["model_config"]
         self.latent, self.hidden = int(mc["latent"]), int(mc["hidden"])
+        self.layout = spec(decoder.meta.get("layout", Layout.HMD3_WAIST))
+        n_root = self.layout.root_outputs
         N = self.cfg.samples
         # Ring rows: tau + 1 frames of history, plus the row the decoder writes the next
         # hidden states into while frame n - tau is still being emitted.
@@ -141,7 +150,8 @@ class Engine:
                 "ring_h": ((N, self.hidden), np.float32, L),  # hidden state before the frame
                 "ring_rot": ((N, 108), np.float32, L),
                 "ring_con": ((N, 2), np.float32, L),
-                "ring_x": ((NUM_FEATURES,), np.float32, L),
+                "ring_x": ((self.layout.n_features,), np.float32, L),
+                "ring_root": ((N, max(1, n_root)), np.float32, L),  # hmd3: pelvis outputs
                 "ring_pos": ((4, 3), np.float64, L),  # calibrated tracker positions
                 "ring_quat": ((4, 4), np.float64, L),
                 "ring_seq": ((), np.int64, L),
@@ -171,7 +181,7 @@ class Engine:
         self.slots["eps"][slot] = eps
         wf = (
             WaistFilter(self.cfg.waist_filter_hz, self.cfg.fps)
-            if self.cfg.waist_filter_hz
+            if self.cfg.waist_filter_hz and not self.layout.predicts_root
             else None
         )
         self.players[player] = _Player(
@@ -224,29 +234,30 @@ class Engine:
         pos, quat = s.row("ring_pos", k), s.row("ring_quat", k)  # (P, 4, 3), (P, 4, 4)
         # One decoder call for all P*N samples; ONNX Runtime reads the hidden states from
         # this frame's ring row and writes the next ones straight into the following row.
+        outputs = {
+            "rotations": s.row("ring_rot", k).reshape(P * N, 108),
+            "contacts": s.row("ring_con", k).reshape(P * N, 2),
+            "h_out": s.row("ring_h", (k + 1) % L).reshape(P * N, self.hidden),
+        }
+        if self.layout.predicts_root:
+            outputs["root"] = s.row("ring_root", k).reshape(P * N, self.layout.root_outputs)
         self.decoder.run_into(
             {
                 "features": np.repeat(s.row("ring_x", k), N, axis=0),
                 "z": s.view("eps").reshape(P * N, self.latent),
                 "h": s.row("ring_h", k).reshape(P * N, self.hidden),
             },
-            {
-                "rotations": s.row("ring_rot", k).reshape(P * N, 108),
-                "contacts": s.row("ring_con", k).reshape(P * N, 2),
-                "h_out": s.row("ring_h", (k + 1) % L).reshape(P * N, self.hidden),
-            },
+            outputs,
         )
-        rot = s.row("ring_rot", k).reshape(P * N, 108)
-        con = s.row("ring_con", k).reshape(P * N, 2)
-        waist_pos, waist_quat = pos[:, TrackerSlot.WAIST], quat[:, TrackerSlot.WAIST]  # (P, ...)
-        _, wp = fk32(
-            rot,
-            np.repeat(quat2mat(waist_quat).astype(np.float32), N, axis=0),
-            np.repeat(waist_pos.astype(np.float32), N, axis=0),
-            False,
-        )
+        rot, con = outputs["rotations"], outputs["contacts"]
+        root_mat, root_pos = self._roots(pos, quat, outputs.get("root"), N)
+        _, wp = fk32(rot, root_mat, root_pos, False)
         self._ik(s.view, P * N).step(None, wp, con)
-        scores = self.scorer.score(wp, waist_pos, waist_quat, repeat=N).reshape(P, N)
+        if self.layout.predicts_root:  # every sample has its own pelvis
+            scores = self.scorer.score_mats(wp, root_pos, root_mat).reshape(P, N)
+        else:  # the N samples of a player share the waist tracker's
+            waist_pos, waist_quat = pos[:, TrackerSlot.WAIST], quat[:, TrackerSlot.WAIST]
+            scores = self.scorer.score(wp, waist_pos, waist_quat, repeat=N).reshape(P, N)
         wp = wp.reshape(P, N, -1, 3)
 
         started = 0
@@ -257,6 +268,23 @@ class Engine:
             self.players[pid].frames += 1
         self._tick += 1
         return TickResult(poses, events, started)
+
+    def _roots(self, pos: F64, quat: F64, root_out: F32 | None, repeat: int) -> tuple[F32, F32]:
+        """World pelvis rotations ``(R, 3, 3)`` and positions ``(R, 3)`` for
+        ``R = len(pos) * repeat`` decoded rows.
+
+        ``hmd3+waist``: the waist tracker's, shared by a player's ``repeat`` rows.
+        ``hmd3``: each row's own pelvis output (6D rotation, position), moved out of
+        the player's head frame into the world.
+        """
+        if root_out is None:
+            m = quat2mat(quat[:, TrackerSlot.WAIST]).astype(np.float32)
+            p = pos[:, TrackerSlot.WAIST].astype(np.float32)
+            return np.repeat(m, repeat, axis=0), np.repeat(p, repeat, axis=0)
+        head_pos = np.repeat(pos[:, TrackerSlot.HEAD], repeat, axis=0)
+        head_quat = np.repeat(quat[:, TrackerSlot.HEAD], repeat, axis=0)
+        mats, places = pelvis_from_head(root_out, head_pos, head_quat)
+        return mats.astype(np.float32), places.astype(np.float32)
 
     def _ik(self, get: Callable[[str], NDArray[Any]], rows: int, prefix: str = "ik") -> ContactIK:
         """Contact IK over ``rows`` rows of the ``<prefix>_*`` state arrays (views)."""
@@ -307,7 +335,11 @@ class Engine:
                 q = np.array(frame.quat, dtype=np.float64)
                 if p.waist_filter is not None:
                     q[TrackerSlot.WAIST] = p.waist_filter(q[TrackerSlot.WAIST])
-                cal = p.calibration.apply(np.asarray(frame.pos, dtype=np.float64), q)
+                raw = np.array(frame.pos, dtype=np.float64)
+                if self.layout.predicts_root:
+                    # No waist: keep the unused slot finite whatever the client sent.
+                    raw[TrackerSlot.WAIST], q[TrackerSlot.WAIST] = raw[TrackerSlot.HEAD], _IDENT
+                cal = p.calibration.apply(raw, q)
                 prev = s["ring_pos"][kp, p.slot] if p.last is not None else cal
                 s["ring_pos"][k, p.slot] = cal
                 s["ring_quat"][k, p.slot] = q
@@ -318,10 +350,10 @@ class Engine:
             s["ring_held"][k, p.slot] = held
         if fresh:  # the features of every fresh frame in one vectorised call
             idx = [p.slot for p, _, _ in fresh]
-            s["ring_x"][k, idx] = tracker_features(
+            s["ring_x"][k, idx] = self.layout.features(
                 np.stack([c for _, c, _ in fresh]),
                 np.stack([v for _, _, v in fresh]),
-                s["ring_quat"][k, idx, TrackerSlot.WAIST],
+                s["ring_quat"][k, idx],
                 self.cfg.fps,
             )
         return events
@@ -360,6 +392,7 @@ class Engine:
         samples = np.array([sample for _, sample, _ in emit])
         rot = s["ring_rot"][k, slots, samples]  # (E, 108) copies
         con = s["ring_con"][k, slots, samples]
+        root = s["ring_root"][k, slots, samples] if self.layout.predicts_root else None
         interp = [i for i, (_, _, w) in enumerate(emit) if 0.0 < w < 1.0]
         if interp:
             zs, hs = [], []
@@ -369,21 +402,19 @@ class Engine:
                 eps, hr = s["eps"][p.slot], s["ring_h"][k, p.slot]
                 zs.append((1 - w) * eps[p.plan.src] + w * eps[p.plan.dst])
                 hs.append((1 - w) * hr[p.plan.src] + w * hr[p.plan.dst])
-            r, c, _ = self.decoder.run(
+            out = self.decoder.run(
                 features=s["ring_x"][k, slots[interp]],
                 z=np.asarray(zs, np.float32),
                 h=np.asarray(hs, np.float32),
             )
-            rot[interp], con[interp] = r, c
+            rot[interp], con[interp] = out[0], out[-2]
+            if root is not None:
+                root[interp] = out[1]
         for p, _, w in emit:
             if p.plan is not None and w >= 1.0:
                 p.plan = None
         pos, quat = s["ring_pos"][k, slots], s["ring_quat"][k, slots]
-        wm, wp = fk32(
-            rot,
-            quat2mat(quat[:, TrackerSlot.WAIST]).astype(np.float32),
-            pos[:, TrackerSlot.WAIST].astype(np.float32),
-        )
+        wm, wp = fk32(rot, *self._roots(pos, quat, root, 1))
         assert wm is not None
         # The players' own display IK, batched: gather their states, step, scatter back.
         state = {n: s[n][slots] for n in _DISPLAY_IK}
@@ -419,6 +450,9 @@ def _rest_trackers() -> F64:
     return pos[list(TRACKER_JOINT_INDEX)]
 
 
+_IDENT = np.array([0.0, 0.0, 0.0, 1.0])
+
+
 def _identity_quats() -> F64:
     q = np.zeros((4, 4))
     q[:, 3] = 1.0
@@ -426,11 +460,15 @@ def _identity_quats() -> F64:
 
 
 def load_engine(
-    cfg: EngineConfig | None = None, models_dir: str | None = None, threads: int = 1
+    cfg: EngineConfig | None = None,
+    models_dir: str | None = None,
+    threads: int = 1,
+    layout: str = Layout.HMD3_WAIST,
 ) -> Engine:
-    """An engine on the shipped models (or those in ``models_dir``)."""
+    """An engine on the shipped models (or those in ``models_dir``) for ``layout``."""
     from posecast.inference.artifact import load_artifact
 
-    decoder = load_artifact("cvae_decoder", models_dir, threads=threads)
-    scorer = AnomalyScorer(load_artifact("anomaly", models_dir, threads=threads))
+    ls = spec(layout)
+    decoder = load_artifact(ls.decoder, models_dir, threads=threads)
+    scorer = AnomalyScorer(load_artifact(ls.anomaly, models_dir, threads=threads))
     return Engine(decoder, scorer, cfg)

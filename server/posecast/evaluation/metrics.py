@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from posecast.skeleton import FEET, LOWER_BODY, TOES
+from posecast.skeleton import FEET, LOWER_BODY, PARENTS, TOES, Joint
 
 F64 = NDArray[np.floating]
 Acc = tuple[float, int]
@@ -52,6 +52,43 @@ def ground_penetration(pred: F64) -> Acc:
     joints = [int(j) for j in (*FEET, *TOES)]
     depth = np.maximum(0.0, -pred[:, joints, 1].min(axis=1))
     return float(depth.sum() * 100.0), int(depth.size)
+
+
+def root_pe(pred: F64, gt: F64) -> Acc:
+    """Pelvis position error, cm (the headset-only model predicts the pelvis)."""
+    return mpjpe(pred, gt, [int(Joint.PELVIS)])
+
+
+def hand_pe(pred: F64, gt: F64) -> Acc:
+    """Position error of both hands, cm."""
+    return mpjpe(pred, gt, [int(Joint.LEFT_HAND), int(Joint.RIGHT_HAND)])
+
+
+def local_rotations(world_mat: F64) -> F64:
+    """World joint rotations ``(T, 19, 3, 3)`` -> local ones (the pelvis keeps its world
+    rotation)."""
+    local = np.array(world_mat, dtype=np.float64, copy=True)
+    for j, p in enumerate(PARENTS):
+        if p >= 0:
+            local[:, j] = np.swapaxes(world_mat[:, p], -1, -2) @ world_mat[:, j]
+    return local
+
+
+def mpjre(pred_world_mat: F64, gt_world_mat: F64) -> Acc:
+    """Mean per-joint rotation error, degrees: the geodesic angle between predicted and
+    true *local* rotations of all 19 joints (the pelvis: its world rotation)."""
+    a, b = local_rotations(pred_world_mat), local_rotations(gt_world_mat)
+    rel = np.swapaxes(a, -1, -2) @ b
+    cos = np.clip((np.trace(rel, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
+    d = np.degrees(np.arccos(cos))  # (T, 19)
+    return float(d.sum()), int(d.size)
+
+
+def jitter(pred: F64, fps: float) -> Acc:
+    """Mean jerk of the joints, m/s^3: the norm of the third difference of the positions
+    times ``fps^3``, over every joint and frame (lower is smoother)."""
+    d = np.linalg.norm(np.diff(pred, 3, axis=0), axis=-1) * fps**3
+    return float(d.sum()), int(d.size)
 
 
 def implausible(scores: F64, threshold_m: float) -> Acc:

@@ -18,8 +18,8 @@ import numpy as np
 import onnxruntime as ort
 
 from posecast.errors import ModelError
+from posecast.layout import Layout, spec
 from posecast.skeleton import JOINT_NAMES
-from posecast.tracking import FEATURE_NAMES
 
 ARTIFACT_FORMAT = "posecast-model"
 ARTIFACT_VERSION = 1
@@ -82,7 +82,11 @@ def load_artifact(name: str, models_dir: str | Path | None = None, threads: int 
         raise ModelError(f"not a {ARTIFACT_FORMAT} v{ARTIFACT_VERSION} sidecar", path=meta_path)
     if meta.get("joint_order") != list(JOINT_NAMES):
         raise ModelError("sidecar joint order differs from this posecast", path=meta_path)
-    if meta.get("feature_layout") != list(FEATURE_NAMES):
+    try:
+        layout = spec(meta.get("layout", Layout.HMD3_WAIST))
+    except ValueError:
+        raise ModelError(f"unknown tracker layout {meta.get('layout')!r}", path=meta_path) from None
+    if meta.get("feature_layout") != list(layout.feature_names):
         raise ModelError("sidecar feature layout differs from this posecast", path=meta_path)
     try:
         session = ort.InferenceSession(

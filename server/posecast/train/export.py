@@ -11,6 +11,9 @@ Artifacts (in ``posecast/models``):
 
 * ``cvae_decoder.onnx``: ``features (B,24), z (B,30), h (B,128)`` ->
   ``rotations (B,108), contacts (B,2), h_out (B,128)``
+* ``cvae_decoder_hmd3.onnx`` (headset only): ``features (B,36), z, h`` ->
+  ``rotations (B,108), root (B,9), contacts, h_out``; ``root`` is the pelvis rotation
+  (6D) and position (metres) in the head's yaw frame
 * ``ae_step.onnx`` (the deterministic ablation, encoder included):
   ``features (B,24), h_enc (B,128), h_dec (B,128)`` ->
   ``rotations, contacts, h_enc_out, h_dec_out``
@@ -30,8 +33,9 @@ import onnx
 from onnx import TensorProto, helper, numpy_helper
 
 from posecast import __version__
+from posecast.layout import Layout, spec
 from posecast.skeleton import JOINT_NAMES, PARENTS, reference_offsets
-from posecast.tracking import FEATURE_NAMES, TRACKER_JOINT, TrackerSlot
+from posecast.tracking import FEATURE_NAMES, TRACKER_JOINT
 from posecast.train.checkpoint import load_checkpoint
 
 OPSET = 17
@@ -66,9 +70,13 @@ class _Graph:
         self.nodes.append(helper.make_node("Split", [x, sizes], outs, axis=1))
         return outs
 
-    def linear(self, x: str, sd: dict[str, np.ndarray], prefix: str) -> str:
-        w = self.const(f"{prefix}.weight_t", sd[f"{prefix}.weight"].T)
-        b = self.const(f"{prefix}.bias", sd[f"{prefix}.bias"])
+    def linear(
+        self, x: str, sd: dict[str, np.ndarray], prefix: str, rows: slice = slice(None)
+    ) -> str:
+        """``x @ W[rows].T + b[rows]`` for the torch Linear ``prefix``."""
+        tag = "" if rows == slice(None) else f"_{rows.start}_{rows.stop}"
+        w = self.const(f"{prefix}.weight_t{tag}", sd[f"{prefix}.weight"][rows].T)
+        b = self.const(f"{prefix}.bias{tag}", sd[f"{prefix}.bias"][rows])
         return self.op("Gemm", [x, w, b])
 
     def gru_step(self, f: str, h: str, sd: dict[str, np.ndarray], prefix: str, out: str) -> str:
@@ -124,9 +132,8 @@ def _state(ckpt: dict[str, Any]) -> dict[str, np.ndarray]:
 
 
 def _decoder_nodes(
-    g: _Graph, sd: dict[str, np.ndarray], x: str, z: str, h: str, h_out: str
+    g: _Graph, sd: dict[str, np.ndarray], x: str, z: str, h: str, h_out: str, n_feat: int
 ) -> None:
-    n_feat = len(FEATURE_NAMES)
     w = sd["decoder.fc.weight"]  # (128, 54): tracker columns first, then latent
     fx = g.op(
         "Gemm",
@@ -140,21 +147,26 @@ def _decoder_nodes(
     f = g.op("Relu", [g.op("Add", [fx, fz])])
     h_new = g.gru_step(f, h, sd, "decoder.gru", out=h_out)
     a = g.op("Relu", [h_new])
-    g.op("Identity", [g.linear(a, sd, "decoder.pose")], out="rotations")
+    n_out = sd["decoder.pose.weight"].shape[0]
+    g.op("Identity", [g.linear(a, sd, "decoder.pose", slice(0, 108))], out="rotations")
+    if n_out > 108:  # the headset-only model's pelvis outputs
+        g.op("Identity", [g.linear(a, sd, "decoder.pose", slice(108, n_out))], out="root")
     g.op("Sigmoid", [g.linear(a, sd, "decoder.contact")], out="contacts")
 
 
 def build_decoder(ckpt: dict[str, Any]) -> onnx.ModelProto:
     sd, norm = _state(ckpt), ckpt["norm"]
+    n_feat = int(ckpt["config"].get("n_features", len(FEATURE_NAMES)))
     g = _Graph()
     x = g.normalise("features", np.asarray(norm["feat_mean"]), np.asarray(norm["feat_std"]), "feat")
-    _decoder_nodes(g, sd, x, "z", "h", "h_out")
+    _decoder_nodes(g, sd, x, "z", "h", "h_out", n_feat)
     hidden = sd["decoder.gru.weight_hh_l0"].shape[1]
-    latent = sd["decoder.fc.weight"].shape[1] - len(FEATURE_NAMES)
+    latent = sd["decoder.fc.weight"].shape[1] - n_feat
+    root = sd["decoder.pose.weight"].shape[0] - 108
     return g.model(
         "posecast_cvae_decoder_step",
-        {"features": len(FEATURE_NAMES), "z": latent, "h": hidden},
-        {"rotations": 108, "contacts": 2, "h_out": hidden},
+        {"features": n_feat, "z": latent, "h": hidden},
+        {"rotations": 108} | ({"root": root} if root else {}) | {"contacts": 2, "h_out": hidden},
     )
 
 
@@ -165,7 +177,7 @@ def build_ae_step(ckpt: dict[str, Any]) -> onnx.ModelProto:
     fe = g.op("Relu", [g.linear(x, sd, "encoder.fc")])
     h_enc = g.gru_step(fe, "h_enc", sd, "encoder.gru", out="h_enc_out")
     z = g.linear(h_enc, sd, "encoder.z")
-    _decoder_nodes(g, sd, x, z, "h_dec", "h_dec_out")
+    _decoder_nodes(g, sd, x, z, "h_dec", "h_dec_out", len(FEATURE_NAMES))
     hidden = sd["decoder.gru.weight_hh_l0"].shape[1]
     return g.model(
         "posecast_ae_step",
@@ -211,6 +223,7 @@ def sidecar(
 ) -> dict[str, Any]:
     """Everything the server needs to use an artifact without flags or the training code."""
     splits = ckpt.get("data", {}).get("splits", {})
+    ls = spec(ckpt.get("config", {}).get("layout", Layout.HMD3_WAIST))
     return {
         "format": ARTIFACT_FORMAT,
         "version": ARTIFACT_VERSION,
@@ -229,8 +242,9 @@ def sidecar(
         "rotation_layout": "6D per joint: first two columns of the local rotation matrix, [c0, c1]",
         "parents": list(PARENTS),
         "skeleton_offsets_m": reference_offsets().round(6).tolist(),
-        "tracker_slots": {s.name: TRACKER_JOINT[s].name for s in TrackerSlot},
-        "feature_layout": list(FEATURE_NAMES),
+        "layout": str(ls.layout),
+        "tracker_slots": {s.name: TRACKER_JOINT[s].name for s in ls.slots},
+        "feature_layout": list(ls.feature_names),
         "normalisation": ckpt["norm"],
         "model_config": ckpt["config"],
         "training": {
@@ -271,6 +285,7 @@ def export_all(
     ae: str | Path | None = None,
     anomaly: str | Path | None = None,
     extra: dict[str, dict[str, Any]] | None = None,
+    cvae_hmd3: str | Path | None = None,
 ) -> list[Path]:
     """Write the ONNX files and sidecars for whichever checkpoints are given."""
     out = Path(out_dir)
@@ -278,6 +293,7 @@ def export_all(
     written = []
     jobs = [
         ("cvae_decoder", cvae, build_decoder),
+        ("cvae_decoder_hmd3", cvae_hmd3, build_decoder),
         ("ae_step", ae, build_ae_step),
         ("anomaly", anomaly, build_anomaly),
     ]
