@@ -130,3 +130,38 @@ def test_waist_filter_normalises_its_input() -> None:
     f = WaistFilter(cutoff_hz=5.0)
     out = f(np.array([0.0, 0.0, 0.0, 3.0]))
     np.testing.assert_allclose(out, [0.0, 0.0, 0.0, 1.0])
+
+
+def test_headset_only_tpose_learns_each_devices_rotation_offset() -> None:
+    """A headset-only T-pose: the user faces some heading, each device reports its
+    own axes (a controller's grip is not the hand joint's frame). After calibration
+    every orientation is the joint's: the heading alone in the T-pose, and a later
+    turn of the body turns the corrected orientations with it."""
+    from posecast.geometry.rotations import axis_mat, mat2quat, quat_conj
+
+    heading = yaw2quat(0.7)
+    pos = quat_apply(heading, rest_trackers(size=1.05))
+    device = mat2quat(
+        np.stack([axis_mat("X", 0.3), axis_mat("Y", 1.4), axis_mat("Z", -1.2), np.eye(3)])
+    )  # each device's fixed mounting rotation relative to its joint
+    reported = quat_mul(np.broadcast_to(heading, (4, 4)), device)
+    cal = Calibration.from_tpose(pos, reported, waist=False)
+    assert cal.scale == pytest.approx(1 / 1.05, rel=1e-6)
+    assert cal.waist_offset_m == (0.0, 0.0, 0.0)
+    fixed = cal.orient(reported)
+    for i in range(3):
+        assert abs(quat_mul(quat_conj(fixed[i]), heading)[3]) == pytest.approx(1.0, abs=1e-9)
+    turn = yaw2quat(-2.0)
+    later = cal.orient(quat_mul(np.broadcast_to(turn, (4, 4)), reported))
+    want = quat_mul(turn, heading)
+    for i in range(3):
+        assert abs(quat_mul(quat_conj(later[i]), want)[3]) == pytest.approx(1.0, abs=1e-9)
+    # The 4-point T-pose keeps the devices' orientations as they are.
+    assert Calibration.from_tpose(pos, reported).orient(reported) is reported
+
+
+def test_headset_only_tpose_needs_spread_hands() -> None:
+    pos = rest_trackers()
+    pos[TrackerSlot.LEFT_HAND] = pos[TrackerSlot.RIGHT_HAND] + [0.0, 0.3, 0.0]
+    with pytest.raises(ConfigError, match="spread"):
+        Calibration.from_tpose(pos, identity_quats(), waist=False)

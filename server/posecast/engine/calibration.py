@@ -16,7 +16,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from posecast.errors import ConfigError
-from posecast.geometry.rotations import quat_apply, quat_conj, quat_normalize, quat_slerp
+from posecast.geometry.rotations import (
+    quat_apply,
+    quat_conj,
+    quat_mul,
+    quat_normalize,
+    quat_slerp,
+    yaw2quat,
+)
 from posecast.skeleton import REST_PELVIS_HEIGHT_M, Joint, reference_offsets
 from posecast.tracking import TrackerSlot
 
@@ -35,6 +42,9 @@ MIN_HEIGHT_M, MAX_HEIGHT_M = 0.9, 2.5
 class Calibration:
     scale: float = 1.0  # canonical metres per user metre
     waist_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)  # in the waist's frame
+    # Per slot, a rotation (xyzw) applied on the right of the reported orientation, so
+    # that a device's own axes become the joint's (headset-only T-pose calibration).
+    rot_offsets: tuple[tuple[float, float, float, float], ...] = ()
 
     @classmethod
     def from_height(cls, height_m: float) -> Calibration:
@@ -47,19 +57,36 @@ class Calibration:
     def from_tpose(cls, pos: F64, quat: F64, waist: bool = True) -> Calibration:
         """From one frame of the user standing in a T-pose: ``(4, 3)`` / ``(4, 4)``.
 
-        ``waist=False`` (a headset-only player): the scale alone, from the head."""
+        ``waist=False`` (a headset-only player, whose model reads the head's and hands'
+        orientations): the scale, and per-slot rotation offsets that turn each device's
+        reported orientation into its joint's. In a T-pose every joint's world rotation
+        is the body's heading alone, and the heading is square to the line from the
+        right hand to the left."""
         head_y = float(pos[TrackerSlot.HEAD, 1])
         if not MIN_HEIGHT_M - HEAD_TOP_ABOVE_JOINT_M < head_y < MAX_HEIGHT_M:
             raise ConfigError(f"T-pose head height {head_y:.2f} m is implausible")
         scale = REFERENCE_HEAD_HEIGHT_M / head_y
         if not waist:
-            return cls(scale=scale)
+            across = pos[TrackerSlot.LEFT_HAND] - pos[TrackerSlot.RIGHT_HAND]
+            forward = np.cross(across, [0.0, 1.0, 0.0])  # left x up = forward (+Z)
+            if np.hypot(forward[0], forward[2]) < 0.5:
+                raise ConfigError("T-pose hands are not spread apart level with the body")
+            heading = yaw2quat(np.arctan2(forward[0], forward[2]))
+            offsets = [quat_mul(quat_conj(quat[i]), heading) for i in range(3)]
+            offsets.append(np.array([0.0, 0.0, 0.0, 1.0]))  # no waist
+            return cls(scale=scale, rot_offsets=tuple(tuple(map(float, q)) for q in offsets))  # type: ignore[misc]
         waist_pos = pos[TrackerSlot.WAIST] * scale
         head = pos[TrackerSlot.HEAD] * scale
         # In a T-pose the pelvis stands under the head, at the reference pelvis height.
         expected = np.array([head[0], REST_PELVIS_HEIGHT_M, head[2]])
         offset = quat_apply(quat_conj(quat[TrackerSlot.WAIST]), waist_pos - expected)
         return cls(scale=scale, waist_offset_m=tuple(float(v) for v in offset))  # type: ignore[arg-type]
+
+    def orient(self, quat: F64) -> F64:
+        """Tracker orientations ``(4, 4)`` with the device offsets removed."""
+        if not self.rot_offsets:
+            return quat
+        return quat_normalize(quat_mul(quat, np.asarray(self.rot_offsets)))
 
     def apply(self, pos: F64, quat: F64) -> F64:
         """Tracker positions ``(4, 3)`` in canonical-body metres."""

@@ -335,6 +335,7 @@ class Engine:
                 q = np.array(frame.quat, dtype=np.float64)
                 if p.waist_filter is not None:
                     q[TrackerSlot.WAIST] = p.waist_filter(q[TrackerSlot.WAIST])
+                q = p.calibration.orient(q)
                 raw = np.array(frame.pos, dtype=np.float64)
                 if self.layout.predicts_root:
                     # No waist: keep the unused slot finite whatever the client sent.
