@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 from posecast.service.ratelimit import IpLimiter, TokenBucket
 
 
@@ -34,3 +36,11 @@ def test_ip_limiter_memory_is_bounded() -> None:
     for i in range(100):
         lim.allow(f"10.0.0.{i}", 0.0)
     assert len(lim._seen) == 10
+
+
+def test_wait_s_paces_a_caller_to_the_rate() -> None:
+    b = TokenBucket(rate_hz=10.0, burst=2.0)
+    assert b.wait_s(0.0) == 0.0 and b.wait_s(0.0) == 0.0  # the burst
+    assert b.wait_s(0.0) == pytest.approx(0.1)  # then one token per 1/rate
+    assert b.wait_s(0.05) == pytest.approx(0.05)
+    assert b.wait_s(0.1) == 0.0

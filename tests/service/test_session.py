@@ -69,13 +69,28 @@ def test_anything_before_hello_is_not_joined() -> None:
         (Hello(1, token()[:-3] + "AAA", "r1", "A"), UnauthenticatedError),
         (Hello(1, token(room="r2"), "r1", "A"), ForbiddenError),
         (Hello(1, token(role="spectator"), "r1", "A", watch=("r2",)), ForbiddenError),
-        (Hello(1, token(), "r1", "A", layout="hmd3"), LayoutUnsupportedError),
     ],
 )
 def test_bad_hellos_are_fatal(hello: Hello, error: type[Exception]) -> None:
     with pytest.raises(error) as e:
         _session().handle(hello, time.time())
     assert e.value.fatal  # type: ignore[attr-defined]
+
+
+@pytest.mark.parametrize("layout", [None, "hmd3+waist", "hmd3"])
+def test_the_hello_layout_is_kept_when_served(layout: str | None) -> None:
+    s = _session(layouts="hmd3+waist,hmd3")
+    join = s.handle(Hello(1, token(), "r1", "A", layout=layout), time.time())
+    assert isinstance(join, Join)
+    s.joined(join)
+    assert s.layout == (layout or "hmd3+waist")
+
+
+def test_a_layout_the_server_does_not_serve_is_fatal() -> None:
+    s = _session(layouts="hmd3+waist")
+    with pytest.raises(LayoutUnsupportedError) as e:
+        s.handle(Hello(1, token(), "r1", "A", layout="hmd3"), time.time())
+    assert e.value.fatal and e.value.field == "layout"
 
 
 def test_expired_token() -> None:

@@ -12,6 +12,7 @@ import pytest
 
 from posecast.engine.calibration import Calibration
 from posecast.engine.engine import Engine, TrackerFrame
+from posecast.engine.multi import MultiEngine
 from posecast.engine.selectors import AnomalySelector
 from posecast.protocol import decode
 from posecast.protocol.messages import Pose
@@ -27,7 +28,7 @@ def _frame(seq: int, seed: int = 0) -> TrackerFrame:
 
 @pytest.fixture
 def worker(engine_factory: Callable[[ServerConfig], Callable[[], Engine]]) -> EngineWorker:
-    return EngineWorker(engine_factory(make_cfg(lookahead=2))())
+    return EngineWorker(MultiEngine({"hmd3+waist": engine_factory(make_cfg(lookahead=2))()}))
 
 
 def test_one_step_batches_every_player_and_encodes_their_poses(worker: EngineWorker) -> None:
@@ -62,7 +63,8 @@ def test_ops_apply_in_order_and_tolerate_races(worker: EngineWorker) -> None:
         ),
         0.0,
     )
-    assert e.players["a"].calibration == cal and e.players["a"].selector == sel
+    inner = e.engines[e.players["a"]].players["a"]
+    assert inner.calibration == cal and inner.selector == sel
 
 
 def test_poses_wait_for_the_first_frame(worker: EngineWorker) -> None:

@@ -36,13 +36,14 @@ from websockets.typing import Subprotocol
 
 from posecast.engine.config import EngineConfig
 from posecast.engine.engine import Engine, load_engine
+from posecast.engine.multi import MultiEngine
 from posecast.protocol.messages import SUBPROTOCOL
 from posecast.service import viewer
 from posecast.service.bus import create_bus
 from posecast.service.config import ServerConfig
 from posecast.service.hub import Hub
 from posecast.service.metrics import CONTENT_TYPE, Metrics
-from posecast.service.ratelimit import IpLimiter
+from posecast.service.ratelimit import IpLimiter, TokenBucket
 from posecast.service.ticker import EngineWorker, run_ticks
 
 log = logging.getLogger("posecast.server")
@@ -60,7 +61,10 @@ class PosecastServer:
     """One server instance: its own hub, metrics registry, engine thread and socket."""
 
     def __init__(
-        self, cfg: ServerConfig, *, engine_factory: Callable[[], Engine] | None = None
+        self,
+        cfg: ServerConfig,
+        *,
+        engine_factory: Callable[[], Engine | MultiEngine] | None = None,
     ) -> None:
         self.cfg = cfg
         self.metrics = Metrics()
@@ -80,11 +84,17 @@ class PosecastServer:
         self.stopping = False
         self.port = 0
 
-    def _default_engine(self) -> Engine:
+    def _default_engine(self) -> MultiEngine:
+        """One engine per served layout, each on its model (``--layouts``)."""
         ecfg = EngineConfig(
             samples=self.cfg.samples, lookahead=self.cfg.lookahead, fps=self.cfg.tick_hz
         )
-        return load_engine(ecfg, self.cfg.models_dir, threads=self.cfg.engine_threads)
+        return MultiEngine(
+            {
+                layout: load_engine(ecfg, self.cfg.models_dir, self.cfg.engine_threads, layout)
+                for layout in self.cfg.served_layouts
+            }
+        )
 
     # --- lifecycle ----------------------------------------------------------------------
 
@@ -104,6 +114,8 @@ class PosecastServer:
         )
         self.port = self._server.sockets[0].getsockname()[1]
         engine = await loop.run_in_executor(self.executor, self._engine_factory)
+        if isinstance(engine, Engine):  # one model: its layout's batch only
+            engine = MultiEngine({engine.layout.layout: engine})
         worker = EngineWorker(engine)
         self._ticks = asyncio.create_task(
             run_ticks(
@@ -189,8 +201,21 @@ class PosecastServer:
         client = _Client(ws, asyncio.Event())
         client.writer = asyncio.create_task(self._write(conn, client))
         self._clients[conn] = client
+        # Read pacing: whatever a connection sends, this server decodes at most twice
+        # what the protocol allows it (frames plus control messages). Beyond that it
+        # stops reading, so a flood waits in the flooder's own socket buffers and
+        # TCP window instead of in this process's CPU time (docs/reliability.md).
+        pace = TokenBucket(
+            2.0 * (self.cfg.max_rate_hz + self.cfg.control_rate_hz),
+            2.0 * (self.cfg.rate_burst + self.cfg.control_rate_hz),
+        )
         try:
             async for data in ws:
+                wait = pace.wait_s(time.monotonic())
+                if wait > 0.0:
+                    self.metrics.reads_paced.inc()
+                    await asyncio.sleep(wait)
+                    pace.allow(time.monotonic())
                 self.hub.receive(conn, data, time.monotonic())
                 self._flush()
         except ConnectionClosed:

@@ -52,7 +52,12 @@ class BusSink(Protocol):
     ) -> None: ...
 
     def remote_snapshot(
-        self, room: str, live: Mapping[str, tuple[str, str]], issued_at: float, now: float
+        self,
+        room: str,
+        live: Mapping[str, tuple[str, str]],
+        issued_at: float,
+        now: float,
+        keep: bool = False,
     ) -> None: ...
 
     def remote_lost(self, now: float) -> None: ...

@@ -18,7 +18,7 @@ from typing import Any
 
 from posecast.auth.tokens import new_secret
 from posecast.errors import ConfigError
-from posecast.protocol.messages import Limits
+from posecast.protocol.messages import LAYOUTS, Limits
 
 ENV_PREFIX = "POSECAST_"
 _ID = re.compile(r"[A-Za-z0-9_.-]{1,64}")
@@ -45,6 +45,9 @@ class ServerConfig:
     lookahead: int = _opt(10, "look-ahead tau in frames; poses lag frames by tau ticks")
     engine_threads: int = _opt(1, "ONNX Runtime intra-op threads of the engine thread")
     models_dir: str | None = _opt(None, "directory of ONNX models (default: shipped)")
+    layouts: str = _opt(
+        "hmd3+waist", "tracker layouts served, comma-separated; each loads its model"
+    )
     max_message_bytes: int = _opt(8192, "largest WebSocket message accepted, bytes")
     max_rate_hz: int = _opt(120, "frames per second one player may send (token bucket)")
     rate_burst: int = _opt(30, "frames a player may send above the rate in one burst")
@@ -114,7 +117,15 @@ class ServerConfig:
             raise ConfigError("redis_url must start with redis://, rediss:// or unix://")
         if not _ID.fullmatch(self.node_id or "x") or not _ID.fullmatch(self.redis_prefix):
             raise ConfigError("node_id and redis_prefix: 1 to 64 of A-Z a-z 0-9 _ . -")
+        served = self.served_layouts
+        if not served or any(x not in LAYOUTS for x in served) or len(set(served)) < len(served):
+            raise ConfigError(f"layouts: a comma-separated subset of {', '.join(LAYOUTS)}")
         self.limits()  # the protocol ranges (message size, rate, room size) hold
+
+    @property
+    def served_layouts(self) -> tuple[str, ...]:
+        """The tracker layouts this server accepts in ``hello`` (one model each)."""
+        return tuple(x.strip() for x in self.layouts.split(",") if x.strip())
 
     def limits(self) -> Limits:
         """The protocol limits this server announces in ``welcome``."""

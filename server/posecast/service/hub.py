@@ -43,6 +43,7 @@ from posecast.errors import (
 )
 from posecast.protocol.codec import decode, encode
 from posecast.protocol.messages import (
+    LAYOUT_4POINT,
     PROTOCOL_VERSION,
     Bye,
     Error,
@@ -207,6 +208,7 @@ class Hub:
             and claims.role == "player"
             and old.session.role == "player"
             and self.rooms.room_of(claims.player) == room
+            and old.session.layout == (join.hello.layout or LAYOUT_4POINT)
         )
         if not takeover:  # ROOM_FULL before anyone is displaced
             if claims.role == "player":
@@ -229,9 +231,12 @@ class Hub:
         self.metrics.connections.labels("pending").dec()
         self.metrics.connections.labels(claims.role).inc()
         if claims.role == "player" and not takeover:
+            moved = self.remote.get(room, claims.player)
+            if moved is not None:  # it was in this room on a node that failed: now here
+                self.remote.leave(room, claims.player, moved.node, now)
             self.rooms.add_player(room, claims.player, join.hello.name)
             seed = zlib.crc32(claims.player.encode())
-            self._ops.append(EngineOp("add", claims.player, seed=seed))
+            self._ops.append(EngineOp("add", claims.player, seed=seed, layout=c.session.layout))
             self.bus.joined(room, claims.player, join.hello.name)
             join_msg = Presence("join", room, claims.player, join.hello.name)
             self._to_room(room, join_msg, now, skip=claims.player)
@@ -394,7 +399,7 @@ class Hub:
 
     def remote_leave(self, room: str, player: str, node: str, now: float) -> None:
         gone = self.remote.leave(room, player, node, now)
-        if gone is not None:
+        if gone is not None and self.rooms.room_of(player) != room:
             self._to_room(room, Presence("leave", room, player, gone.name), now)
             self._gauges()
 
@@ -421,16 +426,30 @@ class Hub:
             self.metrics.poses_superseded.inc(superseded)
 
     def remote_snapshot(
-        self, room: str, live: Mapping[str, tuple[str, str]], issued_at: float, now: float
+        self,
+        room: str,
+        live: Mapping[str, tuple[str, str]],
+        issued_at: float,
+        now: float,
+        keep: bool = False,
     ) -> None:
+        """Reconcile ``room``'s remote members with ``live`` (player -> (node, name)).
+        ``keep``: add, never remove (a read that other nodes may not have refilled
+        yet, e.g. just after Redis came back empty)."""
         if room not in self._watched:
             return
         r = self.rooms.rooms.get(room)
         local = r.players if r is not None else {}
         others = {p: v for p, v in live.items() if p not in local}
+        if keep:
+            for m in self.remote.members(room):
+                held = self.remote.get(room, m.player)
+                if held is not None and m.player not in others:
+                    others[m.player] = (held.node, m.name)
         joined, left = self.remote.snapshot(room, others, issued_at)
         for m in left:
-            self._to_room(room, Presence("leave", room, m.player, m.name), now)
+            if m.player not in local:  # one that moved here left the remote view only
+                self._to_room(room, Presence("leave", room, m.player, m.name), now)
         for m in joined:
             self._to_room(room, Presence("join", room, m.player, m.name), now)
         if joined or left:

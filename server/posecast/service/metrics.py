@@ -7,6 +7,9 @@ many) each count their own, and nothing leaks between them. ``/metrics`` serves
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
+
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
 from prometheus_client.exposition import CONTENT_TYPE_LATEST
 
@@ -47,6 +50,11 @@ class Metrics:
             "posecast_ssi_transitions", "SSI sample transitions started", registry=r
         )
         self.frames_in = Counter("posecast_frames", "Tracker frames accepted", registry=r)
+        self.reads_paced = Counter(
+            "posecast_reads_paced",
+            "Times a connection's reading paused: it sent faster than twice its limits",
+            registry=r,
+        )
         self.frames_dropped = Counter(
             "posecast_frames_dropped",
             "Tracker frames dropped, by reason",
@@ -101,8 +109,19 @@ class Metrics:
         self.remote_players = Gauge(
             "posecast_remote_players", "Players on other nodes in this node's rooms", registry=r
         )
+        # For leak checks (benchmarks/load.py): the count should follow the connections
+        # and come back to its idle value once they are gone.
+        self.asyncio_tasks = Gauge(
+            "posecast_asyncio_tasks",
+            "asyncio tasks alive in the server's event loop (counted at each /metrics read)",
+            registry=r,
+        )
 
     def render(self) -> bytes:
+        """The exposition text. Called in the event loop (the ``/metrics`` handler), it
+        first counts that loop's tasks; called outside one, it leaves the last count."""
+        with contextlib.suppress(RuntimeError):  # no running event loop
+            self.asyncio_tasks.set(len(asyncio.all_tasks()))
         out: bytes = generate_latest(self.registry)
         return out
 

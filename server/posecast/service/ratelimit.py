@@ -34,6 +34,13 @@ class TokenBucket:
             return True
         return False
 
+    def wait_s(self, now: float) -> float:
+        """Take a token if one is saved up (0.0); otherwise how long until one is.
+        For pacing: a caller that waits that long and asks again gets one."""
+        if self.allow(now):
+            return 0.0
+        return (1.0 - self.tokens) / self.rate_hz
+
 
 @dataclass
 class IpLimiter:

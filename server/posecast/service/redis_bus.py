@@ -66,6 +66,7 @@ class RedisBus(Bus):
         self._full_sync_queued = False
         self._task: asyncio.Task[None] | None = None
         self._lost: asyncio.TimerHandle | None = None
+        self._connected_at = 0.0
         self._last_error = "not connected yet"
         self._idle = True
         self._failures = 0  # connection attempts failed since the last success
@@ -198,6 +199,7 @@ class RedisBus(Bus):
             self._lost.cancel()
             self._lost = None
         if up:
+            self._connected_at = time.monotonic()
             self._failures = 0
             self.metrics.bus_reconnects.inc()
             log.info("bus connected", extra={"node": self.node})
@@ -270,8 +272,13 @@ class RedisBus(Bus):
         rooms = [r for r in (only or tuple(self._watched)) if r in self._watched]
         live = await self.store.reconcile(client, rooms, sink.local_rooms, heartbeat=heartbeat)
         now = time.monotonic()
+        # Just after a (re)connect, Redis may have come back empty and the other nodes
+        # not have re-registered yet: for one node TTL a read adds members, never
+        # removes them (leaves still arrive as messages; a node that died meanwhile is
+        # caught by the next reads).
+        keep = now - self._connected_at < self.cfg.redis_node_ttl_s
         for room, members in live.items():
-            sink.remote_snapshot(room, members, issued, now)
+            sink.remote_snapshot(room, members, issued, now, keep)
         self.after()
 
     async def _listen(self, pubsub: PubSub) -> None:

@@ -38,6 +38,7 @@ from posecast.errors import (
     RateLimitedError,
 )
 from posecast.protocol.messages import (
+    LAYOUT_3POINT,
     LAYOUT_4POINT,
     ROLE_MAY_SEND,
     Bye,
@@ -118,6 +119,7 @@ class Session:
     claims: Claims | None = None
     name: str = ""
     rooms: tuple[str, ...] = ()
+    layout: str = LAYOUT_4POINT  # the hello's tracker layout, once joined
     last_seq: int | None = None
     last_message_at: float = 0.0
     clock: ClockEstimator = field(default_factory=ClockEstimator)
@@ -162,7 +164,7 @@ class Session:
         if isinstance(msg, Bye):
             return Leave(msg.reason)
         if isinstance(msg, Calibrate):
-            return CalibrateIn(_calibration(msg))
+            return CalibrateIn(_calibration(msg, self.layout))
         if isinstance(msg, Selector):
             return SelectorIn(msg.player, _selector(msg))
         if isinstance(msg, Kick):
@@ -170,8 +172,9 @@ class Session:
         raise ForbiddenError(f"{msg.TYPE} is not for a server", field="type")  # pragma: no cover
 
     def _hello(self, hello: Hello, now: float) -> Join:
-        if hello.layout not in (None, LAYOUT_4POINT):
-            raise LayoutUnsupportedError(f"layout {hello.layout!r} is not served", field="layout")
+        layout = hello.layout or LAYOUT_4POINT
+        if layout not in self.cfg.served_layouts:
+            raise LayoutUnsupportedError(f"layout {layout!r} is not served", field="layout")
         claims = verify(
             self.cfg.secret_bytes,
             hello.token,
@@ -192,6 +195,7 @@ class Session:
         """The hub admitted ``join``: the session is live."""
         self.phase = Phase.JOINED
         self.claims = join.claims
+        self.layout = join.hello.layout or LAYOUT_4POINT
         self.name = join.hello.name
         self.rooms = join.rooms
 
@@ -226,13 +230,13 @@ class Session:
         self.phase = Phase.CLOSED
 
 
-def _calibration(msg: Calibrate) -> Calibration:
+def _calibration(msg: Calibrate, layout: str) -> Calibration:
     where = "height_m" if msg.height_m is not None else "trackers"
     try:
         if msg.height_m is not None:
             return Calibration.from_height(msg.height_m)
         assert msg.pos is not None and msg.quat is not None
-        return Calibration.from_tpose(msg.pos, msg.quat)
+        return Calibration.from_tpose(msg.pos, msg.quat, waist=layout != LAYOUT_3POINT)
     except ConfigError as exc:
         raise CalibrationFailedError(exc.message, field=where) from None
 

@@ -25,11 +25,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from posecast.engine.calibration import Calibration
-from posecast.engine.engine import Engine, EngineEvent, TrackerFrame
+from posecast.engine.engine import EngineEvent, TrackerFrame
+from posecast.engine.multi import MultiEngine
 from posecast.engine.selectors import Selector as EngineSelector
 from posecast.errors import ProtocolError
 from posecast.protocol.codec import encode
-from posecast.protocol.messages import Pose
+from posecast.protocol.messages import LAYOUT_4POINT, Pose
 
 log = logging.getLogger("posecast.ticker")
 
@@ -41,6 +42,7 @@ class EngineOp:
     kind: str  # add | remove | selector | calibration
     player: str
     seed: int = 0
+    layout: str = LAYOUT_4POINT  # add: which model's batch the player joins
     selector: EngineSelector | None = None
     calibration: Calibration | None = None
 
@@ -63,7 +65,7 @@ class TickOutput:
 class EngineWorker:
     """Owns the :class:`Engine`; only ever called from the engine thread."""
 
-    def __init__(self, engine: Engine) -> None:
+    def __init__(self, engine: MultiEngine) -> None:
         self.engine = engine
         self.unencodable = 0  # poses dropped because quantising refused them
 
@@ -105,7 +107,7 @@ class EngineWorker:
         if op.kind == "add":
             if present:  # rejoined before its removal was applied: start afresh
                 e.remove_player(op.player)
-            e.add_player(op.player, op.seed)
+            e.add_player(op.player, op.seed, op.layout)
         elif not present:
             return  # left before this op was applied
         elif op.kind == "remove":

@@ -13,7 +13,9 @@ socket dropped, the server said ``bye`` or sent ``SERVER_SHUTDOWN``, ``TIMED_OUT
 ``SLOW_CONSUMER`` or ``INTERNAL``), the client waits an exponential back-off with
 jitter (``backoff_initial_s`` doubling up to ``backoff_max_s``), opens a new
 connection and sends the same ``hello`` again: same token (or a fresh one from a
-token callable), room, name, layout and rate. Frames sent meanwhile are dropped, not
+token callable), room, name, layout and rate. Given several URLs (the nodes of one
+cluster, ``docs/scale-out.md``), every attempt goes to the next URL in turn, so a
+dead node's players come back through another one. Frames sent meanwhile are dropped, not
 queued (a newer frame supersedes them), but their ``seq`` is used up, so ``seq``
 keeps increasing across connections. Errors that a retry cannot fix (a refused or
 expired token, ``FORBIDDEN``, ``ROOM_FULL``, ``KICKED``, ``REPLACED``, ...) end the
@@ -33,7 +35,14 @@ import logging
 import random
 import time
 from collections import deque
-from collections.abc import AsyncIterable, AsyncIterator, Awaitable, Callable, Generator
+from collections.abc import (
+    AsyncIterable,
+    AsyncIterator,
+    Awaitable,
+    Callable,
+    Generator,
+    Sequence,
+)
 from types import TracebackType
 from typing import Any
 
@@ -82,7 +91,10 @@ class Client:
     :func:`connect`. Options (keyword-only, with their defaults):
 
     Args:
-        url: the server's WebSocket URL, e.g. ``ws://127.0.0.1:8765/``.
+        url: the server's WebSocket URL, e.g. ``ws://127.0.0.1:8765/``; or a sequence
+            of URLs of one cluster, tried in order (failover): the first connection
+            takes the first that opens, and each reconnect attempt moves on to the
+            next URL after the one that was lost, wrapping around.
         token: the join token, or a callable returning one (called at every join, so
             a long session can fetch a fresh token before rejoining).
         reconnect: rejoin after retryable losses (True).
@@ -100,7 +112,7 @@ class Client:
 
     def __init__(
         self,
-        url: str,
+        url: str | Sequence[str],
         token: Token,
         *,
         reconnect: bool = True,
@@ -114,7 +126,10 @@ class Client:
         max_events: int = 4096,
         seq0: int = 0,
     ) -> None:
-        self.url = url
+        self.urls: tuple[str, ...] = (url,) if isinstance(url, str) else tuple(url)
+        if not self.urls:
+            raise ValueError("no server URL")
+        self._url_index = 0
         self._token = token
         self.reconnect = reconnect
         self.backoff_initial_s, self.backoff_max_s = backoff_initial_s, backoff_max_s
@@ -135,6 +150,11 @@ class Client:
         self._closing = False
 
     # --- state -------------------------------------------------------------------------
+
+    @property
+    def url(self) -> str:
+        """The URL of the current (or last) connection."""
+        return self.urls[self._url_index]
 
     @property
     def welcome(self) -> Welcome | None:
@@ -301,6 +321,7 @@ class Client:
             delay = backoff_delay(attempt, self.backoff_initial_s, self.backoff_max_s, self._rng)
             self._push(Reconnecting(attempt, delay, cause))
             await asyncio.sleep(delay)
+            self._url_index = (self._url_index + 1) % len(self.urls)  # failover: next node
             ws: ClientConnection | None = None
             try:
                 ws = await self._open()
@@ -505,8 +526,17 @@ class Connecting:
         self._client = client
 
     async def _connect(self) -> Client:
-        self._client._ws = await self._client._open()
-        return self._client
+        client = self._client
+        for i in range(len(client.urls)):  # the first URL that opens
+            client._url_index = i
+            try:
+                client._ws = await client._open()
+            except (OSError, TimeoutError, InvalidHandshake):
+                if i == len(client.urls) - 1:
+                    raise
+                continue
+            break
+        return client
 
     def __await__(self) -> Generator[Any, None, Client]:
         return self._connect().__await__()
@@ -523,16 +553,18 @@ class Connecting:
         await self._client.close()
 
 
-def connect(url: str, token: Token, **options: Any) -> Connecting:
+def connect(url: str | Sequence[str], token: Token, **options: Any) -> Connecting:
     """Open a WebSocket to a posecast server (subprotocol ``posecast.v1``).
 
     ``await connect(url, token)`` gives a :class:`Client`; then :meth:`Client.join`.
     The token travels in ``hello``, never in the URL. ``options`` are the keyword
-    options of :class:`Client` (reconnect, back-off, pings, timeouts).
+    options of :class:`Client` (reconnect, back-off, pings, timeouts). ``url`` may be
+    a sequence of the URLs of one cluster's nodes: failover, see :class:`Client`.
 
     Raises:
         OSError, TimeoutError, websockets.InvalidHandshake: the server is unreachable
             or refused the WebSocket (HTTP 429 when connecting too often, 503 when it
-            is not ready). The first connection is never retried.
+            is not ready); with several URLs, the last one's error once none opened.
+            The first connection is never retried.
     """
     return Connecting(Client(url, token, **options))

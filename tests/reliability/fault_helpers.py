@@ -1,0 +1,373 @@
+"""Helpers of the fault-injection tests: a ``posecast serve`` subprocess with RSS
+sampling, a raw client that never reads, a lossy WebSocket relay, and the measures
+the tests report (pose rates, gaps, joint jumps, lost poses).
+
+Everything runs on loopback against real processes; nothing here fakes the server.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import contextlib
+import itertools
+import os
+import random
+import re
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import threading
+import time
+import urllib.error
+import urllib.request
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from websockets.asyncio.client import ClientConnection
+from websockets.asyncio.client import connect as ws_connect
+from websockets.asyncio.server import Server, ServerConnection, serve
+from websockets.exceptions import ConnectionClosed
+from websockets.typing import Subprotocol
+
+from posecast.protocol import decode, encode
+from posecast.protocol.messages import SUBPROTOCOL, Frame, Hello, Message, Pose
+from tests.service.conftest import SECRET
+
+TICK_HZ = 60.0  # the server default the tests run at
+
+
+# --- the server under test ---------------------------------------------------------------
+
+
+class ServerProc:
+    """One ``posecast serve`` subprocess on an ephemeral loopback port (8 samples).
+
+    ``log`` (optional) receives the server's JSON log lines (stderr).
+    """
+
+    def __init__(self, *extra: str, log: Path | None = None, log_level: str = "WARNING") -> None:
+        env = {k: v for k, v in os.environ.items() if not k.startswith("POSECAST_")}
+        env.update(POSECAST_TOKEN_SECRET=SECRET, POSECAST_LOG_LEVEL=log_level)
+        # Serve only the layout these tests speak: one model to load, a faster start.
+        # (An environment variable, not a flag: servers without the option ignore it.)
+        env["POSECAST_LAYOUTS"] = "hmd3+waist"
+        cmd = [sys.executable, "-m", "posecast", "serve", "--port", "0", "--samples", "8",
+               "--lookahead", "2", "--conn-per-ip-per-min", "100000", *extra]  # fmt: skip
+        self.log = log
+        err = log.open("ab") if log is not None else None
+        try:
+            self.proc = subprocess.Popen(
+                cmd, env=env, stdout=subprocess.PIPE, stderr=err or subprocess.DEVNULL, text=True
+            )
+        finally:
+            if err is not None:
+                err.close()
+        assert self.proc.stdout is not None
+        line = self.proc.stdout.readline()
+        match = re.search(r"listening on ws://[\d.]+:(\d+)", line)
+        if not match:
+            self.close()
+            raise AssertionError(f"posecast serve did not start: {line!r}")
+        self.port = int(match.group(1))
+
+    @property
+    def url(self) -> str:
+        return f"ws://127.0.0.1:{self.port}/"
+
+    def http(self, path: str) -> tuple[int, str]:
+        try:
+            with urllib.request.urlopen(f"http://127.0.0.1:{self.port}{path}", timeout=2) as r:
+                return r.status, r.read().decode()
+        except urllib.error.HTTPError as e:
+            return e.code, e.read().decode()
+
+    def metric(self, name: str) -> float:
+        """Sum of every sample of metric ``name`` (all label sets) in ``/metrics``."""
+        _, body = self.http("/metrics")
+        pattern = rf"^{re.escape(name)}(?:\{{[^}}]*\}})? (\S+)$"
+        return sum(float(v) for v in re.findall(pattern, body, re.M))
+
+    def rss_kib(self) -> int:
+        return rss_kib(self.proc.pid)
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                self.proc.send_signal(signal.SIGKILL)
+                self.proc.wait(timeout=10)
+        if self.proc.stdout is not None:
+            self.proc.stdout.close()
+
+
+def rss_kib(pid: int) -> int:
+    """Resident set size of process ``pid``, KiB (Linux ``/proc``)."""
+    status = Path(f"/proc/{pid}/status").read_text()
+    found = re.search(r"^VmRSS:\s+(\d+) kB$", status, re.M)
+    assert found is not None, "no VmRSS in /proc/PID/status"
+    return int(found[1])
+
+
+class RssSampler:
+    """Samples a process's RSS every ``period_s`` in a thread: ``(monotonic, KiB)``."""
+
+    def __init__(self, pid: int, period_s: float = 0.1) -> None:
+        self.pid, self.period_s = pid, period_s
+        self.samples: list[tuple[float, int]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            with contextlib.suppress(OSError, AssertionError):  # the process may be gone
+                self.samples.append((time.monotonic(), rss_kib(self.pid)))
+            self._stop.wait(self.period_s)
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(5)
+
+    def between(self, t0: float, t1: float) -> list[int]:
+        return [kib for t, kib in self.samples if t0 <= t <= t1]
+
+
+# --- a client that never reads -------------------------------------------------------------
+
+
+def _masked_frame(payload: bytes, opcode: int = 0x2) -> bytes:
+    """One client-to-server WebSocket frame (FIN, masked, as RFC 6455 requires)."""
+    n = len(payload)
+    if n < 126:
+        head = struct.pack("!BB", 0x80 | opcode, 0x80 | n)
+    elif n < 65536:
+        head = struct.pack("!BBH", 0x80 | opcode, 0x80 | 126, n)
+    else:
+        head = struct.pack("!BBQ", 0x80 | opcode, 0x80 | 127, n)
+    mask = os.urandom(4)
+    body = bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
+    return head + mask + body
+
+
+class SilentReader:
+    """A raw TCP client that completes the WebSocket handshake, sends ``hello`` (and,
+    if asked, frames) and never reads another byte. Its receive buffer is made small
+    (``rcvbuf_bytes``, set before connecting) so the server's side fills quickly."""
+
+    def __init__(self, port: int, tok: str, room: str, name: str, rcvbuf_bytes: int = 4096):
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf_bytes)
+        self.sock.connect(("127.0.0.1", port))
+        key = base64.b64encode(os.urandom(16)).decode()
+        self.sock.sendall(
+            (
+                "GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\n"
+                f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
+                f"Sec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: {SUBPROTOCOL}\r\n\r\n"
+            ).encode()
+        )
+        head = b""
+        while b"\r\n\r\n" not in head:  # the 101 response, byte by byte: nothing more
+            chunk = self.sock.recv(1)
+            assert chunk, f"the server closed during the handshake: {head!r}"
+            head += chunk
+        assert head.startswith(b"HTTP/1.1 101"), head
+        self.sock.sendall(_masked_frame(encode(Hello(1, tok, room, name))))
+        self.hello_at = time.monotonic()
+        self.sock.setblocking(False)
+
+    def send_nowait(self, msg: Frame) -> bool:
+        """Send one message if the socket takes it whole right now."""
+        data = _masked_frame(encode(msg))
+        try:
+            sent = self.sock.send(data)
+        except (BlockingIOError, OSError):
+            return False
+        assert sent == len(data), "a partial frame would corrupt the stream"
+        return True
+
+    def tcp_state(self) -> int:
+        """The kernel's TCP state (1: ESTABLISHED; 7: CLOSE, e.g. after a reset)."""
+        info = self.sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO, 8)
+        return info[0]
+
+    def reset_by_server(self) -> bool:
+        """The server dropped the connection (RST or FIN received)."""
+        return self.tcp_state() != 1
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+def abort_with_reset(ws: ClientConnection) -> None:
+    """Vanish: ``SO_LINGER`` 0 then close, so the kernel sends a TCP RST and no
+    WebSocket close frame ever leaves."""
+    sock = ws.transport.get_extra_info("socket")
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+    ws.transport.abort()
+
+
+# --- a lossy, jittery relay ------------------------------------------------------------------
+
+
+@dataclass
+class RelayStats:
+    frames_in: int = 0
+    frames_dropped: int = 0
+    frames_reordered: int = 0  # forwarded after a frame with a higher seq
+    other_in: int = 0
+    delays_s: list[float] = field(default_factory=list)
+
+
+class LossyRelay:
+    """A WebSocket relay between clients and ``upstream``: client-to-server ``frame``
+    messages are dropped with probability ``drop``; every client-to-server message is
+    held for a random ``0..jitter_s`` (independently, so frames overtake each other).
+    Server-to-client traffic passes untouched. Seeded: the same seed, the same faults.
+
+    TCP itself never loses a byte, so loss is applied to whole messages, as a link
+    that loses packets would look to the application after its retransmit gives up.
+    """
+
+    def __init__(self, upstream: str, *, drop: float, jitter_s: float, seed: int) -> None:
+        self.upstream, self.drop, self.jitter_s = upstream, drop, jitter_s
+        self.rng = random.Random(seed)
+        self.stats = RelayStats()
+        self._server: Server | None = None
+        self.port = 0
+
+    @property
+    def url(self) -> str:
+        return f"ws://127.0.0.1:{self.port}/"
+
+    async def start(self) -> None:
+        self._server = await serve(
+            self._relay, "127.0.0.1", 0, subprotocols=[Subprotocol(SUBPROTOCOL)],
+            compression=None, ping_interval=None,
+        )  # fmt: skip
+        self.port = self._server.sockets[0].getsockname()[1]
+
+    async def stop(self) -> None:
+        if self._server is not None:
+            self._server.close()
+            await self._server.wait_closed()
+
+    async def _relay(self, down: ServerConnection) -> None:
+        async with ws_connect(
+            self.upstream, subprotocols=[Subprotocol(SUBPROTOCOL)], compression=None,
+            ping_interval=None,
+        ) as up:  # fmt: skip
+            pending: set[asyncio.Task[None]] = set()
+            last_seq = [-1]
+
+            async def later(data: bytes, delay: float, seq: int | None) -> None:
+                await asyncio.sleep(delay)
+                if seq is not None:
+                    if seq < last_seq[0]:
+                        self.stats.frames_reordered += 1
+                    last_seq[0] = max(last_seq[0], seq)
+                with contextlib.suppress(ConnectionClosed):
+                    await up.send(data)
+
+            async def client_to_server() -> None:
+                async for data in down:
+                    assert isinstance(data, bytes)
+                    msg = decode(data)
+                    seq = msg.seq if isinstance(msg, Frame) else None
+                    if seq is not None:
+                        self.stats.frames_in += 1
+                        if self.rng.random() < self.drop:
+                            self.stats.frames_dropped += 1
+                            continue
+                    else:
+                        self.stats.other_in += 1
+                    delay = self.rng.uniform(0.0, self.jitter_s)
+                    self.stats.delays_s.append(delay)
+                    task = asyncio.create_task(later(data, delay, seq))
+                    pending.add(task)
+                    task.add_done_callback(pending.discard)
+
+            async def server_to_client() -> None:
+                async for data in up:
+                    await down.send(data)
+
+            tasks = [
+                asyncio.create_task(client_to_server()),
+                asyncio.create_task(server_to_client()),
+            ]
+            with contextlib.suppress(ConnectionClosed):
+                await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+            for t in (*tasks, *pending):
+                t.cancel()
+            await asyncio.gather(*tasks, *pending, return_exceptions=True)
+
+
+# --- measures -------------------------------------------------------------------------------
+
+
+def rates_hz(poses: Sequence[Pose], t0: float, t1: float, window_s: float = 0.5) -> list[float]:
+    """Poses per second in consecutive windows of server time ``[t0, t1)``."""
+    n = max(1, int((t1 - t0) / window_s))
+    counts = [0] * n
+    for p in poses:
+        k = int((p.t - t0) / window_s)
+        if 0 <= k < n:
+            counts[k] += 1
+    return [c / window_s for c in counts]
+
+
+def max_gap_s(poses: Sequence[Pose]) -> float:
+    """Longest server-time gap between consecutive poses of one player."""
+    ts = [p.t for p in poses]
+    return max((b - a for a, b in itertools.pairwise(ts)), default=0.0)
+
+
+@dataclass(frozen=True)
+class Jumps:
+    max_jump_m: float  # largest joint displacement between consecutive poses
+    max_speed_m_s: float  # the same divided by the server time between them
+    p99_jump_m: float
+
+
+def joint_jumps(poses: Sequence[Pose]) -> Jumps:
+    """How far any joint moves between consecutive poses (one player, in order)."""
+    if len(poses) < 2:
+        return Jumps(0.0, 0.0, 0.0)
+    pos = np.stack([p.positions for p in poses])  # (P, 19, 3)
+    t = np.array([p.t for p in poses])  # (P,)
+    step = np.linalg.norm(np.diff(pos, axis=0), axis=-1).max(axis=-1)  # (P-1,)
+    dt = np.maximum(np.diff(t), 1.0 / TICK_HZ)
+    return Jumps(float(step.max()), float((step / dt).max()), float(np.percentile(step, 99)))
+
+
+def seqs_in(poses: Iterable[Pose], t0: float, t1: float) -> set[tuple[str, int]]:
+    """``(player, seq)`` of the poses made by ticks in ``[t0, t1]`` (server time)."""
+    return {(p.player, p.seq) for p in poses if t0 <= p.t <= t1}
+
+
+def pose_of(player: str) -> Callable[[Message], bool]:
+    """A ``wait_for`` predicate: a pose of ``player``."""
+    return lambda m: isinstance(m, Pose) and m.player == player
+
+
+def is_(expected: Message) -> Callable[[Message], bool]:
+    """A ``wait_for`` predicate: a message equal to ``expected``."""
+    return lambda m: m == expected
+
+
+def fmt(values: Iterable[float], digits: int = 1) -> str:
+    return "[" + ", ".join(f"{v:.{digits}f}" for v in values) + "]"
+
+
+def report(title: str, **figures: Any) -> None:
+    """Print one line of figures (``pytest -s`` shows them; CI logs keep them)."""
+    body = "  ".join(f"{k}={v}" for k, v in figures.items())
+    print(f"\n[fault] {title}: {body}")
