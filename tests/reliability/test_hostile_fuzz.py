@@ -468,7 +468,10 @@ def test_a_message_over_the_frame_cap_is_closed_1009_and_others_stay(arena: Aren
     frame (close 1009) before the codec sees it: the sender is cut off, nobody else."""
     att = Attacker(arena.port)
     assert isinstance(att.hello(token("r1", "atk-big")), Welcome)
+    before = errors_by_code(scrape(arena.port)).get("TOO_LARGE", 0.0)
     ans = att.probe(b"\x00" * (65536 + 1))
     assert ans.closed and ans.close_code == 1009 and ans.errors == []
+    time.sleep(0.2)
+    assert errors_by_code(scrape(arena.port)).get("TOO_LARGE", 0.0) == before + 1  # counted
     assert http_get(arena.port, "/healthz")[0] == 200
     assert all(not c.closed.is_set() for c in arena.clients.values())

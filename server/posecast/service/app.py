@@ -31,6 +31,7 @@ from dataclasses import dataclass
 from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed
+from websockets.frames import CloseCode
 from websockets.http11 import Request, Response
 from websockets.typing import Subprotocol
 
@@ -167,7 +168,8 @@ class PosecastServer:
             return connection.respond(200, "ok\n")
         if path == "/readyz":
             if self.ready and not self.bus.healthy:
-                return connection.respond(503, f"not ready: {self.bus.status}\n")
+                # The reason stays in the logs: its text may name internal hosts.
+                return connection.respond(503, "not ready: redis unavailable\n")
             return connection.respond(200, "ready\n") if self.ready else _unavailable(connection)
         if path == "/metrics":
             body = self.metrics.render()
@@ -218,8 +220,11 @@ class PosecastServer:
                     pace.allow(time.monotonic())
                 self.hub.receive(conn, data, time.monotonic())
                 self._flush()
-        except ConnectionClosed:
-            pass
+        except ConnectionClosed as exc:
+            if exc.sent is not None and exc.sent.code == CloseCode.MESSAGE_TOO_BIG:
+                # Past the WebSocket frame cap the library closes before the codec sees
+                # the message; it is still a TOO_LARGE message, and counted as one.
+                self.metrics.errors.labels("TOO_LARGE").inc()
         finally:
             self.hub.disconnect(conn, time.monotonic())
             del self._clients[conn]
