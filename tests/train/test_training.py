@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from posecast.model.cvae import CVAEConfig
 from posecast.train.anomaly_trainer import AnomalyTrainConfig, train_anomaly
@@ -74,3 +75,21 @@ def test_hmd3_cvae_learns_the_pelvis_and_rotations(prepared_dir: Path, tmp_path:
     assert state["model"]["decoder.pose.weight"].shape == (117, 128)
     assert state["model"]["decoder.fc.weight"].shape == (128, 36 + 30)
     assert state["config"]["layout"] == "hmd3"
+
+
+def test_the_orientation_ablation_zeroes_only_orientation_inputs(
+    prepared_dir: Path, tmp_path: Path
+) -> None:
+    import dataclasses
+
+    cfg = CVAEConfig(n_features=36, layout="hmd3", root_outputs=9)
+    train_cfg = dataclasses.replace(SMALL, steps=4, log_every=2, val_every=4, no_orientation=True)
+    ckpt = train_cvae(prepared_dir, tmp_path, cfg, train_cfg, log=lambda _: None)
+    std = np.asarray(load_checkpoint(ckpt)["norm"]["feat_std"])
+    from posecast.tracking import FEATURE_NAMES_HMD3
+
+    ori = np.array([".r" in n for n in FEATURE_NAMES_HMD3])
+    assert np.all(std[ori] == np.float32(1e-3))  # constant zero: the std floor
+    assert np.all(std[~ori] > 1e-3)
+    with pytest.raises(ValueError, match="no orientation"):
+        train_cvae(prepared_dir, tmp_path / "four", CVAEConfig(), train_cfg, log=lambda _: None)

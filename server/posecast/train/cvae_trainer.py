@@ -20,6 +20,7 @@ import torch
 
 from posecast.dataset.augment import Augmentation
 from posecast.geometry.torch_ops import r6d2mat
+from posecast.layout import spec
 from posecast.model.cvae import CVAE, CVAEConfig
 from posecast.train.checkpoint import load_checkpoint, save_checkpoint
 from posecast.train.data import Normalisation, TrainArrays, load_train_val
@@ -41,6 +42,9 @@ class CVAETrainConfig:
     # the rotations are right only where they move a joint. 0 for the shipped 4-point
     # model (trained before it existed), 10 for the headset-only one (docs/model-card.md).
     rot_weight: float = 0.0
+    # Ablation (docs/evaluation.md): zero the headset-only model's orientation inputs,
+    # leaving it the positions and velocities a 4-point model reads.
+    no_orientation: bool = False
     seed: int = 0
     log_every: int = 100
     val_every: int = 1000
@@ -111,6 +115,12 @@ def train_cvae(
     ckpt_path = out / "checkpoint.pt"
     t0 = time.perf_counter()
     manifest, train, val = load_train_val(data_dir, cfg.augmentation(), cfg.seed, model_cfg.layout)
+    if cfg.no_orientation:
+        cols = [i for i, n in enumerate(spec(model_cfg.layout).feature_names) if ".r" in n]
+        if not cols:
+            raise ValueError(f"layout {model_cfg.layout} has no orientation features")
+        train.features[:, cols] = 0.0
+        val.features[:, cols] = 0.0
     log(
         f"data: {train.n_frames} train frames after augmentation, {val.n_frames} val frames "
         f"({time.perf_counter() - t0:.1f} s)"
