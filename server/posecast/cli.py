@@ -69,7 +69,12 @@ def _cmd_train(args: argparse.Namespace) -> int:
             layout=str(ls.layout),
             root_outputs=ls.root_outputs,
         )
-        cfg = CVAETrainConfig(threads=torch_threads, seed=args.seed, rot_weight=args.rot_weight)
+        cfg = CVAETrainConfig(
+            threads=torch_threads,
+            seed=args.seed,
+            rot_weight=args.rot_weight,
+            no_orientation=args.no_orientation,
+        )
         if args.steps:
             cfg = dataclasses.replace(cfg, steps=args.steps)
         path = train_cvae(args.data, args.out, model_cfg, cfg, resume=args.resume)
@@ -175,7 +180,9 @@ def _cmd_bench_engine(args: argparse.Namespace) -> int:
     from posecast.bench.engine_bench import run
 
     counts = [int(p) for p in args.players.split(",")]
-    report = run(counts, args.samples, args.threads, args.ticks, args.naive_players)
+    report = run(
+        counts, args.samples, args.threads, args.ticks, args.naive_players, args.hmd3_share
+    )
     print(f"{'players':>8s} {'p50 ms':>8s} {'p99 ms':>8s} {'GFLOP/s':>8s} {'MB/player':>10s}")
     for i, p in enumerate(report["players"]):
         print(
@@ -186,6 +193,16 @@ def _cmd_bench_engine(args: argparse.Namespace) -> int:
         f"max players at 60 Hz (p99 < 16.7 ms), N={args.samples}: {report['max_realtime_players']}"
     )
     print(f"peak: {report['peak_gflops']} GFLOP/s; naive loop: {report['naive_loop']}")
+    both = report.get("both_models")
+    if both:
+        print(f"both models loaded, {both['hmd3_share']:.0%} of the players headset-only:")
+        print(f"{'players':>8s} {'hmd3':>5s} {'p50 ms':>8s} {'p99 ms':>8s} {'MB/player':>10s}")
+        for i, p in enumerate(report["players"]):
+            print(
+                f"{p:8d} {both['hmd3_players'][i]:5d} {both['tick_p50_ms'][i]:8.2f} "
+                f"{both['tick_p99_ms'][i]:8.2f} {both['rss_mb_per_player'][i]:10.2f}"
+            )
+        print(f"max players at 60 Hz, both models: {both['max_realtime_players']}")
     if args.json is not None:
         args.json.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
     return 0
@@ -276,6 +293,11 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("hmd3+waist", "hmd3"),
         help="tracker layout the CVAE serves (default hmd3+waist)",
     )
+    train.add_argument(
+        "--no-orientation",
+        action="store_true",
+        help="ablation: zero the hmd3 model's orientation inputs",
+    )
     train.set_defaults(func=_cmd_train)
 
     export = sub.add_parser("export", help="checkpoints -> ONNX + JSON sidecars")
@@ -329,6 +351,13 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--threads", type=int, default=2, help="ONNX Runtime intra-op threads")
     be.add_argument("--ticks", type=int, default=120, help="measured ticks per count")
     be.add_argument("--naive-players", type=int, default=10, help="players for the naive loop")
+    be.add_argument(
+        "--hmd3-share",
+        type=float,
+        default=0.5,
+        help="also load the headset-only model and run this share of players on it "
+        "(default 0.5; 0: the 4-point model only)",
+    )
     be.add_argument("--json", type=Path, help="write the report here")
     be.set_defaults(func=_cmd_bench_engine)
 

@@ -1,6 +1,7 @@
-"""``posecast demo`` (what ``make run`` starts): the server with the shipped model, two
+"""``posecast demo`` (what ``make run`` starts): the server with the shipped models, two
 simulated headsets replaying motion at 60 Hz, and a spectator that reports what the
-room receives.
+room receives. Alice wears a waist tracker (layout ``hmd3+waist``); Bob has only a
+headset and two controllers (``hmd3``): one room, both models.
 
 The headsets replay a BVH file when given one (``--bvh``), else a generated walk.
 The printed ``viewer:`` URL opens the live 3D viewer on the room (the demo runs with
@@ -26,10 +27,20 @@ from posecast.auth.tokens import mint
 from posecast.dataset.frames import Frames, derive_frames
 from posecast.motion.synthetic import walk_clip
 from posecast.protocol import decode, encode
-from posecast.protocol.messages import SUBPROTOCOL, Frame, Hello, Pose, Presence, Welcome
+from posecast.protocol.messages import (
+    LAYOUT_3POINT,
+    LAYOUT_4POINT,
+    SUBPROTOCOL,
+    Frame,
+    Hello,
+    Pose,
+    Presence,
+    Welcome,
+)
 from posecast.service.app import PosecastServer
 from posecast.service.config import ServerConfig
 from posecast.skeleton import Joint
+from posecast.tracking import TrackerSlot
 
 
 def motion(bvh: Path | None, seed: int) -> Frames:
@@ -42,10 +53,14 @@ def motion(bvh: Path | None, seed: int) -> Frames:
     return process_file(bvh, load_rigs())[1]
 
 
-async def headset(url: str, token: str, name: str, frames: Frames, offset_m: float) -> None:
-    """Connect, join, and send frames at 60 Hz forever (looping the clip)."""
+async def headset(
+    url: str, token: str, name: str, frames: Frames, offset_m: float, layout: str = LAYOUT_4POINT
+) -> None:
+    """Connect, join, and send frames at 60 Hz forever (looping the clip). A headset-only
+    player (``layout="hmd3"``) sends no waist: that slot is zero and marked not valid."""
+    waist = layout == LAYOUT_4POINT
     async with connect(url, subprotocols=[Subprotocol(SUBPROTOCOL)]) as ws:
-        await ws.send(encode(Hello(1, token, "demo", name)))
+        await ws.send(encode(Hello(1, token, "demo", name, None if waist else layout)))
         reply = await ws.recv()
         welcome = decode(reply if isinstance(reply, bytes) else reply.encode())
         if not isinstance(welcome, Welcome):
@@ -61,7 +76,10 @@ async def headset(url: str, token: str, name: str, frames: Frames, offset_m: flo
                     i = seq % len(frames["features"])
                     pos = frames["tracker_pos"][i].astype(np.float64) + shift
                     quat = frames["tracker_quat"][i].astype(np.float64)
-                    await ws.send(encode(Frame(seq, time.monotonic() - t0, pos, quat)))
+                    if not waist:
+                        pos[TrackerSlot.WAIST], quat[TrackerSlot.WAIST] = 0.0, 0.0
+                    t = time.monotonic() - t0
+                    await ws.send(encode(Frame(seq, t, pos, quat, 0b1111 if waist else 0b0111)))
                     seq += 1
                     await asyncio.sleep(max(0.0, t0 + seq / 60.0 - time.monotonic()))
         finally:
@@ -120,7 +138,7 @@ async def run(port: int, seconds: float | None, bvh: Path | None, samples: int) 
 
     tasks = [
         asyncio.create_task(headset(url, token("alice"), "Alice", motion(bvh, 1), -0.8)),
-        asyncio.create_task(headset(url, token("bob"), "Bob", motion(bvh, 2), 0.8)),
+        asyncio.create_task(headset(url, token("bob"), "Bob", motion(bvh, 2), 0.8, LAYOUT_3POINT)),
         asyncio.create_task(spectator(url, token("viewer", "spectator"))),
     ]
     try:

@@ -62,7 +62,6 @@ def test_join_stream_receive_and_sync_clocks(dev_server: DevServer, uid: str) ->
         ("other_room", errors.ForbiddenError),
         ("wrong_secret", errors.UnauthenticatedError),
         ("expired", errors.TokenExpiredError),
-        ("hmd3", errors.LayoutUnsupportedError),
     ],
 )
 def test_refusals_raise_typed_errors(
@@ -73,14 +72,45 @@ def test_refusals_raise_typed_errors(
         "other_room": lambda: dev_server.token("elsewhere", f"p-{uid}"),
         "wrong_secret": lambda: pc.mint_token("not-the-secret-at-all", room=room, player="p"),
         "expired": lambda: dev_server.token(room, f"p-{uid}", now=time.time() - 7200),
-        "hmd3": lambda: dev_server.token(room, f"p-{uid}"),
     }
 
     async def main() -> None:
         async with pc.connect(dev_server.url, tokens[case]()) as client:
             with pytest.raises(expected) as info:
-                await client.join(room, "P", layout="hmd3" if case == "hmd3" else "hmd3+waist")
+                await client.join(room, "P")
             assert info.value.fatal and not info.value.retryable
+
+    run(main())
+
+
+def test_a_headset_only_player_streams_without_a_waist(dev_server: DevServer, uid: str) -> None:
+    """``layout="hmd3"``: frames with the waist slot not valid; the room gets its avatar
+    (the server's headset-only model predicts the pelvis)."""
+    room = f"room-{uid}"
+
+    async def main() -> None:
+        quest = await pc.connect(dev_server.url, dev_server.token(room, f"quest-{uid}"))
+        bob = await pc.connect(dev_server.url, dev_server.token(room, f"bob-{uid}"))
+        async with quest, bob:
+            await quest.join(room, "Quest", layout="hmd3")
+            await bob.join(room, "Bob")
+
+            async def send() -> int:
+                n = 0
+                async for sample in pc.WalkSource(seconds=1.5):
+                    pos, quat = sample.positions.copy(), sample.orientations.copy()
+                    pos[3], quat[3] = 0.0, (0.0, 0.0, 0.0, 1.0)  # no waist tracker
+                    await quest.send_frame(pos, quat, valid=0b0111)
+                    n += 1
+                return n
+
+            sending = asyncio.create_task(send())
+            poses = [e async for e in bob.events(until=sending) if isinstance(e, pc.Pose)]
+            assert await sending == 90
+            assert len(poses) > 40 and {p.player for p in poses} == {f"quest-{uid}"}
+            head_y = np.array([p.positions[pc.Joint.HEAD][1] for p in poses])
+            pelvis_y = np.array([p.positions[pc.Joint.PELVIS][1] for p in poses])
+            assert np.all(head_y - pelvis_y > 0.3)  # a body hangs under the headset
 
     run(main())
 

@@ -14,7 +14,10 @@ export const PROTOCOL_VERSION = 1;
 export const SUBPROTOCOL = "posecast.v1";
 
 export const LAYOUTS = ["hmd3+waist", "hmd3"] as const;
-/** `hmd3+waist`: head, both hands and waist (served now). `hmd3` is reserved. */
+/**
+ * `hmd3+waist`: head, both hands and waist (the 4-point model). `hmd3`: head and both
+ * hands only (the headset-only model; a WebXR session without a waist tracker).
+ */
 export type Layout = (typeof LAYOUTS)[number];
 export const ROLES = ["player", "spectator", "backend"] as const;
 export type Role = (typeof ROLES)[number];

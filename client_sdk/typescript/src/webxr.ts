@@ -17,11 +17,15 @@
  * - HEAD: the viewer pose (`frame.getViewerPose`), the point between the eyes.
  * - LEFT_HAND / RIGHT_HAND: each input source's **grip** pose (`gripSpace`) by
  *   `handedness`. The grip sits in the palm, a few centimetres from the wrist joint
- *   the model was trained on; the model uses hand positions only (orientations ride
- *   along for display), and the grip is what every runtime reports.
+ *   the model was trained on; the 4-point model uses hand positions only, the
+ *   headset-only model their orientations too (after a T-pose calibration), and the
+ *   grip is what every runtime reports.
  * - WAIST: WebXR has no waist, so the caller supplies one if it has a tracker: an
  *   `XRSpace` (located in `refSpace` each frame) or a pose already in `refSpace`, in
- *   WebXR's -Z-forward convention like every other WebXR pose.
+ *   WebXR's -Z-forward convention like every other WebXR pose. Without one, join
+ *   with layout `"hmd3"`: the headset-only model predicts the pelvis itself. It reads
+ *   the head's and hands' orientations, so send one `calibrate` with a T-pose first
+ *   (the server then learns each device's rotation offset, e.g. grip vs. hand).
  *
  * A slot the frame cannot locate is left out (its `valid` bit is cleared when the
  * client sends the frame). Use a **floor-level** reference space (`local-floor` or

@@ -4,6 +4,10 @@ Each measured tick is everything the server's tick loop does for the engine: inp
 features, the batched decoder call, FK, contact IK and anomaly scoring of every
 sample, selection, and emission with look-ahead (including interpolation re-decodes
 when transitions run). Players replay a generated walk, each from its own phase.
+
+With ``hmd3_share`` above 0 both shipped models are loaded (a :class:`MultiEngine`,
+as ``posecast serve`` runs them) and that share of the players is headset-only: each
+model steps its own players in one batch, so a tick costs two decoder calls.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from posecast.dataset.frames import derive_frames
 from posecast.engine.anomaly import AnomalyScorer
 from posecast.engine.config import EngineConfig
 from posecast.engine.engine import Engine, TrackerFrame
+from posecast.engine.multi import MultiEngine
 from posecast.inference.artifact import load_artifact
 from posecast.motion.synthetic import walk_clip
 
@@ -40,6 +45,7 @@ PEAK_GFLOPS = 2 * 2.5 * 2 * 16 * 2
 class BenchResult:
     players: int
     samples: int
+    hmd3_players: int
     tick_p50_ms: float
     tick_p99_ms: float
     gflops: float
@@ -69,13 +75,27 @@ def bench(
     warmup: int = 20,
     threads: int = 2,
     lookahead: int = 10,
+    hmd3_share: float = 0.0,
 ) -> BenchResult:
-    dec = load_artifact("cvae_decoder", threads=threads)
     scorer = AnomalyScorer(load_artifact("anomaly", threads=threads))
-    engine = Engine(dec, scorer, EngineConfig(samples=samples, lookahead=lookahead), players)
+    cfg = EngineConfig(samples=samples, lookahead=lookahead)
+    n3 = round(hmd3_share * players)
+    engine: Engine | MultiEngine
+    if hmd3_share > 0:
+        engine = MultiEngine(
+            {
+                "hmd3+waist": Engine(load_artifact("cvae_decoder", threads=threads), scorer, cfg),
+                "hmd3": Engine(load_artifact("cvae_decoder_hmd3", threads=threads), scorer, cfg),
+            }
+        )
+    else:
+        engine = Engine(load_artifact("cvae_decoder", threads=threads), scorer, cfg, players)
     rss0 = _rss_mb()
     for p in range(players):
-        engine.add_player(f"p{p}", seed=p)
+        if isinstance(engine, MultiEngine):
+            engine.add_player(f"p{p}", p, "hmd3" if p < n3 else "hmd3+waist")
+        else:
+            engine.add_player(f"p{p}", seed=p)
     pos, quat = _frames()
     times = []
     for t in range(warmup + ticks):
@@ -92,6 +112,7 @@ def bench(
     return BenchResult(
         players=players,
         samples=samples,
+        hmd3_players=n3,
         tick_p50_ms=round(p50, 3),
         tick_p99_ms=round(float(np.percentile(ms, 99)), 3),
         gflops=round(flop / (p50 / 1000.0) / 1e9, 2),
@@ -122,10 +143,30 @@ def naive_loop(players: int, samples: int = 100, ticks: int = 60, threads: int =
 
 
 def run(
-    player_counts: list[int], samples: int, threads: int, ticks: int, naive_players: int
+    player_counts: list[int],
+    samples: int,
+    threads: int,
+    ticks: int,
+    naive_players: int,
+    hmd3_share: float = 0.0,
 ) -> dict[str, Any]:
     results = [bench(p, samples, ticks=ticks, threads=threads) for p in player_counts]
     ok = [r.players for r in results if r.realtime()]
+    mixed: dict[str, Any] = {}
+    if hmd3_share > 0:
+        both = [
+            bench(p, samples, ticks=ticks, threads=threads, hmd3_share=hmd3_share)
+            for p in player_counts
+        ]
+        fits = [r.players for r in both if r.realtime()]
+        mixed = {
+            "hmd3_share": hmd3_share,
+            "hmd3_players": [r.hmd3_players for r in both],
+            "tick_p50_ms": [r.tick_p50_ms for r in both],
+            "tick_p99_ms": [r.tick_p99_ms for r in both],
+            "max_realtime_players": max(fits) if fits else 0,
+            "rss_mb_per_player": [r.rss_mb for r in both],
+        }
     return {
         "players": [r.players for r in results],
         "samples": samples,
@@ -144,4 +185,4 @@ def run(
         },
         "threads": threads,
         "frame_budget_ms": round(FRAME_BUDGET_MS, 3),
-    }
+    } | ({"both_models": mixed} if mixed else {})

@@ -27,7 +27,7 @@ PROTOCOL_VERSION = 1
 SUBPROTOCOL = "posecast.v1"
 
 LAYOUT_4POINT = "hmd3+waist"  # head, both hands, waist: what the shipped model takes
-LAYOUT_3POINT = "hmd3"  # reserved for a headset-only model; servers refuse it for now
+LAYOUT_3POINT = "hmd3"  # head and both hands: the headset-only model (posecast.layout)
 LAYOUTS = (LAYOUT_4POINT, LAYOUT_3POINT)
 ROLES = ("player", "spectator", "backend")
 PRESENCE_EVENTS = ("join", "leave", "stale", "active")

@@ -46,7 +46,7 @@ class ServerConfig:
     engine_threads: int = _opt(1, "ONNX Runtime intra-op threads of the engine thread")
     models_dir: str | None = _opt(None, "directory of ONNX models (default: shipped)")
     layouts: str = _opt(
-        "hmd3+waist", "tracker layouts served, comma-separated; each loads its model"
+        "hmd3+waist,hmd3", "tracker layouts served, comma-separated; each loads its model"
     )
     max_message_bytes: int = _opt(8192, "largest WebSocket message accepted, bytes")
     max_rate_hz: int = _opt(120, "frames per second one player may send (token bucket)")

@@ -235,8 +235,9 @@ class Client:
         """Join ``room`` as ``name`` (shown to others) and start receiving.
 
         Args:
-            layout: the tracked points; ``hmd3+waist`` (head, both hands, waist) is
-                the layout served now.
+            layout: the tracked points, which picks the server's model:
+                ``hmd3+waist`` (head, both hands, waist) or ``hmd3`` (headset and
+                controllers only; the waist slot of frames is ignored).
             rate_hz: frames per second this client will send (absent: 60).
             watch: further rooms to watch (backend tokens only).
 

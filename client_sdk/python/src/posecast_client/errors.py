@@ -220,7 +220,7 @@ class VersionUnsupportedError(ProtocolError):
 
 
 class LayoutUnsupportedError(ProtocolError):
-    """The tracker layout is known but not served (hmd3 is reserved)."""
+    """The tracker layout is known but this server does not serve it (its --layouts)."""
 
     code = "LAYOUT_UNSUPPORTED"
     fatal = True
