@@ -120,3 +120,38 @@ def test_record_exports_an_existing_recording(
     assert recorder.wait(30) == 0
     assert record.main(["--export", str(rec_file), "--bvh", str(tmp_path / "out")]) == 0
     assert len(list((tmp_path / "out").glob("*.bvh"))) == 1
+
+
+def test_sim_churns_players_and_prints_progress(
+    dev_server: DevServer, capsys: pytest.CaptureFixture[str], tmp_path: Path, uid: str
+) -> None:
+    """``--churn-every``: players leave on schedule and new ones take their places;
+    ``--progress-every``: JSON progress lines while it runs."""
+    report = tmp_path / "churn.json"
+    code = sim.main(
+        ["--url", dev_server.url, "--secret", dev_server.secret, "--room-prefix", f"ch-{uid}",
+         "--players", "3", "--rooms", "1", "--duration", "3", "--churn-every", "0.5",
+         "--progress-every", "0.5", "--json", str(report), "-q"]
+    )  # fmt: skip
+    out = capsys.readouterr().out
+    assert code == 0, out
+    s = json.loads(report.read_text())
+    assert s["players"] == 3 and s["failed"] == {} and s["connection_losses"] == 0, s
+    assert 4 <= s["churned"] <= 6  # one leave every 0.5 s for 3 s
+    # each leave made room for a new player, unless it came too close to the end
+    assert 3 + s["churned"] - 1 <= s["sessions"] <= 3 + s["churned"]
+    assert len(s["poses_from"]) == s["sessions"]
+    assert 0 < s["first_pose_ms_p50"] <= s["first_pose_ms_max"] < 2000  # a new player's wait
+    assert f"sessions {s['sessions']:8d}" in " ".join(out.split("  "))
+    lines = [json.loads(x.split(" ", 2)[2]) for x in out.splitlines() if " progress " in x]
+    assert len(lines) >= 4
+    assert [x["poses"] for x in lines] == sorted(x["poses"] for x in lines)
+    assert lines[-1]["poses"] > 0 and lines[-1]["connection_losses"] == 0
+    assert all(x["active"] <= 3 for x in lines) and lines[-1]["active"] >= 2
+
+
+def test_sim_rejects_bad_churn_options() -> None:
+    with pytest.raises(SystemExit, match="must not be negative"):
+        sim.main(["--secret", "s" * 32, "--churn-every", "-1"])
+    with pytest.raises(SystemExit, match="fresh token per player"):
+        sim.main(["--token", "t", "--players", "1", "--churn-every", "1"])

@@ -8,20 +8,31 @@ frames sent, poses received per second, and the end-to-end latency from sending 
 frame to receiving the pose made from it (``pose.seq`` echoes the frame's seq; this
 includes the server's look-ahead), p50 and p99.
 
+For load tests (``benchmarks/load.py``): ``--churn-every S`` makes one player leave
+every S seconds (it says ``bye``) and a new player, with a fresh id and token, join
+its room in its place; the players take turns. A connection lost without being asked
+to leave is counted as a loss (``connection_losses``), so churn and unexplained
+disconnects are told apart, and ``first_pose_ms`` times each player from connecting
+to its own first pose. ``--progress-every S`` prints a ``posecast-sim progress {json}``
+line every S seconds while it runs. SIGINT or SIGTERM ends a run early, with its
+summary.
+
 Examples::
 
     posecast-sim --secret $SECRET --players 4 --rooms 2 --duration 10
     posecast-sim --secret $SECRET --bvh 05_02.bvh --noise-m 0.002 --dropout 0.02 --json out.json
+    posecast-sim --secret $SECRET --players 64 --rooms 16 --duration 600 --churn-every 3
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import itertools
 import json
 import sys
 import time
-from collections.abc import AsyncIterator, Sequence
+from collections.abc import AsyncIterator, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -52,9 +63,23 @@ class PlayerReport:
     latencies_s: list[float] = field(default_factory=list)
     errors: list[str] = field(default_factory=list)
     reconnects: int = 0
+    losses: int = 0  # connections lost while not leaving (each one's first Reconnecting)
+    churned: bool = False  # left because the churn schedule asked it to
+    active: bool = False  # joined and not yet left
+    first_pose_s: float | None = None  # from connecting to receiving its own first pose
     clock_offset_s: float | None = None
     rtt_s: float | None = None
     failure: str | None = None
+
+
+@dataclass
+class Slot:
+    """A place in a room that one player holds at a time (another after churn)."""
+
+    index: int
+    room: str
+    place: int  # the slot's place in its room (sets the avatar's offset)
+    leave: asyncio.Event = field(default_factory=asyncio.Event)  # the current player's
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -70,6 +95,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise-deg", type=float, default=0.0, help="orientation noise s.d., degrees")
     p.add_argument("--dropout", type=float, default=0.0, help="fraction of time a tracker is lost")
     p.add_argument("--seed", type=int, default=0, help="seed of motion, noise and dropouts")
+    p.add_argument(
+        "--churn-every", type=float, default=0.0, metavar="S",
+        help="every S seconds one player leaves and a new one takes its place (0: never)",
+    )  # fmt: skip
+    p.add_argument(
+        "--progress-every", type=float, default=0.0, metavar="S",
+        help="print a 'posecast-sim progress {json}' line every S seconds (0: never)",
+    )  # fmt: skip
     p.add_argument("--json", type=Path, help="also write the summary here as JSON")
     p.add_argument("-q", "--quiet", action="store_true", help="print only the summary")
     return p
@@ -92,11 +125,11 @@ def make_source(args: argparse.Namespace, i: int, slot_in_room: int) -> ReplaySo
 
 
 async def _for(
-    source: ReplaySource, seconds: float, stop: asyncio.Event
+    source: ReplaySource, seconds: float, *stops: asyncio.Event
 ) -> AsyncIterator[TrackerSample]:
     end = time.monotonic() + seconds
     async for sample in source:
-        if time.monotonic() >= end or stop.is_set():
+        if time.monotonic() >= end or any(s.is_set() for s in stops):
             return
         yield sample
 
@@ -107,25 +140,40 @@ async def run_player(
     report: PlayerReport,
     source: ReplaySource,
     stop: asyncio.Event,
+    *,
+    leave: asyncio.Event | None = None,
+    seconds: float | None = None,
 ) -> None:
+    """Join as ``report.player`` and stream ``source`` for ``seconds`` (``--duration``),
+    or until ``stop`` or ``leave`` is set, then say ``bye``."""
     token = token_for(args, report.room, report.player)
+    t_connect = time.monotonic()
     client = await connect_patiently(args.url, token)
+    stops = (stop,) if leave is None else (stop, leave)
     try:
         await client.join(report.room, f"Sim {i}", rate_hz=min(args.rate, 120.0))
-        streaming = asyncio.create_task(client.stream(_for(source, args.duration, stop)))
+        report.active = True
+        frames = _for(source, args.duration if seconds is None else seconds, *stops)
+        streaming = asyncio.create_task(client.stream(frames))
         async for event in client.events(until=streaming):
             if isinstance(event, Pose):
                 report.poses += 1
                 report.poses_from[event.player] = report.poses_from.get(event.player, 0) + 1
                 sent = client.sent_at(event.seq) if event.player == client.player else None
+                if sent is not None and report.first_pose_s is None:
+                    report.first_pose_s = time.monotonic() - t_connect
                 if sent is not None:
                     report.latencies_s.append(time.monotonic() - sent)
             elif isinstance(event, Error):
                 report.errors.append(event.code)
-            elif isinstance(event, Reconnecting) and not args.quiet:
-                print(f"{report.player}: reconnecting ({event.cause!r})", file=sys.stderr)
+            elif isinstance(event, Reconnecting):
+                if event.attempt == 1:
+                    report.losses += 1
+                if not args.quiet:
+                    print(f"{report.player}: reconnecting ({event.cause!r})", file=sys.stderr)
         await streaming
     finally:
+        report.active = False
         report.frames_sent = client.stats.frames_sent
         report.frames_dropped = client.stats.frames_dropped
         report.reconnects = client.stats.reconnects
@@ -139,11 +187,14 @@ def summarise(
     lat = np.array([x for r in reports for x in r.latencies_s]) * 1000.0
     offsets = [r.clock_offset_s for r in reports if r.clock_offset_s is not None]
     rtts = [r.rtt_s for r in reports if r.rtt_s is not None]
+    first = np.array([r.first_pose_s for r in reports if r.first_pose_s is not None]) * 1000.0
     poses = sum(r.poses for r in reports)
     frames = sum(r.frames_sent for r in reports)
     return {
-        "players": len(reports),
+        "players": args.players,
         "rooms": args.rooms,
+        "sessions": len(reports),
+        "churned": sum(r.churned for r in reports),
         "seconds": round(seconds, 3),
         "frames_sent": frames,
         "frames_dropped": sum(r.frames_dropped for r in reports),
@@ -153,10 +204,14 @@ def summarise(
         "latency_ms_p50": round(float(np.percentile(lat, 50)), 2) if lat.size else None,
         "latency_ms_p99": round(float(np.percentile(lat, 99)), 2) if lat.size else None,
         "latency_samples": int(lat.size),
+        "first_pose_ms_p50": round(float(np.percentile(first, 50)), 1) if first.size else None,
+        "first_pose_ms_max": round(float(first.max()), 1) if first.size else None,
         "clock_offset_ms": round(float(np.median(offsets)) * 1000, 3) if offsets else None,
         "rtt_ms": round(float(np.median(rtts)) * 1000, 3) if rtts else None,
         "reconnects": sum(r.reconnects for r in reports),
+        "connection_losses": sum(r.losses for r in reports),
         "errors": sum(len(r.errors) for r in reports),
+        "error_codes": sorted({code for r in reports for code in r.errors}),
         "failed": {r.player: r.failure for r in reports if r.failure},
         "poses_from": {r.player: dict(sorted(r.poses_from.items())) for r in reports},
     }
@@ -174,30 +229,107 @@ def print_summary(s: dict[str, Any]) -> None:
         )
     if s["clock_offset_ms"] is not None:
         print(f"  clock offset    {s['clock_offset_ms']:.3f} ms  (rtt {s['rtt_ms']:.3f} ms)")
+    if s["first_pose_ms_p50"] is not None:
+        p50, top = s["first_pose_ms_p50"], s["first_pose_ms_max"]
+        print(f"  first own pose  p50 {p50:.0f} ms  max {top:.0f} ms  (from connecting)")
+    if s["sessions"] != s["players"]:
+        print(f"  sessions        {s['sessions']:8d}  ({s['churned']} left by the churn schedule)")
     print(
-        f"  reconnects {s['reconnects']}, errors {s['errors']}, failed players {len(s['failed'])}"
+        f"  reconnects {s['reconnects']}, connection losses {s['connection_losses']}, "
+        f"errors {s['errors']}, failed players {len(s['failed'])}"
     )
     for player, why in s["failed"].items():
         print(f"    {player}: {why}")
+
+
+async def run_slot(
+    args: argparse.Namespace,
+    slot: Slot,
+    players: Iterator[int],
+    tag: str,
+    reports: list[PlayerReport],
+    stop: asyncio.Event,
+) -> None:
+    """Hold ``slot`` for ``--duration`` s: one player, then after each churn a new one
+    (a fresh id and token) who replays the slot's motion: building a source takes
+    long enough to stall every other player of this process, so it is built once.
+
+    A player that fails, or whose session ends without being asked to leave, is not
+    replaced: its failure is reported, not papered over by a rejoin.
+    """
+    end = time.monotonic() + args.duration
+    source = make_source(args, slot.index, slot.place)
+    while not stop.is_set() and (left := end - time.monotonic()) > 0:
+        i = next(players)
+        report = PlayerReport(player=f"sim-{tag}-{i}", room=slot.room)
+        reports.append(report)
+        slot.leave = asyncio.Event()
+        try:
+            await run_player(args, i, report, source, stop, leave=slot.leave, seconds=left)
+        except Exception as exc:
+            report.failure = repr(exc)
+            return
+        if not slot.leave.is_set():
+            return
+        report.churned = True
+
+
+async def churn(slots: Sequence[Slot], every_s: float, stop: asyncio.Event) -> None:
+    """Every ``every_s`` seconds ask the next slot's player to leave (slots take turns)."""
+    for k in itertools.count():
+        try:
+            await asyncio.wait_for(stop.wait(), every_s)
+            return
+        except TimeoutError:
+            slots[k % len(slots)].leave.set()
+
+
+async def progress(
+    reports: Sequence[PlayerReport], every_s: float, stop: asyncio.Event, t0: float
+) -> None:
+    """Print a progress line every ``every_s`` seconds (poses so far, players joined...)."""
+    while True:
+        try:
+            await asyncio.wait_for(stop.wait(), every_s)
+            return
+        except TimeoutError:
+            pass
+        line = {
+            "t_s": round(time.monotonic() - t0, 3),
+            "active": sum(r.active for r in reports),
+            "sessions": len(reports),
+            "churned": sum(r.churned for r in reports),
+            "poses": sum(r.poses for r in reports),
+            "connection_losses": sum(r.losses for r in reports),
+            "errors": sum(len(r.errors) for r in reports),
+            "failed": sum(r.failure is not None for r in reports),
+        }
+        print("posecast-sim progress " + json.dumps(line), flush=True)
 
 
 async def run(args: argparse.Namespace) -> dict[str, Any]:
     stop = asyncio.Event()
     stop_on_signals(stop)
     tag = unique_suffix()
-    reports, tasks = [], []
+    players = itertools.count()
+    reports: list[PlayerReport] = []
+    slots, tasks = [], []
+    t0 = time.monotonic()
+    helpers = []
+    if args.progress_every > 0:
+        helpers.append(asyncio.create_task(progress(reports, args.progress_every, stop, t0)))
     for i in range(args.players):
-        room = f"{args.room_prefix}-{i % args.rooms}"
-        report = PlayerReport(player=f"sim-{tag}-{i}", room=room)
-        source = make_source(args, i, i // args.rooms)
-        reports.append(report)
-        tasks.append(asyncio.create_task(run_player(args, i, report, source, stop)))
+        slot = Slot(index=i, room=f"{args.room_prefix}-{i % args.rooms}", place=i // args.rooms)
+        slots.append(slot)
+        tasks.append(asyncio.create_task(run_slot(args, slot, players, tag, reports, stop)))
         await asyncio.sleep(0.01)  # stagger the handshakes a little
+    if args.churn_every > 0:
+        helpers.append(asyncio.create_task(churn(slots, args.churn_every, stop)))
     start = time.monotonic()
-    results = await asyncio.gather(*tasks, return_exceptions=True)
-    for report, result in zip(reports, results, strict=True):
-        if isinstance(result, BaseException):
-            report.failure = repr(result)
+    await asyncio.gather(*tasks)
+    for task in helpers:
+        task.cancel()
+    await asyncio.gather(*helpers, return_exceptions=True)
     return summarise(reports, max(1e-3, time.monotonic() - start), args)
 
 
@@ -208,6 +340,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise SystemExit("posecast-sim: one --token is one player; use --secret for several")
     if args.players < 1 or args.rooms < 1 or args.duration <= 0:
         raise SystemExit("posecast-sim: --players, --rooms and --duration must be positive")
+    if args.churn_every < 0 or args.progress_every < 0:
+        raise SystemExit("posecast-sim: --churn-every and --progress-every must not be negative")
+    if args.token and args.churn_every > 0:
+        raise SystemExit("posecast-sim: churn needs a fresh token per player; use --secret")
     summary = asyncio.run(run(args))
     print_summary(summary)
     if args.json is not None:

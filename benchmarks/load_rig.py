@@ -1,0 +1,412 @@
+r"""What ``load.py`` drives and reads: the processes and the measurements.
+
+A ``posecast serve`` subprocess (:func:`serve`, :class:`Server`: ``/metrics``, RSS,
+FDs, CPU from ``/proc``), ``posecast-sim`` subprocesses (:class:`Sim`: progress lines,
+the final JSON summary, CPU), and the arithmetic of one measured window between two
+:class:`Snapshot`\ s (:func:`window`: tick quantiles from histogram deltas, overruns,
+CPU shares, poses received against what full rooms would get).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+import urllib.request
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+SECRET = "load-secret-" + "x" * 24
+TICK_HZ = 60.0
+DEADLINE_LE = "0.0167"  # the tick histogram's bucket edge at one 60 Hz period
+LIMIT_SHARE = 0.01  # ticks over the deadline, and overruns, per window
+MIN_TICK_HZ = 59.0
+REPO = Path(__file__).resolve().parents[1]
+
+Metrics = dict[str, float]
+
+
+# --- the processes -------------------------------------------------------------------------
+
+
+def _cpu_s(pid: int) -> float:
+    """utime + stime of one process so far, seconds."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _machine_busy_s() -> tuple[float, float]:
+    """(busy, total) CPU seconds of the whole machine so far, over all cores."""
+    values = [int(v) for v in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]]
+    idle = values[3] + values[4]  # idle + iowait
+    total = sum(values[:8])  # guest time is already in user
+    tick = os.sysconf("SC_CLK_TCK")
+    return (total - idle) / tick, total / tick
+
+
+def parse_metrics(text: str) -> Metrics:
+    """Prometheus exposition text -> {``name{labels}``: value} (comments skipped)."""
+    out: Metrics = {}
+    for line in text.splitlines():
+        if line and not line.startswith("#"):
+            series, _, value = line.rpartition(" ")
+            out[series] = float(value)
+    return out
+
+
+@dataclass
+class Server:
+    proc: subprocess.Popen[str]
+    port: int
+    log: Path
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    def get(self, path: str, timeout_s: float = 5.0) -> str:
+        with urllib.request.urlopen(f"http://127.0.0.1:{self.port}{path}", timeout=timeout_s) as r:
+            return str(r.read().decode())
+
+    def metrics(self) -> Metrics:
+        return parse_metrics(self.get("/metrics"))
+
+    def alive(self) -> bool:
+        try:
+            return self.proc.poll() is None and self.get("/healthz").strip() == "ok"
+        except OSError:
+            return False
+
+    def rss_bytes(self) -> int:
+        status = Path(f"/proc/{self.pid}/status").read_text()
+        match = re.search(r"^VmRSS:\s+(\d+) kB$", status, flags=re.MULTILINE)
+        assert match, "no VmRSS"
+        return int(match.group(1)) * 1024
+
+    def fds(self) -> int:
+        return len(os.listdir(f"/proc/{self.pid}/fd"))
+
+    def log_problems(self) -> list[str]:
+        """The server's log lines at WARNING and above (it runs at --log-level WARNING)."""
+        lines = self.log.read_text(errors="replace").splitlines()
+        return [x for x in lines if x.strip()]
+
+
+def confined(cpus: set[int] | None, nice: int = 0) -> Callable[[], None] | None:
+    """A ``preexec_fn`` that confines the child to ``cpus`` (None: anywhere) and lowers
+    its priority by ``nice``."""
+    if not cpus and not nice:
+        return None
+
+    def apply() -> None:
+        if cpus:
+            os.sched_setaffinity(0, cpus)
+        if nice:
+            os.nice(nice)
+
+    return apply
+
+
+def parse_cpus(text: str) -> set[int]:
+    """``"0"`` or ``"1,2"`` -> the CPU numbers."""
+    return {int(x) for x in text.split(",") if x.strip()}
+
+
+@contextmanager
+def serve(
+    samples: int, workdir: Path, extra: list[str] | None = None, cpus: set[int] | None = None
+) -> Iterator[Server]:
+    """``python -m posecast serve`` on a free port, stopped (SIGTERM) on the way out."""
+    env = {**os.environ, "POSECAST_TOKEN_SECRET": SECRET, "POSECAST_LOG_LEVEL": "WARNING"}
+    cmd = [
+        sys.executable,
+        "-m",
+        "posecast",
+        "serve",
+        "--port",
+        "0",
+        "--samples",
+        str(samples),
+        "--conn-per-ip-per-min",
+        "1000000",
+        *(extra or []),
+    ]
+    log = workdir / "server.log"
+    with log.open("w") as err:
+        proc = subprocess.Popen(
+            cmd, env=env, stdout=subprocess.PIPE, stderr=err, text=True, preexec_fn=confined(cpus)
+        )
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline()
+        match = re.search(r":(\d+)$", line.strip())
+        if not match:
+            raise RuntimeError(f"server did not start: {line!r} {log.read_text()[-2000:]}")
+        server = Server(proc, int(match.group(1)), log)
+        deadline = time.monotonic() + 30
+        while server.get("/readyz").strip() != "ready":  # pragma: no cover - starts ready
+            if time.monotonic() > deadline:
+                raise RuntimeError("server not ready in 30 s")
+            time.sleep(0.2)
+        yield server
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+            try:
+                proc.wait(20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        if proc.stdout is not None:
+            proc.stdout.close()
+
+
+@dataclass
+class Sim:
+    """One ``posecast-sim`` process (the SDK's simulator CLI), stopped with SIGINT."""
+
+    proc: subprocess.Popen[bytes]
+    players: int
+    rooms: int
+    out: Path
+    report: Path
+    summary: dict[str, Any] | None = None
+    cpu_at_exit_s: float = 0.0
+
+    @classmethod
+    def start(
+        cls,
+        server: Server,
+        workdir: Path,
+        name: str,
+        players: int,
+        room_size: int,
+        seconds: float,
+        *,
+        churn_every_s: float = 0.0,
+        progress_every_s: float = 1.0,
+        seed: int = 0,
+        cpus: set[int] | None = None,
+        nice: int = 0,
+    ) -> Sim:
+        rooms = math.ceil(players / room_size)
+        out, report = workdir / f"{name}.out", workdir / f"{name}.json"
+        cmd = [
+            sys.executable,
+            "-m",
+            "posecast_client.cli.sim",
+            "--url",
+            f"ws://127.0.0.1:{server.port}/",
+            "--secret",
+            SECRET,
+            "--players",
+            str(players),
+            "--rooms",
+            str(rooms),
+            "--room-prefix",
+            name,
+            "--duration",
+            str(seconds),
+            "--seed",
+            str(seed),
+            "-q",
+            "--progress-every",
+            str(progress_every_s),
+            "--json",
+            str(report),
+        ]
+        if churn_every_s > 0:
+            cmd += ["--churn-every", str(churn_every_s)]
+        with out.open("wb") as stdout:
+            proc = subprocess.Popen(
+                cmd, stdout=stdout, stderr=subprocess.STDOUT, preexec_fn=confined(cpus, nice)
+            )
+        return cls(proc, players, rooms, out, report)
+
+    def cpu_s(self) -> float:
+        if self.proc.poll() is not None:
+            return self.cpu_at_exit_s
+        with contextlib.suppress(FileNotFoundError, ProcessLookupError):  # exited just now
+            self.cpu_at_exit_s = _cpu_s(self.proc.pid)
+        return self.cpu_at_exit_s
+
+    def progress(self) -> dict[str, Any]:
+        """Its latest progress line (poses so far, players joined, losses...)."""
+        last: dict[str, Any] = {}
+        for line in self.out.read_text(errors="replace").splitlines():
+            if line.startswith("posecast-sim progress "):
+                last = json.loads(line.split(" ", 2)[2])
+        return last
+
+    def stop(self, timeout_s: float = 60.0) -> dict[str, Any]:
+        if self.proc.poll() is None:
+            self.cpu_s()
+            self.proc.send_signal(signal.SIGINT)
+        try:
+            self.proc.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        if self.report.exists():
+            self.summary = json.loads(self.report.read_text())
+        else:
+            tail = self.out.read_text(errors="replace")[-2000:]
+            self.summary = {"failed": {"process": f"exit {self.proc.returncode}: {tail}"}}
+        return self.summary
+
+
+# --- windows -------------------------------------------------------------------------------
+
+
+@dataclass
+class Snapshot:
+    t: float
+    metrics: Metrics
+    server_cpu_s: float
+    client_cpu_s: float
+    machine_busy_s: float
+    machine_total_s: float
+    poses: int  # received by the clients so far
+
+    @classmethod
+    def take(cls, server: Server, sims: list[Sim]) -> Snapshot:
+        busy, total = _machine_busy_s()
+        return cls(
+            t=time.monotonic(),
+            metrics=server.metrics(),
+            server_cpu_s=_cpu_s(server.pid),
+            client_cpu_s=sum(s.cpu_s() for s in sims),
+            machine_busy_s=busy,
+            machine_total_s=total,
+            poses=sum(int(s.progress().get("poses", 0)) for s in sims),
+        )
+
+
+def _bucket_counts(m: Metrics, name: str) -> list[tuple[float, float]]:
+    prefix = name + '_bucket{le="'
+    out = [(float(k[len(prefix) : -2]), v) for k, v in m.items() if k.startswith(prefix)]
+    return sorted(out)
+
+
+def hist_quantile(q: float, buckets: list[tuple[float, float]]) -> float:
+    """Prometheus' histogram_quantile: linear within the bucket that holds rank q*n."""
+    n = buckets[-1][1]
+    if n <= 0:
+        return math.nan
+    rank, lower, below = q * n, 0.0, 0.0
+    for upper, cum in buckets:
+        if cum >= rank:
+            if math.isinf(upper):
+                return lower  # beyond the last finite edge: report that edge
+            inside = cum - below
+            return lower + (upper - lower) * ((rank - below) / inside if inside else 1.0)
+        lower, below = upper, cum
+    return lower  # pragma: no cover - the +Inf bucket always holds n
+
+
+def window(a: Snapshot, b: Snapshot, full_rooms_poses_per_s: float) -> dict[str, Any]:
+    """What happened between two snapshots: tick figures, CPU, poses."""
+    seconds = b.t - a.t
+    ta = _bucket_counts(a.metrics, "posecast_tick_seconds")
+    tb = _bucket_counts(b.metrics, "posecast_tick_seconds")
+    diff = [(le, cb - ca) for (le, ca), (_, cb) in zip(ta, tb, strict=True)]
+    ticks = diff[-1][1]
+    in_time = dict(zip((f"{le:g}" for le, _ in diff), (c for _, c in diff), strict=True))[
+        f"{float(DEADLINE_LE):g}"
+    ]
+
+    def d(series: str) -> float:
+        return b.metrics.get(series, 0.0) - a.metrics.get(series, 0.0)
+
+    tick_sum = d("posecast_tick_seconds_sum")
+    overruns = d("posecast_tick_overruns_total")
+    machine = (b.machine_busy_s - a.machine_busy_s) / seconds
+    server_cpu = (b.server_cpu_s - a.server_cpu_s) / seconds
+    client_cpu = (b.client_cpu_s - a.client_cpu_s) / seconds
+    poses_per_s = (b.poses - a.poses) / seconds
+    return {
+        "seconds": round(seconds, 2),
+        "ticks": int(ticks),
+        "tick_hz": round(ticks / seconds, 2),
+        "tick_ms_mean": round(1000 * tick_sum / ticks, 2) if ticks else None,
+        "tick_ms_p50": round(1000 * hist_quantile(0.5, diff), 2),
+        "tick_ms_p99": round(1000 * hist_quantile(0.99, diff), 2),
+        "ticks_over_16_7ms": round(1 - in_time / ticks, 4) if ticks else None,
+        "overruns": int(overruns),
+        "overrun_share": round(overruns / ticks, 4) if ticks else None,
+        "server_cpu_cores": round(server_cpu, 3),
+        "client_cpu_cores": round(client_cpu, 3),
+        "other_cpu_cores": round(max(0.0, machine - server_cpu - client_cpu), 3),
+        "poses_received_per_s": round(poses_per_s, 1),
+        "delivery": round(poses_per_s / full, 4) if (full := full_rooms_poses_per_s) else None,
+        "frames_per_s": round(d("posecast_frames_total") / seconds, 1),
+        "poses_superseded_per_s": round(d("posecast_poses_superseded_total") / seconds, 1),
+    }
+
+
+def sustainable(w: dict[str, Any]) -> bool:
+    return bool(
+        w["ticks"]
+        and w["ticks_over_16_7ms"] <= LIMIT_SHARE
+        and w["overrun_share"] <= LIMIT_SHARE
+        and w["tick_hz"] >= MIN_TICK_HZ
+    )
+
+
+def criteria() -> str:
+    return (
+        f"per window: ticks over 16.7 ms <= {LIMIT_SHARE:.0%} (tick p99 <= 16.7 ms), "
+        f"overruns <= {LIMIT_SHARE:.0%} of ticks, tick rate >= {MIN_TICK_HZ:g} Hz, "
+        "all players joined, no connection lost"
+    )
+
+
+def expected_poses_per_s(sims: list[Sim]) -> float:
+    """Every player receives every room-mate's pose (its own too) at 60 Hz."""
+    total = 0.0
+    for s in sims:
+        sizes = [len(range(r, s.players, s.rooms)) for r in range(s.rooms)]
+        total += TICK_HZ * sum(n * n for n in sizes)
+    return total
+
+
+def players_in(m: Metrics) -> int:
+    return int(m.get("posecast_players", 0))
+
+
+def wait_players(server: Server, n: int, timeout_s: float) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if players_in(server.metrics()) >= n:
+            return True
+        time.sleep(0.25)
+    return False
+
+
+def losses(sims: list[Sim]) -> int:
+    return sum(int(s.progress().get("connection_losses", 0)) for s in sims)
+
+
+def version() -> dict[str, Any]:
+    """Which code was measured: the commit and whether the server's tree differs."""
+
+    def git(*a: str) -> str:
+        done = subprocess.run(["git", *a], cwd=REPO, capture_output=True, text=True)
+        return done.stdout.strip()
+
+    import posecast
+
+    return {
+        "commit": git("rev-parse", "--short", "HEAD"),
+        "server_tree_modified": bool(git("status", "--porcelain", "server")),
+        "server_package": str(Path(posecast.__file__).parent),
+    }
