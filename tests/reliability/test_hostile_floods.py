@@ -74,8 +74,9 @@ def test_a_message_flood_is_limited_and_nobody_else_notices(arena: Arena, kind: 
     budget = cfg.error_rate_hz * window_s + cfg.error_rate_hz  # replies: rate plus burst
     # Read pacing: the server decodes at most twice the protocol's rates from one
     # connection and leaves the rest unread on the flooder's side; a flooder that stops
-    # reading its replies meanwhile is cut off as SLOW_CONSUMER, and what it sent after
-    # that is never handled (nor lets it hold the event loop).
+    # reading its replies meanwhile is cut off as SLOW_CONSUMER, and what it sent but
+    # the server had not read when it left or was cut off is never handled (nor does
+    # it hold the event loop).
     paced_hz = 2.0 * (cfg.max_rate_hz + cfg.control_rate_hz)
     paced_burst = 2.0 * (cfg.rate_burst + cfg.control_rate_hz)
     handled = sum(v for k, v in counted.items() if k != "SLOW_CONSUMER")
@@ -90,7 +91,9 @@ def test_a_message_flood_is_limited_and_nobody_else_notices(arena: Arena, kind: 
     if kind == "junk":  # UNKNOWN_TYPE: non-fatal, dropped; every handled one counted
         assert set(counted) <= {"UNKNOWN_TYPE", "SLOW_CONSUMER"}
         assert counted.get("SLOW_CONSUMER", 0) <= 1
-        assert counted["UNKNOWN_TYPE"] == sent or counted.get("SLOW_CONSUMER") == 1
+        # What was read was counted; what the flooder sent past the pace was never
+        # read (it left, or was cut off as SLOW_CONSUMER, with it still unread).
+        assert 1 <= counted["UNKNOWN_TYPE"] <= sent
         assert 1 <= replies["UNKNOWN_TYPE"] <= budget
     else:
         limit_hz, burst = (
