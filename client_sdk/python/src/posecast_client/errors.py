@@ -220,7 +220,7 @@ class VersionUnsupportedError(ProtocolError):
 
 
 class LayoutUnsupportedError(ProtocolError):
-    """The tracker layout is known but this server does not serve it (its --layouts)."""
+    """The tracker layout is known but this server does not serve it (--layouts)."""
 
     code = "LAYOUT_UNSUPPORTED"
     fatal = True
