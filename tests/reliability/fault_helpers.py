@@ -21,8 +21,6 @@ import subprocess
 import sys
 import threading
 import time
-import urllib.error
-import urllib.request
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,6 +35,7 @@ from websockets.typing import Subprotocol
 
 from posecast.protocol import decode, encode
 from posecast.protocol.messages import SUBPROTOCOL, Frame, Hello, Message, Pose
+from tests.scaleout.conftest import http_get
 from tests.service.conftest import SECRET
 
 TICK_HZ = 60.0  # the server default the tests run at
@@ -81,11 +80,7 @@ class ServerProc:
         return f"ws://127.0.0.1:{self.port}/"
 
     def http(self, path: str) -> tuple[int, str]:
-        try:
-            with urllib.request.urlopen(f"http://127.0.0.1:{self.port}{path}", timeout=2) as r:
-                return r.status, r.read().decode()
-        except urllib.error.HTTPError as e:
-            return e.code, e.read().decode()
+        return http_get(self.port, path)
 
     def metric(self, name: str) -> float:
         """Sum of every sample of metric ``name`` (all label sets) in ``/metrics``."""

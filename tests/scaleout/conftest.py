@@ -37,6 +37,15 @@ def free_port() -> int:
         return port
 
 
+def http_get(port: int, path: str) -> tuple[int, str]:
+    """``GET path`` on a loopback server: status and body, error statuses included."""
+    try:
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}{path}", timeout=2) as r:
+            return r.status, r.read().decode()
+    except urllib.error.HTTPError as e:
+        return e.code, e.read().decode()
+
+
 @pytest.fixture(scope="session")
 def redis_server_bin() -> str:
     found = shutil.which("redis-server")
@@ -127,11 +136,7 @@ class Node:
         self.port = int(match.group(1))
 
     def http(self, path: str) -> tuple[int, str]:
-        try:
-            with urllib.request.urlopen(f"http://127.0.0.1:{self.port}{path}", timeout=2) as r:
-                return r.status, r.read().decode()
-        except urllib.error.HTTPError as e:
-            return e.code, e.read().decode()
+        return http_get(self.port, path)
 
     def wait_ready(self, timeout: float = 10.0) -> None:
         deadline = time.monotonic() + timeout

@@ -43,7 +43,6 @@ from posecast.errors import (
 )
 from posecast.protocol.codec import decode, encode
 from posecast.protocol.messages import (
-    LAYOUT_4POINT,
     PROTOCOL_VERSION,
     Bye,
     Error,
@@ -208,7 +207,7 @@ class Hub:
             and claims.role == "player"
             and old.session.role == "player"
             and self.rooms.room_of(claims.player) == room
-            and old.session.layout == (join.hello.layout or LAYOUT_4POINT)
+            and old.session.layout == join.layout
         )
         if not takeover:  # ROOM_FULL before anyone is displaced
             if claims.role == "player":

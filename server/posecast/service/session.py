@@ -64,11 +64,20 @@ class Phase(enum.Enum):
     CLOSED = "closed"
 
 
+def requested_layout(hello: Hello) -> str:
+    """The tracker layout a ``hello`` asks for (absent: the 4-point layout)."""
+    return hello.layout or LAYOUT_4POINT
+
+
 @dataclass(frozen=True)
 class Join:
     claims: Claims
     hello: Hello
     rooms: tuple[str, ...]  # hello.room first, then the rooms a backend watches
+
+    @property
+    def layout(self) -> str:
+        return requested_layout(self.hello)
 
 
 @dataclass(frozen=True)
@@ -172,7 +181,7 @@ class Session:
         raise ForbiddenError(f"{msg.TYPE} is not for a server", field="type")  # pragma: no cover
 
     def _hello(self, hello: Hello, now: float) -> Join:
-        layout = hello.layout or LAYOUT_4POINT
+        layout = requested_layout(hello)
         if layout not in self.cfg.served_layouts:
             raise LayoutUnsupportedError(f"layout {layout!r} is not served", field="layout")
         claims = verify(
@@ -195,7 +204,7 @@ class Session:
         """The hub admitted ``join``: the session is live."""
         self.phase = Phase.JOINED
         self.claims = join.claims
-        self.layout = join.hello.layout or LAYOUT_4POINT
+        self.layout = join.layout
         self.name = join.hello.name
         self.rooms = join.rooms
 
