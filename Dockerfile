@@ -17,11 +17,11 @@ WORKDIR /src
 RUN python -m venv /opt/posecast
 COPY pyproject.toml README.md LICENSE ./
 COPY server ./server
-# The models are package data (server/posecast/models), so installing the package
+# The models are package data (server/posecast/artifacts), so installing the package
 # bakes them in; the checks fail the build if they, or the Redis client, are missing
 # or if torch slipped into the serving install.
 RUN /opt/posecast/bin/pip install ".[redis]" \
- && /opt/posecast/bin/python -c "import importlib.resources as r, posecast.service.redis_bus, onnxruntime; assert r.files('posecast').joinpath('models/cvae_decoder.onnx').is_file()" \
+ && /opt/posecast/bin/python -c "import importlib.resources as r, posecast.online.cluster.redis_bus, onnxruntime; assert r.files('posecast').joinpath('artifacts/cvae_decoder.onnx').is_file()" \
  && if /opt/posecast/bin/python -c "import torch" 2>/dev/null; then echo "torch in the serving image" >&2; exit 1; fi
 
 # --- runtime: the virtualenv on a clean slim image ------------------------------------

@@ -44,8 +44,8 @@ FPS = 60.0
 
 
 def _fixture(seed: int) -> list[list[list[float]]]:
-    from posecast.dataset.frames import derive_frames
-    from posecast.motion.synthetic import walk_clip
+    from posecast.offline.dataset.frames import derive_frames
+    from posecast.offline.motion.synthetic import walk_clip
 
     w = derive_frames(walk_clip(seconds=8.0, fps=FPS, seed=seed))
     rows = np.concatenate([w["tracker_pos"], w["tracker_quat"]], axis=-1).astype(np.float64)
@@ -58,7 +58,7 @@ async def _client(
 ) -> None:
     from websockets.asyncio.client import connect
 
-    from posecast.auth.tokens import mint
+    from posecast.online.auth.tokens import mint
 
     frames = _fixture(hash(player) % 16)
     tok = mint(SECRET.encode(), room=room, player=player, ttl_s=3600, now=time.time())

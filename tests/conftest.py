@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from posecast.motion.clip import CanonicalClip
-from posecast.motion.synthetic import walk_clip, write_fixture_bvh
+from posecast.offline.motion.clip import CanonicalClip
+from posecast.offline.motion.synthetic import walk_clip, write_fixture_bvh
 
 
 @pytest.fixture
@@ -29,7 +29,7 @@ def fixture_bvh(tmp_path: Path) -> Callable[..., Path]:
     """Factory: ``fixture_bvh(clip, layout="posecast", gz=False)`` writes a BVH file.
 
     ``layout`` is a built-in rig name (``posecast``, ``cmu_mb``, ``cmu_daz``); see
-    :func:`posecast.motion.synthetic.write_fixture_bvh`.
+    :func:`posecast.offline.motion.synthetic.write_fixture_bvh`.
     """
 
     def make(clip: CanonicalClip, layout: str = "posecast", *, gz: bool = False) -> Path:

@@ -1,17 +1,37 @@
-"""The ``posecast`` command line (posecast.cli), called in-process through ``main``."""
+"""The ``posecast`` command line (posecast.cli), called in-process through ``main``.
+
+Every error a user can cause ends as ``posecast: error [CODE]: message`` and a
+``hint:`` line on stderr, exit status 2, and no traceback: one test at least per
+subcommand provokes one (``test_*_user_error`` and the tests around them).
+"""
 
 from __future__ import annotations
 
 import json
 import re
+import socket
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 from posecast.cli import main
-from posecast.dataset.store import read_manifest
-from posecast.motion.synthetic import walk_clip, write_fixture_bvh
+from posecast.offline.dataset.store import read_manifest
+from posecast.offline.motion.synthetic import walk_clip, write_fixture_bvh
 from posecast.skeleton import JOINT_NAMES
+
+
+def user_error(capsys: pytest.CaptureFixture[str], rc: int, code: str) -> str:
+    """Assert a clean user error with ``code``; returns stderr."""
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert "Traceback" not in err, err
+    lines = err.splitlines()
+    at = [i for i, ln in enumerate(lines) if ln.startswith(f"posecast: error [{code}]: ")]
+    assert at, err
+    assert lines[at[0] + 1].startswith("hint: ") and len(lines[at[0] + 1]) > 10, err
+    return err
 
 
 def _write(root: Path, rel: str, layout: str, seed: int) -> Path:
@@ -126,8 +146,27 @@ def test_a_custom_split_file_moves_subjects(bvh_dir: Path, tmp_path: Path) -> No
 
 def test_a_missing_bvh_directory_is_an_error(tmp_path: Path, capsys) -> None:
     argv = ["data", "prepare", "--bvh", str(tmp_path / "nope"), "--out", str(tmp_path / "o")]
-    assert main(argv) == 2
-    assert "[DATA_INVALID]" in capsys.readouterr().err
+    user_error(capsys, main(argv), "DATA_INVALID")
+
+
+@pytest.mark.parametrize(
+    ("extra", "code"),
+    [
+        (["--rig", "no_such_rig"], "RIG_UNKNOWN"),
+        (["--rigs", "no_such_dir"], "CONFIG_INVALID"),
+        (["--out", "__file__"], "CONFIG_INVALID"),
+    ],
+    ids=["unknown-rig", "missing-rigs-dir", "out-is-a-file"],
+)
+def test_data_prepare_user_error(
+    bvh_dir: Path, tmp_path: Path, capsys, extra: list[str], code: str
+) -> None:
+    afile = tmp_path / "afile"
+    afile.write_text("x", "utf-8")
+    extra = [str(afile) if a == "__file__" else a for a in extra]
+    argv = ["data", "prepare", "--bvh", str(bvh_dir), "--out", str(tmp_path / "o"), *extra]
+    user_error(capsys, main(argv), code)
+    assert not (tmp_path / "o").exists()
 
 
 def test_demo_runs_a_room(capsys) -> None:
@@ -146,7 +185,7 @@ def test_demo_runs_a_room(capsys) -> None:
 def test_token_mints_a_token_the_server_verifies(capsys, monkeypatch) -> None:
     import time
 
-    from posecast.auth.tokens import verify
+    from posecast.online.auth.tokens import verify
 
     monkeypatch.setenv("POSECAST_TOKEN_SECRET", "e" * 32)
     args = ["token", "--room", "R", "--player", "P", "--role", "backend", "--rooms", "A,B"]
@@ -160,4 +199,191 @@ def test_token_mints_a_token_the_server_verifies(capsys, monkeypatch) -> None:
     )
     assert claims.exp - claims.iat == 60
     monkeypatch.delenv("POSECAST_TOKEN_SECRET")
-    assert main(["token", "--room", "R", "--player", "P"]) == 2
+    err = user_error(capsys, main(["token", "--room", "R", "--player", "P"]), "CONFIG_INVALID")
+    assert "POSECAST_TOKEN_SECRET" in err
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [
+        ["--ttl", "0"],
+        ["--ttl", "-5"],
+        ["--ttl", str(10**9)],
+        ["--rooms", "A,B"],  # extra rooms are for backends
+        ["--secret", "short"],
+    ],
+    ids=["ttl-0", "ttl-negative", "ttl-too-long", "rooms-without-backend", "short-secret"],
+)
+def test_token_user_error(capsys, monkeypatch, extra: list[str]) -> None:
+    monkeypatch.setenv("POSECAST_TOKEN_SECRET", "e" * 32)
+    rc = main(["token", "--room", "R", "--player", "P", *extra])
+    user_error(capsys, rc, "CONFIG_INVALID")
+
+
+def test_the_entry_point_prints_no_traceback() -> None:
+    """``python -m posecast`` (what the ``posecast`` script runs): exit 2, code and hint."""
+    out = subprocess.run(
+        [sys.executable, "-m", "posecast", "token", "--room", "R", "--player", "P"],
+        input="",
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={"PATH": "/usr/bin:/bin"},
+    )
+    assert out.returncode == 2, out.stderr
+    assert out.stderr.startswith("posecast: error [CONFIG_INVALID]: "), out.stderr
+    assert "\nhint: " in out.stderr and "Traceback" not in out.stderr
+
+
+def test_a_bug_keeps_its_traceback(monkeypatch) -> None:
+    """Only PosecastError is turned into a message; anything else is a bug to see."""
+    import posecast.cli as cli
+
+    def broken(args: object) -> int:
+        raise RuntimeError("a bug")
+
+    monkeypatch.setattr(cli, "_cmd_token", broken)
+    with pytest.raises(RuntimeError, match="a bug"):
+        main(["token", "--room", "R", "--player", "P"])
+
+
+@pytest.mark.parametrize(
+    ("network", "extra", "code"),
+    [
+        ("cvae", ["--steps", "0"], "CONFIG_INVALID"),
+        ("cvae", ["--steps", "-3"], "CONFIG_INVALID"),
+        ("cvae", ["--rot-weight", "-1"], "CONFIG_INVALID"),
+        ("cvae", ["--rot-weight", "nan"], "CONFIG_INVALID"),
+        ("cvae", ["--threads", "0"], "CONFIG_INVALID"),
+        ("cvae", ["--seed", "-1"], "CONFIG_INVALID"),
+        ("cvae", ["--no-orientation"], "CONFIG_INVALID"),  # the 4-point layout has none
+        ("ae", ["--layout", "hmd3"], "CONFIG_INVALID"),
+        ("anomaly", ["--rot-weight", "10"], "CONFIG_INVALID"),
+        ("anomaly", ["--steps", "0"], "CONFIG_INVALID"),
+        ("cvae", [], "DATASET_INVALID"),  # --data names no directory
+        ("anomaly", [], "DATASET_INVALID"),
+    ],
+)
+def test_train_user_error(
+    tmp_path: Path, capsys, network: str, extra: list[str], code: str
+) -> None:
+    argv = ["train", network, "--data", str(tmp_path / "nope"), "--out", str(tmp_path / "run")]
+    user_error(capsys, main([*argv, *extra]), code)
+    assert not (tmp_path / "run").exists()
+
+
+def test_train_on_a_directory_that_is_not_a_dataset(tmp_path: Path, capsys) -> None:
+    argv = ["train", "cvae", "--data", str(tmp_path), "--out", str(tmp_path / "run")]
+    err = user_error(capsys, main(argv), "DATASET_INVALID")
+    assert "posecast data prepare" in err
+
+
+def test_export_user_error(tmp_path: Path, capsys) -> None:
+    out = str(tmp_path / "models")
+    user_error(capsys, main(["export", "--out", out]), "CONFIG_INVALID")  # nothing to export
+    missing = tmp_path / "nope.pt"
+    err = user_error(capsys, main(["export", "--out", out, "--ae", str(missing)]), "MODEL_INVALID")
+    assert str(missing) in err
+    rc = main(["export", "--out", out, "--ae", __file__, "--data", str(tmp_path / "nope")])
+    user_error(capsys, rc, "DATASET_INVALID")
+
+
+@pytest.mark.parametrize(
+    ("extra", "code"),
+    [
+        (["--variants", "foo"], "CONFIG_INVALID"),
+        (["--variants", "cvae_ik,"], "CONFIG_INVALID"),
+        (["--variants", "ae_ik", "--layout", "hmd3"], "CONFIG_INVALID"),
+        (["--split", "holdout"], "CONFIG_INVALID"),
+        (["--samples", "0"], "CONFIG_INVALID"),
+        (["--outlier-factor", "-1"], "CONFIG_INVALID"),
+        (["--json", "/no/such/dir/eval.json"], "CONFIG_INVALID"),
+        (["--models", "/no/such/models"], "MODEL_INVALID"),
+        ([], "DATASET_INVALID"),  # --data names no directory
+    ],
+)
+def test_eval_user_error(tmp_path: Path, capsys, extra: list[str], code: str) -> None:
+    rc = main(["eval", "--data", str(tmp_path / "nope"), *extra])
+    user_error(capsys, rc, code)
+
+
+def test_eval_of_a_directory_without_bvh_files(tmp_path: Path, capsys) -> None:
+    user_error(capsys, main(["eval", "--bvh", str(tmp_path)]), "DATA_INVALID")
+
+
+def test_eval_apps_user_error(bvh_dir: Path, tmp_path: Path, capsys) -> None:
+    data = tmp_path / "prepared"
+    user_error(capsys, main(["eval-apps", "--data", str(data)]), "DATASET_INVALID")
+    user_error(capsys, main(["eval-apps", "--data", str(data), "--runs", "0"]), "CONFIG_INVALID")
+    rc = main(["eval-apps", "--data", str(data), "--samples", "1,x"])
+    user_error(capsys, rc, "CONFIG_INVALID")
+    assert main(["data", "prepare", "--bvh", str(bvh_dir), "--out", str(data)]) == 0
+    capsys.readouterr()
+    rc = main(["eval-apps", "--data", str(data), "--clip", "no_such_clip"])
+    err = user_error(capsys, rc, "CONFIG_INVALID")
+    assert "01_01" in err  # the hint names the clips there are
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [
+        ["--players", "1,x"],
+        ["--players", "0"],
+        ["--samples", "0"],
+        ["--ticks", "0"],
+        ["--hmd3-share", "1.5"],
+        ["--json", "/no/such/dir/bench.json"],
+    ],
+)
+def test_bench_engine_user_error(capsys, extra: list[str]) -> None:
+    user_error(capsys, main(["bench", "engine", *extra]), "CONFIG_INVALID")
+
+
+def test_serve_without_a_secret_is_a_config_error(capsys, monkeypatch) -> None:
+    """No POSECAST_TOKEN_SECRET and no --dev: refused before any socket is opened."""
+    import os
+
+    for name in [k for k in os.environ if k.startswith("POSECAST_")]:
+        monkeypatch.delenv(name)
+    err = user_error(capsys, main(["serve", "--port", "0"]), "CONFIG_INVALID")
+    assert "POSECAST_TOKEN_SECRET" in err and "--dev" in err.splitlines()[-1]
+
+
+@pytest.mark.parametrize(
+    ("extra", "code"),
+    [
+        (["--port", "70000"], "CONFIG_INVALID"),
+        (["--samples", "0"], "CONFIG_INVALID"),
+        (["--layouts", "hmd4"], "CONFIG_INVALID"),
+        (["--models-dir", "/no/such/models"], "MODEL_INVALID"),
+    ],
+)
+def test_serve_user_error(capsys, monkeypatch, extra: list[str], code: str) -> None:
+    import os
+
+    for name in [k for k in os.environ if k.startswith("POSECAST_")]:
+        monkeypatch.delenv(name)
+    user_error(capsys, main(["serve", "--dev", *extra]), code)
+
+
+@pytest.mark.parametrize(
+    ("extra", "code"),
+    [
+        (["--samples", "0"], "CONFIG_INVALID"),
+        (["--seconds", "-1"], "CONFIG_INVALID"),
+        (["--port", "-1"], "CONFIG_INVALID"),
+        (["--bvh", "/no/such/file.bvh"], "BVH_INVALID"),
+    ],
+)
+def test_demo_user_error(capsys, extra: list[str], code: str) -> None:
+    user_error(capsys, main(["demo", *extra]), code)
+
+
+def test_demo_on_a_port_in_use_is_a_config_error(capsys) -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        rc = main(["demo", "--port", str(port), "--seconds", "1", "--samples", "8"])
+    err = user_error(capsys, rc, "CONFIG_INVALID")
+    assert f"127.0.0.1:{port}" in err

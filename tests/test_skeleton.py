@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from posecast.geometry.kinematics import fk_positions
+from posecast.geometry.fk import fk_positions
 from posecast.skeleton import (
     FEET,
     JOINT_NAMES,

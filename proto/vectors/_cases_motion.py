@@ -7,8 +7,8 @@ from typing import Any
 import numpy as np
 from _writer import invalid, pack, valid
 
-from posecast.protocol import codec
-from posecast.protocol import messages as m
+from posecast.online.protocol import codec
+from posecast.online.protocol import messages as m
 
 ID_Q = [0.0, 0.0, 0.0, 1.0]
 HALF_Q = [0.5, 0.5, 0.5, 0.5]

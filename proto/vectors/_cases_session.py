@@ -7,8 +7,8 @@ from typing import Any
 
 from _writer import Raw, invalid, pack, valid
 
-from posecast.protocol import codec
-from posecast.protocol import messages as m
+from posecast.online.protocol import codec
+from posecast.online.protocol import messages as m
 
 
 def _padded_ping(size: int) -> bytes:

@@ -10,9 +10,9 @@ from typing import Any
 import msgpack
 
 from posecast.errors import ProtocolError
-from posecast.protocol import codec
-from posecast.protocol import messages as m
-from posecast.protocol.wire import FIELD_ORDER
+from posecast.online.protocol import codec
+from posecast.online.protocol import messages as m
+from posecast.online.protocol.wire import FIELD_ORDER
 
 
 class Raw(bytes):

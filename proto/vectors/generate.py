@@ -14,7 +14,7 @@ checks fields in beyond the envelope order the spec fixes.
 
 Building a case also checks it against the codec (canonical bytes, every accepted
 encoding, every expected error), so a generator run is itself a test. The vectors
-are committed; ``tests/protocol/test_vectors.py`` checks them against this script.
+are committed; ``tests/online/protocol/test_vectors.py`` checks them against this script.
 """
 
 from __future__ import annotations

@@ -1,30 +1,224 @@
 """The ``posecast`` command line. Configuration is parsed here, once, and passed down.
 
-Subcommands:
+Subcommands (each a thin edge over the module named):
 
-* ``posecast data prepare --bvh DIR --out DIR`` - build a cached training dataset
-* ``posecast serve [--dev] [--port N] ...`` - the pose-streaming server (``docs/server.md``)
+* ``posecast data prepare --bvh DIR --out DIR`` - BVH tree -> cached training dataset
+  (:mod:`posecast.offline.dataset.prepare`, ``docs/data.md``)
+* ``posecast train cvae|ae|anomaly --data DIR --out DIR`` - train a network
+  (:mod:`posecast.offline.train.cvae_trainer`, :mod:`posecast.offline.train.anomaly_trainer`;
+  needs ``posecast[train]``)
+* ``posecast export --out DIR [--cvae|--cvae-hmd3|--ae|--anomaly CKPT]`` - checkpoints ->
+  ONNX models and JSON sidecars (:mod:`posecast.offline.train.export`)
+* ``posecast eval --data DIR | --bvh DIR`` - evaluate the models
+  (:mod:`posecast.offline.evaluation.runner`, ``docs/evaluation.md``)
+* ``posecast eval-apps --data DIR`` - Table 3: target hitting and collision avoidance
+  (:mod:`posecast.offline.evaluation.applications`)
+* ``posecast bench engine`` - per-tick cost of the SSI engine
+  (:mod:`posecast.offline.evaluation.engine_speed`, ``docs/engine.md``)
+* ``posecast serve [--dev] [--port N] ...`` - the pose-streaming server
+  (:mod:`posecast.online.shell.app`, :mod:`posecast.online.config`, ``docs/server.md``)
 * ``posecast token --room R --player P --role player`` - mint a development join token
-* ``posecast demo`` - the data pipeline on a generated fixture (what ``make run`` does
-  until the server lands)
+  (:mod:`posecast.online.auth.tokens`)
+* ``posecast demo`` - a server, two simulated headsets and a spectator on loopback
+  (:mod:`posecast.demo`; what ``make run`` does)
+
+Errors: every failure a user can cause (a bad option value, a missing or unreadable
+file, a model or dataset of the wrong kind) is a :class:`~posecast.errors.PosecastError`.
+:func:`main` prints it as ``posecast: error [CODE]: message`` and a ``hint:`` line on
+stderr, without a traceback, and exits 2. Anything else is a bug and keeps its traceback.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
+import math
+import socket
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import Any, TypeVar
 
-from posecast.errors import PosecastError
+from posecast.errors import (
+    BvhError,
+    ConfigError,
+    DataError,
+    DatasetError,
+    ModelError,
+    PosecastError,
+    RigError,
+)
+from posecast.tracking.layouts import Layout
+
+_HINT = "hint: "
+_E = TypeVar("_E", bound=PosecastError)
+_RESUME_HINT = "--resume continues the run in --out: drop it to start over, or pick another --out"
+
+
+def _hinted(exc: _E, hint: str) -> _E:
+    """``exc`` with the hint :func:`main` prints under it."""
+    exc.add_note(_HINT + hint)
+    return exc
+
+
+def _config(message: str, hint: str) -> ConfigError:
+    return _hinted(ConfigError(message), hint)
+
+
+# --- Validation at the edge ----------------------------------------------------------
+
+
+def _at_least(option: str, value: float, low: float, command: str) -> None:
+    if not value >= low:  # NaN fails too
+        raise _config(f"{option} {value} must be >= {low:g}", f"see `posecast {command} --help`")
+
+
+def _finite(option: str, value: float, command: str, *, positive: bool = False) -> None:
+    if not math.isfinite(value) or value < 0 or (positive and value == 0):
+        need = "a finite number > 0" if positive else "a finite number >= 0"
+        raise _config(f"{option} {value} must be {need}", f"see `posecast {command} --help`")
+
+
+def _int_list(option: str, text: str, command: str) -> list[int]:
+    """A comma-separated list of integers >= 1 (``"1,10,100"``)."""
+    try:
+        values = [int(p) for p in text.split(",")]
+    except ValueError:
+        values = []
+    if not values or min(values) < 1:
+        raise _config(
+            f"{option} {text!r} is not a comma-separated list of integers >= 1",
+            f"e.g. {option} 1,10,100",
+        )
+    return values
+
+
+def _json_out(path: Path | None) -> None:
+    """Fail now, not after a long run, when the report could not be written."""
+    if path is None:
+        return
+    if path.is_dir():
+        raise _config(f"--json {path} is a directory", "name the file to write, e.g. report.json")
+    if not path.parent.is_dir():
+        raise _config(
+            f"--json {path}: directory {path.parent} does not exist", "create it or pick another"
+        )
+
+
+def _out_dir(option: str, path: Path) -> None:
+    if path.exists() and not path.is_dir():
+        raise _config(f"{option} {path} exists and is not a directory", "pick a directory path")
+
+
+def _models_dir(path: Path | None, option: str = "--models") -> None:
+    if path is not None and not path.is_dir():
+        raise _hinted(
+            ModelError("no such models directory", path=path),
+            f"pass the directory `posecast export --out` wrote, or leave out {option} "
+            "for the shipped models",
+        )
+
+
+def _need(extra: str, *modules: str) -> None:
+    """Fail with the install line when an optional dependency is missing."""
+    import importlib.util
+
+    for mod in modules:
+        if importlib.util.find_spec(mod) is None:
+            raise _config(
+                f"this command needs the {mod!r} package (posecast[{extra}])",
+                f"pip install 'posecast[{extra}]'",
+            )
+
+
+def _manifest(path: Path) -> dict[str, object]:
+    """The manifest of a prepared dataset (:class:`DatasetError` if it is not one)."""
+    from posecast.offline.dataset.store import read_manifest
+
+    if not path.is_dir():
+        raise DatasetError("no such dataset directory", path=path)
+    return read_manifest(path)
+
+
+def _clip_frames(manifest: dict[str, object], split: str, path: Path) -> list[int]:
+    """Frame counts of the clips of one split, from the manifest."""
+    clips = manifest.get("clips")
+    entries = clips.get(split) if isinstance(clips, dict) else None
+    if not isinstance(entries, list):
+        raise DatasetError(f"manifest lists no {split} split", path=path)
+    try:
+        return [int(c["frames"]) for c in entries]
+    except (TypeError, KeyError, ValueError):
+        raise DatasetError(f"manifest: bad clip entry in the {split} split", path=path) from None
+
+
+def _need_clips(
+    manifest: dict[str, object], path: Path, splits: Sequence[str], frames: int
+) -> None:
+    for split in splits:
+        if not any(n >= frames for n in _clip_frames(manifest, split, path)):
+            raise _hinted(
+                DatasetError(
+                    f"the {split} split has no clip of at least {frames} frames", path=path
+                ),
+                "prepare more data, or move subjects into that split with "
+                "`posecast data prepare --split-file FILE`",
+            )
+
+
+def _checkpoint(
+    option: str, path: Path, kind: str, layout: str | None = None, hint: str | None = None
+) -> None:
+    """Check that ``path`` is a checkpoint of ``kind`` (and tracker ``layout``)."""
+    import pickle
+
+    from posecast.offline.train.checkpoint import load_checkpoint
+
+    how = f"posecast train {kind}" + (f" --layout {layout}" if layout == Layout.HMD3 else "")
+    hint = hint or f"pass a checkpoint.pt written by `{how}` to {option}"
+    if not path.is_file():
+        raise _hinted(ModelError("no such checkpoint file", path=path), hint)
+    try:
+        state: Any = load_checkpoint(path)
+    except (OSError, EOFError, RuntimeError, ValueError, pickle.UnpicklingError) as exc:
+        raise _hinted(ModelError(f"not a checkpoint: {exc}", path=path), hint) from None
+    if not isinstance(state, dict) or not {"model", "norm", "config"} <= state.keys():
+        raise _hinted(ModelError("not a posecast checkpoint", path=path), hint)
+    if state.get("kind") != kind:
+        raise _hinted(
+            ModelError(f"a {state.get('kind')!r} checkpoint, not {kind!r}", path=path), hint
+        )
+    if layout is not None:
+        config = state["config"]
+        got = (
+            str(config.get("layout", Layout.HMD3_WAIST.value)) if isinstance(config, dict) else None
+        )
+        if got != layout:
+            raise _hinted(
+                ModelError(f"a checkpoint of layout {got!r}, not {layout!r}", path=path), hint
+            )
+
+
+# --- Commands --------------------------------------------------------------------------
 
 
 def _cmd_data_prepare(args: argparse.Namespace) -> int:
-    from posecast.dataset.prepare import prepare
-    from posecast.motion.rig import load_rigs
+    _out_dir("--out", args.out)
+    for d in args.rigs or ():
+        if not d.is_dir():
+            raise _config(f"--rigs {d}: no such directory", "pass a directory of rig *.json maps")
+    _need("data", "scipy")
+    from posecast.offline.dataset.prepare import prepare
+    from posecast.offline.motion.rig import load_rigs
 
     rigs = load_rigs(args.rigs or ())
+    names = [r.name for r in rigs]
+    if args.rig is not None and args.rig not in names:
+        raise _hinted(
+            RigError(f"unknown rig {args.rig!r}; known: {', '.join(names)}"),
+            "pick one of those names, or add its map with --rigs DIR (docs/data.md)",
+        )
     report = prepare(
         args.bvh,
         args.out,
@@ -39,12 +233,39 @@ def _cmd_data_prepare(args: argparse.Namespace) -> int:
     return 0
 
 
+@contextlib.contextmanager
+def _listen_errors(host: str, port: int, hint: str) -> Iterator[None]:
+    """Turn a socket that cannot be bound (port in use, unknown host) into a ConfigError."""
+    try:
+        yield
+    except OSError as exc:
+        bind = (errno.EADDRINUSE, errno.EADDRNOTAVAIL, errno.EACCES)
+        if not isinstance(exc, socket.gaierror) and exc.errno not in bind:
+            raise
+        raise _config(f"cannot listen on {host}:{port}: {exc.strerror or exc}", hint) from None
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     import asyncio
 
+    _at_least("--port", args.port, 0, "demo")
+    if args.port > 65535:
+        raise _config(f"--port {args.port} outside [0, 65535]", "0 picks any free port")
+    _at_least("--samples", args.samples, 1, "demo")
+    if args.seconds is not None:
+        _finite("--seconds", args.seconds, "demo", positive=True)
+    _need("data", "scipy")
     from posecast.demo import run
 
-    with contextlib.suppress(KeyboardInterrupt):
+    if args.bvh is not None:  # read it now: a bad file must fail before the server starts
+        from posecast.offline.dataset.prepare import process_file
+        from posecast.offline.motion.rig import load_rigs
+
+        process_file(args.bvh, load_rigs())
+    with (
+        contextlib.suppress(KeyboardInterrupt),
+        _listen_errors("127.0.0.1", args.port, "pick another --port (0: any free one)"),
+    ):
         asyncio.run(run(args.port, args.seconds, args.bvh, args.samples))
     return 0
 
@@ -52,16 +273,40 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 def _cmd_train(args: argparse.Namespace) -> int:
     import dataclasses
 
-    torch_threads = args.threads
+    cmd = "train"
+    if args.steps is not None:
+        _at_least("--steps", args.steps, 1, cmd)
+    _at_least("--threads", args.threads, 1, cmd)
+    _at_least("--seed", args.seed, 0, cmd)
+    _finite("--rot-weight", args.rot_weight, cmd)
+    layout = Layout(args.layout)
+    if args.network == "anomaly":
+        if layout != Layout.HMD3_WAIST or args.rot_weight or args.no_orientation:
+            raise _config(
+                "--layout, --rot-weight and --no-orientation apply to cvae and ae only",
+                "the anomaly AE reads poses, not trackers: drop those options",
+            )
+    elif args.network == "ae" and layout != Layout.HMD3_WAIST:
+        raise _config(
+            f"the AE ablation exists for the {Layout.HMD3_WAIST} layout only",
+            f"drop --layout, or train `posecast train cvae --layout {layout}`",
+        )
+    elif args.no_orientation and layout == Layout.HMD3_WAIST:
+        raise _config(
+            f"--no-orientation: the {layout} features have no orientations",
+            f"use it with --layout {Layout.HMD3}",
+        )
+    _out_dir("--out", args.out)
+    manifest = _manifest(args.data)
+    _need("train", "torch")
+    ckpt = args.out / "checkpoint.pt"
     if args.network in ("cvae", "ae"):
-        from posecast.layout import Layout, spec
-        from posecast.model.cvae import CVAEConfig
-        from posecast.train.cvae_trainer import CVAETrainConfig, train_cvae
+        from posecast.offline.nets.cvae import CVAEConfig
+        from posecast.offline.train.cvae_trainer import CVAETrainConfig, train_cvae
+        from posecast.tracking.layouts import spec
 
         det = args.network == "ae"
-        if det and args.layout != Layout.HMD3_WAIST:
-            raise SystemExit("the AE ablation exists for the 4-point layout only")
-        ls = spec(args.layout)
+        ls = spec(layout)
         model_cfg = CVAEConfig(
             n_features=ls.n_features,
             deterministic=det,
@@ -70,27 +315,56 @@ def _cmd_train(args: argparse.Namespace) -> int:
             root_outputs=ls.root_outputs,
         )
         cfg = CVAETrainConfig(
-            threads=torch_threads,
+            threads=args.threads,
             seed=args.seed,
             rot_weight=args.rot_weight,
             no_orientation=args.no_orientation,
         )
-        if args.steps:
+        if args.steps is not None:
             cfg = dataclasses.replace(cfg, steps=args.steps)
+        _need_clips(manifest, args.data, ("train", "val"), cfg.window)
+        if args.resume and ckpt.exists():
+            _checkpoint("--resume", ckpt, args.network, str(ls.layout), _RESUME_HINT)
         path = train_cvae(args.data, args.out, model_cfg, cfg, resume=args.resume)
     else:
-        from posecast.train.anomaly_trainer import AnomalyTrainConfig, train_anomaly
+        from posecast.offline.train.anomaly_trainer import AnomalyTrainConfig, train_anomaly
 
-        acfg = AnomalyTrainConfig(threads=torch_threads, seed=args.seed)
-        if args.steps:
+        acfg = AnomalyTrainConfig(threads=args.threads, seed=args.seed)
+        if args.steps is not None:
             acfg = dataclasses.replace(acfg, steps=args.steps)
+        _need_clips(manifest, args.data, ("train", "val"), 1)
+        if args.resume and ckpt.exists():
+            _checkpoint("--resume", ckpt, "anomaly", hint=_RESUME_HINT)
         path = train_anomaly(args.data, args.out, acfg, resume=args.resume)
     print(f"checkpoint: {path}")
     return 0
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from posecast.train.export import export_all, mean_pose_rot6d
+    jobs: list[tuple[str, Path | None, str, str | None]] = [
+        ("--cvae", args.cvae, "cvae", Layout.HMD3_WAIST.value),
+        ("--cvae-hmd3", args.cvae_hmd3, "cvae", Layout.HMD3.value),
+        ("--ae", args.ae, "ae", Layout.HMD3_WAIST.value),
+        ("--anomaly", args.anomaly, "anomaly", None),
+    ]
+    given = [(opt, path, kind, lay) for opt, path, kind, lay in jobs if path is not None]
+    if not given:
+        raise _config(
+            "nothing to export", "pass one or more of --cvae, --cvae-hmd3, --ae, --anomaly"
+        )
+    _out_dir("--out", args.out)
+    for option, path, _, _ in given:
+        if not path.is_file():
+            raise _hinted(
+                ModelError("no such checkpoint file", path=path),
+                f"pass the checkpoint.pt that `posecast train` wrote to {option}",
+            )
+    if args.data is not None:
+        _need_clips(_manifest(args.data), args.data, ("train",), 1)
+    _need("train", "torch", "onnx")
+    for option, path, kind, layout in given:
+        _checkpoint(option, path, kind, layout)
+    from posecast.offline.train.export import export_all, mean_pose_rot6d
 
     extra = {}
     if args.data is not None:
@@ -105,31 +379,75 @@ def _cmd_export(args: argparse.Namespace) -> int:
 def _cmd_eval(args: argparse.Namespace) -> int:
     import json
 
-    from posecast.evaluation.runner import VARIANTS, evaluate, format_table
+    from posecast.offline.dataset.split import SPLITS
+    from posecast.offline.evaluation.runner import VARIANTS, evaluate, format_table
+    from posecast.online.engine.config import EngineConfig
 
-    if args.bvh is not None:
-        from posecast.dataset.prepare import find_bvh_files, process_file
-        from posecast.motion.rig import load_rigs
-
-        rigs = load_rigs()
-        clips = [process_file(p, rigs)[1] for p in find_bvh_files(args.bvh)]
-        fps = 60.0
+    if args.variants is not None:
+        variants = [v.strip() for v in args.variants.split(",")]
+        unknown = [v for v in variants if v not in VARIANTS]
+        if unknown or not variants or len(set(variants)) < len(variants):
+            raise _config(
+                f"--variants {args.variants!r}: not a comma-separated subset of the variants",
+                f"use some of {', '.join(VARIANTS)}",
+            )
     else:
-        from posecast.dataset.store import load_split
-
-        split = load_split(args.data, args.split)
-        clips = [split.clip(i) for i in range(split.n_clips)]
-        fps = split.fps
-    from posecast.engine.config import EngineConfig
-
-    variants = args.variants.split(",") if args.variants else list(VARIANTS)
-    if args.layout != "hmd3+waist" and not args.variants:
-        variants.remove("ae_ik")  # the AE ablation is a 4-point model
-    engine_cfg = EngineConfig(
+        variants = list(VARIANTS)
+        if args.layout != Layout.HMD3_WAIST:
+            variants.remove("ae_ik")  # the AE ablation is a 4-point model
+    if "ae_ik" in variants and args.layout != Layout.HMD3_WAIST:
+        raise _config(
+            f"variant ae_ik exists for the {Layout.HMD3_WAIST} layout only",
+            f"drop ae_ik from --variants for --layout {args.layout}",
+        )
+    if args.data is not None and args.split not in SPLITS:
+        raise _config(f"--split {args.split!r} unknown", f"use one of {', '.join(SPLITS)}")
+    _at_least("--samples", args.samples, 1, "eval")
+    _finite("--outlier-factor", args.outlier_factor, "eval", positive=True)
+    engine_cfg = EngineConfig(  # a ConfigError for a bad --samples
         samples=args.samples,
         outlier_baseline=args.outlier_baseline,
         outlier_factor=args.outlier_factor,
     )
+    _json_out(args.json)
+    _models_dir(args.models)
+    if "baseline_mean_lower_body" in variants:
+        from posecast.online.inference.artifact import default_models_dir
+
+        sidecar = (args.models or default_models_dir()) / "cvae_decoder.json"
+        meta: Any = None
+        with contextlib.suppress(OSError, ValueError):  # unreadable: load_artifact says so
+            meta = json.loads(sidecar.read_text("utf-8"))
+        if isinstance(meta, dict) and "mean_pose_rot6d" not in meta:
+            raise _hinted(
+                ModelError("the decoder sidecar has no mean_pose_rot6d", path=sidecar),
+                "re-export with `posecast export --data DIR`, or leave "
+                "baseline_mean_lower_body out of --variants",
+            )
+
+    if args.bvh is not None:
+        _need("data", "scipy")
+        from posecast.offline.dataset.prepare import find_bvh_files, process_file
+        from posecast.offline.motion.rig import load_rigs
+
+        files = find_bvh_files(args.bvh)
+        if not files:
+            raise DataError(f"{args.bvh}: no .bvh or .bvh.gz files found")
+        rigs = load_rigs()
+        clips = [process_file(p, rigs)[1] for p in files]
+        fps = 60.0
+    else:
+        from posecast.offline.dataset.store import load_split
+
+        _manifest(args.data)
+        split = load_split(args.data, args.split)
+        if split.n_clips == 0:
+            raise _hinted(
+                DatasetError(f"the {args.split} split has no clips", path=args.data),
+                f"evaluate another --split (one of {', '.join(SPLITS)})",
+            )
+        clips = [split.clip(i) for i in range(split.n_clips)]
+        fps = split.fps
     report = evaluate(
         clips,
         fps,
@@ -149,23 +467,33 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 def _cmd_eval_apps(args: argparse.Namespace) -> int:
     import json
 
-    from posecast.dataset.store import load_split
-    from posecast.engine.anomaly import AnomalyScorer
-    from posecast.evaluation.applications import table3
-    from posecast.inference.artifact import load_artifact
+    counts = _int_list("--samples", args.samples, "eval-apps")
+    _at_least("--runs", args.runs, 1, "eval-apps")
+    _at_least("--threads", args.threads, 1, "eval-apps")
+    _json_out(args.json)
+    _models_dir(args.models)
+    _manifest(args.data)
+    from posecast.offline.dataset.store import load_split
+    from posecast.offline.evaluation.applications import table3
+    from posecast.online.engine.anomaly import AnomalyScorer
+    from posecast.online.inference.artifact import load_artifact
 
     kick = None
+    names: list[str] = []
     for split_name in ("train", "val", "test"):
         split = load_split(args.data, split_name)
         for i, meta in enumerate(split.clips):
+            names.append(str(meta["name"]))
             if meta["name"] == args.clip:
                 kick = split.clip(i)
     if kick is None:
-        print(f"posecast: clip {args.clip!r} is not in {args.data}", file=sys.stderr)
-        return 2
+        shown = ", ".join(names[:8]) + (", ..." if len(names) > 8 else "")
+        raise _config(
+            f"--clip {args.clip!r} is not in {args.data}",
+            f"pass the name of a clip of the dataset ({shown or 'it has none'})",
+        )
     dec = load_artifact("cvae_decoder", args.models, threads=args.threads)
     scorer = AnomalyScorer(load_artifact("anomaly", args.models, threads=args.threads))
-    counts = [int(c) for c in args.samples.split(",")]
     report = table3(dec, scorer, kick, sample_counts=counts, runs=args.runs)
     report["clip"] = args.clip
     print(json.dumps(report, indent=1))
@@ -177,9 +505,23 @@ def _cmd_eval_apps(args: argparse.Namespace) -> int:
 def _cmd_bench_engine(args: argparse.Namespace) -> int:
     import json
 
-    from posecast.bench.engine_bench import run
+    cmd = "bench engine"
+    counts = _int_list("--players", args.players, cmd)
+    for option, value in (
+        ("--samples", args.samples),
+        ("--threads", args.threads),
+        ("--ticks", args.ticks),
+        ("--naive-players", args.naive_players),
+    ):
+        _at_least(option, value, 1, cmd)
+    if not 0.0 <= args.hmd3_share <= 1.0:
+        raise _config(
+            f"--hmd3-share {args.hmd3_share} outside [0, 1]",
+            "the share of players on the headset-only model, e.g. 0.5 (0: none)",
+        )
+    _json_out(args.json)
+    from posecast.offline.evaluation.engine_speed import run
 
-    counts = [int(p) for p in args.players.split(",")]
     report = run(
         counts, args.samples, args.threads, args.ticks, args.naive_players, args.hmd3_share
     )
@@ -212,12 +554,23 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     import asyncio
     import os
 
-    from posecast.service.app import serve_until_signal
-    from posecast.service.config import ServerConfig
-    from posecast.service.logging import configure
+    from posecast.online.config import MIN_SECRET_CHARS, ServerConfig
+    from posecast.online.shell.app import serve_until_signal
+    from posecast.online.shell.logging import configure
 
     overrides = {k: v for k, v in vars(args).items() if k not in ("command", "func")}
-    cfg = ServerConfig.from_sources(os.environ, overrides)
+    try:
+        cfg = ServerConfig.from_sources(os.environ, overrides)
+    except ConfigError as exc:
+        if "token secret" in exc.message:
+            hint = (
+                f"export POSECAST_TOKEN_SECRET=<{MIN_SECRET_CHARS}+ random characters, the "
+                "game backend's key>, or pass --dev for a throwaway one"
+            )
+        else:
+            hint = "set it by its flag or POSECAST_* variable: see `posecast serve --help`"
+        raise _hinted(exc, hint + " (docs/server.md)") from None
+    _models_dir(Path(cfg.models_dir) if cfg.models_dir else None, "--models-dir")
     configure(cfg.log_level)
     if cfg.dev and not os.environ.get("POSECAST_TOKEN_SECRET"):
         print(f"posecast: --dev: token secret for this run: {cfg.token_secret}", flush=True)
@@ -225,7 +578,8 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     def ready(port: int) -> None:
         print(f"posecast: listening on ws://{cfg.host}:{port}", flush=True)
 
-    asyncio.run(serve_until_signal(cfg, ready))
+    with _listen_errors(cfg.host, cfg.port, "pick another --port (0: any free one) or --host"):
+        asyncio.run(serve_until_signal(cfg, ready))
     return 0
 
 
@@ -233,15 +587,30 @@ def _cmd_token(args: argparse.Namespace) -> int:
     import os
     import time
 
-    from posecast.auth.tokens import mint
+    from posecast.online.auth.tokens import MAX_TTL_S, mint
+    from posecast.online.config import MIN_SECRET_CHARS
 
     secret = args.secret or os.environ.get("POSECAST_TOKEN_SECRET", "")
     if not secret:
-        print("posecast: token: pass --secret or set POSECAST_TOKEN_SECRET", file=sys.stderr)
-        return 2
+        raise _config(
+            "no token secret", "pass --secret KEY or set POSECAST_TOKEN_SECRET (the server's key)"
+        )
+    if len(secret) < MIN_SECRET_CHARS:
+        raise _config(
+            f"the token secret must be at least {MIN_SECRET_CHARS} characters",
+            "use the secret the server runs with (POSECAST_TOKEN_SECRET)",
+        )
+    if not 0 < args.ttl <= MAX_TTL_S:
+        raise _config(
+            f"--ttl {args.ttl} outside [1, {MAX_TTL_S}] seconds", "e.g. --ttl 3600 (one hour)"
+        )
+    if not args.room or not args.player:
+        raise _config("--room and --player must not be empty", "e.g. --room lobby --player p-17")
     rooms = tuple(r for r in (args.rooms or "").split(",") if r)
-    print(
-        mint(
+    if rooms and args.role != "backend":
+        raise _config("only a backend token may list --rooms", "add --role backend or drop --rooms")
+    try:
+        token = mint(
             secret.encode("utf-8"),
             room=args.room,
             player=args.player,
@@ -250,7 +619,9 @@ def _cmd_token(args: argparse.Namespace) -> int:
             now=time.time(),
             rooms=rooms,
         )
-    )
+    except ValueError as exc:  # mint's own checks of the values above
+        raise _config(str(exc), "see `posecast token --help`") from None
+    print(token)
     return 0
 
 
@@ -276,7 +647,9 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("network", choices=("cvae", "ae", "anomaly"))
     train.add_argument("--data", required=True, type=Path, help="prepared dataset directory")
     train.add_argument("--out", required=True, type=Path, help="run directory (checkpoint.pt)")
-    train.add_argument("--steps", type=int, default=0, help="iterations (0: the default)")
+    train.add_argument(
+        "--steps", type=int, default=None, help="iterations (default: 12000; anomaly 20000)"
+    )
     train.add_argument("--resume", action="store_true", help="continue from out/checkpoint.pt")
     train.add_argument("--threads", type=int, default=2, help="torch CPU threads (default 2)")
     train.add_argument("--seed", type=int, default=0)
@@ -289,8 +662,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     train.add_argument(
         "--layout",
-        default="hmd3+waist",
-        choices=("hmd3+waist", "hmd3"),
+        default=Layout.HMD3_WAIST.value,
+        choices=[layout.value for layout in Layout],
         help="tracker layout the CVAE serves (default hmd3+waist)",
     )
     train.add_argument(
@@ -319,8 +692,8 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--variants", help="comma-separated subset of variants")
     ev.add_argument(
         "--layout",
-        default="hmd3+waist",
-        choices=("hmd3+waist", "hmd3"),
+        default=Layout.HMD3_WAIST.value,
+        choices=[layout.value for layout in Layout],
         help="tracker layout, i.e. which model (default hmd3+waist)",
     )
     ev.add_argument("--samples", type=int, default=100, help="SSI latent samples N (100)")
@@ -361,7 +734,7 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--json", type=Path, help="write the report here")
     be.set_defaults(func=_cmd_bench_engine)
 
-    from posecast.service.config import add_arguments
+    from posecast.online.config import add_arguments
 
     serve = sub.add_parser("serve", help="run the pose-streaming server (docs/server.md)")
     add_arguments(serve)
@@ -385,12 +758,46 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _command(args: argparse.Namespace) -> str:
+    """``"data prepare"``, ``"train"``, ...: the command as typed."""
+    sub = getattr(args, "data_command", None) or getattr(args, "bench_command", None)
+    return f"{args.command} {sub}" if sub else str(args.command)
+
+
+def _hint_for(exc: PosecastError, command: str) -> str:
+    """What to do about ``exc``: the hint it was raised with, else one for its kind."""
+    for note in getattr(exc, "__notes__", ()):
+        if isinstance(note, str) and note.startswith(_HINT):
+            return note[len(_HINT) :]
+    if isinstance(exc, BvhError):
+        return (
+            "check that the file is a readable BVH (plain or .gz); "
+            "`posecast data prepare --skip-bad` leaves bad files out"
+        )
+    if isinstance(exc, RigError):
+        return (
+            "map the skeleton's joints in a rig *.json and pass its directory with "
+            "`posecast data prepare --rigs DIR` (docs/data.md)"
+        )
+    if isinstance(exc, DatasetError):
+        return "pass a directory written by `posecast data prepare --bvh DIR --out DIR`"
+    if isinstance(exc, DataError):
+        return "check the path: it must exist and hold .bvh or .bvh.gz files"
+    if isinstance(exc, ModelError):
+        return (
+            "check the models directory (default: the shipped models), or re-export the "
+            "models with `posecast export`"
+        )
+    return f"see `posecast {command} --help`"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args))
     except PosecastError as exc:
         print(f"posecast: error [{exc.code}]: {exc}", file=sys.stderr)
+        print(_HINT + _hint_for(exc, _command(args)), file=sys.stderr)
         return 2
 
 

@@ -23,13 +23,12 @@ from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed
 from websockets.typing import Subprotocol
 
-from posecast.auth.tokens import mint
-from posecast.dataset.frames import Frames, derive_frames
-from posecast.motion.synthetic import walk_clip
-from posecast.protocol import decode, encode
-from posecast.protocol.messages import (
-    LAYOUT_3POINT,
-    LAYOUT_4POINT,
+from posecast.offline.dataset.frames import Frames, derive_frames
+from posecast.offline.motion.synthetic import walk_clip
+from posecast.online.auth.tokens import mint
+from posecast.online.config import ServerConfig
+from posecast.online.protocol import decode, encode
+from posecast.online.protocol.messages import (
     SUBPROTOCOL,
     Frame,
     Hello,
@@ -37,28 +36,33 @@ from posecast.protocol.messages import (
     Presence,
     Welcome,
 )
-from posecast.service.app import PosecastServer
-from posecast.service.config import ServerConfig
+from posecast.online.shell.app import PosecastServer
 from posecast.skeleton import Joint
-from posecast.tracking import TrackerSlot
+from posecast.tracking.features import TrackerSlot
+from posecast.tracking.layouts import Layout
 
 
 def motion(bvh: Path | None, seed: int) -> Frames:
     """Tracker frames to replay: a BVH clip, or a generated walk."""
     if bvh is None:
         return derive_frames(walk_clip(seconds=12.0, fps=60.0, seed=seed))
-    from posecast.dataset.prepare import process_file
-    from posecast.motion.rig import load_rigs
+    from posecast.offline.dataset.prepare import process_file
+    from posecast.offline.motion.rig import load_rigs
 
     return process_file(bvh, load_rigs())[1]
 
 
 async def headset(
-    url: str, token: str, name: str, frames: Frames, offset_m: float, layout: str = LAYOUT_4POINT
+    url: str,
+    token: str,
+    name: str,
+    frames: Frames,
+    offset_m: float,
+    layout: Layout = Layout.HMD3_WAIST,
 ) -> None:
     """Connect, join, and send frames at 60 Hz forever (looping the clip). A headset-only
     player (``layout="hmd3"``) sends no waist: that slot is zero and marked not valid."""
-    waist = layout == LAYOUT_4POINT
+    waist = layout == Layout.HMD3_WAIST
     async with connect(url, subprotocols=[Subprotocol(SUBPROTOCOL)]) as ws:
         await ws.send(encode(Hello(1, token, "demo", name, None if waist else layout)))
         reply = await ws.recv()
@@ -138,7 +142,7 @@ async def run(port: int, seconds: float | None, bvh: Path | None, samples: int) 
 
     tasks = [
         asyncio.create_task(headset(url, token("alice"), "Alice", motion(bvh, 1), -0.8)),
-        asyncio.create_task(headset(url, token("bob"), "Bob", motion(bvh, 2), 0.8, LAYOUT_3POINT)),
+        asyncio.create_task(headset(url, token("bob"), "Bob", motion(bvh, 2), 0.8, Layout.HMD3)),
         asyncio.create_task(spectator(url, token("viewer", "spectator"))),
     ]
     try:

@@ -20,11 +20,11 @@ from pathlib import Path
 
 import pytest
 
-from posecast.protocol.messages import Pose, Welcome
+from posecast.online.protocol.messages import Pose, Welcome
 from tests.deploy.conftest import ROOT
+from tests.online.conftest import token
+from tests.online.wsclient import Client
 from tests.scaleout.conftest import Node, RedisServer, free_port
-from tests.service.conftest import token
-from tests.service.wsclient import Client
 
 
 @pytest.fixture(scope="session")

@@ -19,7 +19,7 @@ from typing import Any
 import jsonschema
 import pytest
 
-from posecast.service.config import option_help
+from posecast.online.config import option_help
 from tests.deploy.conftest import ROOT, compose, interpolate, load_yaml
 
 OPTIONS = {env for _, env, _, _ in option_help()}

@@ -55,13 +55,13 @@ def test_serving_install_is_redis_extra_without_torch_and_bakes_the_models() -> 
     runs = " ".join(build.all("RUN"))
     assert 'pip install ".[redis]"' in runs
     assert "import torch" in runs and "exit 1" in runs, "the build refuses torch"
-    assert "models/cvae_decoder.onnx" in runs, "the build checks the models are in"
+    assert "artifacts/cvae_decoder.onnx" in runs, "the build checks the models are in"
     copied = " ".join(build.all("COPY"))
     assert "server" in copied and "pyproject.toml" in copied
     # The models are package data, so `pip install .` installs them with the code.
     pyproject = (ROOT / "pyproject.toml").read_text("utf-8")
-    assert '"models/*.onnx", "models/*.json"' in pyproject
-    assert list((ROOT / "server/posecast/models").glob("*.onnx"))
+    assert '"artifacts/*.onnx",' in pyproject and '"artifacts/*.json"' in pyproject
+    assert list((ROOT / "server/posecast/artifacts").glob("*.onnx"))
 
 
 def test_dockerignore_sends_only_what_the_build_copies() -> None:
@@ -94,6 +94,8 @@ def test_the_build_context_installs_the_models_and_the_viewer(tmp_path: Path) ->
     assert out.returncode == 0, out.stdout + out.stderr
     (wheel,) = (tmp_path / "dist").glob("posecast-*.whl")
     names = set(zipfile.ZipFile(wheel).namelist())
-    shipped = {f"posecast/models/{p.name}" for p in (ROOT / "server/posecast/models").iterdir()}
+    shipped = {
+        f"posecast/artifacts/{p.name}" for p in (ROOT / "server/posecast/artifacts").iterdir()
+    }
     assert shipped and shipped <= names, shipped - names
-    assert "posecast/service/redis_bus.py" in names
+    assert "posecast/online/cluster/redis_bus.py" in names

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import re
 
-from posecast.service.metrics import Metrics
+from posecast.online.metrics import Metrics
 from tests.deploy.conftest import ROOT, load_yaml
 
 _SUFFIXES = {"counter": ("_total",), "histogram": ("_bucket", "_sum", "_count"), "gauge": ("",)}

@@ -6,7 +6,7 @@ import numpy as np
 import torch
 
 from posecast.geometry import rotations, torch_ops
-from posecast.geometry.kinematics import fk_mat
+from posecast.geometry.fk import fk_mat
 from posecast.skeleton import NUM_JOINTS, Joint, children
 
 BATCH = 7

@@ -33,10 +33,10 @@ from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.exceptions import ConnectionClosed
 from websockets.typing import Subprotocol
 
-from posecast.protocol import decode, encode
-from posecast.protocol.messages import SUBPROTOCOL, Frame, Hello, Message, Pose
+from posecast.online.protocol import decode, encode
+from posecast.online.protocol.messages import SUBPROTOCOL, Frame, Hello, Message, Pose
+from tests.online.conftest import SECRET
 from tests.scaleout.conftest import http_get
-from tests.service.conftest import SECRET
 
 TICK_HZ = 60.0  # the server default the tests run at
 

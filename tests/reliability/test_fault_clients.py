@@ -17,7 +17,9 @@ from collections.abc import Callable, Iterator
 
 import pytest
 
-from posecast.protocol.messages import Presence, Welcome
+from posecast.online.protocol.messages import Presence, Welcome
+from tests.online.conftest import token, walk_frame
+from tests.online.wsclient import Client
 from tests.reliability.fault_helpers import (
     TICK_HZ,
     RssSampler,
@@ -32,8 +34,6 @@ from tests.reliability.fault_helpers import (
     report,
     seqs_in,
 )
-from tests.service.conftest import token, walk_frame
-from tests.service.wsclient import Client
 
 pytestmark = pytest.mark.timeout(120)
 # Server defaults (service/config.py) the assertions are about.

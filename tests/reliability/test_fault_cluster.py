@@ -14,7 +14,9 @@ from collections.abc import Iterator
 import posecast_client as pc
 import pytest
 
-from posecast.protocol.messages import Pose, Presence, Welcome
+from posecast.online.protocol.messages import Pose, Presence, Welcome
+from tests.online.conftest import token
+from tests.online.wsclient import Client
 from tests.reliability.fault_helpers import (
     ServerProc,
     fmt,
@@ -31,8 +33,6 @@ from tests.scaleout.conftest import (  # noqa: F401 - fixtures used by name
     redis_server,
     redis_server_bin,
 )
-from tests.service.conftest import token
-from tests.service.wsclient import Client
 
 pytestmark = pytest.mark.timeout(300)  # the first test may apt-get install redis-server
 
@@ -147,7 +147,7 @@ def test_a_killed_nodes_players_fail_over_and_the_room_resumes(
         assert local_gap < 0.5, local_gap
         assert all(cl.stats.reconnects == 1 for cl in sdk.values())
         # Nobody announces the movers gone when B's records expire: they play on A now
-        # (hub.remote_snapshot / remote_leave skip players that are local).
+        # (the cluster sink's remote_snapshot / remote_leave skip players that are local).
         ghosts = [n for n in movers if last_event[n] != ["join"]]
         assert not ghosts, f"spurious leave for {ghosts} after failover: {churn}"
 

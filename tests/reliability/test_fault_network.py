@@ -20,7 +20,9 @@ from typing import Any
 import posecast_client as pc
 import pytest
 
-from posecast.protocol.messages import Pose, Welcome
+from posecast.online.protocol.messages import Pose, Welcome
+from tests.online.conftest import token
+from tests.online.wsclient import Client
 from tests.reliability.fault_helpers import (
     TICK_HZ,
     LossyRelay,
@@ -31,8 +33,6 @@ from tests.reliability.fault_helpers import (
     rates_hz,
     report,
 )
-from tests.service.conftest import token
-from tests.service.wsclient import Client
 
 pytestmark = pytest.mark.timeout(120)
 STREAM_S = 4.0

@@ -12,10 +12,10 @@ import time
 import posecast_client as pc
 import pytest
 
-from posecast.protocol.messages import Bye, Welcome
+from posecast.online.protocol.messages import Bye, Welcome
+from tests.online.conftest import token
+from tests.online.wsclient import Client
 from tests.reliability.fault_helpers import ServerProc, fmt, report, seqs_in
-from tests.service.conftest import token
-from tests.service.wsclient import Client
 
 pytestmark = pytest.mark.timeout(120)
 DRAIN_TIMEOUT_S = 5.0  # drain_timeout_s, the server default (service/config.py)

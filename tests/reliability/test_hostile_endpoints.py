@@ -18,14 +18,9 @@ from collections.abc import Iterator
 import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
-from posecast.protocol.messages import Error, Pose, Welcome
+from posecast.online.protocol.messages import Error, Pose, Welcome
+from tests.online.conftest import make_cfg, token
 from tests.reliability.hostile_helpers import OTHER_IP, Arena, Attacker, http_get
-from tests.service import conftest as service_fixtures
-from tests.service.conftest import make_cfg, token
-from tests.service.wsclient import Factory
-
-artifacts = service_fixtures.artifacts  # the session fixtures of tests/service
-engine_factory = service_fixtures.engine_factory
 
 pytestmark = pytest.mark.timeout(120)
 ROOM, PLAYER, NAME = "zq-secret-room", "zq-secret-player", "ZqSecretName"
@@ -42,8 +37,8 @@ METRIC_LABELS = {"role", "result", "code", "reason", "direction", "kind", "le"}
 
 
 @pytest.fixture(scope="module", params=[False, True], ids=["prod", "dev"])
-def arena(request: pytest.FixtureRequest, engine_factory: Factory) -> Iterator[Arena]:
-    with Arena(make_cfg(lookahead=1, dev=request.param, hello_timeout_s=1.0), engine_factory) as a:
+def arena(request: pytest.FixtureRequest) -> Iterator[Arena]:
+    with Arena(make_cfg(lookahead=1, dev=request.param, hello_timeout_s=1.0)) as a:
         secret = Attacker(a.port)
         assert isinstance(secret.hello(token(ROOM, PLAYER), room=ROOM, name=NAME), Welcome)
         for seq in range(30):
@@ -53,8 +48,8 @@ def arena(request: pytest.FixtureRequest, engine_factory: Factory) -> Iterator[A
 
 
 def secret_frame(seq: int) -> bytes:
-    from posecast.protocol import encode
-    from tests.service.conftest import walk_frame
+    from posecast.online.protocol import encode
+    from tests.online.conftest import walk_frame
 
     return encode(walk_frame(seq, seed=7))
 

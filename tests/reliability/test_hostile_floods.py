@@ -18,7 +18,8 @@ from collections.abc import Iterator
 import pytest
 from websockets.exceptions import InvalidStatus
 
-from posecast.protocol.messages import Error, Welcome
+from posecast.online.protocol.messages import Error, Welcome
+from tests.online.conftest import make_cfg, token
 from tests.reliability.hostile_helpers import (
     Arena,
     Attacker,
@@ -28,12 +29,6 @@ from tests.reliability.hostile_helpers import (
     run_flooder,
     scrape,
 )
-from tests.service import conftest as service_fixtures
-from tests.service.conftest import make_cfg, token
-from tests.service.wsclient import Factory
-
-artifacts = service_fixtures.artifacts  # the session fixtures of tests/service
-engine_factory = service_fixtures.engine_factory
 
 pytestmark = pytest.mark.timeout(120)
 FLOOD_S = 1.0
@@ -41,9 +36,9 @@ CONN_PER_MIN = 30
 
 
 @pytest.fixture(scope="module")
-def arena(engine_factory: Factory) -> Iterator[Arena]:
+def arena() -> Iterator[Arena]:
     cfg = make_cfg(lookahead=1, conn_per_ip_per_min=CONN_PER_MIN, hello_timeout_s=1.0)
-    with Arena(cfg, engine_factory) as a:
+    with Arena(cfg) as a:
         yield a
 
 

@@ -37,8 +37,9 @@ from hypothesis import HealthCheck, example, given, seed, settings
 from hypothesis import strategies as st
 
 from posecast.errors import ProtocolError
-from posecast.protocol import decode
-from posecast.protocol.messages import DEFAULT_LIMITS, MAX_DEPTH, Welcome
+from posecast.online.protocol import decode
+from posecast.online.protocol.messages import DEFAULT_LIMITS, MAX_DEPTH, Welcome
+from tests.online.conftest import make_cfg, token
 from tests.reliability.hostile_helpers import (
     Arena,
     Attacker,
@@ -56,13 +57,6 @@ from tests.reliability.hostile_helpers import (
     valid_encodings,
     verdict,
 )
-from tests.service import conftest as service_fixtures
-from tests.service.conftest import make_cfg, token
-from tests.service.wsclient import Factory
-
-# The session fixtures of tests/service (the shipped models, loaded once), re-exported.
-artifacts = service_fixtures.artifacts
-engine_factory = service_fixtures.engine_factory
 
 EXAMPLES = int(os.environ.get("POSECAST_FUZZ_EXAMPLES", "150"))
 SECONDS = float(os.environ.get("POSECAST_FUZZ_SECONDS", "0"))
@@ -383,13 +377,16 @@ class Fuzzer:
 
 
 @pytest.fixture(scope="module")
-def arena(engine_factory: Factory) -> Iterator[Arena]:
+def arena() -> Iterator[Arena]:
     # Every non-fatal error is answered and no frame is rate-limited, so each
     # message's answer is exact; test_hostile_floods covers the limits themselves.
+    # ... and the fuzzer reconnects after every fatal error, as fast as it can: the
+    # per-IP and node-wide connection budgets (test_hostile_churn) are opened up.
     cfg = make_cfg(
-        lookahead=1, error_rate_hz=1e6, control_rate_hz=1e6, rate_burst=10**9, max_rooms=16
-    )
-    with Arena(cfg, engine_factory) as a:
+        lookahead=1, error_rate_hz=1e6, control_rate_hz=1e6, rate_burst=10**9, max_rooms=16,
+        fatal_per_ip_per_min=10**6, accepts_per_s=1e6,
+    )  # fmt: skip
+    with Arena(cfg) as a:
         yield a
 
 
@@ -446,7 +443,7 @@ def _fuzz(arena: Arena, strategy: Any, examples: list[Case], what: str) -> None:
     assert http_get(arena.port, "/healthz")[0] == 200
     for player in arena.clients:
         assert arena.errors_of(player) == []
-        assert not arena.clients[player].closed.is_set()
+    assert arena.closed() == []
     assert_rates_kept(during[0], baseline, what)
 
 
@@ -474,4 +471,4 @@ def test_a_message_over_the_frame_cap_is_closed_1009_and_others_stay(arena: Aren
     time.sleep(0.2)
     assert errors_by_code(scrape(arena.port)).get("TOO_LARGE", 0.0) == before + 1  # counted
     assert http_get(arena.port, "/healthz")[0] == 200
-    assert all(not c.closed.is_set() for c in arena.clients.values())
+    assert arena.closed() == []

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.service.conftest import SECRET
+from tests.online.conftest import SECRET
 
 HEARTBEAT_S = 1.0  # the defaults: the bound the tests check is the documented one
 NODE_TTL_S = 3.0

@@ -17,10 +17,10 @@ from typing import Any
 
 import pytest
 
-from posecast.protocol.messages import Bye, Error, Pose, Presence, Welcome
+from posecast.online.protocol.messages import Bye, Error, Pose, Presence, Welcome
+from tests.online.conftest import token
+from tests.online.wsclient import Client
 from tests.scaleout.conftest import HEARTBEAT_S, NODE_TTL_S, Node, RedisServer
-from tests.service.conftest import token
-from tests.service.wsclient import Client
 
 # Generous: the first test may also install redis-server with apt-get (session fixture).
 pytestmark = pytest.mark.timeout(300)

@@ -62,7 +62,7 @@ def test_write_then_read_gives_the_same_motion(tmp_path: Path, rng: np.random.Ge
 
 
 def test_the_server_reads_what_the_sdk_writes(tmp_path: Path, rng: np.random.Generator) -> None:
-    server_bvh = pytest.importorskip("posecast.motion.bvh")
+    server_bvh = pytest.importorskip("posecast.offline.motion.bvh")
     quat = quat_normalize(rng.normal(size=(3, 19, 4)))
     path = tmp_path / "x.bvh"
     write_bvh(path, names=JOINT_NAMES, parents=PARENTS, offsets=reference_offsets(),

@@ -63,7 +63,7 @@ def mutate(data: bytes, rng: random.Random) -> bytes:
 
 
 def test_the_sdk_and_the_server_agree_on_mutated_vectors() -> None:
-    server = pytest.importorskip("posecast.protocol")
+    server = pytest.importorskip("posecast.online.protocol")
     files = sorted((PROTO / "vectors").glob("*.json"))
     cases = [c for f in files for c in json.loads(f.read_text("utf-8"))]
     seeds = [bytes.fromhex(c.get("canonical_hex") or c["hex"]) for c in cases]

@@ -51,8 +51,8 @@ def test_canonical_rig_and_resampling(tmp_path: Path) -> None:
 
 
 def test_walk_matches_the_servers_walk() -> None:
-    synthetic = pytest.importorskip("posecast.motion.synthetic")
-    frames = pytest.importorskip("posecast.dataset.frames")
+    synthetic = pytest.importorskip("posecast.offline.motion.synthetic")
+    frames = pytest.importorskip("posecast.offline.dataset.frames")
     theirs = frames.derive_frames(synthetic.walk_clip(seconds=3.0, fps=60.0, seed=7))
     ours = WalkSource(seconds=3.0, seed=7)
     np.testing.assert_allclose(ours.positions, theirs["tracker_pos"], atol=1e-5)

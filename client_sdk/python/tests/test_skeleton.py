@@ -10,7 +10,7 @@ from posecast_client import skeleton
 
 def test_tables_match_the_server() -> None:
     server = pytest.importorskip("posecast.skeleton")
-    tracking = pytest.importorskip("posecast.tracking")
+    tracking = pytest.importorskip("posecast.tracking.features")
     assert skeleton.JOINT_NAMES == server.JOINT_NAMES
     assert skeleton.PARENTS == server.PARENTS
     np.testing.assert_array_equal(skeleton.reference_offsets(), server.reference_offsets())

@@ -10,7 +10,7 @@ import pytest
 from posecast_client.tokens import mint_token
 
 SECRET = "dev-secret-0123456789"
-# Minted by server/posecast/auth/tokens.py with the same arguments.
+# Minted by server/posecast/online/auth/tokens.py with the same arguments.
 GOLDEN_PLAYER = (
     "eyJleHAiOjE3MDAwMDA2MDAsImlhdCI6MTcwMDAwMDAwMCwianRpIjoiai0xIiwicGxheWVyIjoiYWRhIiwicm9sZSI6"
     "InBsYXllciIsInJvb20iOiJsb2JieSIsInYiOjF9.25UbpyGLcJ3Gx9fQuf04BaNpBL51CSum7sQn_ctNe2c"
@@ -34,7 +34,7 @@ def test_golden_tokens() -> None:
 
 
 def test_the_server_verifies_minted_tokens() -> None:
-    tokens = pytest.importorskip("posecast.auth.tokens")
+    tokens = pytest.importorskip("posecast.online.auth.tokens")
     tok = mint_token(SECRET, room="r", player="p", role="spectator", now=1000.0)
     claims = tokens.verify(SECRET.encode(), tok, now=1001.0)
     assert (claims.room, claims.player, claims.role, claims.exp) == ("r", "p", "spectator", 4600)

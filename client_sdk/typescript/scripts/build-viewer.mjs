@@ -1,5 +1,5 @@
 // Bundle the live viewer (viewer/main.ts + the SDK + three.js) into ONE static file,
-// server/posecast/viewer/viewer.js, and copy viewer/index.html next to it. Both are
+// server/posecast/online/shell/static/viewer.js, and copy viewer/index.html next to it. Both are
 // committed: the Python server serves them as package data and needs no Node at run
 // time. esbuild's output is deterministic, so the build is reproducible:
 //
@@ -12,7 +12,7 @@ import { fileURLToPath } from "node:url";
 import { build } from "esbuild";
 
 const root = join(dirname(fileURLToPath(import.meta.url)), "..");
-const outDir = join(root, "..", "..", "server", "posecast", "viewer");
+const outDir = join(root, "..", "..", "server", "posecast", "online", "shell", "static");
 const check = process.argv.includes("--check");
 
 const result = await build({

@@ -8,7 +8,7 @@
  * {@link decode} accepts every valid encoding and checks, in the spec's order: size
  * (TOO_LARGE), msgpack syntax and structural bounds (MALFORMED / TOO_LARGE), that the
  * root is a map, nesting depth (MALFORMED), `type` (BAD_FIELD / UNKNOWN_TYPE), then
- * the fields of that type. The per-type code mirrors `posecast/protocol/wire.py`.
+ * the fields of that type. The per-type code mirrors `posecast/online/protocol/wire.py`.
  */
 
 import {

@@ -1,6 +1,6 @@
 /**
  * Field validators for the decoder: one msgpack value in, a checked value out
- * (the TypeScript twin of `posecast/protocol/fields.py`).
+ * (the TypeScript twin of `posecast/online/protocol/fields.py`).
  *
  * Each takes the message map, the key, the value's bounds and `at` (a path prefix for
  * nested maps such as `members[3].`), and throws the error the spec names: BAD_FIELD

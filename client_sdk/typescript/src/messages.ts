@@ -36,7 +36,7 @@ export const MAX_TIME_S = 1e12;
 export const MAX_ID_BYTES = 64;
 export const MAX_LOOKAHEAD_FRAMES = 255;
 
-/** Tracker slots, in wire order (`server/posecast/tracking.py`). */
+/** Tracker slots, in wire order (`server/posecast/tracking/features.py`). */
 export const TRACKER_SLOTS = ["HEAD", "LEFT_HAND", "RIGHT_HAND", "WAIST"] as const;
 export type TrackerSlot = (typeof TRACKER_SLOTS)[number];
 export const NUM_TRACKERS = 4;

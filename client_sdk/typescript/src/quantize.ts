@@ -1,6 +1,6 @@
 /**
  * Pose quantisation for the wire (`proto/README.md`, "Position quantisation" and
- * "Rotation quantisation"); the same arithmetic as `posecast/protocol/quantize.py`,
+ * "Rotation quantisation"); the same arithmetic as `posecast/online/protocol/quantize.py`,
  * so re-encoding a decoded pose gives its bytes back bit for bit.
  *
  * Positions: the PELVIS as three float64 (`root`), the other 18 joints as int16

@@ -1,6 +1,6 @@
 /**
  * A real `posecast serve --dev` process for the integration tests, and join tokens in
- * the server's format (`server/posecast/auth/tokens.py`), minted with Node's crypto.
+ * the server's format (`server/posecast/online/auth/tokens.py`), minted with Node's crypto.
  */
 
 import { type ChildProcess, spawn } from "node:child_process";

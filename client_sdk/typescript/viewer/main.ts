@@ -2,7 +2,7 @@
  * The posecast live viewer: joins a room as a spectator with the SDK and draws every
  * player's 19-joint skeleton in 3D (three.js), with name labels, a player list and a
  * room picker. `scripts/build-viewer.mjs` bundles it into the one file the server
- * serves at `/viewer/viewer.js` (`server/posecast/service/viewer.py`).
+ * serves at `/viewer/viewer.js` (`server/posecast/online/shell/http.py`).
  *
  * Token: `#token=` (preferred: a fragment never reaches the server or its logs) or
  * `?token=` in the page URL; it is removed from the address bar once read. Without

@@ -1,7 +1,7 @@
 """Torch twins of the numpy rotation and FK code, for training losses.
 
 Only what the networks need: 6D to matrix and FK. The numpy versions in
-:mod:`posecast.geometry.rotations` and :mod:`posecast.geometry.kinematics` are the
+:mod:`posecast.geometry.rotations` and :mod:`posecast.geometry.fk` are the
 reference; ``tests/geometry/test_torch_ops.py`` checks parity to 1e-5.
 """
 
@@ -37,7 +37,7 @@ def fk(
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """World rotations ``(..., J, 3, 3)`` and positions ``(..., J, 3)``.
 
-    Same contract as :func:`posecast.geometry.kinematics.fk_mat`; written without
+    Same contract as :func:`posecast.geometry.fk.fk_mat`; written without
     in-place writes so autograd works.
     """
     n = len(parents)

@@ -1,1 +1,0 @@
-"""Benchmarks behind ``posecast bench`` (the scripts in ``benchmarks/`` call these)."""

@@ -1,0 +1,194 @@
+"""``posecast bench engine``: the whole per-tick work of the SSI engine on this machine.
+
+Each measured tick is everything the server's tick loop does for the engine: input
+features, the batched decoder call, FK, contact IK and anomaly scoring of every
+sample, selection, and emission with look-ahead (including interpolation re-decodes
+when transitions run). Players replay a generated walk, each from its own phase.
+
+With ``hmd3_share`` above 0 both shipped models are loaded (a :class:`MultiEngine`,
+as ``posecast serve`` runs them) and that share of the players is headset-only: each
+model steps its own players in one batch, so a tick costs two decoder calls.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from posecast.offline.dataset.frames import derive_frames
+from posecast.offline.motion.synthetic import walk_clip
+from posecast.online.engine.anomaly import AnomalyScorer
+from posecast.online.engine.config import EngineConfig
+from posecast.online.engine.multi import MultiEngine
+from posecast.online.engine.ssi import Engine
+from posecast.online.engine.types import TrackerFrame
+from posecast.online.inference.artifact import load_artifact
+from posecast.tracking.layouts import Layout
+
+FRAME_BUDGET_MS = 1000.0 / 60.0
+# Multiply-accumulates per sample per frame (decoder FC + GRU + heads, anomaly AE),
+# from the layer sizes; FK and IK add a few hundred more and are not counted.
+MAC_PER_SAMPLE = (
+    (24 + 30) * 128
+    + 2 * 128 * 384
+    + 128 * 110
+    + (57 * 28 + 28 * 14 + 14 * 7 + 7 * 7 + 7 * 14 + 14 * 28 + 28 * 108)
+)
+# 2 cores x 2.5 GHz x AVX-512 (2 FMA units x 16 float32 lanes x 2 FLOP).
+PEAK_GFLOPS = 2 * 2.5 * 2 * 16 * 2
+
+
+@dataclass(frozen=True)
+class BenchResult:
+    players: int
+    samples: int
+    hmd3_players: int
+    tick_p50_ms: float
+    tick_p99_ms: float
+    gflops: float
+    rss_mb: float
+
+    def realtime(self) -> bool:
+        return self.tick_p99_ms < FRAME_BUDGET_MS
+
+
+def _rss_mb() -> float:
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    except OSError:  # pragma: no cover - non-Linux
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def _frames(seconds: float = 8.0) -> tuple[np.ndarray, np.ndarray]:
+    fr = derive_frames(walk_clip(seconds, 60.0, seed=3))
+    return fr["tracker_pos"].astype(np.float64), fr["tracker_quat"].astype(np.float64)
+
+
+def bench(
+    players: int,
+    samples: int = 100,
+    ticks: int = 120,
+    warmup: int = 20,
+    threads: int = 2,
+    lookahead: int = 10,
+    hmd3_share: float = 0.0,
+) -> BenchResult:
+    scorer = AnomalyScorer(load_artifact("anomaly", threads=threads))
+    cfg = EngineConfig(samples=samples, lookahead=lookahead)
+    n3 = round(hmd3_share * players)
+    engine: Engine | MultiEngine
+    if hmd3_share > 0:
+        engine = MultiEngine(
+            {
+                Layout.HMD3_WAIST: Engine(
+                    load_artifact("cvae_decoder", threads=threads), scorer, cfg
+                ),
+                Layout.HMD3: Engine(
+                    load_artifact("cvae_decoder_hmd3", threads=threads), scorer, cfg
+                ),
+            }
+        )
+    else:
+        engine = Engine(load_artifact("cvae_decoder", threads=threads), scorer, cfg, players)
+    rss0 = _rss_mb()
+    for p in range(players):
+        if isinstance(engine, MultiEngine):
+            engine.add_player(f"p{p}", p, Layout.HMD3 if p < n3 else Layout.HMD3_WAIST)
+        else:
+            engine.add_player(f"p{p}", seed=p)
+    pos, quat = _frames()
+    times = []
+    for t in range(warmup + ticks):
+        for p in range(players):
+            k = (t + 37 * p) % len(pos)
+            engine.push(f"p{p}", TrackerFrame(t, pos[k], quat[k]))
+        t0 = time.perf_counter()
+        engine.tick()
+        if t >= warmup:
+            times.append(time.perf_counter() - t0)
+    ms = np.array(times) * 1000.0
+    p50 = float(np.percentile(ms, 50))
+    flop = 2.0 * MAC_PER_SAMPLE * players * samples
+    return BenchResult(
+        players=players,
+        samples=samples,
+        hmd3_players=n3,
+        tick_p50_ms=round(p50, 3),
+        tick_p99_ms=round(float(np.percentile(ms, 99)), 3),
+        gflops=round(flop / (p50 / 1000.0) / 1e9, 2),
+        rss_mb=round((_rss_mb() - rss0) / max(1, players), 3),
+    )
+
+
+def naive_loop(players: int, samples: int = 100, ticks: int = 60, threads: int = 2) -> float:
+    """p50 tick (ms) when each player has its own engine, stepped one after another."""
+    dec = load_artifact("cvae_decoder", threads=threads)
+    scorer = AnomalyScorer(load_artifact("anomaly", threads=threads))
+    engines = []
+    for p in range(players):
+        e = Engine(dec, scorer, EngineConfig(samples=samples), 1)
+        e.add_player("p", seed=p)
+        engines.append(e)
+    pos, quat = _frames()
+    times = []
+    for t in range(10 + ticks):
+        t0 = time.perf_counter()
+        for p, e in enumerate(engines):
+            k = (t + 37 * p) % len(pos)
+            e.push("p", TrackerFrame(t, pos[k], quat[k]))
+            e.tick()
+        if t >= 10:
+            times.append(time.perf_counter() - t0)
+    return round(float(np.percentile(np.array(times) * 1000.0, 50)), 3)
+
+
+def run(
+    player_counts: list[int],
+    samples: int,
+    threads: int,
+    ticks: int,
+    naive_players: int,
+    hmd3_share: float = 0.0,
+) -> dict[str, Any]:
+    results = [bench(p, samples, ticks=ticks, threads=threads) for p in player_counts]
+    ok = [r.players for r in results if r.realtime()]
+    mixed: dict[str, Any] = {}
+    if hmd3_share > 0:
+        both = [
+            bench(p, samples, ticks=ticks, threads=threads, hmd3_share=hmd3_share)
+            for p in player_counts
+        ]
+        fits = [r.players for r in both if r.realtime()]
+        mixed = {
+            "hmd3_share": hmd3_share,
+            "hmd3_players": [r.hmd3_players for r in both],
+            "tick_p50_ms": [r.tick_p50_ms for r in both],
+            "tick_p99_ms": [r.tick_p99_ms for r in both],
+            "max_realtime_players": max(fits) if fits else 0,
+            "rss_mb_per_player": [r.rss_mb for r in both],
+        }
+    return {
+        "players": [r.players for r in results],
+        "samples": samples,
+        "tick_p50_ms": [r.tick_p50_ms for r in results],
+        "tick_p99_ms": [r.tick_p99_ms for r in results],
+        "max_realtime_players": max(ok) if ok else 0,
+        "gflops": [r.gflops for r in results],
+        "peak_gflops": PEAK_GFLOPS,
+        "rss_mb_per_player": [r.rss_mb for r in results],
+        "naive_loop": {
+            "players": naive_players,
+            "tick_p50_ms": naive_loop(naive_players, samples, threads=threads),
+            "batched_tick_p50_ms": bench(
+                naive_players, samples, ticks=60, threads=threads
+            ).tick_p50_ms,
+        },
+        "threads": threads,
+        "frame_budget_ms": round(FRAME_BUDGET_MS, 3),
+    } | ({"both_models": mixed} if mixed else {})

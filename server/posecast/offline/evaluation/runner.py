@@ -1,0 +1,211 @@
+"""Run the evaluation variants over a list of clips and aggregate their metrics."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from posecast.geometry.rotations import quat2mat
+from posecast.offline.dataset.frames import Frames
+from posecast.offline.evaluation import metrics as m
+from posecast.offline.evaluation.reconstruct import (
+    contact_ik,
+    decode_ae,
+    decode_cvae,
+    pose_from_rotations,
+)
+from posecast.online.engine.anomaly import AnomalyScorer
+from posecast.online.engine.config import EngineConfig
+from posecast.online.engine.ssi import Engine
+from posecast.online.engine.types import TrackerFrame
+from posecast.online.inference.artifact import Artifact, load_artifact
+from posecast.skeleton import LOWER_BODY, NUM_ROTATIONS
+from posecast.tracking.features import TrackerSlot
+from posecast.tracking.layouts import Layout, pelvis_from_head, spec
+
+VARIANTS = ("cvae_1sample", "cvae_ik", "cvae_ik_ssi", "ae_ik", "baseline_mean_lower_body")
+METRIC_KEYS = (
+    "mpjpe_cm",
+    "lower_mpjpe_cm",
+    "mpjve_cm_s",
+    "mpjae_cm_s2",
+    "foot_skate_cm_s",
+    "ground_penetration_cm",
+    "implausible_rate",
+    "transitions_per_min",
+    "root_pe_cm",
+    "hand_pe_cm",
+    "mpjre_deg",
+    "jitter",
+)
+
+
+def _mean_leg_pose(meta: dict[str, Any]) -> np.ndarray | None:
+    mean = meta.get("mean_pose_rot6d")
+    return None if mean is None else np.asarray(mean, dtype=np.float64).reshape(NUM_ROTATIONS, 6)
+
+
+def _truth(fr: Frames) -> tuple[np.ndarray, np.ndarray]:
+    """Ground-truth world rotations ``(T, 19, 3, 3)`` and positions of a clip."""
+    root = quat2mat(fr["root_quat"].astype(np.float64))
+    return pose_from_rotations(
+        fr["rot6d"].astype(np.float64), root, fr["root_pos"].astype(np.float64)
+    )
+
+
+def evaluate(
+    clips: Sequence[Frames],
+    fps: float,
+    variants: Sequence[str] = VARIANTS,
+    models_dir: str | Path | None = None,
+    log: Callable[[str], None] | None = None,
+    engine_cfg: EngineConfig | None = None,
+    layout: str = Layout.HMD3_WAIST,
+) -> dict[str, Any]:
+    """Metrics per variant over ``clips`` (each a :data:`Frames` dict with ground truth),
+    for the model of tracker ``layout``.
+
+    ``baseline_mean_lower_body`` takes the true upper body and pelvis whatever the
+    layout, so only its lower-body numbers are a floor to beat.
+    """
+    ls = spec(layout)
+    dec = load_artifact(ls.decoder, models_dir)
+    scorer = AnomalyScorer(load_artifact(ls.anomaly, models_dir))
+    if "ae_ik" in variants and ls.layout is not Layout.HMD3_WAIST:
+        raise ValueError("the AE ablation (ae_ik) exists for the 4-point layout only")
+    ae = load_artifact("ae_step", models_dir) if "ae_ik" in variants else None
+    latent = int(dec.meta["model_config"]["latent"])
+    base = dec if ls.layout is Layout.HMD3_WAIST else load_artifact("cvae_decoder", models_dir)
+    mean_pose = _mean_leg_pose(base.meta)
+    leg_rot = [int(j) - 1 for j in LOWER_BODY]  # rotation rows of the leg joints
+    results: dict[str, Any] = {}
+    feats_of = [
+        fr["features"].astype(np.float32)
+        if ls.layout is Layout.HMD3_WAIST
+        else ls.clip_features(fr["tracker_pos"], fr["tracker_quat"], fps).astype(np.float32)
+        for fr in clips
+    ]
+    truth = [_truth(fr) for fr in clips]
+    for name in variants:
+        acc, t0 = m.Accumulator(), time.perf_counter()
+        ssi: list[tuple[np.ndarray, np.ndarray, int]] = []
+        transitions = 0
+        if name == "cvae_ik_ssi":
+            ssi = run_ssi(dec, scorer, clips, engine_cfg or EngineConfig())
+        for ci, fr in enumerate(clips):
+            feats = feats_of[ci]
+            wpos = fr["tracker_pos"][:, TrackerSlot.WAIST].astype(np.float64)
+            wmat = quat2mat(fr["tracker_quat"][:, TrackerSlot.WAIST].astype(np.float64))
+            root_mat, root_pos = wmat, wpos
+            if name == "cvae_ik_ssi":
+                wm, wp, n_trans = ssi[ci]
+                transitions += n_trans
+            elif name.startswith("cvae"):
+                rot, con, root = decode_cvae(dec, feats, np.zeros(latent, np.float32))
+                if root is not None:
+                    head_pos = fr["tracker_pos"][:, TrackerSlot.HEAD]
+                    head_quat = fr["tracker_quat"][:, TrackerSlot.HEAD]
+                    root_mat, root_pos = pelvis_from_head(root, head_pos, head_quat)
+            elif name == "ae_ik":
+                assert ae is not None
+                rot, con = decode_ae(ae, feats)
+            elif name == "baseline_mean_lower_body":
+                if mean_pose is None:
+                    raise ValueError("the decoder sidecar has no mean_pose_rot6d")
+                rot = fr["rot6d"].astype(np.float64).copy()  # upper body: ground truth
+                rot[:, leg_rot] = mean_pose[leg_rot]
+                con = np.zeros((len(feats), 2))
+            else:
+                raise ValueError(f"unknown variant {name!r}")
+            if name != "cvae_ik_ssi":
+                wm, wp = pose_from_rotations(rot, root_mat, root_pos)
+                if name.endswith("_ik"):
+                    contact_ik(wm, wp, con)
+            gt_mat, gt = truth[ci]
+            acc.add("mpjpe_cm", m.mpjpe(wp, gt))
+            acc.add("lower_mpjpe_cm", m.lower_mpjpe(wp, gt))
+            acc.add("mpjve_cm_s", m.mpjve(wp, gt, fps))
+            acc.add("mpjae_cm_s2", m.mpjae(wp, gt, fps))
+            acc.add("foot_skate_cm_s", m.foot_skate(wp, fr["contacts"], fps))
+            acc.add("ground_penetration_cm", m.ground_penetration(wp))
+            # Each pose is scored with its own pelvis (the waist tracker's for 4 points).
+            scores = scorer.score_mats(wp, wp[:, 0], wm[:, 0])
+            acc.add("implausible_rate", m.implausible(scores, scorer.threshold_m))
+            acc.add("root_pe_cm", m.root_pe(wp, gt))
+            acc.add("hand_pe_cm", m.hand_pe(wp, gt))
+            acc.add("mpjre_deg", m.mpjre(wm, gt_mat))
+            acc.add("jitter", m.jitter(wp, fps))
+        means = acc.means()
+        if name == "cvae_ik_ssi":
+            minutes = sum(len(fr["features"]) for fr in clips) / fps / 60.0
+            means["transitions_per_min"] = transitions / minutes
+        res: dict[str, Any] = {k: round(v, 4) for k, v in means.items()}
+        res["seconds"] = round(time.perf_counter() - t0, 2)
+        results[name] = res
+        if log:
+            log(f"{name}: {res}")
+    gt_jitter = m.Accumulator()
+    for _, gt in truth:
+        gt_jitter.add("jitter", m.jitter(gt, fps))
+    return {
+        "layout": str(ls.layout),
+        "variants": results,
+        "clips": len(clips),
+        "frames": int(sum(len(c["features"]) for c in clips)),
+        "fps": fps,
+        "implausible_threshold_m": scorer.threshold_m,
+        "ground_truth_jitter": round(gt_jitter.means()["jitter"], 4),
+    }
+
+
+def run_ssi(
+    dec: Artifact, scorer: AnomalyScorer, clips: Sequence[Frames], cfg: EngineConfig
+) -> list[tuple[np.ndarray, np.ndarray, int]]:
+    """The full method: every clip as one player of one engine, all stepped together.
+
+    Returns per clip the emitted world rotations ``(T, 19, 3, 3)`` and positions
+    ``(T, 19, 3)``, aligned with the input frames (the engine's ``tau``-frame delay
+    undone by ``seq``), and the number of transitions.
+    """
+    engine = Engine(dec, scorer, cfg, capacity=len(clips))
+    for i in range(len(clips)):
+        engine.add_player(str(i), seed=i)
+    out = [np.full((len(fr["features"]), 19, 3), np.nan, np.float32) for fr in clips]
+    rots = [np.full((len(fr["features"]), 19, 4), np.nan, np.float32) for fr in clips]
+    done: dict[int, int] = {}
+    longest = max(len(fr["features"]) for fr in clips)
+    for t in range(longest + cfg.lookahead):
+        for i, fr in enumerate(clips):
+            if t < len(fr["features"]):
+                pos, quat = fr["tracker_pos"][t], fr["tracker_quat"][t]
+                engine.push(
+                    str(i), TrackerFrame(t, pos.astype(np.float64), quat.astype(np.float64))
+                )
+        for pose in engine.tick().poses:
+            i = int(pose.player)
+            if not pose.held and 0 <= pose.seq < len(out[i]):
+                out[i][pose.seq] = pose.positions
+                rots[i][pose.seq] = pose.rotations
+        for i, fr in enumerate(clips):
+            if i not in done and t + 1 >= len(fr["features"]) + cfg.lookahead:
+                done[i] = engine.transitions(str(i))
+                engine.remove_player(str(i))
+    if any(np.isnan(o).any() for o in out):
+        raise RuntimeError("the engine skipped frames")  # a bug, never bad data
+    return [
+        (quat2mat(r.astype(np.float64)), o.astype(np.float64), done[i])
+        for i, (r, o) in enumerate(zip(rots, out, strict=True))
+    ]
+
+
+def format_table(report: dict[str, Any]) -> str:
+    head = f"{'variant':26s}" + "".join(f"{k:>22s}" for k in METRIC_KEYS) + f"{'seconds':>9s}"
+    lines = [f"layout {report.get('layout', Layout.HMD3_WAIST)}", head]
+    for name, res in report["variants"].items():
+        row = f"{name:26s}" + "".join(f"{res.get(k, float('nan')):22.3f}" for k in METRIC_KEYS)
+        lines.append(row + f"{res.get('seconds', 0):9.1f}")
+    return "\n".join(lines)

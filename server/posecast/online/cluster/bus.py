@@ -1,0 +1,182 @@
+"""The bus between posecast nodes: room presence and one pose batch per room per tick.
+
+This module is the interface and the wire format. Backends by name, chosen once
+from the config by :func:`posecast.online.cluster.auto.create_bus`:
+
+* ``memory`` (the default, no ``redis_url``): an in-process
+  :class:`~posecast.online.cluster.memory.MemoryBroker`.
+  ``posecast serve`` gives it a broker of its own, so it is one embedded node with
+  nothing to talk to; tests hand several hubs one broker to run many nodes in one
+  process, without sockets.
+* ``redis`` (``--redis URL``): :class:`~posecast.online.cluster.redis_bus.RedisBus`, Redis
+  pub/sub for announcements and pose batches, Redis hashes with heartbeats for the
+  authoritative member lists. ``docs/scale-out.md`` has the design.
+
+The hub drives a bus with plain, non-blocking calls (:meth:`Bus.watch`,
+:meth:`Bus.joined`, :meth:`Bus.left`, :meth:`Bus.publish`); the bus calls back into
+a :class:`BusSink` (the hub) with what other nodes did, then calls :attr:`Bus.after`
+(the shell wakes the writers). What the bus carries is :class:`BusMessage`, encoded
+once by :func:`encode_message` (msgpack).
+"""
+
+from __future__ import annotations
+
+import os
+import secrets
+import socket
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import msgpack
+
+BUS_VERSION = 1
+
+
+class BusSink(Protocol):
+    """What a bus reports to (the hub). ``node`` is always another node's id."""
+
+    def remote_join(self, room: str, player: str, name: str, node: str, now: float) -> None: ...
+
+    def remote_leave(self, room: str, player: str, node: str, now: float) -> None: ...
+
+    def remote_tick(
+        self,
+        room: str,
+        node: str,
+        poses: Sequence[tuple[str, bytes]],
+        events: Sequence[bytes],
+        now: float,
+    ) -> None: ...
+
+    def remote_snapshot(
+        self,
+        room: str,
+        live: Mapping[str, tuple[str, str]],
+        issued_at: float,
+        now: float,
+        keep: bool = False,
+    ) -> None: ...
+
+    def remote_lost(self, now: float) -> None: ...
+
+    def remote_burn(self, jti: str, exp: int, now: float) -> None:
+        """Another node ended a session with ``bye`` or a kick: refuse its token here too."""
+        ...
+
+    def local_rooms(self) -> Mapping[str, Mapping[str, str]]:
+        """Every room with a local audience -> its local players (id -> name)."""
+        ...
+
+
+@dataclass(frozen=True)
+class BusMessage:
+    """One message on a room's channel (``kind``: ``tick``, the poses and stale/active
+    presence of one node's players in one tick; ``join``; ``leave``) or on the
+    cluster's control channel (``burn``: a token id ``player`` and its expiry ``exp``)."""
+
+    kind: str
+    node: str
+    player: str = ""
+    name: str = ""
+    poses: tuple[tuple[str, bytes], ...] = ()  # (player, encoded pose message)
+    events: tuple[bytes, ...] = ()  # encoded presence messages
+    exp: int = 0  # burn: Unix time the token expires
+
+
+def encode_message(m: BusMessage) -> bytes:
+    body: dict[str, Any] = {"v": BUS_VERSION, "k": m.kind, "n": m.node}
+    if m.kind == "tick":
+        body["p"] = [list(p) for p in m.poses]
+        if m.events:
+            body["e"] = list(m.events)
+    else:
+        body["p"] = m.player
+        if m.kind == "join":
+            body["m"] = m.name
+        elif m.kind == "burn":
+            body["x"] = m.exp
+    out: bytes = msgpack.packb(body, use_bin_type=True)
+    return out
+
+
+def decode_message(data: bytes) -> BusMessage | None:
+    """The message, or ``None`` for anything this version does not understand (a
+    newer node's message is skipped, not fatal: rolling upgrades)."""
+    try:
+        body = msgpack.unpackb(data, raw=False)
+        if not isinstance(body, dict) or body.get("v") != BUS_VERSION:
+            return None
+        kind, node = str(body["k"]), str(body["n"])
+        if kind == "tick":
+            poses = tuple((str(p), bytes(d)) for p, d in body["p"])
+            return BusMessage(kind, node, poses=poses, events=tuple(body.get("e", ())))
+        if kind in ("join", "leave"):
+            return BusMessage(kind, node, str(body["p"]), str(body.get("m", "")))
+        if kind == "burn":
+            return BusMessage(kind, node, str(body["p"]), exp=int(body["x"]))
+    except (ValueError, KeyError, TypeError, msgpack.UnpackException):
+        pass
+    return None
+
+
+def deliver(sink: BusSink, room: str, m: BusMessage, now: float) -> None:
+    """Hand one decoded message from another node to ``sink``."""
+    if m.kind == "tick":
+        sink.remote_tick(room, m.node, m.poses, m.events, now)
+    elif m.kind == "join":
+        sink.remote_join(room, m.player, m.name, m.node, now)
+    elif m.kind == "leave":
+        sink.remote_leave(room, m.player, m.node, now)
+    elif m.kind == "burn":
+        sink.remote_burn(m.player, m.exp, now)
+
+
+def default_node_id() -> str:
+    host = "".join(c if c.isalnum() or c in "_.-" else "-" for c in socket.gethostname())
+    return f"{host[:40] or 'node'}-{os.getpid()}-{secrets.token_hex(3)}"
+
+
+class Bus:
+    """The interface every backend implements; also the no-op base."""
+
+    def __init__(self, node: str) -> None:
+        self.node = node
+        self.sink: BusSink | None = None
+        self.after: Callable[[], None] = lambda: None  # called after delivering to the sink
+
+    def attach(self, sink: BusSink) -> None:
+        self.sink = sink
+
+    @property
+    def healthy(self) -> bool:
+        """Cross-node traffic flows (``/readyz`` reports it)."""
+        return True
+
+    @property
+    def status(self) -> str:
+        return "ok"
+
+    async def start(self) -> None:
+        """Begin (re)connecting in the background; never waits for a remote store."""
+
+    async def stop(self) -> None:
+        """Flush announcements already made (the shutdown's leaves), then disconnect."""
+
+    def watch(self, room: str) -> None:
+        """This node now has a local audience in ``room``: receive it."""
+
+    def unwatch(self, room: str) -> None:
+        """No local audience is left in ``room``: stop receiving it."""
+
+    def joined(self, room: str, player: str, name: str) -> None:
+        """A local player joined ``room``."""
+
+    def left(self, room: str, player: str) -> None:
+        """A local player left ``room``."""
+
+    def publish(self, room: str, poses: list[tuple[str, bytes]], events: list[bytes]) -> None:
+        """This tick's poses (and stale/active presence) of ``room``'s local players."""
+
+    def burned(self, jti: str, exp: int) -> None:
+        """A session ended with ``bye`` or a kick: its token id is burned everywhere."""

@@ -1,0 +1,166 @@
+"""What posecast keeps in Redis, and every command it sends there.
+
+Keys and channels (``prefix`` is ``redis_prefix``; ``{room}`` is a Redis Cluster
+hash tag, so a room's hash and channel live in one slot)::
+
+    prefix:node:NODE          string, PX node_ttl     the node's heartbeat
+    prefix:members:{ROOM}     hash player -> "NODE\\tNAME", PX 2 x node_ttl
+    prefix:room:{ROOM}        channel: tick, join and leave messages of the room
+    prefix:ctl                channel: burn messages (token ids, cluster-wide)
+    prefix:burned             sorted set: token id -> expiry (Unix seconds)
+
+A member value is ``node`` and display name separated by a TAB, which neither may
+contain (node ids are ``[A-Za-z0-9_.-]``, names have no control characters).
+:class:`RedisStore` only builds commands into pipelines and reads replies; the
+connection, its tasks and reconnects are :mod:`posecast.online.cluster.redis_bus`'s.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from redis.asyncio import Redis
+
+from posecast.online.cluster.bus import BusMessage, encode_message
+from posecast.online.metrics import Metrics
+
+Members = dict[str, tuple[str, str]]  # player -> (node, name)
+
+# Delete a member entry only if ``node`` still owns it (the player may have moved to
+# another node since), then announce the leave; one atomic round trip.
+LEAVE_LUA = """
+local v = redis.call('HGET', KEYS[1], ARGV[1])
+if v and string.sub(v, 1, #ARGV[2] + 1) == ARGV[2] .. '\\t' then
+  redis.call('HDEL', KEYS[1], ARGV[1])
+end
+return redis.call('PUBLISH', ARGV[3], ARGV[4])
+"""
+
+
+class RedisStore:
+    def __init__(self, prefix: str, node: str, node_ttl_s: float, metrics: Metrics) -> None:
+        self.prefix, self.node, self.metrics = prefix, node, metrics
+        self.ttl_ms = int(node_ttl_s * 1000)
+        self.ctl_channel = f"{prefix}:ctl"
+        self.burned_key = f"{prefix}:burned"
+        self._leave_sha = ""
+
+    def channel(self, room: str) -> str:
+        return f"{self.prefix}:room:{{{room}}}"
+
+    def members_key(self, room: str) -> str:
+        return f"{self.prefix}:members:{{{room}}}"
+
+    def node_key(self, node: str) -> str:
+        return f"{self.prefix}:node:{node}"
+
+    async def prepare(self, client: Redis) -> None:
+        """Once per connection: load the script (a restarted Redis has forgotten it)."""
+        self._leave_sha = await client.script_load(LEAVE_LUA)
+
+    # --- writes, queued into a pipeline ------------------------------------------------
+
+    def join(self, pipe: Any, room: str, player: str, name: str) -> None:
+        key = self.members_key(room)
+        pipe.hset(key, player, f"{self.node}\t{name}")
+        pipe.pexpire(key, 2 * self.ttl_ms)
+        self.publish(pipe, room, BusMessage("join", self.node, player, name))
+
+    def leave(self, pipe: Any, room: str, player: str, node: str) -> None:
+        """``node``'s player left (``node`` is another one when reaping a dead node)."""
+        data = self._counted("leave", BusMessage("leave", node, player))
+        key, channel = self.members_key(room), self.channel(room)
+        pipe.evalsha(self._leave_sha, 1, key, player, node, channel, data)
+
+    def burn(self, pipe: Any, jti: str, exp: int) -> None:
+        pipe.zadd(self.burned_key, {jti: exp})
+        pipe.publish(
+            self.ctl_channel, self._counted("burn", BusMessage("burn", self.node, jti, exp=exp))
+        )
+
+    def goodbye(self, pipe: Any) -> None:
+        pipe.delete(self.node_key(self.node))
+
+    def publish(self, pipe: Any, room: str, m: BusMessage) -> None:
+        pipe.publish(self.channel(room), self._counted(m.kind, m))
+
+    def _counted(self, kind: str, m: BusMessage) -> bytes:
+        data = encode_message(m)
+        self.count("out", kind, data)
+        return data
+
+    def count(self, direction: str, kind: str, data: bytes) -> None:
+        self.metrics.bus_messages.labels(direction, kind).inc()
+        self.metrics.bus_bytes.labels(direction).inc(len(data))
+
+    async def execute(self, pipe: Any) -> list[Any]:
+        if not len(pipe):
+            return []
+        t0 = time.perf_counter()
+        out: list[Any] = await pipe.execute()
+        self.metrics.bus_roundtrip.observe(time.perf_counter() - t0)
+        return out
+
+    # --- reads ---------------------------------------------------------------------------
+
+    async def reconcile(
+        self,
+        client: Redis,
+        rooms: list[str],
+        local_rooms: Callable[[], Mapping[str, Mapping[str, str]]],
+        *,
+        heartbeat: bool,
+    ) -> dict[str, Members]:
+        """Each room's live members in Redis, with dead nodes' entries reaped.
+
+        With ``heartbeat``, first refresh this node's key and re-assert every local
+        player (all a resync after an outage or a Redis restart needs). Entries of
+        nodes whose key expired are deleted and their leave announced, as are this
+        node's entries for players no longer here."""
+        pipe = client.pipeline(transaction=False)
+        if heartbeat:
+            pipe.set(self.node_key(self.node), b"1", px=self.ttl_ms)
+            for room, players in local_rooms().items():
+                if players:
+                    key = self.members_key(room)
+                    pipe.hset(key, mapping={p: f"{self.node}\t{n}" for p, n in players.items()})
+                    pipe.pexpire(key, 2 * self.ttl_ms)
+        first = len(pipe)
+        for room in rooms:
+            pipe.hgetall(self.members_key(room))
+        replies = (await self.execute(pipe))[first:]
+        tables = {room: _parse(raw) for room, raw in zip(rooms, replies, strict=True)}
+        nodes = sorted({n for t in tables.values() for n, _ in t.values()} - {self.node})
+        pipe = client.pipeline(transaction=False)
+        for n in nodes:
+            pipe.exists(self.node_key(n))
+        alive = {n for n, up in zip(nodes, await self.execute(pipe), strict=True) if up}
+        alive.add(self.node)
+        local = local_rooms()  # now, after the reads: who is still here
+        pipe = client.pipeline(transaction=False)
+        for room, table in tables.items():
+            for player, (node, _) in table.items():
+                if node not in alive or (node == self.node and player not in local.get(room, {})):
+                    self.leave(pipe, room, player, node)  # reaped, and announced
+        await self.execute(pipe)
+        others = alive - {self.node}
+        return {room: {p: v for p, v in t.items() if v[0] in others} for room, t in tables.items()}
+
+    async def burns(self, client: Redis, limit: int) -> list[tuple[str, int]]:
+        """Token ids burned and not yet expired (and forget the expired ones)."""
+        wall = time.time()
+        pipe = client.pipeline(transaction=False)
+        pipe.zremrangebyscore(self.burned_key, "-inf", wall)
+        pipe.zrangebyscore(self.burned_key, wall, "+inf", start=0, num=limit, withscores=True)
+        _, found = await self.execute(pipe)
+        return [(jti.decode(), int(exp)) for jti, exp in found]
+
+
+def _parse(raw: dict[bytes, bytes]) -> Members:
+    out = {}
+    for player, value in raw.items():
+        node, _, name = value.decode("utf-8", "replace").partition("\t")
+        out[player.decode("utf-8", "replace")] = (node, name)
+    return out

@@ -1,0 +1,225 @@
+"""Server configuration: one frozen dataclass, built once at the edge, passed down.
+
+Every field can be set by a ``posecast serve`` flag (``--max-rate-hz``) or an
+environment variable (``POSECAST_MAX_RATE_HZ``); a flag beats the environment,
+which beats the default. :meth:`ServerConfig.from_sources` is the only place that
+reads either; nothing below it looks at ``os.environ``. ``docs/server.md`` lists
+every option (a test keeps the table in sync with this class).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+from posecast.errors import ConfigError
+from posecast.online.auth.tokens import new_secret
+from posecast.online.protocol.messages import Limits
+from posecast.tracking.layouts import Layout
+
+ENV_PREFIX = "POSECAST_"
+_ID = re.compile(r"[A-Za-z0-9_.-]{1,64}")
+MIN_SECRET_CHARS = 16
+
+
+def _opt(default: Any, help: str, flags: tuple[str, ...] = (), **extra: Any) -> Any:
+    """A config field; ``flags`` are extra spellings of its command-line flag."""
+    return field(default=default, metadata={"help": help, "flags": flags}, **extra)
+
+
+@dataclass(frozen=True)
+class ServerConfig:
+    """Every knob of ``posecast serve``, with safe defaults (units in the names)."""
+
+    host: str = _opt("127.0.0.1", "interface to bind (0.0.0.0 for all)")
+    port: int = _opt(8765, "TCP port for WebSocket and HTTP (0: pick a free one)")
+    token_secret: str = _opt("", "HMAC-SHA256 key shared with the game backend", repr=False)
+    dev: bool = _opt(False, "development mode: invent and print a secret if none is set")
+    token_leeway_s: float = _opt(5.0, "clock skew allowed on token iat/exp, seconds")
+    replay_cache: int = _opt(100_000, "ended-session token ids remembered (replay guard)")
+    tick_hz: float = _opt(60.0, "engine ticks per second (the shipped model runs at 60)")
+    samples: int = _opt(100, "latent samples per player, N")
+    lookahead: int = _opt(10, "look-ahead tau in frames; poses lag frames by tau ticks")
+    engine_threads: int = _opt(1, "ONNX Runtime intra-op threads of the engine thread")
+    models_dir: str | None = _opt(None, "directory of ONNX models (default: shipped)")
+    frame_queue: int = _opt(2, "frames kept per player between ticks; 1: only the newest")
+    layouts: str = _opt(
+        "hmd3+waist,hmd3", "tracker layouts served, comma-separated; each loads its model"
+    )
+    max_message_bytes: int = _opt(8192, "largest WebSocket message accepted, bytes")
+    max_rate_hz: int = _opt(120, "frames per second one player may send (token bucket)")
+    rate_burst: int = _opt(30, "frames a player may send above the rate in one burst")
+    control_rate_hz: float = _opt(20.0, "non-frame messages per second per connection")
+    error_rate_hz: float = _opt(20.0, "non-fatal error replies per second per connection")
+    max_players_per_room: int = _opt(32, "players in one room (spectators not counted)")
+    max_watchers_per_room: int = _opt(64, "spectators and backends watching one room")
+    max_rooms: int = _opt(256, "rooms open at once on this server")
+    max_connections: int = _opt(2048, "WebSocket connections open at once")
+    max_watch_rooms: int = _opt(16, "extra rooms one backend may watch")
+    conn_per_ip_per_min: int = _opt(120, "connection attempts per client IP per minute")
+    fatal_per_ip_per_min: int = _opt(
+        20, "fatal protocol errors per client IP per minute before its connections get HTTP 429"
+    )
+    accepts_per_s: float = _opt(100.0, "new connections accepted per second, all IPs (HTTP 503)")
+    reliable_queue: int = _opt(256, "control messages queued per client before SLOW_CONSUMER")
+    socket_sndbuf_bytes: int = _opt(65536, "kernel send buffer per client (0: OS default)")
+    slow_consumer_s: float = _opt(2.0, "seconds a client's writer may stay undrained")
+    hello_timeout_s: float = _opt(5.0, "seconds to send hello after connecting")
+    idle_timeout_s: float = _opt(60.0, "seconds a player may send nothing before TIMED_OUT")
+    drain_timeout_s: float = _opt(5.0, "seconds shutdown waits for clients to drain")
+    close_timeout_s: float = _opt(2.0, "seconds to wait for a closing handshake")
+    log_level: str = _opt("INFO", "DEBUG, INFO, WARNING or ERROR (JSON lines on stderr)")
+    # Scale-out (docs/scale-out.md). Empty redis_url: one embedded node, no Redis.
+    redis_url: str = _opt(
+        "", "Redis URL shared by all nodes, e.g. redis://redis:6379/0 (empty: one node)",
+        repr=False, flags=("--redis",),
+    )  # fmt: skip
+    node_id: str = _opt("", "this node's id on the bus (empty: hostname plus a random suffix)")
+    redis_prefix: str = _opt("posecast", "prefix of every Redis key and channel of this cluster")
+    redis_heartbeat_s: float = _opt(1.0, "seconds between presence heartbeats and resyncs")
+    redis_node_ttl_s: float = _opt(3.0, "seconds a silent node's players survive it")
+    redis_timeout_s: float = _opt(2.0, "seconds one Redis round trip may take before a reconnect")
+    redis_backoff_max_s: float = _opt(5.0, "longest wait between Redis reconnect attempts")
+
+    def __post_init__(self) -> None:
+        if not self.token_secret:
+            raise ConfigError(
+                "no token secret: set POSECAST_TOKEN_SECRET (or pass --dev to invent one)"
+            )
+        if len(self.token_secret) < MIN_SECRET_CHARS:
+            raise ConfigError(f"the token secret must be at least {MIN_SECRET_CHARS} characters")
+        if not 0 <= self.port <= 65535:
+            raise ConfigError(f"port {self.port} outside [0, 65535]")
+        if not 1.0 <= self.tick_hz <= 240.0:
+            raise ConfigError("tick_hz must be in [1, 240]")
+        positive = (
+            "samples engine_threads rate_burst max_rooms max_connections conn_per_ip_per_min "
+            "fatal_per_ip_per_min reliable_queue replay_cache max_watchers_per_room frame_queue"
+        )
+        for name in positive.split():
+            if getattr(self, name) < 1:
+                raise ConfigError(f"{name} must be >= 1")
+        seconds = (
+            "token_leeway_s control_rate_hz error_rate_hz accepts_per_s slow_consumer_s "
+            "hello_timeout_s idle_timeout_s drain_timeout_s close_timeout_s redis_heartbeat_s "
+            "redis_timeout_s redis_backoff_max_s"
+        )
+        for name in seconds.split():
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"{name} must be > 0")
+        if self.socket_sndbuf_bytes < 0:
+            raise ConfigError("socket_sndbuf_bytes must be >= 0")
+        if self.lookahead < 0:
+            raise ConfigError("lookahead must be >= 0")
+        if self.log_level.upper() not in ("DEBUG", "INFO", "WARNING", "ERROR"):
+            raise ConfigError(f"log_level {self.log_level!r} unknown")
+        if self.redis_node_ttl_s < 2 * self.redis_heartbeat_s:
+            raise ConfigError("redis_node_ttl_s must be at least twice redis_heartbeat_s")
+        if self.redis_url and not self.redis_url.startswith(("redis://", "rediss://", "unix://")):
+            raise ConfigError("redis_url must start with redis://, rediss:// or unix://")
+        if not _ID.fullmatch(self.node_id or "x") or not _ID.fullmatch(self.redis_prefix):
+            raise ConfigError("node_id and redis_prefix: 1 to 64 of A-Z a-z 0-9 _ . -")
+        served = self._layout_names()
+        known = tuple(Layout)
+        if not served or any(x not in known for x in served) or len(set(served)) < len(served):
+            raise ConfigError(f"layouts: a comma-separated subset of {', '.join(known)}")
+        self.limits()  # the protocol ranges (message size, rate, room size) hold
+
+    @property
+    def served_layouts(self) -> tuple[Layout, ...]:
+        """The tracker layouts this server accepts in ``hello`` (one model each);
+        validated in ``__post_init__``."""
+        return tuple(Layout(x) for x in self._layout_names())
+
+    def _layout_names(self) -> tuple[str, ...]:
+        return tuple(x.strip() for x in self.layouts.split(",") if x.strip())
+
+    def limits(self) -> Limits:
+        """The protocol limits this server announces in ``welcome``."""
+        return Limits(
+            max_message_bytes=self.max_message_bytes,
+            max_rate_hz=self.max_rate_hz,
+            max_players=self.max_players_per_room,
+            max_watch_rooms=self.max_watch_rooms,
+        )
+
+    @property
+    def secret_bytes(self) -> bytes:
+        return self.token_secret.encode("utf-8")
+
+    @classmethod
+    def from_sources(
+        cls, env: Mapping[str, str], overrides: Mapping[str, Any] | None = None
+    ) -> ServerConfig:
+        """Defaults, then ``POSECAST_*`` from ``env``, then non-``None`` ``overrides``.
+
+        With ``dev`` on and no secret anywhere, a random secret is invented (the
+        caller prints it). Raises :class:`ConfigError` for any bad value.
+        """
+        values: dict[str, Any] = {}
+        for f in fields(cls):
+            raw = env.get(ENV_PREFIX + f.name.upper())
+            if raw is not None and raw != "":
+                values[f.name] = _parse(f, raw)
+        for name, value in (overrides or {}).items():
+            if value is not None:
+                values[name] = value
+        if values.get("dev") and not values.get("token_secret"):
+            values["token_secret"] = new_secret()
+        try:
+            return cls(**values)
+        except TypeError as exc:  # an unknown override name: a programming error at the edge
+            raise ConfigError(str(exc)) from None
+
+    def replace(self, **changes: Any) -> ServerConfig:
+        return dataclasses.replace(self, **changes)
+
+
+def option_help() -> list[tuple[str, str, str, str]]:
+    """``(field, env var, default, help)`` of every option, for the CLI and the docs."""
+    out = []
+    for f in fields(ServerConfig):
+        if f.name == "token_secret":
+            default = ""
+        else:
+            default = f.default if isinstance(f.default, str) else repr(f.default)
+        out.append((f.name, ENV_PREFIX + f.name.upper(), default, str(f.metadata["help"])))
+    return out
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """One ``--flag`` per option (default ``None``: the environment or the default
+    decides). The token secret has no flag: command lines show up in ``ps``."""
+    for f in fields(ServerConfig):
+        if f.name == "token_secret":
+            continue
+        flags = ("--" + f.name.replace("_", "-"), *f.metadata["flags"])
+        text = f"{f.metadata['help']} [{ENV_PREFIX}{f.name.upper()}, default {f.default!r}]"
+        if str(f.type) == "bool":
+            parser.add_argument(*flags, action="store_true", default=None, help=text)
+        else:
+            kind = {"int": int, "float": float}.get(str(f.type), str)
+            parser.add_argument(*flags, type=kind, default=None, help=text, metavar="V")
+
+
+def _parse(f: dataclasses.Field[Any], raw: str) -> Any:
+    kind = str(f.type)
+    name = ENV_PREFIX + f.name.upper()
+    try:
+        if kind == "bool":
+            if raw.lower() in ("1", "true", "yes", "on"):
+                return True
+            if raw.lower() in ("0", "false", "no", "off"):
+                return False
+            raise ValueError(raw)
+        if kind == "int":
+            return int(raw)
+        if kind == "float":
+            return float(raw)
+    except ValueError:
+        raise ConfigError(f"{name}={raw!r} is not a valid {kind}") from None
+    return raw

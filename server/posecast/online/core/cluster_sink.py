@@ -1,0 +1,145 @@
+"""The cluster sink (pure): what other nodes did, as the bus reports it, into this
+node's rooms (:class:`~posecast.online.cluster.bus.BusSink`).
+
+Remote players are members of a room (``welcome``, presence, capacity) but no
+audience: their poses arrive as one batch per room per tick and go to the local
+audience's latest-wins slots. The sink also keeps the bus watching exactly the rooms
+this node has an audience in (:meth:`ClusterSink.refresh`), and the room gauges.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING
+
+from posecast.errors import ReplacedError
+from posecast.online.auth.tokens import Claims, ReplayGuard
+from posecast.online.cluster.bus import Bus
+from posecast.online.core.connections import Conn, Connections
+from posecast.online.core.remote import RemoteRooms
+from posecast.online.core.rooms import Rooms
+from posecast.online.core.routing import Router
+from posecast.online.protocol.messages import Error, Presence
+
+if TYPE_CHECKING:
+    from posecast.online.metrics import Metrics
+
+
+class ClusterSink:
+    def __init__(
+        self,
+        conns: Connections,
+        rooms: Rooms,
+        remote: RemoteRooms,
+        router: Router,
+        replay: ReplayGuard,
+        bus: Bus,
+        metrics: Metrics,
+        *,
+        wall_offset_s: float,
+        end: Callable[[Conn, float, Error], None],
+    ) -> None:
+        """``end(conn, now, final)`` ends a local connection (admission's ending)."""
+        self.conns = conns
+        self.rooms = rooms
+        self.remote = remote
+        self.router = router
+        self.replay = replay
+        self.bus = bus
+        self.metrics = metrics
+        self.wall_offset_s = wall_offset_s
+        self._end = end
+        self._watched: set[str] = set()  # rooms the bus delivers to this node
+
+    def remote_join(self, room: str, player: str, name: str, node: str, now: float) -> None:
+        local = self.conns.of_player(player)
+        if local is not None and local.session.role == "player":
+            # The same player joined on another node (a reconnect through the balancer
+            # landed elsewhere): that one wins, as a takeover does on one node.
+            replaced = ReplacedError("the same player joined on another node")
+            self._end(local, now, Error.from_exception(replaced))
+        if room in self._watched and self.remote.join(room, player, node, name, now):
+            self.router.to_room(room, Presence("join", room, player, name), now)
+            self.refresh()
+
+    def remote_leave(self, room: str, player: str, node: str, now: float) -> None:
+        gone = self.remote.leave(room, player, node, now)
+        if gone is not None and self.rooms.room_of(player) != room:
+            self.router.to_room(room, Presence("leave", room, player, gone.name), now)
+            self.refresh()
+
+    def remote_tick(
+        self,
+        room: str,
+        node: str,
+        poses: Sequence[tuple[str, bytes]],
+        events: Sequence[bytes],
+        now: float,
+    ) -> None:
+        unknown = superseded = 0
+        for player, data in poses:
+            m = self.remote.get(room, player)
+            if m is None or m.node != node:
+                unknown += 1  # not (yet) a member here: its join or the snapshot comes first
+                continue
+            superseded += self.router.pose_to_room(room, player, data, now)
+        for data in events:
+            self.router.bytes_to_room(room, data, now)
+        if unknown:
+            self.metrics.bus_dropped.labels("unknown_player").inc(unknown)
+        if superseded:
+            self.metrics.poses_superseded.inc(superseded)
+
+    def remote_snapshot(
+        self,
+        room: str,
+        live: Mapping[str, tuple[str, str]],
+        issued_at: float,
+        now: float,
+        keep: bool = False,
+    ) -> None:
+        """Reconcile ``room``'s remote members with ``live`` (player -> (node, name)).
+        ``keep``: add, never remove (a read that other nodes may not have refilled
+        yet, e.g. just after Redis came back empty)."""
+        if room not in self._watched:
+            return
+        r = self.rooms.rooms.get(room)
+        local = r.players if r is not None else {}
+        others = {p: v for p, v in live.items() if p not in local}
+        if keep:
+            for m in self.remote.members(room):
+                held = self.remote.get(room, m.player)
+                if held is not None and m.player not in others:
+                    others[m.player] = (held.node, m.name)
+        joined, left = self.remote.snapshot(room, others, issued_at)
+        for m in left:
+            if m.player not in local:  # one that moved here left the remote view only
+                self.router.to_room(room, Presence("leave", room, m.player, m.name), now)
+        for m in joined:
+            self.router.to_room(room, Presence("join", room, m.player, m.name), now)
+        if joined or left:
+            self.refresh()
+
+    def remote_lost(self, now: float) -> None:
+        """The bus has been down past the node TTL: remote players count as gone."""
+        for room in self.remote.rooms:
+            self.remote_snapshot(room, {}, float("inf"), now)
+
+    def remote_burn(self, jti: str, exp: int, now: float) -> None:
+        self.replay.end(Claims("", "", "", 0, exp, jti), now + self.wall_offset_s)
+
+    def local_rooms(self) -> dict[str, dict[str, str]]:
+        return {name: dict(r.players) for name, r in self.rooms.rooms.items()}
+
+    def refresh(self) -> None:
+        """The gauges, and the bus watching exactly the rooms open here."""
+        self.metrics.players.set(self.rooms.player_count)
+        self.metrics.rooms.set(len(self.rooms.rooms))
+        rooms = set(self.rooms.rooms)
+        new, gone, self._watched = rooms - self._watched, self._watched - rooms, rooms
+        for room in gone:
+            self.bus.unwatch(room)
+            self.remote.drop_room(room)
+        for room in new:
+            self.bus.watch(room)  # may report the room's remote members at once
+        self.metrics.remote_players.set(self.remote.total)

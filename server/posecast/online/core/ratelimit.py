@@ -1,0 +1,104 @@
+"""Rate limits: a token bucket per connection, connection attempts and fatal errors per IP.
+
+Both are pure: the caller passes the time (seconds, any monotonic clock).
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict, deque
+from dataclasses import dataclass, field
+
+
+@dataclass
+class TokenBucket:
+    """``rate_hz`` tokens per second, at most ``burst`` saved up; one per message.
+
+    A client sending at exactly its announced rate never runs dry, and network jitter
+    that bunches up to ``burst`` frames is absorbed; a sustained excess is refused.
+    """
+
+    rate_hz: float
+    burst: float
+    tokens: float = -1.0  # starts full
+    stamp: float | None = None
+
+    def allow(self, now: float) -> bool:
+        if self.stamp is None:
+            self.tokens, self.stamp = self.burst, now
+        else:
+            elapsed = max(0.0, now - self.stamp)
+            self.tokens = min(self.burst, self.tokens + elapsed * self.rate_hz)
+            self.stamp = now
+        if self.tokens >= 1.0:
+            self.tokens -= 1.0
+            return True
+        return False
+
+    def wait_s(self, now: float) -> float:
+        """Take a token if one is saved up (0.0); otherwise how long until one is.
+        For pacing: a caller that waits that long and asks again gets one."""
+        if self.allow(now):
+            return 0.0
+        return (1.0 - self.tokens) / self.rate_hz
+
+
+@dataclass
+class IpLimiter:
+    """At most ``per_minute`` connection attempts per IP in any sliding 60 s window.
+
+    Memory is bounded: at most ``max_ips`` addresses are tracked; the least recently
+    seen is forgotten first (an attacker rotating addresses gains nothing from that
+    which the per-IP limit would have stopped anyway).
+    """
+
+    per_minute: int
+    max_ips: int = 65_536
+    window_s: float = 60.0
+    _seen: OrderedDict[str, deque[float]] = field(default_factory=OrderedDict)
+
+    def allow(self, ip: str, now: float) -> bool:
+        stamps = self._seen.pop(ip, None)
+        if stamps is None:
+            stamps = deque()
+        while stamps and stamps[0] <= now - self.window_s:
+            stamps.popleft()
+        ok = len(stamps) < self.per_minute
+        if ok:
+            stamps.append(now)
+        self._seen[ip] = stamps
+        while len(self._seen) > self.max_ips:
+            self._seen.popitem(last=False)
+        return ok
+
+
+@dataclass
+class FatalBudget:
+    """Fatal protocol errors per IP: ``per_minute`` of them, then that IP's new
+    connections are refused until the budget refills (at ``per_minute / 60`` a second).
+
+    A client that sends garbage, is cut off and reconnects at once makes the server do
+    a handshake, a token check, a join and a leave each time, and tells the room
+    twice; this makes the repeat offender cheap: it is turned away at the HTTP
+    upgrade, before any of that. A well-behaved client never spends from it.
+    Memory is bounded like :class:`IpLimiter`'s.
+    """
+
+    per_minute: int
+    max_ips: int = 65_536
+    _buckets: OrderedDict[str, TokenBucket] = field(default_factory=OrderedDict)
+
+    def charge(self, ip: str, now: float) -> None:
+        """One fatal error from ``ip``."""
+        bucket = self._buckets.pop(ip, None) or TokenBucket(self.per_minute / 60.0, self.per_minute)
+        bucket.allow(now)
+        self._buckets[ip] = bucket
+        while len(self._buckets) > self.max_ips:
+            self._buckets.popitem(last=False)
+
+    def exhausted(self, ip: str, now: float) -> bool:
+        """Whether ``ip`` has spent its budget (its connections are refused)."""
+        bucket = self._buckets.get(ip)
+        if bucket is None or bucket.stamp is None:
+            return False
+        tokens = min(bucket.burst, bucket.tokens + max(0.0, now - bucket.stamp) * bucket.rate_hz)
+        return tokens < 1.0

@@ -1,0 +1,260 @@
+"""One connection's protocol state machine (pure): a decoded message in, an action out.
+
+::
+
+    AWAIT_HELLO --hello ok--> JOINED --bye / fatal error / kick--> CLOSED
+
+The session checks what only this connection decides: the token, the role's right
+to send each message type, frame order (``seq``, serial-number arithmetic), the
+per-connection rate limits and the client's clock. It raises the matching
+:class:`~posecast.errors.ProtocolError` for anything it refuses. What involves other
+connections (room capacity, replacing a player, routing) is the hub's
+(:mod:`posecast.online.core.hub`). No I/O and no clock: the caller passes ``now``, the
+server time (the process's monotonic clock, as on the wire); token times are Unix
+seconds, ``now + wall_offset_s``.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from posecast.errors import (
+    AlreadyJoinedError,
+    CalibrationFailedError,
+    ConfigError,
+    DuplicateError,
+    ForbiddenError,
+    LayoutUnsupportedError,
+    NotJoinedError,
+    OutOfOrderError,
+    RateLimitedError,
+)
+from posecast.online.auth.tokens import Claims, verify
+from posecast.online.config import ServerConfig
+from posecast.online.core.clock import ClockEstimator
+from posecast.online.core.ratelimit import TokenBucket
+from posecast.online.engine.calibration import Calibration
+from posecast.online.engine.selectors import AnomalySelector, ObstacleSelector, TargetSelector
+from posecast.online.engine.selectors import Selector as EngineSelector
+from posecast.online.engine.types import TrackerFrame
+from posecast.online.protocol.messages import (
+    ROLE_MAY_SEND,
+    Bye,
+    Calibrate,
+    Frame,
+    Hello,
+    Kick,
+    Message,
+    Ping,
+    Pong,
+    Selector,
+    seq_delta,
+)
+from posecast.skeleton import Joint
+from posecast.tracking.layouts import Layout
+
+
+class Phase(enum.Enum):
+    AWAIT_HELLO = "await_hello"
+    JOINED = "joined"
+    CLOSED = "closed"
+
+
+def requested_layout(hello: Hello) -> Layout:
+    """The tracker layout a ``hello`` asks for (absent: the 4-point layout)."""
+    return hello.layout or Layout.HMD3_WAIST
+
+
+@dataclass(frozen=True)
+class Join:
+    claims: Claims
+    hello: Hello
+    rooms: tuple[str, ...]  # hello.room first, then the rooms a backend watches
+
+    @property
+    def layout(self) -> Layout:
+        return requested_layout(self.hello)
+
+
+@dataclass(frozen=True)
+class FrameIn:
+    frame: TrackerFrame
+
+
+@dataclass(frozen=True)
+class CalibrateIn:
+    calibration: Calibration
+
+
+@dataclass(frozen=True)
+class SelectorIn:
+    player: str
+    selector: EngineSelector
+
+
+@dataclass(frozen=True)
+class KickIn:
+    player: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class Reply:
+    message: Message
+
+
+@dataclass(frozen=True)
+class Leave:
+    reason: str | None
+
+
+Action = Join | FrameIn | CalibrateIn | SelectorIn | KickIn | Reply | Leave
+
+
+@dataclass
+class Session:
+    """The state of one connection. ``conn`` is the hub's serial number for it."""
+
+    conn: int
+    ip: str
+    cfg: ServerConfig
+    opened_at: float
+    wall_offset_s: float = 0.0  # Unix time minus server time, for token iat/exp
+    phase: Phase = Phase.AWAIT_HELLO
+    claims: Claims | None = None
+    name: str = ""
+    rooms: tuple[str, ...] = ()
+    layout: Layout = Layout.HMD3_WAIST  # the hello's tracker layout, once joined
+    last_seq: int | None = None
+    last_message_at: float = 0.0
+    clock: ClockEstimator = field(default_factory=ClockEstimator)
+    frames: int = 0
+    _held: tuple[np.ndarray, np.ndarray] | None = None  # last accepted (pos, quat)
+    _frame_bucket: TokenBucket | None = None
+    _control_bucket: TokenBucket | None = None
+
+    def __post_init__(self) -> None:
+        self.last_message_at = self.opened_at
+        self._frame_bucket = TokenBucket(self.cfg.max_rate_hz, self.cfg.rate_burst)
+        self._control_bucket = TokenBucket(self.cfg.control_rate_hz, self.cfg.control_rate_hz)
+
+    @property
+    def player(self) -> str:
+        assert self.claims is not None
+        return self.claims.player
+
+    @property
+    def role(self) -> str:
+        return self.claims.role if self.claims is not None else ""
+
+    def handle(self, msg: Message, now: float) -> Action | None:
+        """What ``msg`` asks for; raises ProtocolError for a refused message."""
+        self.last_message_at = now
+        if self.phase is Phase.AWAIT_HELLO:
+            if not isinstance(msg, Hello):
+                raise NotJoinedError(f"{msg.TYPE} before hello", field="type")
+            return self._hello(msg, now)
+        if isinstance(msg, Hello):
+            raise AlreadyJoinedError("this connection has already joined", field="type")
+        if msg.TYPE not in ROLE_MAY_SEND[self.role]:
+            raise ForbiddenError(f"a {self.role} may not send {msg.TYPE}", field="type")
+        if isinstance(msg, Frame):
+            return self._frame(msg, now)
+        assert self._control_bucket is not None
+        if not self._control_bucket.allow(now):
+            raise RateLimitedError(f"more than {self.cfg.control_rate_hz:g} messages/s")
+        if isinstance(msg, Ping):
+            self.clock.add(now, msg.t0)
+            return Reply(Pong(t0=msg.t0, t1=now, t2=now))
+        if isinstance(msg, Bye):
+            return Leave(msg.reason)
+        if isinstance(msg, Calibrate):
+            return CalibrateIn(_calibration(msg, self.layout))
+        if isinstance(msg, Selector):
+            return SelectorIn(msg.player, _selector(msg))
+        if isinstance(msg, Kick):
+            return KickIn(msg.player, msg.reason or "kicked by the game backend")
+        raise ForbiddenError(f"{msg.TYPE} is not for a server", field="type")  # pragma: no cover
+
+    def _hello(self, hello: Hello, now: float) -> Join:
+        layout = requested_layout(hello)
+        if layout not in self.cfg.served_layouts:
+            raise LayoutUnsupportedError(f"layout {layout!r} is not served", field="layout")
+        claims = verify(
+            self.cfg.secret_bytes,
+            hello.token,
+            now=now + self.wall_offset_s,
+            leeway_s=self.cfg.token_leeway_s,
+        )
+        if not claims.allows_room(hello.room):
+            raise ForbiddenError("the token does not admit this room", field="room", fatal=True)
+        if hello.watch and claims.role != "backend":
+            raise ForbiddenError("only a backend may watch rooms", field="watch", fatal=True)
+        for room in hello.watch:
+            if not claims.allows_room(room):
+                raise ForbiddenError(f"the token does not admit room {room!r}", field="watch")
+        rooms = tuple(dict.fromkeys((hello.room, *hello.watch)))
+        return Join(claims, hello, rooms)
+
+    def joined(self, join: Join) -> None:
+        """The hub admitted ``join``: the session is live."""
+        self.phase = Phase.JOINED
+        self.claims = join.claims
+        self.layout = join.layout
+        self.name = join.hello.name
+        self.rooms = join.rooms
+
+    def _frame(self, msg: Frame, now: float) -> FrameIn:
+        assert self._frame_bucket is not None
+        if not self._frame_bucket.allow(now):
+            raise RateLimitedError(
+                f"more than {self.cfg.max_rate_hz} frames/s", ref_seq=msg.seq, field="seq"
+            )
+        if self.last_seq is not None:
+            d = seq_delta(msg.seq, self.last_seq)
+            if d == 0:
+                raise DuplicateError(f"seq {msg.seq} again", ref_seq=msg.seq, field="seq")
+            if d < 0:
+                raise OutOfOrderError(
+                    f"seq {msg.seq} after {self.last_seq}", ref_seq=msg.seq, field="seq"
+                )
+        self.last_seq = msg.seq
+        self.frames += 1
+        self.clock.add(now, msg.t)
+        pos, quat = msg.pos, msg.quat
+        if msg.valid != 0b1111 and self._held is not None:
+            # A lost tracker holds its last pose rather than jumping to the origin.
+            pos, quat = pos.copy(), quat.copy()
+            for i in range(4):
+                if not msg.valid >> i & 1:
+                    pos[i], quat[i] = self._held[0][i], self._held[1][i]
+        self._held = (pos, quat)
+        return FrameIn(TrackerFrame(msg.seq, pos, quat))
+
+    def close(self) -> None:
+        self.phase = Phase.CLOSED
+
+
+def _calibration(msg: Calibrate, layout: Layout) -> Calibration:
+    where = "height_m" if msg.height_m is not None else "trackers"
+    try:
+        if msg.height_m is not None:
+            return Calibration.from_height(msg.height_m)
+        assert msg.pos is not None and msg.quat is not None
+        return Calibration.from_tpose(msg.pos, msg.quat, waist=layout != Layout.HMD3)
+    except ConfigError as exc:
+        raise CalibrationFailedError(exc.message, field=where) from None
+
+
+def _selector(msg: Selector) -> EngineSelector:
+    if msg.kind == "anomaly":
+        return AnomalySelector(msg.factor) if msg.factor is not None else AnomalySelector()
+    assert msg.joint is not None and msg.point is not None
+    joint = Joint[msg.joint]
+    if msg.kind == "target":
+        margin = 0.02 if msg.margin_m is None else msg.margin_m
+        return TargetSelector(joint, msg.point, margin)
+    return ObstacleSelector(joint, msg.point, 0.2 if msg.radius_m is None else msg.radius_m)

@@ -1,0 +1,111 @@
+"""What crosses between the hub and the engine thread each tick (pure data), and the
+inbox that gathers it between ticks.
+
+::
+
+    sessions --frames, calibrations, selectors--> EngineInbox --take()--> TickInput
+    engine thread: TickInput -> one batched step -> TickOutput --> Router.deliver
+
+Frames wait in a short queue per player (``frame_queue``, 2 by default): each tick
+the engine steps the oldest one. A client whose frames arrive near the tick boundary
+(60 Hz against 60 Hz, with a millisecond of network or scheduling jitter) sends two
+in one tick and none in the next; with one slot the older would be lost and the next
+tick would hold, a pose missing from the stream and a hitch on every avatar that
+watches. With two, both are stepped, one tick late at most. Past the queue's depth
+the oldest waiting frame is superseded (latest wins, counted as dropped).
+
+A player enters the engine with its first frame (or its first calibration or
+selector), not when it joins: a connection that joins and never streams (a client
+still loading, or one that sends garbage and is cut off) costs the engine thread
+nothing, and leaves without an engine ``remove``.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+from posecast.online.engine.calibration import Calibration
+from posecast.online.engine.selectors import Selector
+from posecast.online.engine.types import EngineEvent, TrackerFrame
+from posecast.tracking.layouts import Layout
+
+
+@dataclass(frozen=True)
+class EngineOp:
+    """A membership or setting change, applied in the engine thread before a step."""
+
+    kind: str  # add | remove | selector | calibration
+    player: str
+    seed: int = 0
+    layout: Layout = Layout.HMD3_WAIST  # add: which model's batch the player joins
+    selector: Selector | None = None
+    calibration: Calibration | None = None
+
+
+@dataclass
+class TickInput:
+    ops: list[EngineOp]
+    frames: dict[str, TrackerFrame]  # each player's oldest waiting frame
+
+
+@dataclass
+class TickOutput:
+    poses: list[tuple[str, bytes]]  # (player, encoded pose message)
+    events: list[EngineEvent] = field(default_factory=list)
+    transitions: int = 0
+    batch: int = 0  # players in the step
+    seconds: float = 0.0  # wall time of the step in the engine thread
+
+
+class EngineInbox:
+    """Engine ops, and each player's waiting frames, until the tick takes them."""
+
+    def __init__(self, frame_queue: int = 2) -> None:
+        self.depth = frame_queue
+        self._ops: list[EngineOp] = []
+        self._frames: dict[str, deque[TrackerFrame]] = {}
+        self._waiting: dict[str, tuple[int, Layout]] = {}  # joined, not in the engine yet
+        self._in_engine: set[str] = set()
+
+    def joined(self, player: str, seed: int, layout: Layout) -> None:
+        """``player`` joined; it enters the engine with its first frame or setting."""
+        self._waiting[player] = (seed, layout)
+
+    def frame(self, player: str, frame: TrackerFrame) -> bool:
+        """Queue ``frame``; True when the queue was full and its oldest frame dropped."""
+        self._enter(player)
+        queue = self._frames.setdefault(player, deque())
+        superseded = len(queue) >= self.depth
+        if superseded:
+            queue.popleft()
+        queue.append(frame)
+        return superseded
+
+    def setting(self, op: EngineOp) -> None:
+        """A selector or calibration for ``op.player``."""
+        self._enter(op.player)
+        self._ops.append(op)
+
+    def left(self, player: str) -> None:
+        self._waiting.pop(player, None)
+        self._frames.pop(player, None)
+        if player in self._in_engine:
+            self._in_engine.discard(player)
+            self._ops.append(EngineOp("remove", player))
+
+    def take(self) -> TickInput:
+        ops, self._ops = self._ops, []
+        frames = {}
+        for player, queue in list(self._frames.items()):
+            frames[player] = queue.popleft()
+            if not queue:
+                del self._frames[player]
+        return TickInput(ops, frames)
+
+    def _enter(self, player: str) -> None:
+        waiting = self._waiting.pop(player, None)
+        if waiting is not None:
+            seed, layout = waiting
+            self._in_engine.add(player)
+            self._ops.append(EngineOp("add", player, seed=seed, layout=layout))

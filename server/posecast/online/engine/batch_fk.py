@@ -1,0 +1,97 @@
+"""Float32 FK for the engine's hot path (thousands of samples per tick).
+
+Same math as :mod:`posecast.geometry.fk`, specialised: float32 throughout,
+the reference offsets fixed, and the arrays laid out component-major (``(3, 3, B)``
+per joint). numpy multiplies a batch of 3x3 matrices about 5x faster as nine
+contiguous vector operations than through ``matmul`` on ``(B, 3, 3)`` stacks.
+``tests/online/engine/test_batch_fk.py`` checks it against the float64 reference.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+from numpy.typing import NDArray
+
+from posecast.skeleton import NUM_ROTATIONS, PARENTS, reference_offsets
+
+F32 = NDArray[np.float32]
+_OFFSETS = reference_offsets().astype(np.float32)
+
+
+def r6d2mat32(d: F32) -> F32:
+    """``(..., 6)`` -> ``(..., 3, 3)``, Gram-Schmidt in float32."""
+    a1, a2 = d[..., 0:3], d[..., 3:6]
+    b1 = a1 / np.maximum(np.linalg.norm(a1, axis=-1, keepdims=True), 1e-8)
+    b2 = a2 - np.sum(b1 * a2, axis=-1, keepdims=True) * b1
+    b2 /= np.maximum(np.linalg.norm(b2, axis=-1, keepdims=True), 1e-8)
+    b3 = np.cross(b1, b2)
+    out: F32 = np.stack([b1, b2, b3], axis=-1)
+    return out
+
+
+def _local_soa(rot6d: F32, B: int, rows: list[int]) -> F32:
+    """Network 6D rotations ``(B, 108)`` -> local matrices ``(len(rows), 3, 3, B)`` of the
+    given rotation rows (joint ``j`` is row ``j - 1``)."""
+    d = np.ascontiguousarray(rot6d.reshape(B, NUM_ROTATIONS, 6)[:, rows].transpose(1, 2, 0))
+    a1, a2 = d[:, 0:3], d[:, 3:6]  # (R, 3, B)
+    b1 = a1 / np.maximum(np.sqrt((a1 * a1).sum(axis=1, keepdims=True)), 1e-8)
+    b2 = a2 - (b1 * a2).sum(axis=1, keepdims=True) * b1
+    b2 /= np.maximum(np.sqrt((b2 * b2).sum(axis=1, keepdims=True)), 1e-8)
+    b3 = np.empty_like(b1)  # b1 x b2, written out (np.cross is slow on small stacks)
+    b3[:, 0] = b1[:, 1] * b2[:, 2] - b1[:, 2] * b2[:, 1]
+    b3[:, 1] = b1[:, 2] * b2[:, 0] - b1[:, 0] * b2[:, 2]
+    b3[:, 2] = b1[:, 0] * b2[:, 1] - b1[:, 1] * b2[:, 0]
+    out: F32 = np.stack([b1, b2, b3], axis=2)  # columns: [r, row, col, b]
+    return out
+
+
+@functools.cache
+def _plan(want_mats: bool, joints: tuple[int, ...] | None) -> tuple[list[int], list[int]]:
+    """Joints whose positions to compute, and joints whose world rotation is needed."""
+    wanted = set(range(len(PARENTS)) if joints is None else joints)
+    for j in list(wanted):
+        while PARENTS[j] >= 0:
+            j = PARENTS[j]
+            wanted.add(j)
+    parents = {PARENTS[j] for j in wanted if PARENTS[j] >= 0}
+    mats = wanted if want_mats else parents | {0}
+    return sorted(wanted), sorted(mats)
+
+
+def fk32(
+    rot6d: F32,
+    root_mat: F32,
+    root_pos: F32,
+    want_mats: bool = True,
+    joints: tuple[int, ...] | None = None,
+) -> tuple[F32 | None, F32]:
+    """World rotations ``(B, 19, 3, 3)`` (or ``None``) and positions ``(B, 19, 3)``.
+
+    Args:
+        rot6d: ``(B, 108)`` or ``(B, 18, 6)`` network rotations.
+        root_mat: ``(B, 3, 3)`` pelvis world rotation; root_pos: ``(B, 3)``.
+        want_mats: also return world rotations. Without them, leaf joints (head,
+            hands, toes) cost no matrix product at all.
+        joints: compute only these joints' positions (and their ancestors'); the other
+            rows of the result are left undefined. ``None``: all 19.
+    """
+    B = root_pos.shape[0]
+    pos_joints, mat_joints = _plan(want_mats, joints)
+    rows = {j: r for r, j in enumerate(j for j in mat_joints if j > 0)}
+    local = _local_soa(rot6d, B, [j - 1 for j in rows])
+    wm = np.empty((len(PARENTS), 3, 3, B), np.float32)
+    wp = np.empty((len(PARENTS), 3, B), np.float32)
+    wm[0] = root_mat.transpose(1, 2, 0)
+    wp[0] = root_pos.T
+    for j in pos_joints[1:]:
+        p = PARENTS[j]
+        np.add(wp[p], np.sum(wm[p] * _OFFSETS[j][None, :, None], axis=1), out=wp[j])
+        if j in rows:  # W_j[i, k] = sum_m W_p[i, m] L_j[m, k]
+            np.sum(wm[p][:, :, None, :] * local[rows[j]][None, :, :, :], axis=1, out=wm[j])
+    pos: F32 = np.ascontiguousarray(wp.transpose(2, 0, 1))
+    if not want_mats:
+        return None, pos
+    mats: F32 = np.ascontiguousarray(wm.transpose(3, 0, 1, 2))
+    return mats, pos

@@ -1,0 +1,118 @@
+"""Per-player calibration onto the canonical body (paper Sec. 4.4), and waist smoothing.
+
+The network was trained on one body (head joint 1.60 m up). A user of another height
+is scaled onto it: every tracker position is multiplied by ``scale`` on the way in,
+and every output position divided by it on the way out, so the avatar stands where
+the user stands at the user's size. A T-pose calibration also measures the waist
+tracker's offset from where the canonical pelvis would be, in the waist's own frame,
+and removes it from every later frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from posecast.errors import ConfigError
+from posecast.geometry.rotations import (
+    quat_apply,
+    quat_conj,
+    quat_mul,
+    quat_normalize,
+    quat_slerp,
+    yaw2quat,
+)
+from posecast.skeleton import REST_PELVIS_HEIGHT_M, Joint, reference_offsets
+from posecast.tracking.features import TrackerSlot
+
+F64 = NDArray[np.float64]
+
+# Head joint height of the reference body standing in its rest pose.
+REFERENCE_HEAD_HEIGHT_M = REST_PELVIS_HEIGHT_M + float(
+    reference_offsets()[[Joint.SPINE, Joint.CHEST, Joint.NECK, Joint.HEAD], 1].sum()
+)
+# The head joint sits this far below the top of the head on the reference body.
+HEAD_TOP_ABOVE_JOINT_M = 0.15
+MIN_HEIGHT_M, MAX_HEIGHT_M = 0.9, 2.5
+
+
+@dataclass(frozen=True)
+class Calibration:
+    scale: float = 1.0  # canonical metres per user metre
+    waist_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)  # in the waist's frame
+    # Per slot, a rotation (xyzw) applied on the right of the reported orientation, so
+    # that a device's own axes become the joint's (headset-only T-pose calibration).
+    rot_offsets: tuple[tuple[float, float, float, float], ...] = ()
+
+    @classmethod
+    def from_height(cls, height_m: float) -> Calibration:
+        """From the user's standing height (top of head), metres."""
+        if not MIN_HEIGHT_M <= height_m <= MAX_HEIGHT_M:
+            raise ConfigError(f"height {height_m} m outside [{MIN_HEIGHT_M}, {MAX_HEIGHT_M}]")
+        return cls(scale=(REFERENCE_HEAD_HEIGHT_M + HEAD_TOP_ABOVE_JOINT_M) / height_m)
+
+    @classmethod
+    def from_tpose(cls, pos: F64, quat: F64, waist: bool = True) -> Calibration:
+        """From one frame of the user standing in a T-pose: ``(4, 3)`` / ``(4, 4)``.
+
+        ``waist=False`` (a headset-only player, whose model reads the head's and hands'
+        orientations): the scale, and per-slot rotation offsets that turn each device's
+        reported orientation into its joint's. In a T-pose every joint's world rotation
+        is the body's heading alone, and the heading is square to the line from the
+        right hand to the left."""
+        head_y = float(pos[TrackerSlot.HEAD, 1])
+        if not MIN_HEIGHT_M - HEAD_TOP_ABOVE_JOINT_M < head_y < MAX_HEIGHT_M:
+            raise ConfigError(f"T-pose head height {head_y:.2f} m is implausible")
+        scale = REFERENCE_HEAD_HEIGHT_M / head_y
+        if not waist:
+            across = pos[TrackerSlot.LEFT_HAND] - pos[TrackerSlot.RIGHT_HAND]
+            forward = np.cross(across, [0.0, 1.0, 0.0])  # left x up = forward (+Z)
+            if np.hypot(forward[0], forward[2]) < 0.5:
+                raise ConfigError("T-pose hands are not spread apart level with the body")
+            heading = yaw2quat(np.arctan2(forward[0], forward[2]))
+            offsets = [quat_mul(quat_conj(quat[i]), heading) for i in range(3)]
+            offsets.append(np.array([0.0, 0.0, 0.0, 1.0]))  # no waist
+            return cls(scale=scale, rot_offsets=tuple(tuple(map(float, q)) for q in offsets))  # type: ignore[misc]
+        waist_pos = pos[TrackerSlot.WAIST] * scale
+        head = pos[TrackerSlot.HEAD] * scale
+        # In a T-pose the pelvis stands under the head, at the reference pelvis height.
+        expected = np.array([head[0], REST_PELVIS_HEIGHT_M, head[2]])
+        offset = quat_apply(quat_conj(quat[TrackerSlot.WAIST]), waist_pos - expected)
+        return cls(scale=scale, waist_offset_m=tuple(float(v) for v in offset))  # type: ignore[arg-type]
+
+    def orient(self, quat: F64) -> F64:
+        """Tracker orientations ``(4, 4)`` with the device offsets removed."""
+        if not self.rot_offsets:
+            return quat
+        return quat_normalize(quat_mul(quat, np.asarray(self.rot_offsets)))
+
+    def apply(self, pos: F64, quat: F64) -> F64:
+        """Tracker positions ``(4, 3)`` in canonical-body metres."""
+        out = pos * self.scale
+        if any(self.waist_offset_m):
+            out[TrackerSlot.WAIST] -= quat_apply(
+                quat[TrackerSlot.WAIST], np.asarray(self.waist_offset_m)
+            )
+        return out
+
+
+@dataclass
+class WaistFilter:
+    """One-pole low-pass on the waist orientation, by slerp toward each new sample.
+
+    The paper filters the waist quaternion with a 6th-order Butterworth at a 100 Hz
+    cutoff; at a 60 Hz tracker rate that cutoff lies above Nyquist (30 Hz) and would
+    not filter at all, so posecast offers a plain, causal, configurable cutoff.
+    """
+
+    cutoff_hz: float
+    fps: float = 60.0
+    state: F64 | None = field(default=None)
+
+    def __call__(self, quat: F64) -> F64:
+        alpha = 1.0 - np.exp(-2.0 * np.pi * self.cutoff_hz / self.fps)
+        q = quat_normalize(quat)
+        self.state = q if self.state is None else quat_slerp(self.state, q, alpha)
+        return self.state

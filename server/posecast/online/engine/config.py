@@ -1,0 +1,52 @@
+"""Engine settings. Built once at the edge (CLI/env) and passed down; immutable."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from posecast.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class EngineConfig:
+    """Sample selection and interpolation settings (paper Sec. 3.2).
+
+    Attributes:
+        samples: latent samples per player, ``N`` (default 100).
+        lookahead: ``tau``, frames of look-ahead; output lags input by this (default 10).
+        transition_frames: ``T``, frames a transition to a better sample takes (10).
+        outlier_factor: the current sample is an outlier when ``R_c > factor * r``,
+            ``r = median(R) - min(R)`` (2.0, the paper's trimmed estimator).
+        outlier_baseline: ``"zero"`` for that rule, ``"min"`` to measure from the best
+            sample, ``R_c - min(R) > factor * r`` (see :mod:`posecast.online.engine.selectors`).
+        ik_release_frames: frames to blend a released foot back to the network (10).
+        ik_max_drift_m: release a foot lock early once the network's ankle is this far
+            from it (0.2 m, chosen on the validation split, see docs/evaluation.md;
+            ``None`` keeps every lock for the whole predicted contact, as the paper).
+        stale_after_frames: frames without input before a player is marked stale (30).
+        waist_filter_hz: cutoff of the waist-orientation low-pass, ``None`` for off.
+        fps: tick rate the model was trained at (60).
+    """
+
+    samples: int = 100
+    lookahead: int = 10
+    transition_frames: int = 10
+    outlier_factor: float = 2.0
+    outlier_baseline: str = "zero"
+    ik_release_frames: int = 10
+    ik_max_drift_m: float | None = 0.2
+    stale_after_frames: int = 30
+    waist_filter_hz: float | None = None
+    fps: float = 60.0
+
+    def __post_init__(self) -> None:
+        if self.samples < 1:
+            raise ConfigError("samples must be >= 1")
+        if self.lookahead < 0 or self.transition_frames < 1:
+            raise ConfigError("lookahead must be >= 0 and transition_frames >= 1")
+        if self.outlier_factor <= 0 or self.stale_after_frames < 1:
+            raise ConfigError("outlier_factor must be > 0 and stale_after_frames >= 1")
+        if self.outlier_baseline not in ("min", "zero"):
+            raise ConfigError("outlier_baseline must be 'min' or 'zero'")
+        if self.waist_filter_hz is not None and not self.waist_filter_hz > 0:
+            raise ConfigError("waist_filter_hz must be positive")

@@ -1,0 +1,426 @@
+"""The SSI engine: every player advances one frame per tick, all in one batch.
+
+Per tick, for all ``P`` players x ``N`` samples at once:
+
+1. tracker frames -> calibrated positions -> features ``(P, 24)`` (``(P, 36)`` for the
+   headset-only layout, see :mod:`posecast.tracking.layouts`)
+2. one decoder call on ``P*N`` rows -> rotations, contacts, next hidden states (and,
+   for ``hmd3``, each sample's pelvis pose in the head's yaw frame)
+3. FK with the root from the waist tracker (``hmd3``: from the sample's own pelvis
+   output), then per-sample contact IK
+4. anomaly error ``R`` of every sample, and each player's selector decides whether
+   its current sample must give way (detected at frame ``n``, the newest)
+5. emit frame ``n - tau`` per player: the current sample's pose, or during a
+   transition the decoder re-run on the interpolated latent and hidden state
+   (one more batched call), then that player's own display IK
+
+The engine is pure: frames go in with :meth:`Engine.push`, :meth:`Engine.tick`
+returns poses and events (:mod:`posecast.online.engine.types`). No sockets, no
+clocks, no threads; the decoder and the anomaly scorer arrive built
+(:func:`posecast.online.inference.loader.load_engine` loads the shipped ones). One engine serves one
+model (one layout); :class:`posecast.online.engine.multi.MultiEngine` batches each model's
+players together when a server serves both.
+
+Look-ahead (paper Sec. 3.2.4): each player keeps a ring of ``tau + 1`` frames of
+inputs, pre-step hidden states and raw outputs for all samples. An outlier found at
+frame ``n`` starts a transition whose first interpolated frame is
+``n - min(tau, T) + 1``, none of which has been emitted yet; with ``tau = T`` the
+new sample is fully in place exactly at the frame where the outlier would have shown.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from posecast.geometry.fk import fk_positions
+from posecast.geometry.rotations import mat2quat, quat2mat
+from posecast.online.engine.anomaly import AnomalyScorer
+from posecast.online.engine.batch_fk import fk32
+from posecast.online.engine.calibration import Calibration, WaistFilter
+from posecast.online.engine.config import EngineConfig
+from posecast.online.engine.ik import ContactIK
+from posecast.online.engine.selectors import AnomalySelector, Selector
+from posecast.online.engine.slots import SlotArrays
+from posecast.online.engine.types import EngineEvent, PoseOut, TickResult, TrackerFrame
+from posecast.online.inference.artifact import Artifact
+from posecast.skeleton import NUM_JOINTS, REST_PELVIS_HEIGHT_M, reference_offsets
+from posecast.tracking.features import TRACKER_JOINT_INDEX, TrackerSlot
+from posecast.tracking.layouts import Layout, pelvis_from_head, spec
+
+F32 = NDArray[np.float32]
+F64 = NDArray[np.float64]
+
+
+@dataclass
+class _Transition:
+    src: int
+    dst: int
+    start: int  # first frame with a weight above zero
+
+
+@dataclass
+class _Player:
+    id: str
+    slot: int
+    selector: Selector
+    calibration: Calibration
+    waist_filter: WaistFilter | None
+    frames: int = 0  # frames stepped so far
+    current: int = 0
+    plan: _Transition | None = None
+    pending: TrackerFrame | None = None
+    last: TrackerFrame | None = None
+    missing: int = 0
+    stale: bool = False
+    transitions: int = 0
+
+
+class Engine:
+    """Batched SSI for many players. See the module docstring for one tick's steps."""
+
+    def __init__(
+        self,
+        decoder: Artifact,
+        scorer: AnomalyScorer,
+        cfg: EngineConfig | None = None,
+        capacity: int = 8,
+    ) -> None:
+        self.cfg = cfg or EngineConfig()
+        self.decoder = decoder
+        self.scorer = scorer
+        mc = decoder.meta["model_config"]
+        self.latent, self.hidden = int(mc["latent"]), int(mc["hidden"])
+        self.layout = spec(decoder.meta.get("layout", Layout.HMD3_WAIST))
+        n_root = self.layout.root_outputs
+        N = self.cfg.samples
+        # Ring rows: tau + 1 frames of history, plus the row the decoder writes the next
+        # hidden states into while frame n - tau is still being emitted.
+        L = self._ring = self.cfg.lookahead + 2
+        self._tick = 0
+        self.slots = SlotArrays(
+            {
+                "eps": ((N, self.latent), np.float32),
+                "ik_locked": ((N, 2), np.bool_),
+                "ik_lock_pos": ((N, 2, 3), np.float64),
+                "ik_release": ((N, 2), np.int64),
+                "ik_suppressed": ((N, 2), np.bool_),
+                "disp_locked": ((2,), np.bool_),
+                "disp_lock_pos": ((2, 3), np.float64),
+                "disp_release": ((2,), np.int64),
+                "disp_suppressed": ((2,), np.bool_),
+                "ring_h": ((N, self.hidden), np.float32, L),  # hidden state before the frame
+                "ring_rot": ((N, 108), np.float32, L),
+                "ring_con": ((N, 2), np.float32, L),
+                "ring_x": ((self.layout.n_features,), np.float32, L),
+                "ring_root": ((N, max(1, n_root)), np.float32, L),  # hmd3: pelvis outputs
+                "ring_pos": ((4, 3), np.float64, L),  # calibrated tracker positions
+                "ring_quat": ((4, 4), np.float64, L),
+                "ring_seq": ((), np.int64, L),
+                "ring_held": ((), np.bool_, L),
+            },
+            capacity,
+        )
+        self.players: dict[str, _Player] = {}
+        self._order: list[str] = []  # player id per slot
+
+    # --- membership -----------------------------------------------------------------
+
+    def add_player(
+        self,
+        player: str,
+        seed: int,
+        selector: Selector | None = None,
+        calibration: Calibration | None = None,
+    ) -> None:
+        """Join ``player``. Its ``N`` latent samples are drawn from ``seed``; sample 0 is
+        the prior's mean (``eps = 0``) and starts as the current sample."""
+        if player in self.players:
+            raise ValueError(f"player {player!r} is already in the engine")
+        slot = self.slots.add()
+        eps = np.random.default_rng(seed).standard_normal((self.cfg.samples, self.latent))
+        eps[0] = 0.0
+        self.slots["eps"][slot] = eps
+        wf = (
+            WaistFilter(self.cfg.waist_filter_hz, self.cfg.fps)
+            if self.cfg.waist_filter_hz and not self.layout.predicts_root
+            else None
+        )
+        self.players[player] = _Player(
+            player,
+            slot,
+            selector or AnomalySelector(self.cfg.outlier_factor, self.cfg.outlier_baseline),
+            calibration or Calibration(),
+            wf,
+        )
+        self._order.append(player)
+
+    def remove_player(self, player: str) -> None:
+        p = self.players.pop(player)
+        moved = self.slots.remove(p.slot)
+        last_id = self._order.pop()
+        if moved is not None:
+            self._order[p.slot] = last_id
+            self.players[last_id].slot = p.slot
+
+    def set_selector(self, player: str, selector: Selector) -> None:
+        self.players[player].selector = selector
+
+    def set_calibration(self, player: str, calibration: Calibration) -> None:
+        self.players[player].calibration = calibration
+
+    def push(self, player: str, frame: TrackerFrame) -> None:
+        """Offer the newest frame; a newer push before the tick replaces it."""
+        self.players[player].pending = frame
+
+    def current_sample(self, player: str) -> int:
+        return self.players[player].current
+
+    def transitions(self, player: str) -> int:
+        return self.players[player].transitions
+
+    @property
+    def player_count(self) -> int:
+        return self.slots.count
+
+    # --- the tick ---------------------------------------------------------------------
+
+    def tick(self) -> TickResult:
+        P, N = self.slots.count, self.cfg.samples
+        if P == 0:
+            self._tick += 1
+            return TickResult([], [], 0)
+        s, L = self.slots, self._ring
+        k = self._tick % L
+        events = self._gather_inputs(k)
+        pos, quat = s.row("ring_pos", k), s.row("ring_quat", k)  # (P, 4, 3), (P, 4, 4)
+        # One decoder call for all P*N samples; ONNX Runtime reads the hidden states from
+        # this frame's ring row and writes the next ones straight into the following row.
+        outputs = {
+            "rotations": s.row("ring_rot", k).reshape(P * N, 108),
+            "contacts": s.row("ring_con", k).reshape(P * N, 2),
+            "h_out": s.row("ring_h", (k + 1) % L).reshape(P * N, self.hidden),
+        }
+        if self.layout.predicts_root:
+            outputs["root"] = s.row("ring_root", k).reshape(P * N, self.layout.root_outputs)
+        self.decoder.run_into(
+            {
+                "features": np.repeat(s.row("ring_x", k), N, axis=0),
+                "z": s.view("eps").reshape(P * N, self.latent),
+                "h": s.row("ring_h", k).reshape(P * N, self.hidden),
+            },
+            outputs,
+        )
+        rot, con = outputs["rotations"], outputs["contacts"]
+        root_mat, root_pos = self._roots(pos, quat, outputs.get("root"), N)
+        _, wp = fk32(rot, root_mat, root_pos, False)
+        self._ik(s.view, P * N).step(None, wp, con)
+        if self.layout.predicts_root:  # every sample has its own pelvis
+            scores = self.scorer.score_mats(wp, root_pos, root_mat).reshape(P, N)
+        else:  # the N samples of a player share the waist tracker's
+            waist_pos, waist_quat = pos[:, TrackerSlot.WAIST], quat[:, TrackerSlot.WAIST]
+            scores = self.scorer.score(wp, waist_pos, waist_quat, repeat=N).reshape(P, N)
+        wp = wp.reshape(P, N, -1, 3)
+
+        started = 0
+        for i, pid in enumerate(self._order):
+            started += self._select(self.players[pid], scores[i], wp[i])
+        poses = self._emit()
+        for pid in self._order:
+            self.players[pid].frames += 1
+        self._tick += 1
+        return TickResult(poses, events, started)
+
+    def _roots(self, pos: F64, quat: F64, root_out: F32 | None, repeat: int) -> tuple[F32, F32]:
+        """World pelvis rotations ``(R, 3, 3)`` and positions ``(R, 3)`` for
+        ``R = len(pos) * repeat`` decoded rows.
+
+        ``hmd3+waist``: the waist tracker's, shared by a player's ``repeat`` rows.
+        ``hmd3``: each row's own pelvis output (6D rotation, position), moved out of
+        the player's head frame into the world.
+        """
+        if root_out is None:
+            m = quat2mat(quat[:, TrackerSlot.WAIST]).astype(np.float32)
+            p = pos[:, TrackerSlot.WAIST].astype(np.float32)
+            return np.repeat(m, repeat, axis=0), np.repeat(p, repeat, axis=0)
+        head_pos = np.repeat(pos[:, TrackerSlot.HEAD], repeat, axis=0)
+        head_quat = np.repeat(quat[:, TrackerSlot.HEAD], repeat, axis=0)
+        mats, places = pelvis_from_head(root_out, head_pos, head_quat)
+        return mats.astype(np.float32), places.astype(np.float32)
+
+    def _ik(self, get: Callable[[str], NDArray[Any]], rows: int, prefix: str = "ik") -> ContactIK:
+        """Contact IK over ``rows`` rows of the ``<prefix>_*`` state arrays (views)."""
+        return ContactIK(
+            get(f"{prefix}_locked").reshape(rows, 2),
+            get(f"{prefix}_lock_pos").reshape(rows, 2, 3),
+            get(f"{prefix}_release").reshape(rows, 2),
+            self.cfg.ik_release_frames,
+            get(f"{prefix}_suppressed").reshape(rows, 2),
+            self.cfg.ik_max_drift_m,
+        )
+
+    def hidden_state(self, player: str) -> NDArray[np.float32]:
+        """The GRU states ``(N, 128)`` the next tick decodes from (a writable view)."""
+        out: NDArray[np.float32] = self.slots["ring_h"][
+            self._tick % self._ring, self.players[player].slot
+        ]
+        return out
+
+    def _gather_inputs(self, k: int) -> list[EngineEvent]:
+        """Write this frame's inputs into ring row ``k``; hold missing frames."""
+        kp = (k - 1) % self._ring
+        events: list[EngineEvent] = []
+        s = self.slots
+        fresh: list[tuple[_Player, NDArray[np.float64], NDArray[np.float64]]] = []
+        for pid in self._order:
+            p = self.players[pid]
+            frame, held = p.pending, False
+            if frame is None:
+                held = True
+                p.missing += 1
+                if p.missing >= self.cfg.stale_after_frames and not p.stale:
+                    p.stale = True
+                    events.append(EngineEvent("stale", pid))
+            else:
+                p.missing = 0
+                if p.stale:
+                    p.stale = False
+                    events.append(EngineEvent("active", pid))
+            p.pending = None
+            if frame is None and p.last is None:
+                # Nothing ever arrived: stand still at the origin in the rest pose.
+                frame = TrackerFrame(-1, _rest_trackers(), _identity_quats())
+            if frame is None:
+                for name in ("ring_x", "ring_pos", "ring_quat", "ring_seq"):
+                    s[name][k, p.slot] = s[name][kp, p.slot]
+            else:
+                q = np.array(frame.quat, dtype=np.float64)
+                if p.waist_filter is not None:
+                    q[TrackerSlot.WAIST] = p.waist_filter(q[TrackerSlot.WAIST])
+                q = p.calibration.orient(q)
+                raw = np.array(frame.pos, dtype=np.float64)
+                if self.layout.predicts_root:
+                    # No waist: keep the unused slot finite whatever the client sent.
+                    raw[TrackerSlot.WAIST], q[TrackerSlot.WAIST] = raw[TrackerSlot.HEAD], _IDENT
+                cal = p.calibration.apply(raw, q)
+                prev = s["ring_pos"][kp, p.slot] if p.last is not None else cal
+                s["ring_pos"][k, p.slot] = cal
+                s["ring_quat"][k, p.slot] = q
+                s["ring_seq"][k, p.slot] = frame.seq
+                fresh.append((p, cal, prev))
+                if frame.seq >= 0:
+                    p.last = frame
+            s["ring_held"][k, p.slot] = held
+        if fresh:  # the features of every fresh frame in one vectorised call
+            idx = [p.slot for p, _, _ in fresh]
+            s["ring_x"][k, idx] = self.layout.features(
+                np.stack([c for _, c, _ in fresh]),
+                np.stack([v for _, _, v in fresh]),
+                s["ring_quat"][k, idx],
+                self.cfg.fps,
+            )
+        return events
+
+    def _select(self, p: _Player, scores: F64, positions: F32) -> int:
+        """Run the player's selector at the newest frame; plan a transition if asked."""
+        if p.plan is not None:
+            return 0
+        best = p.selector.choose(p.current, scores, positions)
+        if best is None or best == p.current:
+            return 0
+        n = p.frames
+        start = n - min(self.cfg.lookahead, self.cfg.transition_frames) + 1
+        p.plan = _Transition(p.current, best, start)
+        p.current = best
+        p.transitions += 1
+        return 1
+
+    def _emit(self) -> list[PoseOut]:
+        tau, T = self.cfg.lookahead, self.cfg.transition_frames
+        s = self.slots
+        k = (self._tick - tau) % self._ring  # ring row of frame n - tau, for every player
+        emit: list[tuple[_Player, int, float]] = []  # player, sample, weight
+        for pid in self._order:
+            p = self.players[pid]
+            e = p.frames - tau
+            if e < 0:
+                continue
+            if p.plan is None or e < p.plan.start:
+                emit.append((p, p.plan.src if p.plan is not None else p.current, 0.0))
+            else:
+                emit.append((p, p.plan.dst, min(1.0, (e - p.plan.start + 1) / T)))
+        if not emit:
+            return []
+        slots = np.array([p.slot for p, _, _ in emit])
+        samples = np.array([sample for _, sample, _ in emit])
+        rot = s["ring_rot"][k, slots, samples]  # (E, 108) copies
+        con = s["ring_con"][k, slots, samples]
+        root = s["ring_root"][k, slots, samples] if self.layout.predicts_root else None
+        interp = [i for i, (_, _, w) in enumerate(emit) if 0.0 < w < 1.0]
+        if interp:
+            zs, hs = [], []
+            for i in interp:
+                p, _, w = emit[i]
+                assert p.plan is not None
+                eps, hr = s["eps"][p.slot], s["ring_h"][k, p.slot]
+                zs.append((1 - w) * eps[p.plan.src] + w * eps[p.plan.dst])
+                hs.append((1 - w) * hr[p.plan.src] + w * hr[p.plan.dst])
+            out = self.decoder.run(
+                features=s["ring_x"][k, slots[interp]],
+                z=np.asarray(zs, np.float32),
+                h=np.asarray(hs, np.float32),
+            )
+            rot[interp], con[interp] = out[0], out[-2]
+            if root is not None:
+                root[interp] = out[1]
+        for p, _, w in emit:
+            if p.plan is not None and w >= 1.0:
+                p.plan = None
+        pos, quat = s["ring_pos"][k, slots], s["ring_quat"][k, slots]
+        wm, wp = fk32(rot, *self._roots(pos, quat, root, 1))
+        assert wm is not None
+        # The players' own display IK, batched: gather their states, step, scatter back.
+        state = {n: s[n][slots] for n in _DISPLAY_IK}
+        self._ik(state.__getitem__, len(emit), "disp").step(wm, wp, con)
+        for n in _DISPLAY_IK:
+            s[n][slots] = state[n]
+        scale = np.array([p.calibration.scale for p, _, _ in emit], np.float32)
+        positions = wp / scale[:, None, None]
+        rotations = mat2quat(wm).astype(np.float32)
+        seqs, held = s["ring_seq"][k, slots], s["ring_held"][k, slots]
+        return [
+            PoseOut(
+                player=p.id,
+                seq=int(seqs[i]),
+                positions=positions[i],
+                rotations=rotations[i],
+                contacts=con[i],
+                sample=sample,
+                transitioning=0.0 < w < 1.0,
+                held=bool(held[i]),
+            )
+            for i, (p, sample, w) in enumerate(emit)
+        ]
+
+
+_DISPLAY_IK = ("disp_locked", "disp_lock_pos", "disp_release", "disp_suppressed")
+
+
+def _rest_trackers() -> F64:
+    """Tracker positions of the reference body standing in its rest pose at the origin."""
+    eye = np.broadcast_to(np.eye(3), (NUM_JOINTS, 3, 3))
+    pos = fk_positions(eye, np.array([0.0, REST_PELVIS_HEIGHT_M, 0.0]), reference_offsets())
+    return pos[list(TRACKER_JOINT_INDEX)]
+
+
+_IDENT = np.array([0.0, 0.0, 0.0, 1.0])
+
+
+def _identity_quats() -> F64:
+    q = np.zeros((4, 4))
+    q[:, 3] = 1.0
+    return q

@@ -1,0 +1,54 @@
+"""What goes into the engine and what comes out of a tick (pure data, numpy only).
+
+These types cross layers: the protocol session builds :class:`TrackerFrame`, the
+engine thread returns :class:`TickResult`, the hub routes :class:`EngineEvent`. They
+live apart from :mod:`posecast.online.engine.ssi` so that importing them loads no
+inference library.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+F32 = NDArray[np.float32]
+F64 = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class TrackerFrame:
+    """One frame from a headset: 4 trackers in slot order, world metres, xyzw (a
+    headset-only player's waist slot is ignored)."""
+
+    seq: int
+    pos: F64  # (4, 3)
+    quat: F64  # (4, 4)
+
+
+@dataclass(frozen=True)
+class PoseOut:
+    """A reconstructed pose, ``tau`` frames behind the newest input."""
+
+    player: str
+    seq: int  # seq of the tracker frame this pose is for
+    positions: F32  # (19, 3) world metres, at the user's own scale
+    rotations: F32  # (19, 4) world xyzw
+    contacts: F32  # (2,)
+    sample: int  # the latent sample shown (the destination during a transition)
+    transitioning: bool
+    held: bool  # the input was held over a missing frame
+
+
+@dataclass(frozen=True)
+class EngineEvent:
+    kind: str  # "stale" | "active"
+    player: str
+
+
+@dataclass
+class TickResult:
+    poses: list[PoseOut]
+    events: list[EngineEvent]
+    transitions: int  # transitions started this tick, all players

@@ -1,0 +1,135 @@
+"""Prometheus metrics of one server instance, on a registry the instance owns.
+
+Not the process-global default registry: two servers in one process (the tests run
+many) each count their own, and nothing leaks between them. ``/metrics`` serves
+:meth:`Metrics.render`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+
+from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
+from prometheus_client.exposition import CONTENT_TYPE_LATEST
+
+CONTENT_TYPE = CONTENT_TYPE_LATEST
+_TICK_BUCKETS = (0.001, 0.002, 0.004, 0.008, 0.012, 0.0167, 0.025, 0.05, 0.1, 0.25, 1.0)
+_BATCH_BUCKETS = (0, 1, 2, 4, 8, 16, 32, 64, 128, 256, 512)
+_DRIFT_BUCKETS = (1, 10, 50, 100, 200, 500, 1000, 10_000)
+_BUS_BUCKETS = (0.0005, 0.001, 0.002, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 1.0)
+
+
+class Metrics:
+    """Every metric ``posecast serve`` exports (names are ``posecast_*``)."""
+
+    def __init__(self) -> None:
+        r = self.registry = CollectorRegistry(auto_describe=True)
+        self.connections = Gauge(
+            "posecast_connections", "Open WebSocket connections, by role", ["role"], registry=r
+        )
+        self.players = Gauge("posecast_players", "Players in the engine", registry=r)
+        self.rooms = Gauge("posecast_rooms", "Rooms open", registry=r)
+        self.connects = Counter(
+            "posecast_connects", "Connection attempts, by result", ["result"], registry=r
+        )
+        self.tick_seconds = Histogram(
+            "posecast_tick_seconds",
+            "Wall time of one engine tick (engine thread)",
+            buckets=_TICK_BUCKETS,
+            registry=r,
+        )
+        self.ticks = Counter("posecast_ticks", "Engine ticks delivered", registry=r)
+        self.poses = Counter(
+            "posecast_poses", "Poses the engine produced and routed to their rooms", registry=r
+        )
+        self.tick_overruns = Counter(
+            "posecast_tick_overruns", "Ticks that started late by a whole period", registry=r
+        )
+        self.batch_size = Histogram(
+            "posecast_engine_batch_size", "Players per engine step", buckets=_BATCH_BUCKETS,
+            registry=r,
+        )  # fmt: skip
+        self.transitions = Counter(
+            "posecast_ssi_transitions", "SSI sample transitions started", registry=r
+        )
+        self.frames_in = Counter("posecast_frames", "Tracker frames accepted", registry=r)
+        self.reads_paced = Counter(
+            "posecast_reads_paced",
+            "Times a connection's reading paused: it sent faster than twice its limits",
+            registry=r,
+        )
+        self.frames_dropped = Counter(
+            "posecast_frames_dropped",
+            "Tracker frames dropped, by reason",
+            ["reason"],
+            registry=r,
+        )
+        self.poses_superseded = Counter(
+            "posecast_poses_superseded",
+            "Poses replaced in a client's outbox before it could be sent",
+            registry=r,
+        )
+        self.errors = Counter(
+            "posecast_errors", "Protocol errors, by wire code", ["code"], registry=r
+        )
+        self.bytes_in = Counter("posecast_bytes_in", "WebSocket payload bytes in", registry=r)
+        self.bytes_out = Counter("posecast_bytes_out", "WebSocket payload bytes out", registry=r)
+        self.clock_drift = Histogram(
+            "posecast_clock_drift_ppm",
+            "Absolute client clock drift at session end, ppm",
+            buckets=_DRIFT_BUCKETS,
+            registry=r,
+        )
+
+        # The bus between nodes (docs/scale-out.md); the embedded node reports connected.
+        self.bus_connected = Gauge(
+            "posecast_bus_connected", "1 while cross-node traffic flows, else 0", registry=r
+        )
+        self.bus_reconnects = Counter(
+            "posecast_bus_reconnects", "Connections to the bus's store (Redis) made", registry=r
+        )
+        self.bus_messages = Counter(
+            "posecast_bus_messages", "Bus messages, by direction and kind", ["direction", "kind"],
+            registry=r,
+        )  # fmt: skip
+        self.bus_bytes = Counter(
+            "posecast_bus_bytes", "Bus message payload bytes, by direction", ["direction"],
+            registry=r,
+        )  # fmt: skip
+        self.bus_dropped = Counter(
+            "posecast_bus_dropped",
+            "Bus messages not sent or not used, by reason (superseded, disconnected, "
+            "unknown_player, undecodable)",
+            ["reason"],
+            registry=r,
+        )
+        self.bus_roundtrip = Histogram(
+            "posecast_bus_roundtrip_seconds",
+            "Wall time of one pipelined round trip to the bus's store",
+            buckets=_BUS_BUCKETS,
+            registry=r,
+        )
+        self.remote_players = Gauge(
+            "posecast_remote_players", "Players on other nodes in this node's rooms", registry=r
+        )
+        # For leak checks (benchmarks/load.py): the count should follow the connections
+        # and come back to its idle value once they are gone.
+        self.asyncio_tasks = Gauge(
+            "posecast_asyncio_tasks",
+            "asyncio tasks alive in the server's event loop (counted at each /metrics read)",
+            registry=r,
+        )
+
+    def render(self) -> bytes:
+        """The exposition text. Called in the event loop (the ``/metrics`` handler), it
+        first counts that loop's tasks; called outside one, it leaves the last count."""
+        with contextlib.suppress(RuntimeError):  # no running event loop
+            self.asyncio_tasks.set(len(asyncio.all_tasks()))
+        out: bytes = generate_latest(self.registry)
+        return out
+
+    def value(self, name: str, labels: dict[str, str] | None = None) -> float:
+        """One sample's current value (0 when absent); for tests and logs."""
+        v = self.registry.get_sample_value(name, labels or {})
+        return 0.0 if v is None else float(v)

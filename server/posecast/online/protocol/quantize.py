@@ -1,0 +1,80 @@
+"""Pose quantisation for the wire: millimetre offsets and snorm16 quaternions.
+
+Positions: the PELVIS goes as three float64 (``root``); the other 18 joints
+(``Joint.SPINE`` .. ``Joint.RIGHT_TOE``) as int16 millimetres relative to it,
+little-endian, 108 bytes. Rounding to the nearest millimetre bounds the error at
+0.5 mm per axis (0.87 mm per joint) anywhere in the +-1000 m world, because the
+offset is taken from the exact ``root`` that is sent. int16 reaches +-32.767 m from
+the pelvis, far beyond any body; a wider offset is refused (OUT_OF_RANGE), never
+wrapped.
+
+Rotations: each xyzw component times 32767, rounded, int16 little-endian, 19 x 4 =
+152 bytes. The component error is at most 0.5 / 32767 = 1.5e-5, the angle error
+below 1e-4 rad (0.006 degrees). No sign is forced, so ``q`` and ``-q`` survive as
+sent and a client's interpolation between poses sees the hemisphere the engine chose.
+
+Decoders divide by 32767 and do not renormalise: a quantised unit quaternion is
+within 3.1e-5 of unit length (invisible in a rotation matrix), and skipping it keeps
+``encode(decode(b)) == b``. They still refuse a norm off 1 by more than the
+quaternion tolerance (NOT_NORMALISED), which catches garbage bytes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from posecast.errors import NotNormalisedError, OutOfRangeError
+from posecast.online.protocol.messages import QUAT_TOLERANCE
+from posecast.skeleton import NUM_JOINTS
+
+F64 = NDArray[np.float64]
+
+POS_UNIT_M = 0.001  # one int16 step of a position offset
+ROT_SCALE = 32767.0  # one int16 step of a quaternion component is 1 / ROT_SCALE
+POS_BYTES = (NUM_JOINTS - 1) * 3 * 2  # 108
+ROT_BYTES = NUM_JOINTS * 4 * 2  # 152
+_I16 = np.dtype("<i2")
+_I16_MAX = 32767
+
+
+def pos2mm(positions: ArrayLike) -> tuple[list[float], bytes]:
+    """World positions ``(19, 3)`` metres -> ``(root [3] floats, 108 offset bytes)``."""
+    p = np.asarray(positions, dtype=np.float64)
+    if p.shape != (NUM_JOINTS, 3):
+        raise ValueError(f"positions must be ({NUM_JOINTS}, 3), got {p.shape}")
+    root = p[0]
+    mm = np.rint((p[1:] - root) / POS_UNIT_M)  # (18, 3)
+    if not (np.abs(mm) <= _I16_MAX).all():
+        raise OutOfRangeError("a joint is more than 32.767 m from the pelvis", field="pos_mm")
+    return root.tolist(), mm.astype(_I16).tobytes()
+
+
+def mm2pos(root: ArrayLike, blob: bytes) -> F64:
+    """``(root [3], 108 offset bytes)`` -> world positions ``(19, 3)`` metres."""
+    r = np.asarray(root, dtype=np.float64)
+    out = np.empty((NUM_JOINTS, 3), dtype=np.float64)
+    out[0] = r
+    out[1:] = np.frombuffer(blob, dtype=_I16).reshape(NUM_JOINTS - 1, 3) * POS_UNIT_M + r
+    return out
+
+
+def quat2snorm(quats: ArrayLike) -> bytes:
+    """Unit quaternions ``(19, 4)`` xyzw -> 152 bytes of snorm16."""
+    q = np.asarray(quats, dtype=np.float64)
+    if q.shape != (NUM_JOINTS, 4):
+        raise ValueError(f"rotations must be ({NUM_JOINTS}, 4), got {q.shape}")
+    s = np.rint(q * ROT_SCALE)
+    if not (np.abs(s) <= _I16_MAX).all():  # also catches NaN
+        raise NotNormalisedError("a rotation is not a unit quaternion", field="rot")
+    return s.astype(_I16).tobytes()
+
+
+def snorm2quat(blob: bytes) -> F64:
+    """152 bytes of snorm16 -> quaternions ``(19, 4)`` xyzw (not renormalised)."""
+    q: F64 = np.frombuffer(blob, dtype=_I16).reshape(NUM_JOINTS, 4) / ROT_SCALE
+    n = np.sqrt(np.einsum("ij,ij->i", q, q))  # (19,)
+    if not (np.abs(n - 1.0) <= QUAT_TOLERANCE).all():
+        bad = int(np.argmax(np.abs(n - 1.0)))
+        raise NotNormalisedError(f"rotation of joint {bad} has norm {n[bad]:.6f}", field="rot")
+    return q

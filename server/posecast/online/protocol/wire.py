@@ -1,0 +1,345 @@
+"""Per message type: the wire map -> dataclass check, and the dataclass -> canonical map.
+
+``DECODERS[type] = (known keys, decode)`` and ``ENCODERS[type] = encode``. A decoder
+sees a map already held to the structural bounds, reads every known field with the
+:mod:`posecast.online.protocol.fields` validators and ignores the rest. An encoder builds
+the map in canonical key order (``type``, then the spec's field order), leaving
+absent optionals out and writing every float field as a Python float.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from posecast.errors import BadFieldError, ProtocolError, VersionUnsupportedError
+from posecast.online.protocol import quantize
+from posecast.online.protocol.fields import (
+    CODE_PATTERN,
+    Map,
+    as_bin,
+    as_bool,
+    as_enum,
+    as_float,
+    as_id,
+    as_int,
+    as_list,
+    as_map,
+    as_name,
+    as_point,
+    as_str,
+    as_trackers,
+)
+from posecast.online.protocol.messages import (
+    ALL_TRACKERS_VALID,
+    LIMIT_RANGES,
+    MAX_HEIGHT_M,
+    MAX_ID_BYTES,
+    MAX_LOOKAHEAD_FRAMES,
+    MAX_TIME_S,
+    MIN_HEIGHT_M,
+    PRESENCE_EVENTS,
+    PROTOCOL_VERSION,
+    ROLES,
+    SELECTOR_KINDS,
+    UINT32_MAX,
+    Bye,
+    Calibrate,
+    Error,
+    Frame,
+    Hello,
+    Kick,
+    Limits,
+    Member,
+    Message,
+    Ping,
+    Pong,
+    Pose,
+    Presence,
+    Selector,
+    Welcome,
+)
+from posecast.skeleton import JOINT_NAMES
+from posecast.tracking.layouts import Layout
+
+_T = (0.0, MAX_TIME_S)
+_SELECTOR_FIELDS = {
+    "anomaly": ("factor",),
+    "target": ("joint", "point", "margin_m"),
+    "obstacle": ("joint", "point", "radius_m"),
+}
+
+
+def _has(m: Map, key: str) -> bool:
+    return m.get(key) is not None  # nil reads as absent
+
+
+def _ids(m: Map, key: str, max_len: int, max_bytes: int) -> tuple[str, ...]:
+    if not _has(m, key):
+        return ()
+    items = as_list(m, key, max_len)
+    return tuple(as_id({f"{key}[{i}]": v}, f"{key}[{i}]", max_bytes) for i, v in enumerate(items))
+
+
+def _text(m: Map, key: str, lim: Limits) -> str | None:
+    return as_str(m, key, lim.max_text_bytes, min_bytes=0) if _has(m, key) else None
+
+
+def _hello(m: Map, lim: Limits) -> Hello:
+    version = m.get("version")
+    if type(version) is not int:
+        raise BadFieldError("field version must be an integer", field="version")
+    if version != PROTOCOL_VERSION:
+        raise VersionUnsupportedError(
+            f"version {version} is not supported (this peer speaks {PROTOCOL_VERSION})",
+            field="version",
+        )
+    return Hello(
+        version=version,
+        token=as_str(m, "token", lim.max_token_bytes, min_bytes=0),
+        room=as_id(m, "room", lim.max_room_bytes),
+        name=as_name(m, "name", lim.max_name_bytes),
+        layout=Layout(as_enum(m, "layout", tuple(Layout))) if _has(m, "layout") else None,
+        rate_hz=as_float(m, "rate_hz", 1.0, lim.max_rate_hz) if _has(m, "rate_hz") else None,
+        watch=_ids(m, "watch", lim.max_watch_rooms, lim.max_room_bytes),
+    )
+
+
+def _welcome(m: Map, lim: Limits) -> Welcome:
+    members = []
+    for i, item in enumerate(as_list(m, "members", lim.max_players)):
+        at = f"members[{i}]."
+        if type(item) is not dict:
+            raise BadFieldError(f"members[{i}]: expected a map", field=f"members[{i}]")
+        members.append(
+            Member(
+                as_id(item, "player", MAX_ID_BYTES, at=at),
+                as_name(item, "name", lim.max_name_bytes, at=at),
+            )
+        )
+    lm = as_map(m, "limits")
+    limits = Limits(
+        **{k: as_int(lm, k, lo, hi, at="limits.") for k, (lo, hi) in LIMIT_RANGES.items()}
+    )
+    return Welcome(
+        version=as_int(m, "version", 1, 255),
+        player=as_id(m, "player", MAX_ID_BYTES),
+        session=as_id(m, "session", MAX_ID_BYTES),
+        role=as_enum(m, "role", ROLES),
+        room=as_id(m, "room", lim.max_room_bytes),
+        t=as_float(m, "t", *_T),
+        rate_hz=as_float(m, "rate_hz", 1.0, 1000.0),
+        lookahead_frames=as_int(m, "lookahead_frames", 0, MAX_LOOKAHEAD_FRAMES),
+        members=tuple(members),
+        limits=limits,
+    )
+
+
+def _calibrate(m: Map, lim: Limits) -> Calibrate:
+    has_height, has_tpose = _has(m, "height_m"), _has(m, "tpose")
+    if has_tpose and not as_bool(m, "tpose"):
+        raise BadFieldError("tpose, when present, must be true", field="tpose")
+    if has_height and has_tpose:
+        raise BadFieldError("give height_m or tpose, not both", field="tpose")
+    if has_height:
+        return Calibrate(height_m=as_float(m, "height_m", MIN_HEIGHT_M, MAX_HEIGHT_M))
+    if not has_tpose:
+        raise BadFieldError("calibrate needs height_m or tpose: true", field="height_m")
+    pos, quat = as_trackers(m, "trackers")
+    return Calibrate(pos=pos, quat=quat)
+
+
+def _frame(m: Map, lim: Limits) -> Frame:
+    seq = as_int(m, "seq", 0, UINT32_MAX)
+    try:
+        t = as_float(m, "t", *_T)
+        valid = (
+            as_int(m, "valid", 0, ALL_TRACKERS_VALID) if _has(m, "valid") else ALL_TRACKERS_VALID
+        )
+        pos, quat = as_trackers(m, "trackers", valid)
+    except ProtocolError as exc:
+        exc.ref_seq = seq
+        raise
+    return Frame(seq, t, pos, quat, valid)
+
+
+def _pose(m: Map, lim: Limits) -> Pose:
+    root = as_point(m, "root")
+    rot = as_bin(m, "rot", quantize.ROT_BYTES) if _has(m, "rot") else None
+    return Pose(
+        player=as_id(m, "player", MAX_ID_BYTES),
+        seq=as_int(m, "seq", 0, UINT32_MAX),
+        t=as_float(m, "t", *_T),
+        positions=quantize.mm2pos(root, as_bin(m, "pos_mm", quantize.POS_BYTES)),
+        rotations=None if rot is None else quantize.snorm2quat(rot),
+    )
+
+
+def _presence(m: Map, lim: Limits) -> Presence:
+    return Presence(
+        event=as_enum(m, "event", PRESENCE_EVENTS),
+        room=as_id(m, "room", lim.max_room_bytes),
+        player=as_id(m, "player", MAX_ID_BYTES),
+        name=as_name(m, "name", lim.max_name_bytes),
+    )
+
+
+def _selector(m: Map, lim: Limits) -> Selector:
+    player = as_id(m, "player", MAX_ID_BYTES)
+    kind = as_enum(m, "kind", SELECTOR_KINDS)
+    for key in ("joint", "point", "radius_m", "margin_m", "factor"):
+        if _has(m, key) and key not in _SELECTOR_FIELDS[kind]:
+            raise BadFieldError(f"{key} does not apply to a {kind} selector", field=key)
+    aimed = kind != "anomaly"
+    return Selector(
+        player=player,
+        kind=kind,
+        joint=as_enum(m, "joint", JOINT_NAMES) if aimed else None,
+        point=as_point(m, "point") if aimed else None,
+        radius_m=as_float(m, "radius_m", 0.001, 10.0) if _has(m, "radius_m") else None,
+        margin_m=as_float(m, "margin_m", 0.0, 10.0) if _has(m, "margin_m") else None,
+        factor=as_float(m, "factor", 0.1, 100.0) if _has(m, "factor") else None,
+    )
+
+
+def _error(m: Map, lim: Limits) -> Error:
+    code = as_str(m, "code", 32)
+    if CODE_PATTERN.fullmatch(code) is None:
+        raise BadFieldError("code must be upper-case letters, digits and _", field="code")
+    return Error(
+        code=code,
+        message=as_str(m, "message", lim.max_text_bytes, min_bytes=0),
+        fatal=as_bool(m, "fatal"),
+        field=_text(m, "field", lim),
+        ref_seq=as_int(m, "ref_seq", 0, UINT32_MAX) if _has(m, "ref_seq") else None,
+    )
+
+
+def _opt(d: Map, **fields: Any) -> Map:
+    d.update((k, v) for k, v in fields.items() if v is not None)
+    return d
+
+
+def _trackers(pos: Any, quat: Any) -> list[list[float]]:
+    rows: list[list[float]] = np.hstack([pos, quat]).astype(np.float64).tolist()
+    return rows
+
+
+def _fl(v: float | None) -> float | None:
+    return None if v is None else float(v)
+
+
+def _enc_welcome(w: Welcome) -> Map:
+    return {
+        "type": "welcome",
+        "version": w.version,
+        "player": w.player,
+        "session": w.session,
+        "role": w.role,
+        "room": w.room,
+        "t": float(w.t),
+        "rate_hz": float(w.rate_hz),
+        "lookahead_frames": w.lookahead_frames,
+        "members": [{"player": p.player, "name": p.name} for p in w.members],
+        "limits": {k: getattr(w.limits, k) for k in LIMIT_RANGES},
+    }
+
+
+def _enc_pose(p: Pose) -> Map:
+    root, pos_mm = quantize.pos2mm(p.positions)
+    d = {"type": "pose", "player": p.player, "seq": p.seq, "t": float(p.t), "root": root}
+    d["pos_mm"] = pos_mm
+    if p.rotations is not None:
+        d["rot"] = quantize.quat2snorm(p.rotations)
+    return d
+
+
+_ENC: dict[type[Any], Callable[[Any], Map]] = {
+    Hello: lambda h: _opt(
+        {"type": "hello", "version": h.version, "token": h.token, "room": h.room, "name": h.name},
+        layout=h.layout,
+        rate_hz=_fl(h.rate_hz),
+        watch=list(h.watch) or None,
+    ),
+    Welcome: _enc_welcome,
+    Calibrate: lambda c: (
+        {"type": "calibrate", "height_m": float(c.height_m)}
+        if c.pos is None
+        else {"type": "calibrate", "tpose": True, "trackers": _trackers(c.pos, c.quat)}
+    ),
+    Frame: lambda f: _opt(
+        {"type": "frame", "seq": f.seq, "t": float(f.t), "trackers": _trackers(f.pos, f.quat)},
+        valid=None if f.valid == ALL_TRACKERS_VALID else f.valid,
+    ),
+    Pose: _enc_pose,
+    Presence: lambda p: {
+        "type": "presence",
+        "event": p.event,
+        "room": p.room,
+        "player": p.player,
+        "name": p.name,
+    },
+    Selector: lambda s: _opt(
+        {"type": "selector", "player": s.player, "kind": s.kind},
+        joint=s.joint,
+        point=None if s.point is None else [float(v) for v in s.point],
+        radius_m=_fl(s.radius_m),
+        margin_m=_fl(s.margin_m),
+        factor=_fl(s.factor),
+    ),
+    Kick: lambda k: _opt({"type": "kick", "player": k.player}, reason=k.reason),
+    Ping: lambda p: {"type": "ping", "t0": float(p.t0)},
+    Pong: lambda p: {"type": "pong", "t0": float(p.t0), "t1": float(p.t1), "t2": float(p.t2)},
+    Error: lambda e: _opt(
+        {"type": "error", "code": e.code, "message": e.message, "fatal": e.fatal},
+        field=e.field,
+        ref_seq=e.ref_seq,
+    ),
+    Bye: lambda b: _opt({"type": "bye"}, reason=b.reason),
+}
+ENCODERS: dict[str, Callable[[Any], Map]] = {cls.TYPE: fn for cls, fn in _ENC.items()}
+
+_DEC: dict[type[Message], tuple[tuple[str, ...], Callable[[Map, Limits], Message]]] = {
+    Hello: (("version", "token", "room", "name", "layout", "rate_hz", "watch"), _hello),
+    Welcome: (
+        (
+            "version",
+            "player",
+            "session",
+            "role",
+            "room",
+            "t",
+            "rate_hz",
+            "lookahead_frames",
+            "members",
+            "limits",
+        ),
+        _welcome,
+    ),
+    Calibrate: (("height_m", "tpose", "trackers"), _calibrate),
+    Frame: (("seq", "t", "trackers", "valid"), _frame),
+    Pose: (("player", "seq", "t", "root", "pos_mm", "rot"), _pose),
+    Presence: (("event", "room", "player", "name"), _presence),
+    Selector: (
+        ("player", "kind", "joint", "point", "radius_m", "margin_m", "factor"),
+        _selector,
+    ),
+    Kick: (
+        ("player", "reason"),
+        lambda m, lim: Kick(as_id(m, "player", MAX_ID_BYTES), _text(m, "reason", lim)),
+    ),
+    Ping: (("t0",), lambda m, lim: Ping(as_float(m, "t0", *_T))),
+    Pong: (
+        ("t0", "t1", "t2"),
+        lambda m, lim: Pong(as_float(m, "t0", *_T), as_float(m, "t1", *_T), as_float(m, "t2", *_T)),
+    ),
+    Error: (("code", "message", "fatal", "field", "ref_seq"), _error),
+    Bye: (("reason",), lambda m, lim: Bye(_text(m, "reason", lim))),
+}
+# Spec field order per type (canonical key order after "type"), and the decoders.
+FIELD_ORDER: dict[str, tuple[str, ...]] = {cls.TYPE: keys for cls, (keys, _) in _DEC.items()}
+DECODERS: dict[str, tuple[frozenset[str], Callable[[Map, Limits], Message]]] = {
+    cls.TYPE: (frozenset(("type", *keys)), fn) for cls, (keys, fn) in _DEC.items()
+}

@@ -1,0 +1,275 @@
+"""The asyncio shell: a ``websockets`` server that only moves bytes.
+
+Per connection, two tasks: the handler reads messages and hands them to the
+:class:`~posecast.online.core.hub.Hub`; the writer sleeps until its outbox has something,
+takes everything (control messages first, then one pose per avatar) and sends it. A
+writer that a slow client blocks delays nobody else: the tick keeps filling that
+client's latest-wins slots, and the hub cuts the client off when it stays behind.
+
+The same port answers plain HTTP (:mod:`posecast.online.shell.http`): ``/healthz``,
+``/readyz``, ``/metrics`` and the viewer, and every WebSocket upgrade passes its
+gate (per-IP and node-wide limits) before the handshake. A node whose bus is down
+still accepts connections and serves its local rooms (``docs/scale-out.md``).
+
+Lifecycle: :meth:`PosecastServer.start` binds, loads the engine in the engine thread
+and starts ticking; :meth:`PosecastServer.stop` stops accepting, says ``bye`` to
+everyone, waits up to ``drain_timeout_s`` for the writers to flush, then closes.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import signal
+import socket
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+from websockets.asyncio.server import Server, ServerConnection, serve
+from websockets.exceptions import ConnectionClosed
+from websockets.frames import CloseCode
+from websockets.typing import Subprotocol
+
+from posecast.online.cluster.auto import create_bus
+from posecast.online.config import ServerConfig
+from posecast.online.core.hub import Hub
+from posecast.online.core.ratelimit import TokenBucket
+from posecast.online.engine.config import EngineConfig
+from posecast.online.engine.multi import MultiEngine
+from posecast.online.engine.ssi import Engine
+from posecast.online.inference.loader import load_multi_engine
+from posecast.online.metrics import Metrics
+from posecast.online.protocol.messages import SUBPROTOCOL
+from posecast.online.shell.http import HttpRoutes, peer_ip
+from posecast.online.shell.ticker import EngineWorker, run_ticks
+
+log = logging.getLogger("posecast.server")
+_HTTP_PATHS = ("/healthz", "/readyz", "/metrics")
+
+
+@dataclass
+class _Client:
+    ws: ServerConnection
+    wake: asyncio.Event
+    writer: asyncio.Task[None] | None = None
+
+
+class PosecastServer:
+    """One server instance: its own hub, metrics registry, engine thread and socket."""
+
+    def __init__(
+        self,
+        cfg: ServerConfig,
+        *,
+        engine_factory: Callable[[], Engine | MultiEngine] | None = None,
+    ) -> None:
+        self.cfg = cfg
+        self.metrics = Metrics()
+        self.bus = create_bus(cfg, self.metrics, clock=time.monotonic)
+        self.hub = Hub(
+            cfg, self.metrics, wall_offset_s=time.time() - time.monotonic(), bus=self.bus
+        )
+        self.bus.after = self._flush  # what other nodes sent lands in outboxes: wake writers
+        self.http = HttpRoutes(
+            cfg, self.metrics, self.hub, self.bus,
+            ready=lambda: self.ready,
+            open_connections=lambda: len(self._clients),
+            clock=time.monotonic,
+        )  # fmt: skip
+        self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="posecast-engine")
+        self._engine_factory = engine_factory or self._default_engine
+        self._clients: dict[int, _Client] = {}
+        self._server: Server | None = None
+        self._ticks: asyncio.Task[None] | None = None
+        self._stop_ticks = asyncio.Event()
+        self.ready = False
+        self.stopping = False
+        self.port = 0
+
+    def _default_engine(self) -> MultiEngine:
+        """One engine per served layout, each on its model (``--layouts``)."""
+        ecfg = EngineConfig(
+            samples=self.cfg.samples, lookahead=self.cfg.lookahead, fps=self.cfg.tick_hz
+        )
+        layouts, threads = self.cfg.served_layouts, self.cfg.engine_threads
+        return load_multi_engine(ecfg, layouts, self.cfg.models_dir, threads)
+
+    # --- lifecycle ----------------------------------------------------------------------
+
+    async def start(self) -> None:
+        loop = asyncio.get_running_loop()
+        self._server = await serve(
+            self._handle,
+            self.cfg.host,
+            self.cfg.port,
+            process_request=self.http,
+            subprotocols=[Subprotocol(SUBPROTOCOL)],  # a client offering none gets HTTP 400
+            compression=None,  # poses are quantised binary; deflate per client costs CPU
+            max_size=max(4 * self.cfg.max_message_bytes, 65_536),  # the codec says TOO_LARGE
+            max_queue=64,
+            open_timeout=self.cfg.hello_timeout_s,
+            close_timeout=self.cfg.close_timeout_s,
+        )
+        self.port = self._server.sockets[0].getsockname()[1]
+        engine = await loop.run_in_executor(self.executor, self._engine_factory)
+        if isinstance(engine, Engine):  # one model: its layout's batch only
+            engine = MultiEngine({engine.layout.layout: engine})
+        worker = EngineWorker(engine)
+        self._ticks = asyncio.create_task(
+            run_ticks(
+                period_s=1.0 / self.cfg.tick_hz,
+                executor=self.executor,
+                worker=worker,
+                take_input=self.hub.take_tick_input,
+                deliver=self.hub.deliver,
+                after=self._after_tick,
+                overrun=self.metrics.tick_overruns.inc,
+                stop=self._stop_ticks,
+            )
+        )
+        await self.bus.start()
+        self.ready = True
+        log.info(
+            "listening", extra={"host": self.cfg.host, "port": self.port, "node": self.bus.node}
+        )
+
+    async def stop(self) -> None:
+        """Graceful shutdown: stop accepting, ``bye`` to all, drain, close."""
+        if self.stopping:
+            return
+        self.stopping, self.ready = True, False
+        assert self._server is not None
+        self._server.close(close_connections=False)  # no new connections from here on
+        self.hub.shutdown(time.monotonic())
+        self._flush()
+        bus_stopped = asyncio.create_task(self.bus.stop())  # other nodes hear the leaves now
+        deadline = time.monotonic() + self.cfg.drain_timeout_s
+        while self._clients and time.monotonic() < deadline:
+            await asyncio.sleep(0.01)
+        for client in list(self._clients.values()):  # past the deadline: cut them off
+            client.ws.transport.abort()
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(self._server.wait_closed(), self.cfg.close_timeout_s)
+        self._stop_ticks.set()
+        if self._ticks is not None:
+            await self._ticks
+        await bus_stopped
+        self.executor.shutdown(wait=True)
+        log.info("stopped", extra={"port": self.port})
+
+    # --- one connection ---------------------------------------------------------------------
+
+    async def _handle(self, ws: ServerConnection) -> None:
+        sock = ws.transport.get_extra_info("socket")
+        if self.cfg.socket_sndbuf_bytes and sock is not None:
+            # Bound the kernel's backlog too, or a stalled client would sit on seconds
+            # of stale poses there before its outbox ever saw back-pressure.
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, self.cfg.socket_sndbuf_bytes)
+        conn = self.hub.connect(peer_ip(ws), time.monotonic())
+        client = _Client(ws, asyncio.Event())
+        client.writer = asyncio.create_task(self._write(conn, client))
+        self._clients[conn] = client
+        # Read pacing: whatever a connection sends, this server decodes at most twice
+        # what the protocol allows it (frames plus control messages). Beyond that it
+        # stops reading, so a flood waits in the flooder's own socket buffers and
+        # TCP window instead of in this process's CPU time (docs/reliability.md).
+        pace = TokenBucket(
+            2.0 * (self.cfg.max_rate_hz + self.cfg.control_rate_hz),
+            2.0 * (self.cfg.rate_burst + self.cfg.control_rate_hz),
+        )
+        try:
+            async for data in ws:
+                wait = pace.wait_s(time.monotonic())
+                if wait > 0.0:
+                    self.metrics.reads_paced.inc()
+                    await asyncio.sleep(wait)
+                    pace.allow(time.monotonic())
+                self.hub.receive(conn, data, time.monotonic())
+                self._flush()
+        except ConnectionClosed as exc:
+            if exc.sent is not None and exc.sent.code == CloseCode.MESSAGE_TOO_BIG:
+                # Past the WebSocket frame cap the library closes before the codec sees
+                # the message; it is still a TOO_LARGE message, and counted as one.
+                self.metrics.errors.labels("TOO_LARGE").inc()
+        finally:
+            self.hub.disconnect(conn, time.monotonic())
+            del self._clients[conn]
+            client.writer.cancel()
+            with contextlib.suppress(asyncio.CancelledError, ConnectionClosed):
+                await client.writer
+            self._flush()
+
+    async def _write(self, conn: int, client: _Client) -> None:
+        box = self.hub.outbox(conn)
+        assert box is not None
+        while True:
+            await client.wake.wait()
+            client.wake.clear()
+            batch = box.take()
+            if batch:
+                await _send_batch(client.ws, batch)
+                self.metrics.bytes_out.inc(sum(map(len, batch)))
+            box.sent(time.monotonic())
+            if box.closed and not box.pending:
+                await client.ws.close(box.close_code, box.close_reason)
+                return
+
+    def _flush(self) -> None:
+        """Wake the writers the hub queued for, and cut off the clients it gave up on."""
+        for conn in self.hub.pop_dirty():
+            client = self._clients.get(conn)
+            if client is not None:
+                client.wake.set()
+        for conn in self.hub.pop_aborts():
+            client = self._clients.get(conn)
+            if client is not None:
+                asyncio.get_running_loop().create_task(self._cut_off(client))
+
+    async def _cut_off(self, client: _Client) -> None:
+        """Give the writer a moment to get the final error out, then drop the socket."""
+        if client.writer is not None:
+            with contextlib.suppress(TimeoutError, asyncio.CancelledError, ConnectionClosed):
+                await asyncio.wait_for(asyncio.shield(client.writer), 0.25)
+        client.ws.transport.abort()
+
+    def _after_tick(self, now: float) -> None:
+        self.hub.check_timeouts(now)
+        self._flush()
+
+
+async def _send_batch(ws: ServerConnection, batch: list[bytes]) -> None:
+    """Send ``batch`` as separate WebSocket messages in ONE socket write.
+
+    ``ws.send()`` writes every message on its own: one syscall per pose, which at
+    64 players is ~30 000 a second and the largest cost of the event loop. Here the
+    connection's own Sans-I/O protocol frames every message and the frames leave
+    together. ``send_context()`` is what ``send()`` itself runs in: it checks the
+    state first and, on the way out, applies the same flow control (it waits while
+    the transport is above its high-water mark) and the same error handling.
+    """
+    if len(batch) == 1:
+        await ws.send(batch[0])
+        return
+    async with ws.send_context():
+        for data in batch:
+            ws.protocol.send_binary(data)
+        ws.transport.write(b"".join(ws.protocol.data_to_send()))
+
+
+async def serve_until_signal(cfg: ServerConfig, on_ready: Callable[[int], None]) -> None:
+    """``posecast serve``: run until SIGTERM or SIGINT, then shut down gracefully."""
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        loop.add_signal_handler(sig, stop.set)
+    server = PosecastServer(cfg)
+    await server.start()
+    on_ready(server.port)
+    try:
+        await stop.wait()
+        log.info("signal received: shutting down")
+    finally:
+        await server.stop()

@@ -1,0 +1,120 @@
+"""The fixed-rate tick: gather every player's newest frame, one batched engine step,
+encode the poses, hand them back for broadcast.
+
+All engine work, membership changes included, runs in ONE dedicated worker thread
+(``ThreadPoolExecutor(max_workers=1)``), at tick boundaries, so socket I/O goes on
+while the engine computes and the engine is never touched by two threads::
+
+    event loop:    take_tick_input() --ops, frames--> |           | --TickOutput--> deliver()
+    engine thread:                                     EngineWorker.step()
+
+If a step takes longer than a period, the next one starts at once and the schedule
+is reset rather than caught up: there is no backlog of ticks, frames in the meantime
+supersede each other (latest wins), and ``posecast_tick_overruns`` counts it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from posecast.errors import ProtocolError
+from posecast.online.core.tick import EngineOp, TickInput, TickOutput
+from posecast.online.engine.multi import MultiEngine
+from posecast.online.protocol.codec import encode
+from posecast.online.protocol.messages import Pose
+
+log = logging.getLogger("posecast.ticker")
+
+
+class EngineWorker:
+    """Owns the :class:`Engine`; only ever called from the engine thread."""
+
+    def __init__(self, engine: MultiEngine) -> None:
+        self.engine = engine
+        self.unencodable = 0  # poses dropped because quantising refused them
+
+    def step(self, inp: TickInput, server_t: float) -> TickOutput:
+        t0 = time.perf_counter()
+        e = self.engine
+        for op in inp.ops:
+            self._apply(op)
+        for player, frame in inp.frames.items():
+            if player in e.players:
+                e.push(player, frame)
+        result = e.tick()
+        poses = []
+        for p in result.poses:
+            if p.held or p.seq < 0:
+                continue  # one pose per source frame: nothing new over a gap or when stale
+            pose = Pose(
+                player=p.player,
+                seq=p.seq,
+                t=server_t,
+                positions=p.positions.astype(np.float64),
+                rotations=p.rotations.astype(np.float64),
+            )
+            try:
+                poses.append((p.player, encode(pose)))
+            except ProtocolError:
+                self.unencodable += 1
+        return TickOutput(
+            poses,
+            result.events,
+            result.transitions,
+            e.player_count,
+            time.perf_counter() - t0,
+        )
+
+    def _apply(self, op: EngineOp) -> None:
+        e = self.engine
+        present = op.player in e.players
+        if op.kind == "add":
+            if present:  # rejoined before its removal was applied: start afresh
+                e.remove_player(op.player)
+            e.add_player(op.player, op.seed, op.layout)
+        elif not present:
+            return  # left before this op was applied
+        elif op.kind == "remove":
+            e.remove_player(op.player)
+        elif op.kind == "selector" and op.selector is not None:
+            e.set_selector(op.player, op.selector)
+        elif op.kind == "calibration" and op.calibration is not None:
+            e.set_calibration(op.player, op.calibration)
+
+
+async def run_ticks(
+    *,
+    period_s: float,
+    executor: ThreadPoolExecutor,
+    worker: EngineWorker,
+    take_input: Callable[[], TickInput],
+    deliver: Callable[[TickOutput, float], None],
+    after: Callable[[float], None],
+    overrun: Callable[[], None],
+    stop: asyncio.Event,
+) -> None:
+    """Tick every ``period_s`` until ``stop`` is set; one engine step at a time."""
+    loop = asyncio.get_running_loop()
+    next_t = loop.time()
+    while not stop.is_set():
+        inp = take_input()
+        try:
+            out = await loop.run_in_executor(executor, worker.step, inp, time.monotonic())
+        except Exception:  # a bug in one step must not stop the server
+            log.exception("engine step failed")
+            out = TickOutput([])
+        deliver(out, time.monotonic())
+        after(time.monotonic())
+        next_t += period_s
+        delay = next_t - loop.time()
+        if delay < -period_s:
+            overrun()
+            next_t = loop.time()
+            delay = 0.0
+        await asyncio.sleep(max(0.0, delay))

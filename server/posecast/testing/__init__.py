@@ -1,0 +1,1 @@
+"""Helpers for tests and benchmarks of posecast: a real ``posecast serve`` subprocess."""

@@ -1,1 +1,0 @@
-"""Training, checkpoints and export for the networks in :mod:`posecast.model` (needs torch)."""

@@ -1,0 +1,24 @@
+"""``posecast bench engine`` (posecast.offline.evaluation.engine_speed) runs both models, briefly.
+
+The figures themselves come from running the benchmark (docs/engine.md); this only
+checks that a tiny run measures what it says it does."""
+
+from __future__ import annotations
+
+import math
+
+from posecast.offline.evaluation.engine_speed import bench, run
+
+
+def test_a_mixed_run_splits_players_between_the_models() -> None:
+    r = bench(4, samples=4, ticks=3, warmup=1, threads=1, hmd3_share=0.5)
+    assert (r.players, r.hmd3_players, r.samples) == (4, 2, 4)
+    assert 0 < r.tick_p50_ms <= r.tick_p99_ms and math.isfinite(r.gflops)
+
+
+def test_the_report_has_a_both_models_section_only_when_asked() -> None:
+    one = run([2], samples=4, threads=1, ticks=3, naive_players=1, hmd3_share=0.0)
+    assert "both_models" not in one and one["players"] == [2]
+    two = run([2], samples=4, threads=1, ticks=3, naive_players=1, hmd3_share=0.5)
+    both = two["both_models"]
+    assert both["hmd3_players"] == [1] and len(both["tick_p99_ms"]) == 1

@@ -1,0 +1,52 @@
+"""The engine inbox (posecast.online.core.tick): when players enter and leave the
+engine, and the per-player frame queue."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from posecast.online.core.tick import EngineInbox, EngineOp
+from posecast.online.engine.types import TrackerFrame
+from posecast.tracking.layouts import Layout
+
+
+def _frame(seq: int) -> TrackerFrame:
+    return TrackerFrame(seq, np.zeros((4, 3)), np.tile([0.0, 0.0, 0.0, 1.0], (4, 1)))
+
+
+def test_a_player_that_joins_and_leaves_without_a_frame_never_reaches_the_engine() -> None:
+    inbox = EngineInbox()
+    inbox.joined("p", seed=7, layout=Layout.HMD3)
+    assert inbox.take().ops == []
+    inbox.left("p")
+    tick = inbox.take()
+    assert tick.ops == [] and tick.frames == {}
+
+
+def test_the_first_frame_adds_the_player_with_its_seed_and_layout_then_leave_removes() -> None:
+    inbox = EngineInbox()
+    inbox.joined("p", seed=7, layout=Layout.HMD3)
+    inbox.frame("p", _frame(0))
+    tick = inbox.take()
+    assert tick.ops == [EngineOp("add", "p", seed=7, layout=Layout.HMD3)]
+    assert tick.frames["p"].seq == 0
+    inbox.frame("p", _frame(1))
+    inbox.left("p")
+    tick = inbox.take()
+    assert tick.ops == [EngineOp("remove", "p")] and tick.frames == {}
+
+
+def test_a_setting_before_any_frame_adds_the_player_first() -> None:
+    inbox = EngineInbox()
+    inbox.joined("p", seed=1, layout=Layout.HMD3_WAIST)
+    inbox.setting(EngineOp("calibration", "p"))
+    assert [op.kind for op in inbox.take().ops] == ["add", "calibration"]
+
+
+def test_the_queue_keeps_the_newest_frames_up_to_its_depth() -> None:
+    inbox = EngineInbox(frame_queue=3)
+    inbox.joined("p", seed=0, layout=Layout.HMD3_WAIST)
+    dropped = [inbox.frame("p", _frame(seq)) for seq in range(5)]
+    assert dropped == [False, False, False, True, True]
+    assert [inbox.take().frames["p"].seq for _ in range(3)] == [2, 3, 4]
+    assert inbox.take().frames == {}

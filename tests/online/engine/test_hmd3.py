@@ -1,0 +1,173 @@
+"""The headset-only (``hmd3``) path of the engine and one batch per model.
+
+These tests run a small randomly initialised hmd3 decoder exported through the real
+export code (its pelvis outputs biased to stand the body under the head), so they test
+the mechanics, not the trained model: the pelvis comes from the decoder, the waist
+slot is never read, players of both layouts are stepped in their own batches.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from posecast.offline.evaluation.reconstruct import decode_cvae
+from posecast.offline.nets.cvae import CVAE, CVAEConfig
+from posecast.offline.train.export import build_decoder, sidecar
+from posecast.online.engine.anomaly import AnomalyScorer
+from posecast.online.engine.config import EngineConfig
+from posecast.online.engine.multi import MultiEngine
+from posecast.online.engine.ssi import Engine
+from posecast.online.engine.types import TrackerFrame
+from posecast.online.inference.artifact import Artifact, load_artifact
+from posecast.skeleton import Joint
+from posecast.tracking.features import TrackerSlot
+from posecast.tracking.layouts import Layout, pelvis_from_head, spec
+
+WalkFrames = Callable[..., list[TrackerFrame]]
+
+
+@pytest.fixture(scope="module")
+def hmd3_decoder(tmp_path_factory: pytest.TempPathFactory) -> Artifact:
+    torch.manual_seed(7)
+    ls = spec(Layout.HMD3)
+    cfg = CVAEConfig(n_features=ls.n_features, layout="hmd3", root_outputs=ls.root_outputs)
+    model = CVAE(cfg)
+    with torch.no_grad():  # pelvis upright (6D of the identity), 0.9 m up, under the head
+        model.decoder.pose.bias[108:] = torch.tensor([1, 0, 0, 0, 1, 0, 0, 0.9, 0.0])
+        model.decoder.pose.weight[108:] *= 0.01
+    ckpt = {
+        "model": model.state_dict(),
+        "config": cfg.to_dict(),
+        "norm": {
+            "feat_mean": [0.0] * ls.n_features,
+            "feat_std": [1.0] * ls.n_features,
+            "pose_mean": [0.0] * 57,
+            "pose_std": [1.0] * 57,
+        },
+    }
+    folder = tmp_path_factory.mktemp("hmd3_model")
+    onnx_model = build_decoder(ckpt)
+    (folder / "cvae_decoder_hmd3.onnx").write_bytes(onnx_model.SerializeToString())
+    meta = sidecar(ckpt, "cvae_decoder_hmd3", onnx_model)
+    (folder / "cvae_decoder_hmd3.json").write_text(json.dumps(meta))
+    return load_artifact("cvae_decoder_hmd3", folder)
+
+
+def _engine(dec: Artifact, scorer: AnomalyScorer, **cfg: object) -> Engine:
+    return Engine(dec, scorer, EngineConfig(**cfg))  # type: ignore[arg-type]
+
+
+def test_the_pelvis_comes_from_the_decoder_under_the_head(
+    hmd3_decoder: Artifact, scorer: AnomalyScorer, walk_frames: WalkFrames
+) -> None:
+    """With one sample, no look-ahead: the emitted pelvis is the decoder's pelvis
+    output moved out of the head frame, exactly as an offline decode gives it."""
+    e = _engine(hmd3_decoder, scorer, samples=1, lookahead=0)
+    e.add_player("a", seed=0)
+    frames = walk_frames(0)[:30]
+    got = []
+    for f in frames:
+        e.push("a", f)
+        (pose,) = e.tick().poses
+        got.append(pose.positions[Joint.PELVIS])
+    pos = np.stack([f.pos for f in frames])
+    quat = np.stack([f.quat for f in frames])
+    feats = spec(Layout.HMD3).clip_features(pos, quat, 60.0).astype(np.float32)
+    _, _, root = decode_cvae(hmd3_decoder, feats, np.zeros(30, np.float32))
+    assert root is not None
+    _, want = pelvis_from_head(root, pos[:, TrackerSlot.HEAD], quat[:, TrackerSlot.HEAD])
+    np.testing.assert_allclose(np.stack(got), want, atol=1e-4)
+    below = pos[:, TrackerSlot.HEAD, 1] - np.stack(got)[:, 1]
+    assert np.all(below > 0.3)  # the body hangs from the head, not from a waist tracker
+
+
+def test_the_waist_slot_is_never_read(
+    hmd3_decoder: Artifact, scorer: AnomalyScorer, walk_frames: WalkFrames
+) -> None:
+    runs = []
+    for waist in (None, np.array([1e5, -3.0, 7.0])):
+        e = _engine(hmd3_decoder, scorer, samples=4, lookahead=2)
+        e.add_player("a", seed=1)
+        out = []
+        for f in walk_frames(1)[:20]:
+            if waist is not None:
+                pos, quat = f.pos.copy(), f.quat.copy()
+                pos[TrackerSlot.WAIST], quat[TrackerSlot.WAIST] = waist, [0.0, 0.0, 0.0, 0.0]
+                f = TrackerFrame(f.seq, pos, quat)
+            e.push("a", f)
+            out += [p.positions for p in e.tick().poses]
+        runs.append(np.stack(out))
+    assert np.isfinite(runs[1]).all()
+    np.testing.assert_array_equal(runs[0], runs[1])
+
+
+def test_each_model_steps_its_own_players_in_one_batch(
+    hmd3_decoder: Artifact,
+    decoder: Artifact,
+    scorer: AnomalyScorer,
+    walk_frames: WalkFrames,
+) -> None:
+    """Two layouts in one MultiEngine: each player is in its layout's engine, both
+    emit every tick, and a player's poses equal those of an engine of its own."""
+    multi = MultiEngine(
+        {
+            "hmd3+waist": _engine(decoder, scorer, samples=4, lookahead=2),
+            "hmd3": _engine(hmd3_decoder, scorer, samples=4, lookahead=2),
+        }
+    )
+    multi.add_player("four", 11, "hmd3+waist")
+    multi.add_player("three", 12, "hmd3")
+    multi.add_player("three-b", 13, "hmd3")
+    assert multi.counts() == {"hmd3+waist": 1, "hmd3": 2} and multi.player_count == 3
+    alone = _engine(hmd3_decoder, scorer, samples=4, lookahead=2)
+    alone.add_player("three", 12)
+    frames = walk_frames(2)[:15]
+    seen: dict[str, int] = {}
+    for f in frames:
+        for p in ("four", "three", "three-b"):
+            multi.push(p, f)
+        alone.push("three", f)
+        res = multi.tick()
+        for pose in res.poses:
+            seen[pose.player] = seen.get(pose.player, 0) + 1
+        mine = {p.player: p for p in res.poses}
+        for pose in alone.tick().poses:
+            np.testing.assert_array_equal(mine["three"].positions, pose.positions)
+    assert seen == {"four": 13, "three": 13, "three-b": 13}  # 15 frames, tau = 2
+    multi.remove_player("three")
+    assert multi.counts() == {"hmd3+waist": 1, "hmd3": 1}
+    with pytest.raises(ValueError, match="already"):
+        multi.add_player("four", 1, "hmd3")
+
+
+def test_a_multi_engine_refuses_what_it_cannot_serve(
+    hmd3_decoder: Artifact, decoder: Artifact, scorer: AnomalyScorer
+) -> None:
+    only4 = MultiEngine({"hmd3+waist": _engine(decoder, scorer, samples=2)})
+    with pytest.raises(ValueError, match="not served"):
+        only4.add_player("x", 1, "hmd3")
+    with pytest.raises(ValueError, match="runs a hmd3 model"):
+        MultiEngine({"hmd3+waist": _engine(hmd3_decoder, scorer, samples=2)})
+    with pytest.raises(ValueError):
+        MultiEngine({})
+
+
+def test_the_hmd3_sidecar_must_match_its_features(hmd3_decoder: Artifact, tmp_path: Path) -> None:
+    from posecast.errors import ModelError
+
+    meta = dict(hmd3_decoder.meta)
+    meta["layout"] = "hmd3+waist"  # 36 hmd3 feature names under the 4-point layout
+    (tmp_path / "m.json").write_text(json.dumps(meta))
+    (tmp_path / "m.onnx").write_bytes(b"")
+    with pytest.raises(ModelError, match="feature layout"):
+        load_artifact("m", tmp_path)
+    meta["layout"] = "hmd5"
+    (tmp_path / "m.json").write_text(json.dumps(meta))
+    with pytest.raises(ModelError, match="unknown tracker layout"):
+        load_artifact("m", tmp_path)

@@ -1,0 +1,235 @@
+"""Foot-contact IK (paper Sec. 3.1 post-processing): two-bone solve, lock, release."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from posecast.geometry.fk import fk_mat
+from posecast.geometry.rotations import axis_mat, normalize
+from posecast.online.engine.ik import ContactIK, apply_leg_ik, two_bone_ik
+from posecast.skeleton import NUM_JOINTS, Joint, reference_offsets
+
+L_THIGH, L_SHIN, L_FOOT, L_TOE = Joint.LEFT_THIGH, Joint.LEFT_SHIN, Joint.LEFT_FOOT, Joint.LEFT_TOE
+LEG_LENGTH_M = 0.43 + 0.42  # thigh + shin of the reference body
+MM = 1e-3
+
+
+def crouch(k: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """World rotations ``(1, 19, 3, 3)`` and positions ``(1, 19, 3)`` of the reference
+    body with both knees bent. ``k`` (frames) drifts it the way a network's output
+    slides: the pelvis moves 5 mm forward and 3 mm left per frame, and the left thigh
+    swings forward 0.01 rad per frame, so the network's left ankle moves every frame."""
+    local = np.broadcast_to(np.eye(3), (NUM_JOINTS, 3, 3)).copy()
+    for thigh, shin in ((L_THIGH, L_SHIN), (Joint.RIGHT_THIGH, Joint.RIGHT_SHIN)):
+        local[thigh] = axis_mat("X", -0.6 - (0.01 * k if thigh == L_THIGH else 0.0))
+        local[shin] = axis_mat("X", 1.1)
+    root = np.array([0.003 * k, 0.80, 0.005 * k])
+    wm, wp = fk_mat(local, root, reference_offsets())
+    return wm[None], wp[None]
+
+
+def left_ankle(wp: np.ndarray) -> np.ndarray:
+    return wp[0, L_FOOT]
+
+
+def contact(left: float, right: float = 0.0) -> np.ndarray:
+    return np.array([[left, right]])
+
+
+def assert_leg_is_rigid(wm: np.ndarray, wp: np.ndarray) -> None:
+    """Positions follow from rotations along both legs, so bone lengths are the reference
+    ones and the rotations the IK wrote agree with the positions it wrote."""
+    off = reference_offsets()
+    for thigh, shin, foot, toe in (
+        (L_THIGH, L_SHIN, L_FOOT, L_TOE),
+        (Joint.RIGHT_THIGH, Joint.RIGHT_SHIN, Joint.RIGHT_FOOT, Joint.RIGHT_TOE),
+    ):
+        for parent, child in ((thigh, shin), (shin, foot), (foot, toe)):
+            expected = wp[0, parent] + wm[0, parent] @ off[child]
+            np.testing.assert_allclose(wp[0, child], expected, atol=1e-9)
+
+
+# --- two_bone_ik ------------------------------------------------------------------------
+
+
+def random_legs(rng: np.random.Generator, n: int) -> tuple[np.ndarray, ...]:
+    hip = rng.normal(size=(n, 3))
+    l1 = rng.uniform(0.3, 0.5, size=(n, 1))
+    l2 = rng.uniform(0.3, 0.5, size=(n, 1))
+    knee = hip + l1 * normalize(rng.normal(size=(n, 3)))
+    ankle = knee + l2 * normalize(rng.normal(size=(n, 3)))
+    return hip, knee, ankle, l1[:, 0], l2[:, 0]
+
+
+def test_two_bone_ik_reaches_reachable_targets_and_keeps_bone_lengths(
+    rng: np.random.Generator,
+) -> None:
+    hip, knee, ankle, l1, l2 = random_legs(rng, 200)
+    d = rng.uniform(np.abs(l1 - l2) + 0.01, l1 + l2 - 0.01)
+    target = hip + d[:, None] * normalize(rng.normal(size=(200, 3)))
+    k2, a2 = two_bone_ik(hip, knee, ankle, target)
+    np.testing.assert_allclose(a2, target, atol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(k2 - hip, axis=-1), l1, atol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(a2 - k2, axis=-1), l2, atol=1e-9)
+    # The knee stays in the plane of hip, target and old knee, on the old knee's side.
+    u = normalize(target - hip)
+    normal = np.cross(u, knee - hip)
+    np.testing.assert_allclose(np.sum(normal * (k2 - hip), axis=-1), 0.0, atol=1e-9)
+    old_bend = (knee - hip) - np.sum((knee - hip) * u, -1, keepdims=True) * u
+    assert np.all(np.sum(old_bend * (k2 - hip), axis=-1) > 0.0)
+
+
+def test_two_bone_ik_reaches_toward_unreachable_targets(rng: np.random.Generator) -> None:
+    hip, knee, ankle, l1, l2 = random_legs(rng, 50)
+    direction = normalize(rng.normal(size=(50, 3)))
+    target = hip + 2.0 * (l1 + l2)[:, None] * direction
+    k2, a2 = two_bone_ik(hip, knee, ankle, target)
+    np.testing.assert_allclose(a2, hip + (l1 + l2)[:, None] * direction, atol=1e-5)
+    np.testing.assert_allclose(np.linalg.norm(k2 - hip, axis=-1), l1, atol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(a2 - k2, axis=-1), l2, atol=1e-5)
+
+
+def test_two_bone_ik_bends_a_straight_leg_forward() -> None:
+    """A straight leg has no bend plane; a closer target bends the knee toward +Z."""
+    hip = np.array([[0.0, 1.0, 0.0]])
+    knee, ankle = hip - [0.0, 0.43, 0.0], hip - [0.0, 0.85, 0.0]
+    k2, a2 = two_bone_ik(hip, knee, ankle, hip - [0.0, 0.7, 0.0])
+    np.testing.assert_allclose(a2, hip - [0.0, 0.7, 0.0], atol=1e-12)
+    assert k2[0, 2] > 0.1
+    assert k2[0, 0] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_apply_leg_ik_moves_only_the_active_leg() -> None:
+    wm, wp = crouch()
+    before_m, before_p = wm.copy(), wp.copy()
+    targets = wp[:, [L_FOOT, Joint.RIGHT_FOOT]] + np.array([0.05, 0.02, -0.04])
+    apply_leg_ik(wm, wp, targets, np.array([[True, False]]))
+    np.testing.assert_allclose(left_ankle(wp), targets[0, 0], atol=1e-9)
+    # The foot keeps its world rotation and the toe rides along with the ankle.
+    np.testing.assert_allclose(wm[0, L_FOOT], before_m[0, L_FOOT])
+    np.testing.assert_allclose(
+        wp[0, L_TOE] - wp[0, L_FOOT], before_p[0, L_TOE] - before_p[0, L_FOOT], atol=1e-12
+    )
+    untouched = [j for j in Joint if j not in (L_SHIN, L_FOOT, L_TOE)]
+    np.testing.assert_array_equal(wp[0, untouched], before_p[0, untouched])
+    assert_leg_is_rigid(wm, wp)
+
+
+# --- ContactIK ----------------------------------------------------------------------------
+
+
+def test_locked_foot_stays_within_a_millimetre_while_contact_holds() -> None:
+    """Contact stays above 0.5 for 30 frames while the network's ankle drifts 37 cm,
+    always within the leg's reach: the shown ankle stays where the contact began (the
+    paper's rule; the early release on large drift is switched off here)."""
+    ik = ContactIK.zeros(1, release_frames=4, max_drift_m=None)
+    wm, wp = crouch(0)
+    lock = left_ankle(wp).copy()
+    ik.step(wm, wp, contact(0.9))
+    np.testing.assert_allclose(left_ankle(wp), lock, atol=1e-12)  # locking moves nothing
+    drift = []
+    for k in range(1, 31):
+        wm, wp = crouch(k)
+        drift.append(np.linalg.norm(left_ankle(wp) - lock))
+        assert np.linalg.norm(lock - wp[0, L_THIGH]) < LEG_LENGTH_M - 0.01  # reachable
+        net_right = wp[0, Joint.RIGHT_FOOT].copy()
+        ik.step(wm, wp, contact(0.51 + 0.4 * (k % 2)))
+        assert np.linalg.norm(left_ankle(wp) - lock) < MM
+        np.testing.assert_array_equal(wp[0, Joint.RIGHT_FOOT], net_right)  # no contact
+        assert_leg_is_rigid(wm, wp)
+    assert max(drift) > 0.3  # the network really slid
+
+
+def test_release_blends_back_linearly_over_release_frames() -> None:
+    """Contact ends on frame 0 of the release: the shown ankle then moves in equal steps
+    from the lock to the network's ankle, weights ``1, 3/4, 1/2, 1/4`` of the lock for
+    ``release_frames = 4``, and from the 5th frame on shows the network's own pose."""
+    R = 4
+    ik = ContactIK.zeros(1, release_frames=R)
+    wm, wp = crouch(0)
+    lock = left_ankle(wp).copy()
+    ik.step(wm, wp, contact(0.9))
+    wm_net, wp_net = crouch(8)  # the network's pose, held still during the release
+    net = left_ankle(wp_net).copy()
+    assert np.linalg.norm(net - lock) > 0.05
+    for i in range(R + 3):
+        wm, wp = wm_net.copy(), wp_net.copy()
+        ik.step(wm, wp, contact(0.2))
+        w = max(0.0, 1.0 - i / R)
+        np.testing.assert_allclose(left_ankle(wp), w * lock + (1 - w) * net, atol=1e-9)
+        assert_leg_is_rigid(wm, wp)
+    np.testing.assert_array_equal(wp, wp_net)
+    np.testing.assert_array_equal(wm, wm_net)
+    assert not ik.locked.any()
+    assert not ik.release_left.any()
+
+
+def test_foot_landing_again_mid_release_does_not_pop() -> None:
+    """Contact flickers (0.9, then 0.4 for two frames, then 0.6): when the foot lands
+    again halfway through its release it locks where it is shown, so the shown ankle
+    never moves by more than one release step (a quarter of the lock-to-network gap)."""
+    R = 4
+    ik = ContactIK.zeros(1, release_frames=R)
+    wm, wp = crouch(0)
+    ik.step(wm, wp, contact(0.9))
+    wm_net, wp_net = crouch(10)
+    gap = np.linalg.norm(left_ankle(wp_net) - left_ankle(wp))
+    assert gap > 0.05
+    shown = [left_ankle(wp).copy()]
+    for c in (0.4, 0.4, 0.6, 0.6, 0.6):
+        wm, wp = wm_net.copy(), wp_net.copy()
+        ik.step(wm, wp, contact(c))
+        shown.append(left_ankle(wp).copy())
+    steps = np.linalg.norm(np.diff(shown, axis=0), axis=-1)
+    assert steps.max() <= gap / R + 1e-9
+    # Locked again: held still from the landing on.
+    np.testing.assert_allclose(shown[3], shown[5], atol=MM)
+
+
+def test_contact_ik_works_on_views_of_engine_buffers() -> None:
+    """The engine hands in reshaped views of its slot arrays; steps update them in place."""
+    locked = np.zeros((2, 3, 2), bool)
+    lock_pos = np.zeros((2, 3, 2, 3))
+    release = np.zeros((2, 3, 2), np.int64)
+    ik = ContactIK(locked.reshape(6, 2), lock_pos.reshape(6, 2, 3), release.reshape(6, 2), 4)
+    wm, wp = crouch(0)
+    wm6, wp6 = np.repeat(wm, 6, axis=0), np.repeat(wp, 6, axis=0)
+    prob = np.zeros((6, 2))
+    prob[4] = [0.9, 0.0]
+    ik.step(wm6, wp6, prob)
+    assert locked[1, 1, 0] and locked.sum() == 1
+    np.testing.assert_allclose(lock_pos[1, 1, 0], left_ankle(wp))
+    prob[4] = [0.1, 0.0]
+    ik.step(wm6, wp6, prob)
+    assert not locked.any()
+    assert release[1, 1, 0] == 3  # one release frame shown, three to go
+
+
+def test_a_lock_the_network_drifted_far_from_is_released_early() -> None:
+    """With ``max_drift_m = 0.2`` the lock holds (within 1 mm) until the network's ankle
+    is over 20 cm away, is then released, blends back, and does not lock again until
+    the predicted contact has ended once."""
+    ik = ContactIK.zeros(1, release_frames=4, max_drift_m=0.2)
+    wm, wp = crouch(0)
+    lock = left_ankle(wp).copy()
+    ik.step(wm, wp, contact(0.9))
+    released_at = None
+    for k in range(1, 31):
+        wm, wp = crouch(k)
+        drift = float(np.linalg.norm(left_ankle(wp) - lock))
+        ik.step(wm, wp, contact(0.9))
+        if released_at is None and drift <= 0.2:
+            assert np.linalg.norm(left_ankle(wp) - lock) < MM
+        elif released_at is None:
+            released_at = k
+    assert released_at is not None
+    assert not ik.locked[0, 0]
+    wm, wp = crouch(30)
+    net = left_ankle(wp).copy()
+    ik.step(wm, wp, contact(0.9))  # still predicted: stays unlocked, back on the network
+    np.testing.assert_allclose(left_ankle(wp), net, atol=1e-9)
+    ik.step(*crouch(30), contact(0.1))  # the contact ends ...
+    wm, wp = crouch(30)
+    ik.step(wm, wp, contact(0.9))  # ... and a new one locks again
+    assert ik.locked[0, 0]

@@ -1,0 +1,112 @@
+"""The engine worker and tick loop (posecast.online.shell.ticker), on the real ONNX engine."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import pytest
+
+from posecast.online.config import ServerConfig
+from posecast.online.engine.calibration import Calibration
+from posecast.online.engine.multi import MultiEngine
+from posecast.online.engine.selectors import AnomalySelector
+from posecast.online.engine.ssi import Engine
+from posecast.online.engine.types import TrackerFrame
+from posecast.online.protocol import decode
+from posecast.online.protocol.messages import Pose
+from posecast.online.shell.ticker import EngineOp, EngineWorker, TickInput, TickOutput, run_ticks
+from tests.online.conftest import make_cfg, walk_frame
+
+
+def _frame(seq: int, seed: int = 0) -> TrackerFrame:
+    f = walk_frame(seq, seed)
+    return TrackerFrame(f.seq, f.pos, f.quat)
+
+
+@pytest.fixture
+def worker(engine_factory: Callable[[ServerConfig], Callable[[], Engine]]) -> EngineWorker:
+    return EngineWorker(MultiEngine({"hmd3+waist": engine_factory(make_cfg(lookahead=2))()}))
+
+
+def test_one_step_batches_every_player_and_encodes_their_poses(worker: EngineWorker) -> None:
+    ops = [EngineOp("add", p, seed=i) for i, p in enumerate("abc")]
+    out = worker.step(TickInput(ops, {p: _frame(0, i) for i, p in enumerate("abc")}), 5.0)
+    assert out.batch == 3 and out.poses == []  # tau = 2: nothing out yet
+    for seq in (1, 2):
+        out = worker.step(TickInput([], {p: _frame(seq) for p in "abc"}), 5.0)
+    assert [p for p, _ in out.poses] == ["a", "b", "c"]
+    pose = decode(out.poses[0][1])
+    assert isinstance(pose, Pose) and pose.seq == 0 and pose.t == 5.0
+    assert pose.positions.shape == (19, 3) and np.isfinite(pose.positions).all()
+    assert out.seconds > 0
+
+
+def test_ops_apply_in_order_and_tolerate_races(worker: EngineWorker) -> None:
+    e = worker.engine
+    worker.step(TickInput([EngineOp("add", "a"), EngineOp("remove", "a")], {}), 0.0)
+    assert e.player_count == 0
+    worker.step(TickInput([EngineOp("remove", "ghost"), EngineOp("selector", "ghost")], {}), 0.0)
+    worker.step(TickInput([EngineOp("add", "a"), EngineOp("add", "a")], {"zz": _frame(0)}), 0.0)
+    assert e.player_count == 1
+    cal = Calibration.from_height(1.9)
+    sel = AnomalySelector(5.0)
+    worker.step(
+        TickInput(
+            [
+                EngineOp("calibration", "a", calibration=cal),
+                EngineOp("selector", "a", selector=sel),
+            ],
+            {},
+        ),
+        0.0,
+    )
+    inner = e.engines[e.players["a"]].players["a"]
+    assert inner.calibration == cal and inner.selector == sel
+
+
+def test_poses_wait_for_the_first_frame(worker: EngineWorker) -> None:
+    worker.step(TickInput([EngineOp("add", "a")], {}), 0.0)
+    for _ in range(5):
+        out = worker.step(TickInput([], {}), 0.0)
+    assert out.poses == []  # held rest poses of a player who never sent are not shown
+
+
+@pytest.mark.timeout(10)
+def test_tick_loop_runs_engine_work_in_one_dedicated_thread(worker: EngineWorker) -> None:
+    threads: set[str] = set()
+    delivered: list[TickOutput] = []
+    step = worker.step
+
+    def spy(inp: TickInput, t: float) -> TickOutput:
+        threads.add(threading.current_thread().name)
+        return step(inp, t)
+
+    worker.step = spy  # type: ignore[method-assign]
+
+    async def main() -> None:
+        stop = asyncio.Event()
+        inputs = iter([TickInput([EngineOp("add", "a")], {})] + [TickInput([], {})] * 1000)
+        with ThreadPoolExecutor(1, thread_name_prefix="engine") as pool:
+            task = asyncio.create_task(
+                run_ticks(
+                    period_s=1 / 60,
+                    executor=pool,
+                    worker=worker,
+                    take_input=lambda: next(inputs),
+                    deliver=lambda out, now: delivered.append(out),
+                    after=lambda now: None,
+                    overrun=lambda: None,
+                    stop=stop,
+                )
+            )
+            await asyncio.sleep(0.25)
+            stop.set()
+            await task
+
+    asyncio.run(main())
+    assert len(threads) == 1 and next(iter(threads)).startswith("engine")
+    assert 8 <= len(delivered) <= 20  # about 60 Hz for a quarter of a second

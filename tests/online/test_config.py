@@ -1,0 +1,94 @@
+"""Server config (posecast.online.config): defaults, env, flags, validation, docs."""
+
+from __future__ import annotations
+
+import argparse
+import re
+from dataclasses import fields
+from pathlib import Path
+
+import pytest
+
+from posecast.errors import ConfigError
+from posecast.online.config import ServerConfig, add_arguments, option_help
+
+SECRET = "s" * 32
+DOCS = Path(__file__).resolve().parents[2] / "docs" / "server.md"
+
+
+def test_refuses_to_start_without_a_secret() -> None:
+    with pytest.raises(ConfigError, match="POSECAST_TOKEN_SECRET"):
+        ServerConfig.from_sources({})
+    with pytest.raises(ConfigError, match="at least"):
+        ServerConfig.from_sources({"POSECAST_TOKEN_SECRET": "short"})
+
+
+def test_dev_invents_a_secret() -> None:
+    a = ServerConfig.from_sources({}, {"dev": True})
+    b = ServerConfig.from_sources({"POSECAST_DEV": "1"})
+    assert len(a.token_secret) >= 32 and a.token_secret != b.token_secret
+
+
+def test_flags_beat_env_beat_defaults() -> None:
+    env = {"POSECAST_TOKEN_SECRET": SECRET, "POSECAST_PORT": "9000", "POSECAST_SAMPLES": "8"}
+    cfg = ServerConfig.from_sources(env, {"port": 9100, "samples": None})
+    assert (cfg.port, cfg.samples, cfg.tick_hz) == (9100, 8, 60.0)
+    assert cfg.models_dir is None
+
+
+def test_env_values_are_typed() -> None:
+    env = {
+        "POSECAST_TOKEN_SECRET": SECRET,
+        "POSECAST_SLOW_CONSUMER_S": "0.5",
+        "POSECAST_DEV": "false",
+        "POSECAST_MODELS_DIR": "/tmp/m",
+    }
+    cfg = ServerConfig.from_sources(env)
+    assert cfg.slow_consumer_s == 0.5 and cfg.dev is False and cfg.models_dir == "/tmp/m"
+    with pytest.raises(ConfigError, match="POSECAST_PORT"):
+        ServerConfig.from_sources({**env, "POSECAST_PORT": "eighty"})
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"port": 70000},
+        {"samples": 0},
+        {"tick_hz": 0.5},
+        {"slow_consumer_s": 0.0},
+        {"max_message_bytes": 100},  # below the protocol's floor
+        {"max_players_per_room": 33},  # above the v1 maximum
+        {"log_level": "LOUD"},
+    ],
+)
+def test_bad_values_are_refused_once_at_the_edge(change: dict[str, object]) -> None:
+    with pytest.raises(ConfigError):
+        ServerConfig(token_secret=SECRET, **change)  # type: ignore[arg-type]
+
+
+def test_the_secret_never_shows_in_repr() -> None:
+    assert SECRET not in repr(ServerConfig(token_secret=SECRET))
+
+
+def test_limits_follow_the_config() -> None:
+    lim = ServerConfig(token_secret=SECRET, max_rate_hz=90, max_players_per_room=8).limits()
+    assert (lim.max_rate_hz, lim.max_players, lim.max_message_bytes) == (90, 8, 8192)
+
+
+def test_every_option_has_a_flag_except_the_secret() -> None:
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    args = vars(parser.parse_args(["--max-rate-hz", "30", "--dev"]))
+    assert args["max_rate_hz"] == 30 and args["dev"] is True and args["port"] is None
+    assert "token_secret" not in args
+    assert set(args) == {f.name for f in fields(ServerConfig)} - {"token_secret"}
+
+
+def test_docs_table_lists_every_option_with_env_and_default() -> None:
+    text = DOCS.read_text("utf-8")
+    for name, env, default, _ in option_help():
+        row = next((ln for ln in text.splitlines() if f"`{env}`" in ln), None)
+        assert row is not None, f"docs/server.md lacks {env}"
+        assert f"`--{name.replace('_', '-')}`" in row or name == "token_secret", row
+        if default:
+            assert re.search(rf"`{re.escape(default)}`", row), (name, default, row)
