@@ -1,8 +1,9 @@
 r"""What ``load.py`` drives and reads: the processes and the measurements.
 
-A ``posecast serve`` subprocess (:func:`serve`, :class:`Server`: ``/metrics``, RSS,
-FDs, CPU from ``/proc``), ``posecast-sim`` subprocesses (:class:`Sim`: progress lines,
-the final JSON summary, CPU), and the arithmetic of one measured window between two
+A ``posecast serve`` subprocess (:func:`serve`, :class:`Server`: a
+:class:`posecast.testing.serve.ServeProcess`: ``/metrics``, RSS, FDs, CPU),
+``posecast-sim`` subprocesses (:class:`Sim`: progress lines, the final JSON summary,
+CPU), and the arithmetic of one measured window between two
 :class:`Snapshot`\ s (:func:`window`: tick quantiles from histogram deltas, overruns,
 CPU shares, poses received against what full rooms would get).
 """
@@ -13,17 +14,17 @@ import contextlib
 import json
 import math
 import os
-import re
 import signal
 import subprocess
 import sys
 import time
-import urllib.request
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+from posecast.testing.serve import Metrics, ServeProcess, cpu_seconds
 
 SECRET = "load-secret-" + "x" * 24
 TICK_HZ = 60.0
@@ -32,16 +33,8 @@ LIMIT_SHARE = 0.01  # ticks over the deadline, and overruns, per window
 MIN_TICK_HZ = 59.0
 REPO = Path(__file__).resolve().parents[1]
 
-Metrics = dict[str, float]
-
 
 # --- the processes -------------------------------------------------------------------------
-
-
-def _cpu_s(pid: int) -> float:
-    """utime + stime of one process so far, seconds."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def _machine_busy_s() -> tuple[float, float]:
@@ -53,50 +46,28 @@ def _machine_busy_s() -> tuple[float, float]:
     return (total - idle) / tick, total / tick
 
 
-def parse_metrics(text: str) -> Metrics:
-    """Prometheus exposition text -> {``name{labels}``: value} (comments skipped)."""
-    out: Metrics = {}
-    for line in text.splitlines():
-        if line and not line.startswith("#"):
-            series, _, value = line.rpartition(" ")
-            out[series] = float(value)
-    return out
+class Server(ServeProcess):
+    """The server under load: a :class:`~posecast.testing.serve.ServeProcess` logging
+    to ``log``, plus what ``load.py`` reads of it."""
 
-
-@dataclass
-class Server:
-    proc: subprocess.Popen[str]
-    port: int
-    log: Path
-
-    @property
-    def pid(self) -> int:
-        return self.proc.pid
+    def __init__(self, samples: int, log: Path, extra: list[str], cpus: set[int] | None) -> None:
+        log.unlink(missing_ok=True)  # this run's lines only
+        super().__init__(
+            "--conn-per-ip-per-min", "1000000", *extra,
+            secret=SECRET, samples=samples, lookahead=None, log=log,
+            preexec_fn=confined(cpus),
+        )  # fmt: skip
 
     def get(self, path: str, timeout_s: float = 5.0) -> str:
-        with urllib.request.urlopen(f"http://127.0.0.1:{self.port}{path}", timeout=timeout_s) as r:
-            return str(r.read().decode())
-
-    def metrics(self) -> Metrics:
-        return parse_metrics(self.get("/metrics"))
-
-    def alive(self) -> bool:
-        try:
-            return self.proc.poll() is None and self.get("/healthz").strip() == "ok"
-        except OSError:
-            return False
-
-    def rss_bytes(self) -> int:
-        status = Path(f"/proc/{self.pid}/status").read_text()
-        match = re.search(r"^VmRSS:\s+(\d+) kB$", status, flags=re.MULTILINE)
-        assert match, "no VmRSS"
-        return int(match.group(1)) * 1024
-
-    def fds(self) -> int:
-        return len(os.listdir(f"/proc/{self.pid}/fd"))
+        """The body of ``GET path``; an error status raises."""
+        status, body = self.http(path, timeout_s)
+        if status != 200:
+            raise RuntimeError(f"{path} answered {status}")
+        return body
 
     def log_problems(self) -> list[str]:
         """The server's log lines at WARNING and above (it runs at --log-level WARNING)."""
+        assert self.log is not None
         lines = self.log.read_text(errors="replace").splitlines()
         return [x for x in lines if x.strip()]
 
@@ -125,49 +96,10 @@ def parse_cpus(text: str) -> set[int]:
 def serve(
     samples: int, workdir: Path, extra: list[str] | None = None, cpus: set[int] | None = None
 ) -> Iterator[Server]:
-    """``python -m posecast serve`` on a free port, stopped (SIGTERM) on the way out."""
-    env = {**os.environ, "POSECAST_TOKEN_SECRET": SECRET, "POSECAST_LOG_LEVEL": "WARNING"}
-    cmd = [
-        sys.executable,
-        "-m",
-        "posecast",
-        "serve",
-        "--port",
-        "0",
-        "--samples",
-        str(samples),
-        "--conn-per-ip-per-min",
-        "1000000",
-        *(extra or []),
-    ]
-    log = workdir / "server.log"
-    with log.open("w") as err:
-        proc = subprocess.Popen(
-            cmd, env=env, stdout=subprocess.PIPE, stderr=err, text=True, preexec_fn=confined(cpus)
-        )
-    try:
-        assert proc.stdout is not None
-        line = proc.stdout.readline()
-        match = re.search(r":(\d+)$", line.strip())
-        if not match:
-            raise RuntimeError(f"server did not start: {line!r} {log.read_text()[-2000:]}")
-        server = Server(proc, int(match.group(1)), log)
-        deadline = time.monotonic() + 30
-        while server.get("/readyz").strip() != "ready":  # pragma: no cover - starts ready
-            if time.monotonic() > deadline:
-                raise RuntimeError("server not ready in 30 s")
-            time.sleep(0.2)
+    """``python -m posecast serve`` on a free port, ready; stopped (SIGTERM) on the way out."""
+    with Server(samples, workdir / "server.log", extra or [], cpus) as server:
+        server.wait_ready(timeout_s=30)
         yield server
-    finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGTERM)
-            try:
-                proc.wait(20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-        if proc.stdout is not None:
-            proc.stdout.close()
 
 
 @dataclass
@@ -236,7 +168,7 @@ class Sim:
         if self.proc.poll() is not None:
             return self.cpu_at_exit_s
         with contextlib.suppress(FileNotFoundError, ProcessLookupError):  # exited just now
-            self.cpu_at_exit_s = _cpu_s(self.proc.pid)
+            self.cpu_at_exit_s = cpu_seconds(self.proc.pid)
         return self.cpu_at_exit_s
 
     def progress(self) -> dict[str, Any]:
@@ -283,7 +215,7 @@ class Snapshot:
         return cls(
             t=time.monotonic(),
             metrics=server.metrics(),
-            server_cpu_s=_cpu_s(server.pid),
+            server_cpu_s=cpu_seconds(server.pid),
             client_cpu_s=sum(s.cpu_s() for s in sims),
             machine_busy_s=busy,
             machine_total_s=total,

@@ -4,11 +4,12 @@
                                   [--seconds 10] [--procs 2] [--json OUT]
 
 Starts a ``redis-server`` (Debian's package; a free port, a temporary directory) and
-two ``posecast serve --redis`` nodes. Every room gets half its players on node A and
-half on node B, each sending 60 Hz frames (the client of ``benchmarks/server.py``).
-Every pose a client receives is classed **same-node** (its source player is on the
-receiver's node) or **cross-node** (it came over Redis), so both latencies come from
-the same run, the same rooms and the same ticks; their difference is the bus's cost.
+two ``posecast serve --redis`` nodes (:class:`posecast.testing.serve.ServeProcess`).
+Every room gets half its players on node A and half on node B, each sending 60 Hz
+frames (the client of ``benchmarks/server.py``). Every pose a client receives is
+classed **same-node** (its source player is on the receiver's node) or **cross-node**
+(it came over Redis), so both latencies come from the same run, the same rooms and
+the same ticks; their difference is the bus's cost.
 
 Latency is frame sent -> that seq's pose received by a room-mate, minus the SSI
 look-ahead tau / 60 s (all processes share CLOCK_MONOTONIC). Redis load comes from
@@ -23,18 +24,17 @@ import importlib.util
 import json
 import multiprocessing as mp
 import os
-import re
 import shutil
 import socket
 import subprocess
-import sys
 import tempfile
 import time
-import urllib.request
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from posecast.testing.serve import Metrics, ServeProcess, metric_sum
 
 SECRET = "bench-secret-" + "x" * 24  # benchmarks/server.py's clients mint with this
 _SERVER_BENCH = Path(__file__).with_name("server.py")  # its 60 Hz client is reused
@@ -67,19 +67,11 @@ def start_redis(workdir: str) -> tuple[subprocess.Popen[bytes], int]:
     raise SystemExit("redis-server did not start")
 
 
-def start_node(name: str, redis_url: str, args: argparse.Namespace) -> subprocess.Popen[str]:
-    env = {**os.environ, "POSECAST_TOKEN_SECRET": SECRET, "POSECAST_LOG_LEVEL": "WARNING"}
-    cmd = [sys.executable, "-m", "posecast", "serve", "--port", "0", "--node-id", name,
-           "--redis", redis_url, "--samples", str(args.samples),
-           "--lookahead", str(args.lookahead), "--conn-per-ip-per-min", "100000"]  # fmt: skip
-    return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, text=True)
-
-
-def node_port(proc: subprocess.Popen[str]) -> int:
-    assert proc.stdout is not None
-    match = re.search(r":(\d+)$", proc.stdout.readline().strip())
-    assert match, "node did not start"
-    return int(match.group(1))
+def start_node(name: str, redis_url: str, args: argparse.Namespace) -> ServeProcess:
+    return ServeProcess(
+        "--node-id", name, "--redis", redis_url, "--conn-per-ip-per-min", "100000",
+        secret=SECRET, samples=args.samples, lookahead=args.lookahead,
+    )  # fmt: skip
 
 
 def _worker(clients: list[tuple[int, str, str]], start_at: float, stop_at: float) -> Any:
@@ -111,18 +103,17 @@ def redis_info(port: int) -> dict[str, float]:
     }
 
 
-def metric_sum(text: str, name: str, label: str = "") -> float:
-    pattern = rf"^{re.escape(name)}(\{{[^}}]*{re.escape(label)}[^}}]*\}})? ([0-9.e+-]+)$"
-    return sum(float(m.group(2)) for m in re.finditer(pattern, text, flags=re.MULTILINE))
-
-
 def run(args: argparse.Namespace) -> dict[str, Any]:
     workdir = tempfile.mkdtemp(prefix="posecast-bench-redis-")
     redis_proc, redis_port = start_redis(workdir)
     url = f"redis://127.0.0.1:{redis_port}/0"
-    nodes = [start_node("node-a", url, args), start_node("node-b", url, args)]
+    nodes: list[ServeProcess] = []
     try:
-        ports = [node_port(n) for n in nodes]
+        for name in ("node-a", "node-b"):
+            nodes.append(start_node(name, url, args))
+        for n in nodes:
+            n.wait_ready()
+        ports = [n.port for n in nodes]
         players = []  # (port, player, room): half of each room on each node
         for r in range(args.rooms):
             for i in range(args.per_room):
@@ -141,14 +132,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             results: dict[str, Any] = {}
             for part in pending.get(timeout=args.seconds + args.warmup + 120):
                 results.update(part)
-        metrics = []
-        for port in ports:
-            with urllib.request.urlopen(f"http://127.0.0.1:{port}/metrics", timeout=5) as r:
-                metrics.append(r.read().decode())
+        metrics = [n.metrics() for n in nodes]
     finally:
         for n in nodes:
-            n.terminate()
-            n.wait(timeout=30)
+            n.stop(timeout_s=30)
         redis_proc.terminate()
         redis_proc.wait(timeout=10)
         shutil.rmtree(workdir, ignore_errors=True)
@@ -162,7 +149,7 @@ def report(
     info0: dict[str, float],
     info1: dict[str, float],
     span: float,
-    metrics: list[str],
+    metrics: list[Metrics],
     t0: float,
     t1: float,
 ) -> dict[str, Any]:
@@ -209,7 +196,7 @@ def report(
         out["publish_bytes_mean"] = round(rate["net_in"] / rate["commands"])
     window = args.seconds + args.warmup + 3.0  # counters span the whole run
     out["bus_out_msgs_per_s_per_node"] = round(
-        np.mean([metric_sum(m, "posecast_bus_messages_total", 'direction="out"') for m in metrics])
+        np.mean([metric_sum(m, "posecast_bus_messages_total", direction="out") for m in metrics])
         / window
     )
     rt_sum = sum(metric_sum(m, "posecast_bus_roundtrip_seconds_sum") for m in metrics)

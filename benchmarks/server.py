@@ -3,7 +3,8 @@
     python benchmarks/server.py [--players 64] [--rooms 8] [--samples 100]
                                 [--seconds 10] [--procs 2] [--json OUT]
 
-The server runs as a subprocess (``python -m posecast serve``); the clients run in
+The server runs as a subprocess (``python -m posecast serve``, a
+:class:`posecast.testing.serve.ServeProcess`); the clients run in
 ``--procs`` other processes, each an asyncio loop of WebSocket clients. Every client
 sends 60 Hz frames replayed from a generated walk (``walk_clip`` ->
 ``derive_frames``), on an absolute schedule with a random phase.
@@ -28,16 +29,14 @@ import json
 import multiprocessing as mp
 import os
 import random
-import re
-import subprocess
-import sys
 import time
-import urllib.request
 from pathlib import Path
 from typing import Any
 
 import msgpack
 import numpy as np
+
+from posecast.testing.serve import Metrics, ServeProcess
 
 SECRET = "bench-secret-" + "x" * 24
 FPS = 60.0
@@ -115,29 +114,18 @@ def _worker(port: int, clients: list[tuple[str, str]], start_at: float, stop_at:
     return out
 
 
-def _cpu_seconds(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
-def _metric(text: str, name: str) -> float:
-    m = re.search(rf"^{re.escape(name)} ([0-9.e+-]+)$", text, flags=re.MULTILINE)
-    return float(m.group(1)) if m else float("nan")
+def _metric(metrics: Metrics, series: str) -> float:
+    return metrics.get(series, float("nan"))
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    env = {**os.environ, "POSECAST_TOKEN_SECRET": SECRET, "POSECAST_LOG_LEVEL": "WARNING"}
-    cmd = [sys.executable, "-m", "posecast", "serve", "--port", "0",
-           "--samples", str(args.samples), "--lookahead", str(args.lookahead),
-           "--conn-per-ip-per-min", "100000",
-           "--engine-threads", str(args.engine_threads)]  # fmt: skip
-    server = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, text=True)
+    server = ServeProcess(
+        "--conn-per-ip-per-min", "100000", "--engine-threads", str(args.engine_threads),
+        secret=SECRET, samples=args.samples, lookahead=args.lookahead,
+    )  # fmt: skip
     try:
-        assert server.stdout is not None
-        line = server.stdout.readline()
-        match = re.search(r":(\d+)$", line.strip())
-        assert match, f"server did not start: {line!r}"
-        port = int(match.group(1))
+        server.wait_ready()
+        port = server.port
         players = [(f"p{i}", f"room{i % args.rooms}") for i in range(args.players)]
         chunks = [players[i :: args.procs] for i in range(args.procs)]
         start_at = time.monotonic() + 2.0 + 0.05 * args.players  # all connected by then
@@ -147,24 +135,22 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         with ctx.Pool(args.procs) as pool:
             pending = pool.starmap_async(_worker, [(port, c, start_at, stop_at) for c in chunks])
             time.sleep(max(0.0, measure_from - time.monotonic()))
-            cpu0, wall0 = _cpu_seconds(server.pid), time.monotonic()
+            cpu0, wall0 = server.cpu_seconds(), time.monotonic()
             time.sleep(max(0.0, stop_at - time.monotonic()))
-            cpu1, wall1 = _cpu_seconds(server.pid), time.monotonic()
+            cpu1, wall1 = server.cpu_seconds(), time.monotonic()
             results: dict[str, Any] = {}
             for part in pending.get(timeout=args.seconds + args.warmup + 120):
                 results.update(part)
-        with urllib.request.urlopen(f"http://127.0.0.1:{port}/metrics", timeout=5) as r:
-            metrics = r.read().decode()
+        metrics = server.metrics()
     finally:
-        server.terminate()
-        server.wait(timeout=15)
+        server.stop(timeout_s=15)
     return _report(args, results, metrics, (cpu1 - cpu0) / (wall1 - wall0), measure_from, stop_at)
 
 
 def _report(
     args: argparse.Namespace,
     results: dict[str, Any],
-    metrics: str,
+    metrics: Metrics,
     cpu_cores: float,
     t0: float,
     t1: float,

@@ -1,6 +1,7 @@
-"""Helpers of the fault-injection tests: a ``posecast serve`` subprocess with RSS
-sampling, a raw client that never reads, a lossy WebSocket relay, and the measures
-the tests report (pose rates, gaps, joint jumps, lost poses).
+"""Helpers of the fault-injection tests: a ``posecast serve`` subprocess
+(:class:`posecast.testing.serve.ServeProcess`) with RSS sampling, a raw client that
+never reads, a lossy WebSocket relay, and the measures the tests report (pose rates,
+gaps, joint jumps, lost poses).
 
 Everything runs on loopback against real processes; nothing here fakes the server.
 """
@@ -13,12 +14,8 @@ import contextlib
 import itertools
 import os
 import random
-import re
-import signal
 import socket
 import struct
-import subprocess
-import sys
 import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -35,8 +32,8 @@ from websockets.typing import Subprotocol
 
 from posecast.online.protocol import decode, encode
 from posecast.online.protocol.messages import SUBPROTOCOL, Frame, Hello, Message, Pose
+from posecast.testing.serve import ServeProcess, rss_bytes
 from tests.online.conftest import SECRET
-from tests.scaleout.conftest import http_get
 
 TICK_HZ = 60.0  # the server default the tests run at
 
@@ -44,71 +41,32 @@ TICK_HZ = 60.0  # the server default the tests run at
 # --- the server under test ---------------------------------------------------------------
 
 
-class ServerProc:
-    """One ``posecast serve`` subprocess on an ephemeral loopback port (8 samples).
+class ServerProc(ServeProcess):
+    """One ``posecast serve`` subprocess on an ephemeral loopback port (8 samples,
+    look-ahead 2, only the ``hmd3+waist`` layout: one model to load, a faster start),
+    with per-IP connection and fatal-error budgets these reconnecting tests never
+    spend. A :class:`~posecast.testing.serve.ServeProcess`.
 
     ``log`` (optional) receives the server's JSON log lines (stderr).
     """
 
     def __init__(self, *extra: str, log: Path | None = None, log_level: str = "WARNING") -> None:
-        env = {k: v for k, v in os.environ.items() if not k.startswith("POSECAST_")}
-        env.update(POSECAST_TOKEN_SECRET=SECRET, POSECAST_LOG_LEVEL=log_level)
-        # Serve only the layout these tests speak: one model to load, a faster start.
-        # (An environment variable, not a flag: servers without the option ignore it.)
-        env["POSECAST_LAYOUTS"] = "hmd3+waist"
-        cmd = [sys.executable, "-m", "posecast", "serve", "--port", "0", "--samples", "8",
-               "--lookahead", "2", "--conn-per-ip-per-min", "100000", *extra]  # fmt: skip
-        self.log = log
-        err = log.open("ab") if log is not None else None
-        try:
-            self.proc = subprocess.Popen(
-                cmd, env=env, stdout=subprocess.PIPE, stderr=err or subprocess.DEVNULL, text=True
-            )
-        finally:
-            if err is not None:
-                err.close()
-        assert self.proc.stdout is not None
-        line = self.proc.stdout.readline()
-        match = re.search(r"listening on ws://[\d.]+:(\d+)", line)
-        if not match:
-            self.close()
-            raise AssertionError(f"posecast serve did not start: {line!r}")
-        self.port = int(match.group(1))
-
-    @property
-    def url(self) -> str:
-        return f"ws://127.0.0.1:{self.port}/"
-
-    def http(self, path: str) -> tuple[int, str]:
-        return http_get(self.port, path)
-
-    def metric(self, name: str) -> float:
-        """Sum of every sample of metric ``name`` (all label sets) in ``/metrics``."""
-        _, body = self.http("/metrics")
-        pattern = rf"^{re.escape(name)}(?:\{{[^}}]*\}})? (\S+)$"
-        return sum(float(v) for v in re.findall(pattern, body, re.M))
+        super().__init__(
+            "--conn-per-ip-per-min", "100000", "--fatal-per-ip-per-min", "100000", *extra,
+            secret=SECRET, samples=8, lookahead=2, log=log, log_level=log_level,
+            env={"POSECAST_LAYOUTS": "hmd3+waist"},
+        )  # fmt: skip
 
     def rss_kib(self) -> int:
-        return rss_kib(self.proc.pid)
+        return rss_kib(self.pid)
 
     def close(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                self.proc.send_signal(signal.SIGKILL)
-                self.proc.wait(timeout=10)
-        if self.proc.stdout is not None:
-            self.proc.stdout.close()
+        self.stop(timeout_s=15)
 
 
 def rss_kib(pid: int) -> int:
     """Resident set size of process ``pid``, KiB (Linux ``/proc``)."""
-    status = Path(f"/proc/{pid}/status").read_text()
-    found = re.search(r"^VmRSS:\s+(\d+) kB$", status, re.M)
-    assert found is not None, "no VmRSS in /proc/PID/status"
-    return int(found[1])
+    return rss_bytes(pid) // 1024
 
 
 class RssSampler:
@@ -123,7 +81,7 @@ class RssSampler:
 
     def _run(self) -> None:
         while not self._stop.is_set():
-            with contextlib.suppress(OSError, AssertionError):  # the process may be gone
+            with contextlib.suppress(OSError, RuntimeError):  # the process may be gone
                 self.samples.append((time.monotonic(), rss_kib(self.pid)))
             self._stop.wait(self.period_s)
 

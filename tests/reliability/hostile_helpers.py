@@ -36,7 +36,6 @@ from pathlib import Path
 from typing import Any
 
 import msgpack
-from prometheus_client.parser import text_string_to_metric_families
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import ClientConnection, connect
 
@@ -61,7 +60,8 @@ from posecast.online.protocol.messages import (
     Welcome,
     seq_delta,
 )
-from posecast.testing.serve import ServeProcess
+from posecast.testing.serve import Series, ServeProcess, parse_series
+from posecast.testing.serve import http_get as serve_http_get
 from tests.online.conftest import walk_frame
 from tests.reliability.healthy_players import HEALTHY, WATCHED
 
@@ -292,7 +292,7 @@ def check_answer(v: Verdict, ans: Answer, table: dict[str, bool]) -> list[str]:
 
 # --- metrics ----------------------------------------------------------------------------
 
-Samples = dict[tuple[str, tuple[tuple[str, str], ...]], float]
+Samples = dict[Series, float]  # {(name, sorted label pairs): value}
 
 
 def http_get(
@@ -323,13 +323,10 @@ def http_get(
 
 
 def scrape(port: int) -> Samples:
-    status, _, body = http_get(port, "/metrics")
-    assert status == 200
-    out: Samples = {}
-    for fam in text_string_to_metric_families(body.decode()):
-        for s in fam.samples:
-            out[(s.name, tuple(sorted(s.labels.items())))] = s.value
-    return out
+    """``/metrics`` of the server on ``port``, parsed by :mod:`posecast.testing.serve`."""
+    status, body = serve_http_get(port, "/metrics")
+    assert status == 200, status
+    return parse_series(body)
 
 
 def errors_by_code(samples: Samples) -> dict[str, float]:

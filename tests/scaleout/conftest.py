@@ -10,20 +10,18 @@ and its own nodes.
 from __future__ import annotations
 
 import os
-import re
 import shutil
-import signal
 import socket
 import subprocess
 import sys
 import time
-import urllib.error
-import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
+from posecast.testing.serve import ServeProcess
+from posecast.testing.serve import http_get as http_get  # re-exported
 from tests.online.conftest import SECRET
 
 HEARTBEAT_S = 1.0  # the defaults: the bound the tests check is the documented one
@@ -35,15 +33,6 @@ def free_port() -> int:
         s.bind(("127.0.0.1", 0))
         port: int = s.getsockname()[1]
         return port
-
-
-def http_get(port: int, path: str) -> tuple[int, str]:
-    """``GET path`` on a loopback server: status and body, error statuses included."""
-    try:
-        with urllib.request.urlopen(f"http://127.0.0.1:{port}{path}", timeout=2) as r:
-            return r.status, r.read().decode()
-    except urllib.error.HTTPError as e:
-        return e.code, e.read().decode()
 
 
 @pytest.fixture(scope="session")
@@ -114,62 +103,39 @@ def redis_server(redis_server_bin: str, tmp_path: Path) -> Iterator[RedisServer]
         server.stop()
 
 
-class Node:
-    """One ``posecast serve --redis URL`` subprocess."""
+class Node(ServeProcess):
+    """One ``posecast serve --redis URL`` subprocess (8 samples, look-ahead 2): a
+    :class:`~posecast.testing.serve.ServeProcess`, listening once constructed."""
 
     def __init__(self, name: str, redis_url: str, *extra: str) -> None:
-        env = {k: v for k, v in os.environ.items() if not k.startswith("POSECAST_")}
-        env.update(POSECAST_TOKEN_SECRET=SECRET, POSECAST_LOG_LEVEL="WARNING")
-        cmd = [sys.executable, "-m", "posecast", "serve", "--port", "0", "--samples", "8",
-               "--lookahead", "2", "--redis", redis_url, "--node-id", name,
-               "--redis-heartbeat-s", str(HEARTBEAT_S), "--redis-node-ttl-s", str(NODE_TTL_S),
-               "--conn-per-ip-per-min", "10000", *extra]  # fmt: skip
         self.name = name
-        self.proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, text=True)
-        self.port = 0
+        super().__init__(
+            "--redis", redis_url, "--node-id", name,
+            "--redis-heartbeat-s", str(HEARTBEAT_S), "--redis-node-ttl-s", str(NODE_TTL_S),
+            "--conn-per-ip-per-min", "10000", "--fatal-per-ip-per-min", "10000", *extra,
+            secret=SECRET, samples=8, lookahead=2,
+        )  # fmt: skip
 
     def wait_listening(self) -> None:
-        assert self.proc.stdout is not None
-        line = self.proc.stdout.readline()
-        match = re.search(r"listening on ws://[\d.]+:(\d+)", line)
-        assert match, f"node {self.name} did not start: {line!r}"
-        self.port = int(match.group(1))
+        """Nothing left to wait for: the constructor has read the port."""
 
-    def http(self, path: str) -> tuple[int, str]:
-        return http_get(self.port, path)
-
-    def wait_ready(self, timeout: float = 10.0) -> None:
-        deadline = time.monotonic() + timeout
-        while self.http("/readyz")[0] != 200:
-            assert time.monotonic() < deadline, f"node {self.name}: {self.http('/readyz')}"
-            time.sleep(0.05)
-
-    def kill(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGKILL)
-            self.proc.wait(timeout=10)
+    def wait_ready(self, timeout_s: float = 10.0) -> None:
+        super().wait_ready(timeout_s)
 
     def close(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                self.kill()
-        if self.proc.stdout is not None:
-            self.proc.stdout.close()
+        self.stop(timeout_s=15)
 
 
 @pytest.fixture
 def nodes(redis_server: RedisServer) -> Iterator[tuple[Node, Node]]:
-    """Nodes A and B on one Redis, started together, both ready."""
-    pair = (Node("node-a", redis_server.url), Node("node-b", redis_server.url))
+    """Nodes A and B on one Redis, started one after the other, both ready."""
+    pair: list[Node] = []
     try:
-        for n in pair:
-            n.wait_listening()
+        for name in ("node-a", "node-b"):
+            pair.append(Node(name, redis_server.url))
         for n in pair:
             n.wait_ready()
-        yield pair
+        yield pair[0], pair[1]
     finally:
         for n in pair:
             n.close()

@@ -25,9 +25,10 @@ import sys
 import time
 import urllib.error
 import urllib.request
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from types import TracebackType
+from typing import Self
 
 from prometheus_client.parser import text_string_to_metric_families
 
@@ -45,29 +46,47 @@ def http_get(port: int, path: str, timeout_s: float = 5.0) -> tuple[int, str]:
             return e.code, e.read().decode()
 
 
+Series = tuple[str, tuple[tuple[str, str], ...]]  # (name, sorted (label, value) pairs)
+_LABEL = re.compile(r'(\w+)="((?:[^"\\]|\\.)*)"')
+
+
+def _escape(value: str) -> str:
+    """A label value as the exposition format writes it between quotes."""
+    return value.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
+
+
 def series_name(name: str, labels: Mapping[str, str]) -> str:
-    """The key :func:`parse_metrics` uses: ``name{a="x",b="y"}`` with sorted labels."""
+    """The key :func:`parse_metrics` uses: ``name{a="x",b="y"}`` with sorted labels
+    (values escaped as in the exposition format)."""
     if not labels:
         return name
-    inner = ",".join(f'{k}="{v}"' for k, v in sorted(labels.items()))
+    inner = ",".join(f'{k}="{_escape(v)}"' for k, v in sorted(labels.items()))
     return f"{name}{{{inner}}}"
+
+
+def parse_series(text: str) -> dict[Series, float]:
+    """Prometheus exposition text -> {(name, sorted label pairs): value}."""
+    out: dict[Series, float] = {}
+    for family in text_string_to_metric_families(text):
+        for s in family.samples:
+            out[(s.name, tuple(sorted(s.labels.items())))] = float(s.value)
+    return out
 
 
 def parse_metrics(text: str) -> Metrics:
     """Prometheus exposition text -> {series: value} (see :func:`series_name`)."""
-    out: Metrics = {}
-    for family in text_string_to_metric_families(text):
-        for s in family.samples:
-            out[series_name(s.name, s.labels)] = float(s.value)
-    return out
+    return {series_name(n, dict(labels)): v for (n, labels), v in parse_series(text).items()}
 
 
 def metric_sum(metrics: Metrics, name: str, **labels: str) -> float:
-    """Sum of every series of ``name`` whose labels include ``labels``."""
+    """Sum of every series of ``name`` whose labels include ``labels``. ``name`` may
+    carry labels too, as PromQL writes them: ``posecast_errors_total{code="TOO_LARGE"}``."""
+    base_name, _, inline = name.partition("{")
+    want = dict(_LABEL.findall(inline)) | {k: _escape(v) for k, v in labels.items()}
     total = 0.0
     for series, value in metrics.items():
         base, _, rest = series.partition("{")
-        if base == name and all(f'{k}="{v}"' in rest for k, v in labels.items()):
+        if base == base_name and want.items() <= dict(_LABEL.findall(rest)).items():
             total += value
     return total
 
@@ -92,6 +111,7 @@ class ServeProcess:
     first line. The environment is this process's minus every ``POSECAST_*``, plus
     ``POSECAST_TOKEN_SECRET=secret``, ``POSECAST_LOG_LEVEL`` and ``env``.
 
+    ``samples``, ``lookahead``: None leaves the server's default.
     ``log``: a file that receives the server's JSON log lines (stderr), else dropped.
     ``preexec_fn``: run in the child before it starts (CPU affinity, niceness).
     """
@@ -100,8 +120,8 @@ class ServeProcess:
         self,
         *flags: str,
         secret: str,
-        samples: int = 8,
-        lookahead: int = 2,
+        samples: int | None = 8,
+        lookahead: int | None = 2,
         log: Path | None = None,
         log_level: str = "WARNING",
         env: Mapping[str, str] | None = None,
@@ -110,10 +130,12 @@ class ServeProcess:
         full_env = {k: v for k, v in os.environ.items() if not k.startswith("POSECAST_")}
         full_env.update(POSECAST_TOKEN_SECRET=secret, POSECAST_LOG_LEVEL=log_level)
         full_env.update(env or {})
-        self.cmd: Sequence[str] = [
-            sys.executable, "-m", "posecast", "serve", "--port", "0",
-            "--samples", str(samples), "--lookahead", str(lookahead), *flags,
-        ]  # fmt: skip
+        self.cmd = [sys.executable, "-m", "posecast", "serve", "--port", "0"]
+        if samples is not None:
+            self.cmd += ["--samples", str(samples)]
+        if lookahead is not None:
+            self.cmd += ["--lookahead", str(lookahead)]
+        self.cmd += flags
         self.log = log
         err = log.open("ab") if log is not None else None
         try:
@@ -139,7 +161,7 @@ class ServeProcess:
 
     # --- context manager -------------------------------------------------------------
 
-    def __enter__(self) -> ServeProcess:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(

@@ -66,6 +66,7 @@ from posecast_client.protocol import (
     SUBPROTOCOL,
     Bye,
     Calibrate,
+    Layout,
     Message,
     Ping,
     Welcome,
@@ -228,7 +229,7 @@ class Client:
         room: str,
         name: str,
         *,
-        layout: str = "hmd3+waist",
+        layout: str = Layout.HMD3_WAIST,
         rate_hz: float | None = None,
         watch: tuple[str, ...] = (),
     ) -> Welcome:
@@ -236,8 +237,9 @@ class Client:
 
         Args:
             layout: the tracked points, which picks the server's model:
-                ``hmd3+waist`` (head, both hands, waist) or ``hmd3`` (headset and
-                controllers only; the waist slot of frames is ignored).
+                :class:`Layout` ``HMD3_WAIST`` (``"hmd3+waist"``: head, both hands,
+                waist) or ``HMD3`` (``"hmd3"``: headset and controllers only; the
+                waist slot of frames is ignored). Servers serve both by default.
             rate_hz: frames per second this client will send (absent: 60).
             watch: further rooms to watch (backend tokens only).
 
@@ -251,7 +253,7 @@ class Client:
             raise RuntimeError("join() once per client, after `await connect(...)`")
         self._hello_args = {"room": room, "name": name, "layout": layout, "rate_hz": rate_hz,
                             "watch": watch}  # fmt: skip
-        if layout == "hmd3+waist":
+        if layout == Layout.HMD3_WAIST:
             self._hello_args["layout"] = None  # the default: canonical hellos leave it out
         try:
             welcome = await self._handshake(self._ws)

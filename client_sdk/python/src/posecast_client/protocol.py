@@ -14,6 +14,7 @@ order. Messages that hold arrays compare by identity; compare their wire maps
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from enum import StrEnum
 from typing import ClassVar
 
 import numpy as np
@@ -25,7 +26,17 @@ F64 = NDArray[np.float64]
 
 PROTOCOL_VERSION = 1
 SUBPROTOCOL = "posecast.v1"
-LAYOUTS = ("hmd3+waist", "hmd3")  # hmd3 decodes but servers refuse it for now
+
+
+class Layout(StrEnum):
+    """The tracked points a player sends (``hello.layout``); each picks the server's
+    model. The same names as the server's ``posecast.tracking.layouts.Layout``."""
+
+    HMD3_WAIST = "hmd3+waist"  # head, both hands, waist (the default)
+    HMD3 = "hmd3"  # headset and controllers only: the frames' waist slot is ignored
+
+
+LAYOUTS = tuple(Layout)  # the wire enum, in the schema's order
 ROLES = ("player", "spectator", "backend")
 PRESENCE_EVENTS = ("join", "leave", "stale", "active")
 SELECTOR_KINDS = ("anomaly", "target", "obstacle")
