@@ -26,6 +26,7 @@ from typing import Any
 
 from posecast.online.auth.tokens import mint
 from posecast.testing.serve import ServeProcess, metric_sum
+from posecast.tracking.layouts import Layout
 
 REPO = Path(__file__).resolve().parents[1]
 SECRET = "test-secret-" + "x" * 20  # the healthy players' tokens: tests/online/conftest.py
@@ -75,9 +76,8 @@ def _window(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
 
 
 def run(fatal_per_min: int, seconds: float, ips: int, attempts: int) -> dict[str, Any]:
-    flags = ["--conn-per-ip-per-min", "1000000", "--fatal-per-ip-per-min", str(fatal_per_min),
-             "--lookahead", "1"]  # fmt: skip
-    env = {"POSECAST_LAYOUTS": "hmd3+waist"}
+    flags = ["--conn-per-ip-per-min", "1000000", "--fatal-per-ip-per-min", str(fatal_per_min)]
+    env = {"POSECAST_LAYOUTS": Layout.HMD3_WAIST.value}
     with ServeProcess(*flags, secret=SECRET, samples=8, lookahead=1, env=env) as server:
         server.wait_ready()
         players = _players(server.port)

@@ -37,6 +37,7 @@ def make_cfg(**changes: Any) -> ServerConfig:
         "samples": 8,
         "conn_per_ip_per_min": 10_000,
         "fatal_per_ip_per_min": 10_000,
+        "accepts_per_s": 10_000.0,
     }
     base.update(changes)
     return ServerConfig(**base)

@@ -33,6 +33,7 @@ from websockets.typing import Subprotocol
 from posecast.online.protocol import decode, encode
 from posecast.online.protocol.messages import SUBPROTOCOL, Frame, Hello, Message, Pose
 from posecast.testing.serve import ServeProcess, rss_bytes
+from posecast.tracking.layouts import Layout
 from tests.online.conftest import SECRET
 
 TICK_HZ = 60.0  # the server default the tests run at
@@ -54,7 +55,7 @@ class ServerProc(ServeProcess):
         super().__init__(
             "--conn-per-ip-per-min", "100000", "--fatal-per-ip-per-min", "100000", *extra,
             secret=SECRET, samples=8, lookahead=2, log=log, log_level=log_level,
-            env={"POSECAST_LAYOUTS": "hmd3+waist"},
+            env={"POSECAST_LAYOUTS": Layout.HMD3_WAIST.value},
         )  # fmt: skip
 
     def rss_kib(self) -> int:

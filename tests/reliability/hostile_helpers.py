@@ -62,6 +62,7 @@ from posecast.online.protocol.messages import (
 )
 from posecast.testing.serve import Series, ServeProcess, parse_series
 from posecast.testing.serve import http_get as serve_http_get
+from posecast.tracking.layouts import Layout
 from tests.online.conftest import walk_frame
 from tests.reliability.healthy_players import HEALTHY, WATCHED
 
@@ -414,7 +415,7 @@ class Arena:
             secret=self.cfg.token_secret,
             samples=self.cfg.samples,
             lookahead=self.cfg.lookahead,
-            env={"POSECAST_LAYOUTS": "hmd3+waist"},  # one model to load: a faster start
+            env={"POSECAST_LAYOUTS": Layout.HMD3_WAIST.value},  # one model: a faster start
         )
         self.port = self.server.port
         try:

@@ -36,7 +36,7 @@ from tests.reliability.fault_helpers import (
 )
 
 pytestmark = pytest.mark.timeout(120)
-# Server defaults (service/config.py) the assertions are about.
+# Server defaults (online/config.py) the assertions are about.
 SLOW_CONSUMER_S = 2.0  # slow_consumer_s: a writer undrained this long is cut off
 SOCKET_SNDBUF_BYTES = 65536  # socket_sndbuf_bytes: the kernel's share of the backlog
 

@@ -18,7 +18,7 @@ from tests.online.wsclient import Client
 from tests.reliability.fault_helpers import ServerProc, fmt, report, seqs_in
 
 pytestmark = pytest.mark.timeout(120)
-DRAIN_TIMEOUT_S = 5.0  # drain_timeout_s, the server default (service/config.py)
+DRAIN_TIMEOUT_S = 5.0  # drain_timeout_s, the server default (online/config.py)
 ROOMS, PER_ROOM = 2, 4
 
 

@@ -41,7 +41,7 @@ MAX_SECONDS = 60.0
 
 @pytest.fixture(scope="module")
 def arena() -> Iterator[Arena]:
-    cfg = make_cfg(lookahead=1, fatal_per_ip_per_min=FATAL_PER_MIN)
+    cfg = make_cfg(lookahead=1, fatal_per_ip_per_min=FATAL_PER_MIN, accepts_per_s=100.0)
     with Arena(cfg) as a:
         yield a
 

@@ -1,6 +1,6 @@
 """What each HTTP endpoint of the server's one port tells a caller without a token.
 
-The routes (``service/app.py``, ``service/viewer.py``): ``/healthz``, ``/readyz``,
+The routes (``online/shell/http.py``): ``/healthz``, ``/readyz``,
 ``/metrics``, the viewer page and script under ``/viewer/``, and, with ``--dev`` only
 and from loopback only, ``/viewer/token`` and ``/viewer/rooms``. Everything else is a
 WebSocket handshake, which sends nothing before a ``hello`` with a valid token.
@@ -69,7 +69,7 @@ def test_no_route_names_a_room_or_player(arena: Arena) -> None:
             seen[path, source] = status
             text = body.decode("utf-8", "replace")
             if dev and path.startswith("/viewer/rooms"):
-                # Deliberate, documented (service/viewer.py): with --dev, loopback callers
+                # Deliberate, documented (online/shell/http.py): with --dev, loopback callers
                 # may list this node's rooms and mint spectator tokens.
                 assert ROOM in text and status == 200
                 continue

@@ -28,7 +28,7 @@ class Metrics:
         self.connections = Gauge(
             "posecast_connections", "Open WebSocket connections, by role", ["role"], registry=r
         )
-        self.players = Gauge("posecast_players", "Players in the engine", registry=r)
+        self.players = Gauge("posecast_players", "Players in this node's rooms", registry=r)
         self.rooms = Gauge("posecast_rooms", "Rooms open", registry=r)
         self.connects = Counter(
             "posecast_connects", "Connection attempts, by result", ["result"], registry=r

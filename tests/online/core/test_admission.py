@@ -1,5 +1,5 @@
-"""Admission (posecast.online.core.admission): the one error path for a message, and
-the fatal-error budget that turns a repeat offender away."""
+"""Admission (posecast.online.core.admission): joins, takeovers, kicks, refusals,
+timeouts and shutdown; the one error path for a message; the fatal-error budget."""
 
 from __future__ import annotations
 
@@ -9,11 +9,22 @@ import time
 import pytest
 
 from posecast.online.core.hub import Hub
-from posecast.online.core.session import Session
+from posecast.online.core.session import Phase, Session
 from posecast.online.metrics import Metrics
 from posecast.online.protocol import decode, encode
-from posecast.online.protocol.messages import Error, Hello, Message, Ping, Pong
-from tests.online.conftest import make_cfg, token
+from posecast.online.protocol.messages import (
+    Bye,
+    Error,
+    Hello,
+    Kick,
+    Message,
+    Ping,
+    Pong,
+    Presence,
+    Welcome,
+)
+from tests.online.conftest import make_cfg, token, walk_frame
+from tests.online.core.harness import Harness
 
 IP = "10.0.0.9"
 
@@ -74,3 +85,145 @@ def test_being_replaced_or_kicked_does_not_spend_the_budget() -> None:
     for _ in range(3):  # each join replaces the one before (REPLACED, fatal)
         _joined(hub, "p", now)
     assert hub.admits(IP, now)
+
+
+def test_reconnect_with_the_same_player_takes_over_silently() -> None:
+    h = Harness()
+    a1, b = h.join("a"), h.join("b")
+    h.inbox(a1), h.inbox(b)
+    h.hub.take_tick_input()
+    a2 = h.join("a")
+    assert h.codes(a1) == ["REPLACED"] and h.hub.outbox(a1).closed  # type: ignore[union-attr]
+    assert isinstance(h.inbox(a2)[0], Welcome)
+    assert h.inbox(b) == []  # no leave/join for a takeover
+    assert h.hub.take_tick_input().ops == []  # the engine keeps the player
+    h.hub.disconnect(a1, h.now)  # the old socket goes away later
+    assert h.hub.rooms.room_of("a") == "r1" and h.hub.connections.by_player["a"] == a2
+
+
+def test_bye_burns_the_token() -> None:
+    h = Harness()
+    tok = token(player="a")
+    a = h.join("a", tok=tok)
+    h.send(a, Bye("done"))
+    assert isinstance(h.inbox(a)[-1], Bye)
+    h.hub.disconnect(a, h.now)
+    again = h.join("a", tok=tok)
+    assert h.codes(again) == ["UNAUTHENTICATED"]
+
+
+def test_backend_kicks_a_player_it_watches_but_no_other() -> None:
+    h = Harness()
+    a, other = h.join("a"), h.join("x", room="r9")
+    be = h.join("be", role="backend", rooms=("r2",))
+    watcher = h.inbox(be)
+    assert isinstance(watcher[0], Welcome) and [m.player for m in watcher[0].members] == ["a"]
+    h.inbox(a), h.inbox(other)
+    h.send(a, walk_frame(0))  # a is in the engine now
+    h.send(be, Kick("x"))
+    assert h.codes(be) == ["NOT_FOUND"]
+    h.send(be, Kick("a", "cheating"))
+    (kicked,) = h.inbox(a)
+    assert isinstance(kicked, Error) and (kicked.code, kicked.message) == ("KICKED", "cheating")
+    assert h.hub.rooms.room_of("a") is None
+    assert ("remove", "a") in [(op.kind, op.player) for op in h.hub.take_tick_input().ops]
+
+
+def test_fatal_errors_end_the_session_and_leave_the_room() -> None:
+    h = Harness()
+    a, b = h.join("a"), h.join("b")
+    h.inbox(a), h.inbox(b)
+    h.hub.receive(a, b"\xc1", h.now)
+    assert h.codes(a) == ["MALFORMED"]
+    assert h.hub.connections.conns[a].session.phase is Phase.CLOSED
+    assert h.inbox(b) == [Presence("leave", "r1", "a", "A")]
+    assert h.hub.metrics.value("posecast_errors_total", {"code": "MALFORMED"}) == 1
+
+
+def test_text_frames_are_malformed_and_close_with_1003() -> None:
+    h = Harness()
+    a = h.join("a")
+    h.inbox(a)
+    h.hub.receive(a, '{"type": "ping"}', h.now)
+    assert h.codes(a) == ["MALFORMED"]
+    assert h.hub.outbox(a).close_code == 1003  # type: ignore[union-attr]
+
+
+def test_room_full() -> None:
+    h = Harness(max_players_per_room=1)
+    h.join("a")
+    b = h.join("b")
+    assert h.codes(b) == ["ROOM_FULL"]
+
+
+def test_non_fatal_error_replies_are_budgeted_but_all_counted() -> None:
+    h = Harness(error_rate_hz=5.0)
+    a = h.join("a")
+    h.inbox(a)
+    for _ in range(20):
+        h.send(a, Kick("zz"))  # a player may not kick
+    assert h.codes(a) == ["FORBIDDEN"] * 5
+    assert h.hub.metrics.value("posecast_errors_total", {"code": "FORBIDDEN"}) == 20
+
+
+def test_timeouts_and_slow_consumers() -> None:
+    h = Harness(hello_timeout_s=1.0, slow_consumer_s=2.0, idle_timeout_s=30.0)
+    silent = h.hub.connect("10.0.0.2", h.now)
+    slow = h.join("slow")
+    h.hub.check_timeouts(h.now + 1.5)
+    assert h.codes(silent) == ["TIMED_OUT"]
+    box = h.hub.outbox(slow)
+    assert box is not None
+    box.take()  # the writer took the welcome and is stuck sending it
+    h.hub.check_timeouts(h.now + 2.5)
+    assert slow in h.hub.pop_aborts()
+    assert h.hub.metrics.value("posecast_errors_total", {"code": "SLOW_CONSUMER"}) == 1
+    idle = h.join("idle")
+    quiet = h.join("quiet", role="spectator")  # watchers only receive; pings keep them
+    h.inbox(idle), h.inbox(quiet)
+    h.hub.check_timeouts(h.now + 31.0)
+    assert h.codes(idle) == ["TIMED_OUT"] and h.codes(quiet) == []
+
+
+def test_shutdown_says_bye_to_everyone() -> None:
+    h = Harness()
+    conns = [h.join(p) for p in "abc"]
+    for conn in conns:
+        h.inbox(conn)
+    h.hub.shutdown(h.now)
+    for conn in conns:
+        (bye,) = h.inbox(conn)
+        box = h.hub.outbox(conn)
+        assert isinstance(bye, Bye) and bye.reason == "SERVER_SHUTDOWN"
+        assert box is not None and (box.close_code, box.close_reason) == (1001, "SERVER_SHUTDOWN")
+
+
+def test_timeouts_do_not_spend_the_budget_but_an_oversized_message_does() -> None:
+    hub, now = Hub(make_cfg(fatal_per_ip_per_min=1, hello_timeout_s=1.0), Metrics()), time.time()
+    hub.connect(IP, now)
+    hub.check_timeouts(now + 2.0)  # no hello in time: TIMED_OUT, fatal
+    assert hub.admits(IP, now + 2.0)
+    conn = _joined(hub, "p", now)
+    hub.oversized(conn, now)  # websockets closed it 1009 past the frame cap
+    assert hub.metrics.value("posecast_errors_total", {"code": "TOO_LARGE"}) == 1
+    assert not hub.admits(IP, now)
+
+
+def test_a_bug_while_admitting_a_hello_ends_the_connection_with_internal(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from posecast.online.core.admission import Admission
+
+    hub, now = Hub(make_cfg(), Metrics()), time.time()
+
+    def broken(self: Admission, *args: object) -> None:
+        raise RuntimeError("a bug in the join")
+
+    monkeypatch.setattr(Admission, "_join", broken)
+    conn = hub.connect(IP, now)
+    hub.receive(conn, encode(Hello(1, token(player="p"), "r1", "P")), now)
+    (err,) = _inbox(hub, conn)
+    assert isinstance(err, Error) and (err.code, err.fatal) == ("INTERNAL", True)
+    box = hub.outbox(conn)
+    assert box is not None and box.closed and box.close_code == 1011
+    assert hub.rooms.room_of("p") is None and "p" not in hub.connections.by_player

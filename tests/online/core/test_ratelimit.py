@@ -62,3 +62,12 @@ def test_the_fatal_budget_forgets_the_least_recent_address_past_its_bound() -> N
     for ip in ("a", "b", "c"):
         budget.charge(ip, 0.0)
     assert not budget.exhausted("a", 0.0) and budget.exhausted("c", 0.0)
+
+
+def test_an_ipv6_host_is_one_address_per_64_and_mapped_ipv4_is_its_ipv4() -> None:
+    budget = FatalBudget(per_minute=1)
+    budget.charge("2001:db8:1:2::1", 0.0)
+    assert budget.exhausted("2001:db8:1:2:ffff::9", 0.0)  # the same /64
+    assert not budget.exhausted("2001:db8:1:3::1", 0.0)
+    budget.charge("::ffff:192.0.2.7", 0.0)
+    assert budget.exhausted("192.0.2.7", 0.0)

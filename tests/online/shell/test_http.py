@@ -112,3 +112,54 @@ def test_dev_room_list() -> None:
     rooms.add_watcher(("lobby",), "cam")
     listing = json.loads(get("/viewer/rooms", rooms=rooms).body)
     assert listing == [{"room": "demo", "players": 2}, {"room": "lobby", "players": 0}]
+
+
+# --- the upgrade gate ------------------------------------------------------------------
+
+
+class GatePeer:
+    """A connection as :class:`~posecast.online.shell.http.HttpRoutes` sees it."""
+
+    def __init__(self, ip: str) -> None:
+        self.remote_address = (ip, 50000)
+
+    def respond(self, status: int, text: str) -> Response:
+        return Response(status, "", Headers(), text.encode())
+
+
+def _gate(**cfg: Any) -> tuple[viewer.HttpRoutes, Any, list[float]]:
+    from posecast.online.cluster.memory import MemoryBus
+    from posecast.online.core.hub import Hub
+    from posecast.online.metrics import Metrics
+
+    config = ServerConfig(token_secret=SECRET, **cfg)
+    metrics, clock = Metrics(), [0.0]
+    hub = Hub(config, metrics)
+    routes = viewer.HttpRoutes(
+        config, metrics, hub, MemoryBus(clock=lambda: clock[0]),
+        ready=lambda: True, open_connections=lambda: 0, clock=lambda: clock[0],
+    )  # fmt: skip
+    return routes, hub, clock
+
+
+def _upgrade(routes: viewer.HttpRoutes, ip: str) -> int | None:
+    answer = routes(GatePeer(ip), Request("/", Headers()))
+    return None if answer is None else answer.status_code
+
+
+def test_the_gate_refuses_an_address_whose_fatal_budget_is_spent_with_429() -> None:
+    routes, hub, clock = _gate(fatal_per_ip_per_min=2)
+    for _ in range(2):
+        hub.admission.fatal.charge("10.0.0.5", clock[0])
+    assert _upgrade(routes, "10.0.0.5") == 429
+    assert _upgrade(routes, "10.0.0.6") is None  # another address goes on to the handshake
+    assert routes.metrics.value("posecast_connects_total", {"result": "fatal_budget"}) == 1
+    clock[0] = 31.0  # 2 a minute: one back after 30 s
+    assert _upgrade(routes, "10.0.0.5") is None
+
+
+def test_the_gate_caps_new_connections_node_wide_with_503() -> None:
+    routes, _, _ = _gate(accepts_per_s=3.0)
+    answers = [_upgrade(routes, f"10.0.1.{i}") for i in range(5)]  # five addresses at once
+    assert answers == [None, None, None, 503, 503]
+    assert routes.metrics.value("posecast_connects_total", {"result": "busy"}) == 2

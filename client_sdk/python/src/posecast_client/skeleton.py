@@ -4,7 +4,7 @@ World: right-handed, +Y up, metres; a character faces +Z in its rest pose and it
 left side is +X. The rest pose (every local rotation identity) is a T-pose. Joint
 ``j``'s world position is ``p[parent] + R_world[parent] @ OFFSETS_M[j]``.
 
-These tables mirror ``server/posecast/skeleton.py`` and ``tracking.py`` (a test
+These tables mirror ``server/posecast/skeleton.py`` and ``tracking/features.py`` (a test
 compares them when the server package is installed).
 """
 

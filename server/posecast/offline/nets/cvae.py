@@ -31,6 +31,8 @@ from dataclasses import asdict, dataclass
 import torch
 from torch import nn
 
+from posecast.tracking.layouts import Layout
+
 
 @dataclass(frozen=True)
 class CVAEConfig:
@@ -41,7 +43,7 @@ class CVAEConfig:
     n_rot: int = 18
     deterministic: bool = False  # the AE ablation: mu/sigma replaced by one FC layer
     encoder_sees_pose: bool = True
-    layout: str = "hmd3+waist"  # posecast.tracking.layouts.Layout value
+    layout: str = Layout.HMD3_WAIST.value  # stored as its string in the checkpoint
     root_outputs: int = 0  # 9 when the decoder predicts the pelvis pose (layout hmd3)
 
     def __post_init__(self) -> None:

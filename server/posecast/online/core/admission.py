@@ -4,7 +4,7 @@
 
     bytes --decode--> Session.handle --action--> Admission
         hello        -> replay guard, capacity, takeover -> Rooms, welcome, presence
-        frame        -> EngineInbox (latest wins)
+        frame        -> EngineInbox (a short queue per player)
         calibrate, selector -> EngineInbox; kick -> ending another connection
         bye / fatal error / timeout -> one ending: final message, rooms, engine, bus
 
@@ -35,6 +35,7 @@ from posecast.errors import (
     ServerShutdownError,
     SlowConsumerError,
     TimedOutError,
+    TooLargeError,
 )
 from posecast.online.auth.tokens import ReplayGuard
 from posecast.online.cluster.bus import Bus
@@ -73,12 +74,15 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("posecast.core")
 _DROP_REASON = {"OUT_OF_ORDER": "out_of_order", "DUPLICATE": "duplicate", "RATE_LIMITED": "rate"}
-# Fatal errors that are the server's decision or the room's state, not the client's
-# misbehaviour: they never spend the client IP's fatal budget.
+# Fatal errors a conforming client can meet (the server's decision, the room's state,
+# a slow network or an idle headset): they never spend the address's fatal budget.
 _NOT_THE_CLIENTS_FAULT = frozenset(
     c.code
-    for c in (ReplacedError, KickedError, ServerShutdownError, RoomFullError, SlowConsumerError)
-)
+    for c in (
+        ReplacedError, KickedError, ServerShutdownError, RoomFullError, SlowConsumerError,
+        TimedOutError,
+    )
+)  # fmt: skip
 
 
 class Admission:
@@ -111,6 +115,7 @@ class Admission:
         self.wall_offset_s = wall_offset_s
         self._changed = changed
         self.fatal = FatalBudget(cfg.fatal_per_ip_per_min)
+        self._bug_logs = TokenBucket(1.0, 10.0)  # tracebacks logged: 10, then one a second
         self.shutting_down = False
         self._superseded = metrics.frames_dropped.labels("superseded")  # hot path: bind once
 
@@ -140,6 +145,7 @@ class Admission:
             self._charge(c, exc, now)
             self.end(c, now, final=Error.from_exception(exc), close_code=1003)
             return
+        action: Action | None = None
         try:
             action = c.session.handle(decode(data, limits=self.limits), now)
             if action is not None:
@@ -147,8 +153,26 @@ class Admission:
         except ProtocolError as exc:
             self.refuse(c, exc, now)
         except Exception:  # a bug: the sender hears INTERNAL, nobody else notices
-            log.exception("internal error", extra={"conn": conn, "ip": c.session.ip})
-            self.refuse(c, InternalError("the server failed to handle this message"), now)
+            if self._bug_logs.allow(now):  # one bad input must not flood the log
+                log.exception("internal error", extra={"conn": conn, "ip": c.session.ip})
+            self.metrics.errors.labels(InternalError.code).inc()
+            if isinstance(action, Join) or c.session.phase is Phase.AWAIT_HELLO:
+                # A join that failed half-way is not a session to go on with: end it
+                # (close 1011) rather than leave it joined outside its room.
+                internal = InternalError("the server failed to admit this connection", fatal=True)
+                self.end(c, now, final=Error.from_exception(internal))
+            elif c.errors.allow(now):
+                msg = InternalError("the server failed to handle this message")
+                self.router.send(c, Error.from_exception(msg), now)
+
+    def oversized(self, conn: int, now: float) -> None:
+        """``conn`` sent a message past the WebSocket frame cap: websockets closed it
+        (1009) before the codec saw it. Counted, and charged, as a ``TOO_LARGE``."""
+        c = self.conns.get(conn)
+        exc = TooLargeError("message over the WebSocket frame cap")
+        self.metrics.errors.labels(exc.code).inc()
+        if c is not None:
+            self._charge(c, exc, now)
 
     def disconnect(self, conn: int, now: float) -> None:
         """The socket is gone (after any close): forget the connection."""

@@ -87,6 +87,9 @@ class Hub:
     def disconnect(self, conn: int, now: float) -> None:
         self.admission.disconnect(conn, now)
 
+    def oversized(self, conn: int, now: float) -> None:
+        self.admission.oversized(conn, now)
+
     def check_timeouts(self, now: float) -> None:
         self.admission.check_timeouts(now)
 
@@ -106,7 +109,11 @@ class Hub:
     # --- the tick ------------------------------------------------------------------------
 
     def take_tick_input(self) -> TickInput:
-        return self.inbox.take()
+        late = self.inbox.late
+        tick = self.inbox.take()
+        if self.inbox.late > late:
+            self.metrics.frames_dropped.labels("superseded").inc(self.inbox.late - late)
+        return tick
 
     def deliver(self, out: TickOutput, now: float) -> None:
         self.router.deliver(out, now)

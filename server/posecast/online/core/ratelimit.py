@@ -5,8 +5,23 @@ Both are pure: the caller passes the time (seconds, any monotonic clock).
 
 from __future__ import annotations
 
+import ipaddress
 from collections import OrderedDict, deque
 from dataclasses import dataclass, field
+
+
+def address_key(ip: str) -> str:
+    """The unit a per-address limit counts: an IPv4 address, or an IPv6 address's /64
+    (one host usually holds a whole /64, so rotating within it must not escape)."""
+    try:
+        addr = ipaddress.ip_address(ip)
+    except ValueError:
+        return ip
+    if isinstance(addr, ipaddress.IPv6Address):
+        if addr.ipv4_mapped is not None:
+            return str(addr.ipv4_mapped)
+        return str(ipaddress.IPv6Network((addr, 64), strict=False))
+    return str(addr)
 
 
 @dataclass
@@ -57,6 +72,7 @@ class IpLimiter:
     _seen: OrderedDict[str, deque[float]] = field(default_factory=OrderedDict)
 
     def allow(self, ip: str, now: float) -> bool:
+        ip = address_key(ip)
         stamps = self._seen.pop(ip, None)
         if stamps is None:
             stamps = deque()
@@ -79,7 +95,9 @@ class FatalBudget:
     A client that sends garbage, is cut off and reconnects at once makes the server do
     a handshake, a token check, a join and a leave each time, and tells the room
     twice; this makes the repeat offender cheap: it is turned away at the HTTP
-    upgrade, before any of that. A well-behaved client never spends from it.
+    upgrade, before any of that. Only errors a conforming client never causes spend
+    from it (not a timeout, a full room, a kick or being replaced: see
+    :mod:`posecast.online.core.admission`).
     Memory is bounded like :class:`IpLimiter`'s.
     """
 
@@ -89,6 +107,7 @@ class FatalBudget:
 
     def charge(self, ip: str, now: float) -> None:
         """One fatal error from ``ip``."""
+        ip = address_key(ip)
         bucket = self._buckets.pop(ip, None) or TokenBucket(self.per_minute / 60.0, self.per_minute)
         bucket.allow(now)
         self._buckets[ip] = bucket
@@ -97,7 +116,7 @@ class FatalBudget:
 
     def exhausted(self, ip: str, now: float) -> bool:
         """Whether ``ip`` has spent its budget (its connections are refused)."""
-        bucket = self._buckets.get(ip)
+        bucket = self._buckets.get(address_key(ip))
         if bucket is None or bucket.stamp is None:
             return False
         tokens = min(bucket.burst, bucket.tokens + max(0.0, now - bucket.stamp) * bucket.rate_hz)

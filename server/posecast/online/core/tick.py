@@ -7,12 +7,16 @@ inbox that gathers it between ticks.
     engine thread: TickInput -> one batched step -> TickOutput --> Router.deliver
 
 Frames wait in a short queue per player (``frame_queue``, 2 by default): each tick
-the engine steps the oldest one. A client whose frames arrive near the tick boundary
-(60 Hz against 60 Hz, with a millisecond of network or scheduling jitter) sends two
-in one tick and none in the next; with one slot the older would be lost and the next
-tick would hold, a pose missing from the stream and a hitch on every avatar that
-watches. With two, both are stepped, one tick late at most. Past the queue's depth
-the oldest waiting frame is superseded (latest wins, counted as dropped).
+the engine steps the oldest one that is still current. A client whose frames arrive
+near the tick boundary (60 Hz against 60 Hz, with a millisecond of network or
+scheduling jitter) sends two in one tick and none in the next; with one slot the
+older would be lost and the next tick would hold: a pose missing from the stream
+and a hitch on every avatar that watches. With the queue, both are stepped, the
+second one tick later. A frame is late, and superseded (counted as dropped), when it
+already waited at the previous tick and a newer one has arrived since: so a client
+that sends faster than the tick (a 72, 90 or 120 Hz headset, or a clock a little
+fast) never builds a standing backlog, and the extra latency stays within one tick
+of a burst. Past the queue's depth the oldest waiting frame is superseded too.
 
 A player enters the engine with its first frame (or its first calibration or
 selector), not when it joins: a connection that joins and never streams (a client
@@ -64,7 +68,9 @@ class EngineInbox:
     def __init__(self, frame_queue: int = 2) -> None:
         self.depth = frame_queue
         self._ops: list[EngineOp] = []
-        self._frames: dict[str, deque[TrackerFrame]] = {}
+        self._frames: dict[str, deque[tuple[int, TrackerFrame]]] = {}  # (tick, frame)
+        self._tick = 0  # how many takes so far: the tick a frame arrived before
+        self.late = 0  # frames superseded at a take (waited a tick, a newer one came)
         self._waiting: dict[str, tuple[int, Layout]] = {}  # joined, not in the engine yet
         self._in_engine: set[str] = set()
 
@@ -79,7 +85,7 @@ class EngineInbox:
         superseded = len(queue) >= self.depth
         if superseded:
             queue.popleft()
-        queue.append(frame)
+        queue.append((self._tick, frame))
         return superseded
 
     def setting(self, op: EngineOp) -> None:
@@ -98,9 +104,13 @@ class EngineInbox:
         ops, self._ops = self._ops, []
         frames = {}
         for player, queue in list(self._frames.items()):
-            frames[player] = queue.popleft()
+            while len(queue) > 1 and queue[0][0] < self._tick:
+                queue.popleft()  # waited since the previous tick and a newer one is here
+                self.late += 1
+            frames[player] = queue.popleft()[1]
             if not queue:
                 del self._frames[player]
+        self._tick += 1
         return TickInput(ops, frames)
 
     def _enter(self, player: str) -> None:

@@ -7,13 +7,17 @@ back through FK with the waist's own (heading-free) rotation.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numpy.typing import NDArray
 
 from posecast.geometry.rotations import quat2mat
 from posecast.online.engine.batch_fk import fk32
-from posecast.online.inference.artifact import Artifact
 from posecast.skeleton import LOWER_BODY, Joint
+
+if TYPE_CHECKING:  # the artifact arrives built: importing this module loads no runtime
+    from posecast.online.inference.artifact import Artifact
 
 F64 = NDArray[np.floating]
 _LOWER = [int(j) for j in LOWER_BODY]

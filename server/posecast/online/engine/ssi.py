@@ -32,7 +32,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -47,10 +47,12 @@ from posecast.online.engine.ik import ContactIK
 from posecast.online.engine.selectors import AnomalySelector, Selector
 from posecast.online.engine.slots import SlotArrays
 from posecast.online.engine.types import EngineEvent, PoseOut, TickResult, TrackerFrame
-from posecast.online.inference.artifact import Artifact
 from posecast.skeleton import NUM_JOINTS, REST_PELVIS_HEIGHT_M, reference_offsets
 from posecast.tracking.features import TRACKER_JOINT_INDEX, TrackerSlot
 from posecast.tracking.layouts import Layout, pelvis_from_head, spec
+
+if TYPE_CHECKING:  # the decoder arrives built (inference/loader.py): no runtime import here
+    from posecast.online.inference.artifact import Artifact
 
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]

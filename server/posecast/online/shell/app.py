@@ -193,7 +193,7 @@ class PosecastServer:
             if exc.sent is not None and exc.sent.code == CloseCode.MESSAGE_TOO_BIG:
                 # Past the WebSocket frame cap the library closes before the codec sees
                 # the message; it is still a TOO_LARGE message, and counted as one.
-                self.metrics.errors.labels("TOO_LARGE").inc()
+                self.hub.oversized(conn, time.monotonic())
         finally:
             self.hub.disconnect(conn, time.monotonic())
             del self._clients[conn]

@@ -1,5 +1,5 @@
-"""The fixed-rate tick: gather every player's newest frame, one batched engine step,
-encode the poses, hand them back for broadcast.
+"""The fixed-rate tick: take every player's waiting frame (the core's EngineInbox),
+one batched engine step, encode the poses, hand them back for broadcast.
 
 All engine work, membership changes included, runs in ONE dedicated worker thread
 (``ThreadPoolExecutor(max_workers=1)``), at tick boundaries, so socket I/O goes on
@@ -10,7 +10,8 @@ while the engine computes and the engine is never touched by two threads::
 
 If a step takes longer than a period, the next one starts at once and the schedule
 is reset rather than caught up: there is no backlog of ticks, frames in the meantime
-supersede each other (latest wins), and ``posecast_tick_overruns`` counts it.
+wait in each player's short queue (past it, the oldest is superseded), and
+``posecast_tick_overruns`` counts it.
 """
 
 from __future__ import annotations
@@ -33,7 +34,8 @@ log = logging.getLogger("posecast.ticker")
 
 
 class EngineWorker:
-    """Owns the :class:`Engine`; only ever called from the engine thread."""
+    """Owns the :class:`~posecast.online.engine.multi.MultiEngine`; only ever called
+    from the engine thread."""
 
     def __init__(self, engine: MultiEngine) -> None:
         self.engine = engine

@@ -1,0 +1,19 @@
+"""Routing (posecast.online.core.routing): poses and presence to the room's audience."""
+
+from __future__ import annotations
+
+from posecast.online.core.tick import TickOutput
+from tests.online.core.harness import Harness
+
+
+def test_poses_reach_the_room_audience_only() -> None:
+    h = Harness()
+    a, b, c = h.join("a"), h.join("b"), h.join("c", room="r2")
+    spec = h.join("s", role="spectator")
+    for conn in (a, b, c, spec):
+        h.inbox(conn)
+    h.hub.deliver(TickOutput([("a", b"pose-a"), ("c", b"pose-c")]), h.now)
+    h.hub.deliver(TickOutput([("a", b"pose-a2"), ("c", b"pose-c2")]), h.now)  # nobody read
+    raw = {conn: h.hub.outbox(conn).take() for conn in (a, b, c, spec)}  # type: ignore[union-attr]
+    assert raw == {a: [b"pose-a2"], b: [b"pose-a2"], c: [b"pose-c2"], spec: [b"pose-a2"]}
+    assert h.hub.metrics.value("posecast_poses_superseded_total") == 4

@@ -1,0 +1,21 @@
+"""Engines on the shipped artifacts (posecast.online.inference.loader)."""
+
+from __future__ import annotations
+
+from posecast.online.engine.config import EngineConfig
+from posecast.online.inference.loader import load_engine, load_multi_engine
+from posecast.tracking.layouts import Layout, spec
+
+
+def test_load_engine_serves_the_layout_it_was_asked_for() -> None:
+    engine = load_engine(EngineConfig(samples=4, lookahead=1), layout=Layout.HMD3)
+    assert engine.layout.layout is Layout.HMD3
+    assert engine.layout == spec(Layout.HMD3)
+
+
+def test_load_multi_engine_builds_one_engine_per_layout_and_batches_each() -> None:
+    multi = load_multi_engine(EngineConfig(samples=4, lookahead=1), tuple(Layout))
+    assert set(multi.layouts) == set(Layout)
+    multi.add_player("a", 1, Layout.HMD3)
+    multi.add_player("b", 2, Layout.HMD3_WAIST)
+    assert multi.counts() == {Layout.HMD3_WAIST: 1, Layout.HMD3: 1}
