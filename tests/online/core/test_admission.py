@@ -227,3 +227,16 @@ def test_a_bug_while_admitting_a_hello_ends_the_connection_with_internal(
     box = hub.outbox(conn)
     assert box is not None and box.closed and box.close_code == 1011
     assert hub.rooms.room_of("p") is None and "p" not in hub.connections.by_player
+
+
+def test_a_client_announcing_more_than_the_tick_rate_gets_a_queue_of_one() -> None:
+    hub, now = Hub(make_cfg(), Metrics()), time.time()
+    fast = hub.connect(IP, now)
+    hub.receive(fast, encode(Hello(1, token(player="f"), "r1", "F", rate_hz=90.0)), now)
+    slow = _joined(hub, "s", now)
+    for seq in range(2):
+        hub.receive(fast, encode(walk_frame(seq)), now)
+        hub.receive(slow, encode(walk_frame(seq)), now)
+    first = hub.take_tick_input().frames
+    assert (first["f"].seq, first["s"].seq) == (1, 0)  # the 90 Hz one keeps its newest
+    assert set(hub.take_tick_input().frames) == {"s"}

@@ -252,7 +252,9 @@ class Admission:
             if moved is not None:  # it was in this room on a node that failed: now here
                 self.remote.leave(room, claims.player, moved.node, now)
             self.rooms.add_player(room, claims.player, join.hello.name)
-            self.inbox.joined(claims.player, zlib.crc32(claims.player.encode()), join.layout)
+            fast = (join.hello.rate_hz or 60.0) > self.cfg.tick_hz  # see core/tick.py
+            seed = zlib.crc32(claims.player.encode())
+            self.inbox.joined(claims.player, seed, join.layout, queue=1 if fast else None)
             self.bus.joined(room, claims.player, join.hello.name)
             join_msg = Presence("join", room, claims.player, join.hello.name)
             self.router.to_room(room, join_msg, now, skip=claims.player)

@@ -109,11 +109,7 @@ class Hub:
     # --- the tick ------------------------------------------------------------------------
 
     def take_tick_input(self) -> TickInput:
-        late = self.inbox.late
-        tick = self.inbox.take()
-        if self.inbox.late > late:
-            self.metrics.frames_dropped.labels("superseded").inc(self.inbox.late - late)
-        return tick
+        return self.inbox.take()
 
     def deliver(self, out: TickOutput, now: float) -> None:
         self.router.deliver(out, now)

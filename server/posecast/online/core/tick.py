@@ -7,16 +7,16 @@ inbox that gathers it between ticks.
     engine thread: TickInput -> one batched step -> TickOutput --> Router.deliver
 
 Frames wait in a short queue per player (``frame_queue``, 2 by default): each tick
-the engine steps the oldest one that is still current. A client whose frames arrive
-near the tick boundary (60 Hz against 60 Hz, with a millisecond of network or
-scheduling jitter) sends two in one tick and none in the next; with one slot the
-older would be lost and the next tick would hold: a pose missing from the stream
-and a hitch on every avatar that watches. With the queue, both are stepped, the
-second one tick later. A frame is late, and superseded (counted as dropped), when it
-already waited at the previous tick and a newer one has arrived since: so a client
-that sends faster than the tick (a 72, 90 or 120 Hz headset, or a clock a little
-fast) never builds a standing backlog, and the extra latency stays within one tick
-of a burst. Past the queue's depth the oldest waiting frame is superseded too.
+the engine steps the oldest one. A client whose frames arrive near the tick boundary
+(60 Hz against 60 Hz, with a millisecond of network or scheduling jitter) sends two
+in one tick and none in the next; with one slot the older would be lost and the next
+tick would hold: a pose missing from the stream and a hitch on every avatar that
+watches. With two, both are stepped, the second one tick later; the queue drains at
+the next gap. Past its depth the oldest waiting frame is superseded (latest wins,
+counted as dropped), so the added latency is one tick at most. A client that
+announces more frames per second than the tick rate (``hello.rate_hz``: a 72, 90 or
+120 Hz headset) would keep the queue full for good, one tick behind: it gets a queue
+of one, the newest frame, as every client did before the queue.
 
 A player enters the engine with its first frame (or its first calibration or
 selector), not when it joins: a connection that joins and never streams (a client
@@ -68,24 +68,26 @@ class EngineInbox:
     def __init__(self, frame_queue: int = 2) -> None:
         self.depth = frame_queue
         self._ops: list[EngineOp] = []
-        self._frames: dict[str, deque[tuple[int, TrackerFrame]]] = {}  # (tick, frame)
-        self._tick = 0  # how many takes so far: the tick a frame arrived before
-        self.late = 0  # frames superseded at a take (waited a tick, a newer one came)
+        self._frames: dict[str, deque[TrackerFrame]] = {}
+        self._depth: dict[str, int] = {}  # per player, when it differs from ``depth``
         self._waiting: dict[str, tuple[int, Layout]] = {}  # joined, not in the engine yet
         self._in_engine: set[str] = set()
 
-    def joined(self, player: str, seed: int, layout: Layout) -> None:
-        """``player`` joined; it enters the engine with its first frame or setting."""
+    def joined(self, player: str, seed: int, layout: Layout, queue: int | None = None) -> None:
+        """``player`` joined; it enters the engine with its first frame or setting.
+        ``queue``: its frame queue's depth (default: the inbox's)."""
         self._waiting[player] = (seed, layout)
+        if queue is not None:
+            self._depth[player] = queue
 
     def frame(self, player: str, frame: TrackerFrame) -> bool:
         """Queue ``frame``; True when the queue was full and its oldest frame dropped."""
         self._enter(player)
         queue = self._frames.setdefault(player, deque())
-        superseded = len(queue) >= self.depth
+        superseded = len(queue) >= self._depth.get(player, self.depth)
         if superseded:
             queue.popleft()
-        queue.append((self._tick, frame))
+        queue.append(frame)
         return superseded
 
     def setting(self, op: EngineOp) -> None:
@@ -96,6 +98,7 @@ class EngineInbox:
     def left(self, player: str) -> None:
         self._waiting.pop(player, None)
         self._frames.pop(player, None)
+        self._depth.pop(player, None)
         if player in self._in_engine:
             self._in_engine.discard(player)
             self._ops.append(EngineOp("remove", player))
@@ -104,13 +107,9 @@ class EngineInbox:
         ops, self._ops = self._ops, []
         frames = {}
         for player, queue in list(self._frames.items()):
-            while len(queue) > 1 and queue[0][0] < self._tick:
-                queue.popleft()  # waited since the previous tick and a newer one is here
-                self.late += 1
-            frames[player] = queue.popleft()[1]
+            frames[player] = queue.popleft()
             if not queue:
                 del self._frames[player]
-        self._tick += 1
         return TickInput(ops, frames)
 
     def _enter(self, player: str) -> None:
