@@ -33,7 +33,7 @@ import urllib.request
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import msgpack
 from websockets.exceptions import ConnectionClosed
@@ -601,6 +601,33 @@ def main(argv: list[str] | None = None) -> None:
 
 
 ATTACKER_NICE = 10
+T = TypeVar("T")
+
+
+def as_attacker(fn: Callable[[], T]) -> T:
+    """Run ``fn`` in a thread of its own at niceness :data:`ATTACKER_NICE` (Linux nice
+    is per thread, and the threads it starts, such as the sync WebSocket client's
+    readers, inherit it), wait for it, and return its result or raise its exception.
+
+    For attackers that must run in the test's process (the fuzzer: hypothesis drives
+    it): in the field the attacker's CPU is on its own machine, so here it takes only
+    what the server and the healthy players leave."""
+    out: list[T] = []
+    failure: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), ATTACKER_NICE)
+            out.append(fn())
+        except BaseException as exc:  # handed to the caller below
+            failure.append(exc)
+
+    thread = threading.Thread(target=run, name="attacker")
+    thread.start()
+    thread.join()
+    if failure:
+        raise failure[0]
+    return out[0]
 
 
 def run_flooder(port: int, tok: str, kind: str, seconds: float, *extra: str) -> Any:

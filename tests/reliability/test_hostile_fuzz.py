@@ -44,6 +44,7 @@ from tests.reliability.hostile_helpers import (
     Arena,
     Attacker,
     Peer,
+    as_attacker,
     assert_rates_kept,
     base_maps,
     check_answer,
@@ -425,13 +426,17 @@ def _rounds(body: Callable[[Case], None], strategy: Any, examples: list[Case]) -
 def _fuzz(arena: Arena, strategy: Any, examples: list[Case], what: str) -> None:
     baseline = arena.baseline()
     before = errors_by_code(scrape(arena.port))
-    fz = Fuzzer(arena.port)
     t0 = time.monotonic()
-    try:
-        with arena.window() as during:
-            rounds = _rounds(fz.run, strategy, examples)
-    finally:
-        fz.close()
+
+    def attack() -> tuple[Fuzzer, int]:
+        fz = Fuzzer(arena.port)
+        try:
+            return fz, _rounds(fz.run, strategy, examples)
+        finally:
+            fz.close()
+
+    with arena.window() as during:
+        fz, rounds = as_attacker(attack)
     time.sleep(0.2)  # the last errors are counted before the scrape
     counted = delta(errors_by_code(scrape(arena.port)), before)
     print(

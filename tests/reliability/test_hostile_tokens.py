@@ -24,6 +24,7 @@ from tests.online.conftest import SECRET, make_cfg, token, walk_frame
 from tests.reliability.hostile_helpers import (
     Arena,
     Attacker,
+    as_attacker,
     assert_rates_kept,
     delta,
     errors_by_code,
@@ -96,9 +97,9 @@ def test_token_attacks_get_their_codes_and_no_room_data(arena: Arena) -> None:
     }  # fmt: skip
     baseline = arena.baseline()
     before = errors_by_code(scrape(port))
-    rounds = 0
-    with arena.window() as during:
-        t0 = time.monotonic()
+
+    def attack() -> int:
+        rounds, t0 = 0, time.monotonic()
         while rounds == 0 or time.monotonic() - t0 < 2.0:  # a window long enough to measure
             for name, (tok, room, code) in attacks.items():
                 got = _everything_after_hello(port, tok, room)
@@ -106,6 +107,10 @@ def test_token_attacks_get_their_codes_and_no_room_data(arena: Arena) -> None:
                            for m in got]  # fmt: skip
                 assert summary == [(Error, code, True)], name
             rounds += 1
+        return rounds
+
+    with arena.window() as during:
+        rounds = as_attacker(attack)
     print(f"token attacks: {rounds} rounds of {len(attacks)} attacks")
     want = {
         code: rounds * sum(c == code for _, _, c in attacks.values())
