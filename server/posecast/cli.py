@@ -2,7 +2,8 @@
 
 Subcommands (each a thin edge over the module named):
 
-* ``posecast data prepare --bvh DIR --out DIR`` - BVH tree -> cached training dataset
+* ``posecast data prepare [--bvh DIR ...] [--amc DIR ...] [--hdm05 DIR ...] --out DIR`` -
+  BVH and ASF/AMC trees -> cached training dataset
   (:mod:`posecast.offline.dataset.prepare`, ``docs/data.md``)
 * ``posecast train cvae|ae|anomaly --data DIR --out DIR`` - train a network
   (:mod:`posecast.offline.train.cvae_trainer`, :mod:`posecast.offline.train.anomaly_trainer`;
@@ -41,6 +42,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from posecast.errors import (
+    AcclaimError,
     BvhError,
     ConfigError,
     DataError,
@@ -204,6 +206,13 @@ def _checkpoint(
 
 
 def _cmd_data_prepare(args: argparse.Namespace) -> int:
+    if not (args.bvh or args.amc or args.hdm05):
+        raise _config(
+            "no motion to prepare",
+            "pass --bvh DIR (BVH files), --amc DIR (ASF/AMC files) and/or --hdm05 DIR "
+            "(the HDM05 set, CC BY-SA 3.0), each as often as needed",
+        )
+    _finite("--amc-fps", args.amc_fps, "data prepare", positive=True)
     _out_dir("--out", args.out)
     for d in args.rigs or ():
         if not d.is_dir():
@@ -223,6 +232,9 @@ def _cmd_data_prepare(args: argparse.Namespace) -> int:
         args.bvh,
         args.out,
         rigs,
+        amc_roots=args.amc,
+        hdm05_roots=args.hdm05,
+        amc_fps=args.amc_fps,
         rig_name=args.rig,
         skip_bad=args.skip_bad,
         split_file=args.split_file,
@@ -631,8 +643,30 @@ def build_parser() -> argparse.ArgumentParser:
 
     data = sub.add_parser("data", help="motion data tools")
     data_sub = data.add_subparsers(dest="data_command", required=True)
-    prep = data_sub.add_parser("prepare", help="BVH tree -> cached canonical dataset")
-    prep.add_argument("--bvh", required=True, type=Path, help="directory of .bvh / .bvh.gz files")
+    prep = data_sub.add_parser("prepare", help="BVH and ASF/AMC trees -> cached canonical dataset")
+    prep.add_argument(
+        "--bvh", action="append", type=Path, help="directory of .bvh / .bvh.gz files (repeatable)"
+    )
+    prep.add_argument(
+        "--amc",
+        action="append",
+        type=Path,
+        help="directory of .amc / .amc.gz files, each with its subject's .asf/.asx "
+        "in the same folder (repeatable)",
+    )
+    prep.add_argument(
+        "--hdm05",
+        action="append",
+        type=Path,
+        help="directory of HDM05 ASF/AMC files: opt-in, CC BY-SA 3.0, recorded in the "
+        "manifest (repeatable)",
+    )
+    prep.add_argument(
+        "--amc-fps",
+        type=float,
+        default=120.0,
+        help="frame rate of AMC files, which store none (default 120; HDM05 names say theirs)",
+    )
     prep.add_argument("--out", required=True, type=Path, help="output directory")
     prep.add_argument("--skip-bad", action="store_true", help="skip and list unreadable files")
     prep.add_argument("--rig", default=None, help="force one rig instead of auto-detecting")
@@ -774,6 +808,11 @@ def _hint_for(exc: PosecastError, command: str) -> str:
             "check that the file is a readable BVH (plain or .gz); "
             "`posecast data prepare --skip-bad` leaves bad files out"
         )
+    if isinstance(exc, AcclaimError):
+        return (
+            "check that the file is a readable ASF/AMC (plain or .gz) and that its subject's "
+            ".asf sits beside the .amc; `posecast data prepare --skip-bad` leaves bad files out"
+        )
     if isinstance(exc, RigError):
         return (
             "map the skeleton's joints in a rig *.json and pass its directory with "
@@ -782,6 +821,11 @@ def _hint_for(exc: PosecastError, command: str) -> str:
     if isinstance(exc, DatasetError):
         return "pass a directory written by `posecast data prepare --bvh DIR --out DIR`"
     if isinstance(exc, DataError):
+        if command == "data prepare":
+            return (
+                "check the paths: each must exist, a --bvh one hold .bvh or .bvh.gz files, "
+                "an --amc or --hdm05 one .amc or .amc.gz files with their .asf"
+            )
         return "check the path: it must exist and hold .bvh or .bvh.gz files"
     if isinstance(exc, ModelError):
         return (

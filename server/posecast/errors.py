@@ -10,6 +10,7 @@ tools (data preparation, training) use codes of their own so logs stay greppable
     ├── ModelError                    MODEL_INVALID    (path)
     ├── DataError                     DATA_INVALID
     │   ├── BvhError                  BVH_INVALID      (file, line)
+    │   ├── AcclaimError              ACCLAIM_INVALID  (file, line)
     │   ├── RigError                  RIG_UNKNOWN      (file, missing joints)
     │   └── DatasetError              DATASET_INVALID  (path)
     └── ProtocolError                 (one per wire code; field, ref_seq, fatal)
@@ -86,14 +87,9 @@ class DataError(PosecastError):
     code = "DATA_INVALID"
 
 
-class BvhError(DataError):
-    """A BVH file is corrupt, truncated or not BVH at all.
-
-    ``file`` names the file and ``line`` (1-based) the line where the problem was
-    found, when one applies.
-    """
-
-    code = "BVH_INVALID"
+class _FileError(DataError):
+    """A data file problem at a place: ``file`` names the file and ``line`` (1-based)
+    the line where it was found, when one applies; ``detail`` is the bare message."""
 
     def __init__(self, message: str, *, file: str | Path | None = None, line: int | None = None):
         self.file = str(file) if file is not None else None
@@ -104,6 +100,19 @@ class BvhError(DataError):
             where += ": "
         super().__init__(where + message)
         self.detail = message
+
+
+class BvhError(_FileError):
+    """A BVH file is corrupt, truncated or not BVH at all."""
+
+    code = "BVH_INVALID"
+
+
+class AcclaimError(_FileError):
+    """An Acclaim ASF skeleton or AMC motion file (the ``.asf``/``.asx`` or the
+    ``.amc``) is corrupt, truncated or inconsistent."""
+
+    code = "ACCLAIM_INVALID"
 
 
 class RigError(DataError):

@@ -18,14 +18,32 @@ from posecast.offline.dataset.split import (
 )
 from posecast.offline.dataset.store import read_manifest
 
-# The CMU subjects in ../shared/data (see its README).
+# The subjects in ../shared/data (see its README): CMU numbers of the BVH set, the
+# CMU numbers new with the ASF/AMC set, and the HDM05 actor codes.
 CMU_SUBJECTS = {"1", "3", "5", "6", "7", "8", "9", "10", "12", "13", "14", "60", "61", "94", "135"}
+CMU_AMC_SUBJECTS = {"16", "17", "29", "35", "49", "91", "127", "131"}
+HDM05_ACTORS = {"bd", "bk", "dg", "mm", "tr"}
+# Minutes of motion of the new subjects (../shared/data/index_amc.csv)
+NEW_MINUTES = {
+    "16": 2.46, "17": 0.45, "29": 9.93, "35": 0.19, "49": 3.12, "91": 1.61, "127": 1.63,
+    "131": 2.45, "bd": 1.84, "bk": 2.49, "dg": 1.88, "mm": 1.67, "tr": 1.98,
+}  # fmt: skip
 
 
 def test_committed_table_loads_and_lists_the_staged_subjects() -> None:
     table = load_split_table()
-    assert set(table) == CMU_SUBJECTS
+    assert set(table) == CMU_SUBJECTS | CMU_AMC_SUBJECTS | HDM05_ACTORS
     assert set(table.values()) == set(SPLITS)  # every split has subjects
+
+
+def test_the_asf_amc_subjects_keep_the_test_split_clean() -> None:
+    table = load_split_table()
+    # 14 (BVH and ASF/AMC trials) stays in test, 135 in train; the new subjects go to
+    # train and val only, about 85/15 by duration.
+    assert table["14"] == "test" and table["135"] == "train"
+    assert {table[s] for s in NEW_MINUTES} == {"train", "val"}
+    val = sum(m for s, m in NEW_MINUTES.items() if table[s] == "val")
+    assert val / sum(NEW_MINUTES.values()) == pytest.approx(0.15, abs=0.02)
 
 
 def test_salsa_partners_share_a_split() -> None:
@@ -95,6 +113,9 @@ def test_hashed_split_is_about_80_10_10() -> None:
         ("01_01.bvh", "1"),
         ("captures/alice/take1.bvh", "alice"),
         ("captures/bob/05_02_retake.bvh", "bob"),
+        ("cmu_amc/135/135_02.amc.gz", "135"),
+        ("hdm05_amc/bd/HDM_bd_squat1Reps_001_120.amc.gz", "bd"),
+        ("elsewhere/HDM_mm_sneak2StepsLStart_002_120.amc", "mm"),
     ],
 )
 def test_subject_of(path: str, subject: str) -> None:

@@ -26,6 +26,8 @@ from posecast.offline.motion.synthetic import walk_clip
 from posecast.skeleton import JOINT_NAMES, PARENTS, Joint, reference_offsets
 
 LAYOUTS = ("cmu_daz", "cmu_mb", "posecast")
+# The built-in rigs: the BVH layouts above and the ASF/AMC one (see test_acclaim.py).
+BUILTIN = (*LAYOUTS, "cmu_asf")
 
 
 @pytest.fixture
@@ -44,7 +46,7 @@ def posecast_rig_dict() -> dict[str, object]:
 
 def test_builtin_rigs_load() -> None:
     rigs = {r.name: r for r in builtin_rigs()}
-    assert sorted(rigs) == sorted(LAYOUTS)
+    assert sorted(rigs) == sorted(BUILTIN)
     for rig in rigs.values():
         assert set(rig.joints) == set(Joint)
         assert rig.unit_m > 0
@@ -217,7 +219,7 @@ def test_user_rig_is_config_not_code(tmp_path: Path) -> None:
     with pytest.raises(RigError):
         detect_rig(bvh, load_rigs())
     rigs = load_rigs([rig_dir])
-    assert sorted(r.name for r in rigs) == sorted((*LAYOUTS, "renamed"))
+    assert sorted(r.name for r in rigs) == sorted((*BUILTIN, "renamed"))
     rig = detect_rig(bvh, rigs)
     assert rig.name == "renamed"
     out = retarget(bvh, rig, name="r", subject="s", fps=60.0)
@@ -231,5 +233,5 @@ def test_user_rig_replaces_a_builtin_of_the_same_name(tmp_path: Path) -> None:
     data["unit_m"] = 0.001
     (tmp_path / "mm.json").write_text(json.dumps(data))
     rigs = {r.name: r for r in load_rigs([tmp_path])}
-    assert len(rigs) == len(LAYOUTS)
+    assert len(rigs) == len(BUILTIN)
     assert rigs["posecast"].unit_m == pytest.approx(0.001)

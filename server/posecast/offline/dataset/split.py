@@ -1,6 +1,7 @@
 """The subject-wise train/val/test split.
 
-The committed ``split.json`` lists each known subject's split. A subject it does not
+The committed ``split.json`` lists each known subject's split: CMU subject numbers
+and HDM05 actor codes (``bd``, ``bk``, ``dg``, ``mm``, ``tr``). A subject it does not
 list (a user's own captures, the rest of the CMU release) is placed by a stable hash
 of its id, 80 % train, 10 % val, 10 % test, so the same subject always lands in the
 same split and no subject is ever in two.
@@ -54,12 +55,22 @@ def split_of(subject: str, table: dict[str, str]) -> str:
 
 
 _CMU_NAME = re.compile(r"^(\d+)_(\d+)$")
+_HDM05_NAME = re.compile(r"^HDM_([A-Za-z]+)_")
 
 
 def subject_of(path: str | Path) -> str:
-    """Performer id of a BVH file: ``05_02.bvh.gz`` -> ``"5"``; else the folder name."""
-    stem = Path(path).name.split(".")[0]
+    """Performer id of a motion file, BVH or AMC.
+
+    CMU trials ``SS_TT``: ``05_02.bvh.gz`` -> ``"5"``, ``135_02.amc.gz`` -> ``"135"``.
+    HDM05 takes ``HDM_<actor>_...``: ``HDM_bd_squat1Reps_001_120.amc`` -> ``"bd"``
+    (the actor code). Anything else: the folder name.
+    """
+    name = Path(path).name
+    stem = name.split(".")[0]
     m = _CMU_NAME.match(stem)
     if m:
         return str(int(m.group(1)))
+    h = _HDM05_NAME.match(name)
+    if h:
+        return h.group(1)
     return Path(path).parent.name or stem
