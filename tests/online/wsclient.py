@@ -43,6 +43,7 @@ class Client:
         self.closed = asyncio.Event()
         self._reader = asyncio.create_task(self._read()) if read else None
         self._sender: asyncio.Task[None] | None = None
+        self.sent_at: dict[int, float] = {}  # seq -> time.monotonic() it was sent (stream)
 
     @classmethod
     async def open(cls, port: int, *, read: bool = True, **kw: Any) -> Client:
@@ -102,6 +103,7 @@ class Client:
             seq = seq0
             with contextlib.suppress(ConnectionClosed):
                 while True:
+                    self.sent_at[seq] = time.monotonic()
                     await self.send(walk_frame(seq, seed))
                     seq += 1
                     await asyncio.sleep(1 / hz)

@@ -284,6 +284,20 @@ def max_gap_s(poses: Sequence[Pose]) -> float:
     return max((b - a for a, b in itertools.pairwise(ts)), default=0.0)
 
 
+def server_gap_s(poses: Sequence[Pose], sent_at: dict[int, float]) -> float:
+    """The longest gap between consecutive poses of one player that the server added:
+    each server-time gap minus the gap between the sending of those two frames
+    (``sent_at``: seq -> when its sender sent it, the same monotonic clock). A stall
+    of the sending client (a GC pause in the test process) is the client's, not the
+    server's, and cancels out."""
+    gaps = (
+        (b.t - a.t) - (sent_at[b.seq] - sent_at[a.seq])
+        for a, b in itertools.pairwise(poses)
+        if a.seq in sent_at and b.seq in sent_at
+    )
+    return max(gaps, default=0.0)
+
+
 @dataclass(frozen=True)
 class Jumps:
     max_jump_m: float  # largest joint displacement between consecutive poses
