@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from posecast.online.engine.anomaly import AnomalyScorer
 
 from posecast.offline.dataset.frames import derive_frames
 from posecast.offline.evaluation.applications import kick_targets, table3
 from posecast.offline.motion.synthetic import walk_clip
+from posecast.online.engine.anomaly import AnomalyScorer
 from posecast.online.inference.artifact import load_artifact
 from posecast.skeleton import Joint
 

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from posecast.online.engine.config import EngineConfig
 
 from posecast.offline.dataset.frames import derive_frames
 from posecast.offline.evaluation.runner import METRIC_KEYS, VARIANTS, evaluate, format_table
 from posecast.offline.motion.synthetic import walk_clip
+from posecast.online.engine.config import EngineConfig
 
 
 @pytest.fixture(scope="module")

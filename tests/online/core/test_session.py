@@ -6,7 +6,6 @@ import time
 
 import numpy as np
 import pytest
-from posecast.online.engine.selectors import AnomalySelector, ObstacleSelector, TargetSelector
 
 from posecast.errors import (
     AlreadyJoinedError,
@@ -31,6 +30,7 @@ from posecast.online.core.session import (
     SelectorIn,
     Session,
 )
+from posecast.online.engine.selectors import AnomalySelector, ObstacleSelector, TargetSelector
 from posecast.online.protocol.messages import Bye, Calibrate, Hello, Kick, Ping, Pong, Selector
 from posecast.skeleton import Joint
 from tests.online.conftest import make_cfg, token, walk_frame

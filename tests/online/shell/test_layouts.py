@@ -9,12 +9,12 @@ from collections.abc import Callable
 
 import numpy as np
 import pytest
-from posecast.online.engine.anomaly import AnomalyScorer
-from posecast.online.engine.config import EngineConfig
-from posecast.online.engine.multi import MultiEngine
 from websockets.exceptions import ConnectionClosed
 
 from posecast.online.config import ServerConfig
+from posecast.online.engine.anomaly import AnomalyScorer
+from posecast.online.engine.config import EngineConfig
+from posecast.online.engine.multi import MultiEngine
 from posecast.online.engine.ssi import Engine
 from posecast.online.inference.artifact import load_artifact
 from posecast.online.protocol.messages import Error, Frame, Welcome
