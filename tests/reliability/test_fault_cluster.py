@@ -102,7 +102,9 @@ def test_a_killed_nodes_players_fail_over_and_the_room_resumes(
         start = len(obs.messages)
         t_kill = time.monotonic()
         b.proc.kill()
-        b.proc.wait()
+        # Reaped off the event loop: a blocking wait here (a big process takes a while
+        # to tear down) would stall the in-process senders, not the server under test.
+        await asyncio.to_thread(b.proc.wait)
 
         rejoin_s, back_s = {}, {}
         for name in movers:
@@ -174,10 +176,10 @@ def test_a_redis_blip_costs_cross_node_poses_only_for_the_outage(
         await asyncio.sleep(0.5)
         start = len(pa.messages)
         t0 = pa.poses()[-1].t
-        redis_server.stop()
+        await asyncio.to_thread(redis_server.stop)  # blocking calls off the senders' loop
         t_down = time.monotonic()
         await asyncio.sleep(outage_s)
-        redis_server.start()
+        await asyncio.to_thread(redis_server.start)
         t_up = time.monotonic()
         mark = len(pa.messages)
         await pa.wait_for(lambda m: isinstance(m, Pose) and m.player == "pb", 15, mark)
