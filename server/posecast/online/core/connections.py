@@ -47,10 +47,9 @@ class Connections:
         self._dirty.add(c.session.conn)
 
     def send_to_player(self, player: str, data: bytes, now: float) -> None:
-        conn = self.by_player.get(player)
-        if conn is not None:
-            self.conns[conn].outbox.put_reliable(data, now)
-            self._dirty.add(conn)
+        c = self.of_player(player)
+        if c is not None:
+            self.send(c, data, now)
 
     def pose_to_player(self, player: str, source: str, data: bytes, now: float) -> int:
         """``source``'s pose into ``player``'s latest-wins slot; 1 when it superseded one."""
