@@ -13,15 +13,20 @@ ARG PYTHON_IMAGE=python:3.11-slim-bookworm
 FROM ${PYTHON_IMAGE} AS build
 ENV PIP_NO_CACHE_DIR=1 \
     PIP_DISABLE_PIP_VERSION_CHECK=1
+# A C compiler for the native kernels (setup.py); only this stage has it.
+# hadolint ignore=DL3008
+RUN apt-get update \
+ && apt-get install -y --no-install-recommends gcc libc6-dev \
+ && rm -rf /var/lib/apt/lists/*
 WORKDIR /src
 RUN python -m venv /opt/posecast
-COPY pyproject.toml README.md LICENSE ./
+COPY pyproject.toml setup.py README.md LICENSE ./
 COPY server ./server
 # The models are package data (server/posecast/artifacts), so installing the package
 # bakes them in; the checks fail the build if they, or the Redis client, are missing
 # or if torch slipped into the serving install.
 RUN /opt/posecast/bin/pip install ".[redis]" \
- && /opt/posecast/bin/python -c "import importlib.resources as r, posecast.online.cluster.redis_bus, onnxruntime; assert r.files('posecast').joinpath('artifacts/cvae_decoder.onnx').is_file()" \
+ && /opt/posecast/bin/python -c "import importlib.resources as r, posecast.online.cluster.redis_bus, onnxruntime; assert r.files('posecast').joinpath('artifacts/cvae_decoder.onnx').is_file(); from posecast import _native; print('native kernels:', _native.isas())" \
  && if /opt/posecast/bin/python -c "import torch" 2>/dev/null; then echo "torch in the serving image" >&2; exit 1; fi
 
 # --- runtime: the virtualenv on a clean slim image ------------------------------------

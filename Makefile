@@ -19,7 +19,18 @@ $(STAMP): $(PY) pyproject.toml
 	rm -f $(VENV)/.installed-*
 	touch $(STAMP)
 
-venv: $(STAMP)
+# The native kernels (server/native, built by setup.py as posecast._native): the
+# editable install compiles them; a change to their sources rebuilds them here.
+NATIVE_SRC   := setup.py $(wildcard server/native/*.c server/native/*.h)
+NATIVE_STAMP := $(VENV)/.native-built
+
+$(NATIVE_STAMP): $(STAMP) $(NATIVE_SRC)
+	$(PY) -m pip install --quiet --no-deps -e .
+	$(PY) -c "from posecast import _native; print('posecast native kernels:', _native.isa())" \
+	  || echo "posecast: the native kernels did not build; the engine serves with the onnx backend"
+	touch $@
+
+venv: $(STAMP) $(NATIVE_STAMP)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check server tests benchmarks client_sdk/python
@@ -28,7 +39,7 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(VENV)/bin/mypy
 
-pytest: $(STAMP)
+pytest: $(STAMP) $(NATIVE_STAMP)
 	$(PY) -m pytest -q
 
 # The TypeScript SDK (client_sdk/typescript): npm ci when the lock file changed, strict
@@ -40,12 +51,12 @@ $(TS_DIR)/node_modules/.installed: $(TS_DIR)/package-lock.json
 	cd $(TS_DIR) && npm ci --no-audit --no-fund
 	touch $@
 
-ts-test: $(STAMP) $(TS_DIR)/node_modules/.installed
+ts-test: $(STAMP) $(NATIVE_STAMP) $(TS_DIR)/node_modules/.installed
 	cd $(TS_DIR) && npm run --silent typecheck && npm test --silent
 
 test: lint typecheck ts-test pytest
 
-run: $(STAMP)
+run: $(STAMP) $(NATIVE_STAMP)
 	$(PY) -m posecast demo
 
 clean:

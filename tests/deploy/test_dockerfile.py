@@ -68,7 +68,8 @@ def test_dockerignore_sends_only_what_the_build_copies() -> None:
     lines = (ROOT / ".dockerignore").read_text("utf-8").splitlines()
     assert "*" in lines, "ignore everything by default"
     allowed = {ln[1:].rstrip("/") for ln in lines if ln.startswith("!")}
-    assert allowed == {"pyproject.toml", "README.md", "LICENSE", "server"}
+    assert allowed == {"pyproject.toml", "setup.py", "README.md", "LICENSE", "server"}
+    assert "**/*.so" in lines, "the image compiles the native kernels itself"
 
 
 @pytest.mark.timeout(120)
@@ -79,12 +80,12 @@ def test_the_build_context_installs_the_models_and_the_viewer(tmp_path: Path) ->
     pytest.importorskip("wheel", reason="building the wheel needs wheel")
     context = tmp_path / "context"
     context.mkdir()
-    for name in ("pyproject.toml", "README.md", "LICENSE"):
+    for name in ("pyproject.toml", "setup.py", "README.md", "LICENSE"):
         shutil.copy(ROOT / name, context / name)
     shutil.copytree(
         ROOT / "server",
         context / "server",
-        ignore=shutil.ignore_patterns("*.pyc", "__pycache__", "*.egg-info"),
+        ignore=shutil.ignore_patterns("*.pyc", "__pycache__", "*.egg-info", "*.so"),
     )
     out = subprocess.run(
         [sys.executable, "-m", "pip", "wheel", str(context), "--no-deps", "--no-build-isolation",
@@ -99,3 +100,5 @@ def test_the_build_context_installs_the_models_and_the_viewer(tmp_path: Path) ->
     }
     assert shipped and shipped <= names, shipped - names
     assert "posecast/online/cluster/redis_bus.py" in names
+    # the wheel carries the native kernels it compiled (no prebuilt .so was copied in)
+    assert any(n.startswith("posecast/_native") and n.endswith(".so") for n in names), names

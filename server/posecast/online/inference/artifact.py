@@ -70,8 +70,12 @@ class Artifact:
         return [o.name for o in self.session.get_outputs()]
 
 
-def load_artifact(name: str, models_dir: str | Path | None = None, threads: int = 1) -> Artifact:
-    """Load ``<models_dir>/<name>.onnx`` and ``<name>.json`` (default: the shipped models)."""
+def read_sidecar(name: str, models_dir: str | Path | None = None) -> tuple[dict[str, Any], Path]:
+    """The validated sidecar of ``<models_dir>/<name>`` and the path of its ONNX file.
+
+    Every backend reads its model through here, so all of them refuse the same
+    mismatches (joint order, tracker layout, feature layout).
+    """
     folder = Path(models_dir) if models_dir is not None else default_models_dir()
     onnx_path, meta_path = folder / f"{name}.onnx", folder / f"{name}.json"
     try:
@@ -88,6 +92,12 @@ def load_artifact(name: str, models_dir: str | Path | None = None, threads: int 
         raise ModelError(f"unknown tracker layout {meta.get('layout')!r}", path=meta_path) from None
     if meta.get("feature_layout") != list(layout.feature_names):
         raise ModelError("sidecar feature layout differs from this posecast", path=meta_path)
+    return meta, onnx_path
+
+
+def load_artifact(name: str, models_dir: str | Path | None = None, threads: int = 1) -> Artifact:
+    """Load ``<models_dir>/<name>.onnx`` and ``<name>.json`` (default: the shipped models)."""
+    meta, onnx_path = read_sidecar(name, models_dir)
     try:
         session = ort.InferenceSession(
             str(onnx_path), session_options(threads), providers=["CPUExecutionProvider"]

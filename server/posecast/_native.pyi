@@ -1,0 +1,56 @@
+# Types of the native SSI kernels (server/native/pc_module.c, built by setup.py).
+from typing import Any
+
+def isa() -> str: ...
+def isas() -> tuple[str, ...]: ...
+def set_isa(level: str, /) -> None: ...
+def set_threads(n: int, /) -> None: ...
+def threads() -> int: ...
+def pack_decoder(
+    F: int,
+    H: int,
+    n_rot: int,
+    n_root: int,
+    mean: Any,
+    inv_std: Any,
+    wx: Any,
+    bfc: Any,
+    wih: Any,
+    bih: Any,
+    whh: Any,
+    bhh: Any,
+    whead: Any,
+    bhead: Any,
+    bf16: bool,
+    /,
+) -> object: ...
+def pack_pool(offsets: Any, mean: Any, inv_std: Any, layers: list[Any], /) -> object: ...
+def decode(
+    packed: object,
+    features: Any,
+    group: int,
+    cache: Any,
+    h: Any,
+    rotations: Any,
+    root: Any | None,
+    contacts: Any,
+    h_out: Any,
+    /,
+) -> None: ...
+def pool(
+    packed: object,
+    rotations: Any,
+    contacts: Any,
+    root_mat: Any,
+    root_pos: Any,
+    group: int,
+    locked: Any,
+    lock_pos: Any,
+    release: Any,
+    suppressed: Any,
+    release_frames: int,
+    max_drift: float,
+    world_out: Any,
+    scores: Any,
+    /,
+) -> None: ...

@@ -1,0 +1,242 @@
+"""The ``native`` backend: the C kernels of ``posecast._native`` behind the engine's protocol.
+
+The weights come from the same ONNX files the ``onnx`` backend runs (read with the
+``onnx`` package, the format's own reader); nothing else is shipped. The decoder's
+first layer is split as the graph splits it: the latent part ``eps @ wz`` is the
+per-row latent cache (computed once when a player joins), the tracker part is
+computed once per player per frame inside :func:`posecast._native.decode`.
+
+Instruction-set level: the best this CPU runs (``avx512bf16``, ``avx512f``, ``avx2``,
+``generic``), capped by ``POSECAST_NATIVE_ISA``; :func:`native_isa` says which.
+On ``avx512bf16`` the GRU gates multiply bf16 weights into fp32 state; every other
+level, and every other product, is fp32 (docs/engine.md gives the measured effect).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from posecast.errors import ModelError
+from posecast.online.engine.backend import PoolIK
+from posecast.online.inference.artifact import read_sidecar
+from posecast.skeleton import PARENTS, reference_offsets
+
+try:
+    from posecast import _native
+except ImportError as exc:  # not built (no compiler at install time) or not loadable
+    raise ImportError(f"posecast._native is not available: {exc}") from exc
+
+F32 = NDArray[np.float32]
+F64 = NDArray[np.float64]
+
+_NATIVE_PARENTS = (-1, 0, 1, 2, 3, 2, 5, 6, 2, 8, 9, 0, 11, 12, 13, 0, 15, 16, 17)
+
+
+def native_isa() -> str:
+    """The instruction-set level the kernels run on."""
+    level: str = _native.isa()
+    return level
+
+
+def native_isas() -> tuple[str, ...]:
+    """The levels this CPU can run, best first (``generic`` always)."""
+    levels: tuple[str, ...] = _native.isas()
+    return levels
+
+
+def set_native_isa(level: str) -> None:
+    """Run on ``level`` (one of :func:`native_isas`); tests use it to cover every level."""
+    _native.set_isa(level)
+
+
+def _initializers(path: Path) -> dict[str, F32]:
+    import onnx
+    from onnx import numpy_helper
+
+    try:
+        model = onnx.load(str(path))
+    except Exception as exc:  # onnx raises protobuf's own error types
+        raise ModelError(f"cannot read ONNX weights: {exc}", path=path) from exc
+    return {
+        i.name: np.ascontiguousarray(numpy_helper.to_array(i), dtype=np.float32)
+        for i in model.graph.initializer
+    }
+
+
+def _need(w: Mapping[str, F32], name: str, shape: tuple[int, ...], path: Path) -> F32:
+    if name not in w:
+        raise ModelError(f"the native backend needs weight {name!r}", path=path)
+    arr = w[name]
+    if arr.shape != shape:
+        raise ModelError(f"weight {name!r} is {arr.shape}, expected {shape}", path=path)
+    return arr
+
+
+class NativeDecoder:
+    """The decoder step of one artifact, fused in C (see pc_impl.h ``decode_tile``)."""
+
+    def __init__(self, name: str, meta: dict[str, Any], path: Path) -> None:
+        self.name, self.meta = name, meta
+        mc = meta["model_config"]
+        self.latent, self.hidden = int(mc["latent"]), int(mc["hidden"])
+        n_root = int(mc.get("root_outputs", 0))
+        w = _initializers(path)
+        F = len(meta["feature_layout"])
+        H, L = self.hidden, self.latent
+        self._wz = _need(w, "decoder.fc.wz_t", (L, H), path)
+        if n_root:
+            pose = np.concatenate(
+                [
+                    _need(w, "decoder.pose.weight_t_0_108", (H, 108), path),
+                    _need(w, f"decoder.pose.weight_t_108_{108 + n_root}", (H, n_root), path),
+                ],
+                axis=1,
+            )
+            pose_b = np.concatenate(
+                [
+                    _need(w, "decoder.pose.bias_0_108", (108,), path),
+                    _need(w, f"decoder.pose.bias_108_{108 + n_root}", (n_root,), path),
+                ]
+            )
+        else:
+            pose = _need(w, "decoder.pose.weight_t", (H, 108), path)
+            pose_b = _need(w, "decoder.pose.bias", (108,), path)
+        head = np.ascontiguousarray(
+            np.concatenate([pose, _need(w, "decoder.contact.weight_t", (H, 2), path)], axis=1)
+        )
+        head_b = np.ascontiguousarray(
+            np.concatenate([pose_b, _need(w, "decoder.contact.bias", (2,), path)])
+        )
+        self.n_root = n_root
+        try:
+            self._packed = _native.pack_decoder(
+                F,
+                H,
+                108,
+                n_root,
+                _need(w, "feat.mean", (F,), path),
+                _need(w, "feat.inv_std", (F,), path),
+                _need(w, "decoder.fc.wx_t", (F, H), path),
+                _need(w, "decoder.fc.bias", (H,), path),
+                _need(w, "decoder.gru.w_ih_t", (H, 3 * H), path),
+                _need(w, "decoder.gru.b_ih", (3 * H,), path),
+                _need(w, "decoder.gru.w_hh_t", (H, 3 * H), path),
+                _need(w, "decoder.gru.b_hh", (3 * H,), path),
+                head,
+                head_b,
+                True,
+            )
+        except ValueError as exc:
+            raise ModelError(
+                f"the native backend cannot run this decoder: {exc}", path=path
+            ) from exc
+        self.cache_width = H
+
+    def cache_latents(self, eps: F32) -> F32:
+        out: F32 = np.ascontiguousarray(np.asarray(eps, np.float32) @ self._wz, dtype=np.float32)
+        return out
+
+    def step(self, features: F32, group: int, cache: F32, h: F32, out: Mapping[str, F32]) -> None:
+        _native.decode(
+            self._packed,
+            np.ascontiguousarray(features, dtype=np.float32),
+            group,
+            np.ascontiguousarray(cache, dtype=np.float32),
+            np.ascontiguousarray(h, dtype=np.float32),
+            out["rotations"],
+            out.get("root"),
+            out["contacts"],
+            out["h_out"],
+        )
+
+
+class NativePool:
+    """FK, contact IK and anomaly error of every candidate row, in C."""
+
+    def __init__(
+        self,
+        meta: dict[str, Any],
+        path: Path,
+        release_frames: int,
+        max_drift_m: float | None,
+    ) -> None:
+        if tuple(PARENTS) != _NATIVE_PARENTS:
+            raise ModelError("the native kernels were built for another skeleton", path=path)
+        self.meta = meta
+        self.threshold_m = float(meta.get("implausible_threshold_m", float("nan")))
+        w = _initializers(path)
+        layers = []
+        k = 57
+        for i in range(7):
+            wt = w.get(f"layers.{i}.weight_t")
+            if wt is None or wt.ndim != 2 or wt.shape[0] != k:
+                raise ModelError(
+                    f"the native backend needs AE layer {i} with {k} inputs", path=path
+                )
+            n = int(wt.shape[1])
+            layers.append((k, n, wt, _need(w, f"layers.{i}.bias", (n,), path)))
+            k = n
+        try:
+            self._packed = _native.pack_pool(
+                np.ascontiguousarray(reference_offsets(), dtype=np.float32),
+                _need(w, "pose.mean", (57,), path),
+                _need(w, "pose.inv_std", (57,), path),
+                layers,
+            )
+        except ValueError as exc:
+            raise ModelError(
+                f"the native backend cannot run this scorer: {exc}", path=path
+            ) from exc
+        self.release_frames = int(release_frames)
+        self.max_drift = -1.0 if max_drift_m is None else float(max_drift_m)
+
+    def step(
+        self,
+        rotations: F32,
+        contacts: F32,
+        root_mat: F32,
+        root_pos: F32,
+        group: int,
+        ik: PoolIK,
+        world_out: F32,
+    ) -> F64:
+        scores = np.empty(len(rotations), np.float64)
+        _native.pool(
+            self._packed,
+            rotations,
+            contacts,
+            np.ascontiguousarray(root_mat, dtype=np.float32),
+            np.ascontiguousarray(root_pos, dtype=np.float32),
+            group,
+            ik.locked,
+            ik.lock_pos,
+            ik.release,
+            ik.suppressed,
+            self.release_frames,
+            self.max_drift,
+            world_out,
+            scores,
+        )
+        return scores
+
+
+def load_native(
+    decoder_name: str,
+    anomaly_name: str,
+    models_dir: str | None,
+    threads: int,
+    release_frames: int,
+    max_drift_m: float | None,
+) -> tuple[NativeDecoder, NativePool]:
+    """The native decoder and pool on the artifacts ``decoder_name`` / ``anomaly_name``."""
+    _native.set_threads(max(1, int(threads)))
+    meta, path = read_sidecar(decoder_name, models_dir)
+    ae_meta, ae_path = read_sidecar(anomaly_name, models_dir)
+    return NativeDecoder(decoder_name, meta, path), NativePool(
+        ae_meta, ae_path, release_frames, max_drift_m
+    )
