@@ -487,8 +487,7 @@ def _cmd_eval_apps(args: argparse.Namespace) -> int:
     _manifest(args.data)
     from posecast.offline.dataset.store import load_split
     from posecast.offline.evaluation.applications import table3
-    from posecast.online.engine.anomaly import AnomalyScorer
-    from posecast.online.inference.artifact import load_artifact
+    from posecast.online.inference.backends import load_backend
 
     kick = None
     names: list[str] = []
@@ -504,9 +503,8 @@ def _cmd_eval_apps(args: argparse.Namespace) -> int:
             f"--clip {args.clip!r} is not in {args.data}",
             f"pass the name of a clip of the dataset ({shown or 'it has none'})",
         )
-    dec = load_artifact("cvae_decoder", args.models, threads=args.threads)
-    scorer = AnomalyScorer(load_artifact("anomaly", args.models, threads=args.threads))
-    report = table3(dec, scorer, kick, sample_counts=counts, runs=args.runs)
+    loaded = load_backend("native", Layout.HMD3_WAIST, args.models, args.threads)
+    report = table3(loaded, kick, sample_counts=counts, runs=args.runs)
     report["clip"] = args.clip
     print(json.dumps(report, indent=1))
     if args.json is not None:

@@ -1,8 +1,9 @@
 """Fixtures for the service tests: a config, tokens, frames, and (for the end-to-end
 tests) a real server on an ephemeral loopback port with the shipped ONNX models.
 
-The models are loaded once per test session; each server builds its own small engine
-on them (``samples=8``) so a test's server starts in milliseconds.
+The models are loaded once per test session, on the ``onnx`` backend (the engine tests
+run every backend); each server builds its own small engine on them (``samples=8``)
+so a test's server starts in milliseconds.
 """
 
 from __future__ import annotations
@@ -19,10 +20,9 @@ from posecast.offline.dataset.frames import derive_frames
 from posecast.offline.motion.synthetic import walk_clip
 from posecast.online.auth.tokens import mint
 from posecast.online.config import ServerConfig
-from posecast.online.engine.anomaly import AnomalyScorer
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.ssi import Engine
-from posecast.online.inference.artifact import Artifact, load_artifact
+from posecast.online.inference.backends import Backend, load_backend
 from posecast.online.protocol.messages import Frame
 
 SECRET = "test-secret-" + "x" * 20
@@ -65,19 +65,17 @@ def walk_frame(seq: int, seed: int = 0, t: float | None = None) -> Frame:
 
 
 @pytest.fixture(scope="session")
-def artifacts() -> tuple[Artifact, AnomalyScorer]:
-    return load_artifact("cvae_decoder"), AnomalyScorer(load_artifact("anomaly"))
+def onnx_backend() -> Backend:
+    return load_backend("onnx")
 
 
 @pytest.fixture(scope="session")
-def engine_factory(
-    artifacts: tuple[Artifact, AnomalyScorer],
-) -> Callable[[ServerConfig], Callable[[], Engine]]:
+def engine_factory(onnx_backend: Backend) -> Callable[[ServerConfig], Callable[[], Engine]]:
     """``engine_factory(cfg)``: builds that config's engine on the shared models."""
-    decoder, scorer = artifacts
+    dec, pool = onnx_backend.decoder, onnx_backend.pool
 
     def for_cfg(cfg: ServerConfig) -> Callable[[], Engine]:
         ecfg = EngineConfig(samples=cfg.samples, lookahead=cfg.lookahead, fps=cfg.tick_hz)
-        return lambda: Engine(decoder, scorer, ecfg)
+        return lambda: Engine(dec, pool, ecfg, backend_name=onnx_backend.name)
 
     return for_cfg

@@ -22,3 +22,10 @@ def test_the_report_has_a_both_models_section_only_when_asked() -> None:
     two = run([2], samples=4, threads=1, ticks=3, naive_players=1, hmd3_share=0.5)
     both = two["both_models"]
     assert both["hmd3_players"] == [1] and len(both["tick_p99_ms"]) == 1
+
+
+def test_the_report_names_the_backend_that_ran() -> None:
+    r = run([1, 2], samples=2, threads=1, ticks=2, naive_players=1, backend="onnx")
+    assert (r["backend"], r["backend_asked"]) == ("onnx", "onnx")
+    default = run([1], samples=2, threads=1, ticks=2, naive_players=1)
+    assert default["backend_asked"] == "native" and default["backend"] in ("native", "onnx")

@@ -1,4 +1,5 @@
-"""Anomaly scores R of world poses (paper Sec. 3.2.1) from the shipped autoencoder."""
+"""Anomaly scores R of world poses (paper Sec. 3.2.1) from the shipped autoencoder, and
+every backend's candidate pool against them."""
 
 from __future__ import annotations
 
@@ -7,10 +8,13 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from posecast.geometry.rotations import normalize, quat_apply, quat_mul, yaw2quat
+from posecast.geometry.rotations import normalize, quat2mat, quat_apply, quat_mul, yaw2quat
 from posecast.online.engine.anomaly import AnomalyScorer, _rotate_y
-from posecast.skeleton import Joint
+from posecast.online.engine.backend import PoolIK
+from posecast.online.engine.batch_fk import fk32
+from posecast.skeleton import NUM_JOINTS, Joint
 from posecast.tracking.features import TrackerSlot, character_frame, to_character_frame
+from tests.online.engine.conftest import BackendLoader
 
 Walk = Callable[[int], dict[str, np.ndarray]]
 LEFT_BELOW_HIP = [Joint.LEFT_SHIN, Joint.LEFT_FOOT, Joint.LEFT_TOE]
@@ -31,7 +35,6 @@ def test_score_mats_ignores_heading_and_place(walk_arrays: Walk, rng: np.random.
     """Scores from pelvis matrices (the headset-only model's path) depend on the pose,
     not on where the player stands or which way it faces: turning and moving the poses
     and their pelvis together changes no score."""
-    from posecast.geometry.rotations import quat2mat
     from posecast.online.inference.artifact import load_artifact
 
     scorer = AnomalyScorer(load_artifact("anomaly"))
@@ -114,3 +117,34 @@ def test_real_poses_score_lower_than_garbled_ones(
     real = scorer.score(pos, wpos, wquat)
     garbled = scorer.score(bad, wpos, wquat)
     assert real.mean() < garbled.mean()
+
+
+@pytest.mark.parametrize("group", [1, 3])
+def test_every_backends_pool_scores_like_the_scorer(
+    backend: BackendLoader, scorer: AnomalyScorer, walk_arrays: Walk, group: int
+) -> None:
+    """A backend's candidate pool on ground-truth walk rotations, contacts off (no IK):
+    its world positions are the float32 FK's and its errors the scorer's, with each
+    pelvis shared by ``group`` rows as a waist tracker is by a player's samples."""
+    w = walk_arrays(0)
+    rot = w["rot6d"].reshape(-1, 108).astype(np.float32)  # (R, 108)
+    R = len(rot) // group * group
+    rot = rot[:R]
+    root_mat = quat2mat(w["root_quat"][:R:group]).astype(np.float32)  # (R / group, 3, 3)
+    root_pos = w["root_pos"][:R:group].astype(np.float32)
+    ik = PoolIK(
+        np.zeros((R, 2), bool),
+        np.zeros((R, 2, 3)),
+        np.zeros((R, 2), np.int64),
+        np.zeros((R, 2), bool),
+    )
+    world = np.full((R, NUM_JOINTS, 3), np.nan, np.float32)
+    pool = backend().pool
+    got = pool.step(rot, np.zeros((R, 2), np.float32), root_mat, root_pos, group, ik, world)
+    mats, places = np.repeat(root_mat, group, axis=0), np.repeat(root_pos, group, axis=0)
+    _, want = fk32(rot, mats, places, want_mats=False)
+    np.testing.assert_allclose(world, want, atol=1e-5)
+    assert got.shape == (R,) and got.dtype == np.float64
+    np.testing.assert_allclose(got, scorer.score_mats(want, places, mats), atol=1e-5)
+    assert pool.threshold_m == scorer.threshold_m
+    assert not ik.locked.any()

@@ -3,20 +3,19 @@ transitions, smoothness, look-ahead delay, batching, joins and leaves, missing f
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
 import pytest
 
-from posecast.online.engine.anomaly import AnomalyScorer
+from posecast.online.engine.backend import Decoder, Pool
 from posecast.online.engine.calibration import Calibration
-from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.selectors import AnomalySelector, Selector
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import EngineEvent, PoseOut, TrackerFrame
-from posecast.online.inference.artifact import Artifact
 from posecast.skeleton import NUM_JOINTS
+from tests.online.engine.conftest import BackendLoader
 
 MakeEngine = Callable[..., Engine]
 WalkFrames = Callable[..., list[TrackerFrame]]
@@ -47,33 +46,40 @@ class Forced:
         return self.chosen
 
 
-class RecordingScorer(AnomalyScorer):
-    """The shipped scorer, keeping the scores ``(P*N,)`` of the latest call."""
+class RecordingPool:
+    """The backend's pool, keeping the scores ``(P*N,)`` of the latest step."""
 
-    def __init__(self, artifact: Artifact) -> None:
-        super().__init__(artifact)
+    def __init__(self, pool: Pool) -> None:
+        self.pool, self.threshold_m = pool, pool.threshold_m
         self.last = np.zeros(0)
 
-    def score(self, *args: Any, **kwargs: Any) -> np.ndarray:
-        scores: np.ndarray = super().score(*args, **kwargs)
+    def step(self, *args: Any) -> np.ndarray:
+        scores: np.ndarray = self.pool.step(*args)
         self.last = scores.copy()
         return scores
 
 
 class NoContacts:
-    """The shipped decoder with its foot contacts forced to 0, so no contact IK runs and
-    positions show the decoder's poses (and the SSI interpolation) alone."""
+    """The backend's decoder with its foot contacts forced to 0, so no contact IK runs
+    and positions show the decoder's poses (and the SSI interpolation) alone."""
 
-    def __init__(self, decoder: Artifact) -> None:
+    def __init__(self, decoder: Decoder) -> None:
         self.decoder, self.meta, self.name = decoder, decoder.meta, decoder.name
+        self.cache_width = decoder.cache_width
 
-    def run(self, **inputs: np.ndarray) -> list[np.ndarray]:
-        rot, con, h = self.decoder.run(**inputs)
-        return [rot, np.zeros_like(con), h]
+    def cache_latents(self, eps: np.ndarray) -> np.ndarray:
+        return self.decoder.cache_latents(eps)
 
-    def run_into(self, inputs: dict[str, np.ndarray], outputs: dict[str, np.ndarray]) -> None:
-        self.decoder.run_into(inputs, outputs)
-        outputs["contacts"][...] = 0.0
+    def step(
+        self,
+        features: np.ndarray,
+        group: int,
+        cache: np.ndarray,
+        h: np.ndarray,
+        out: Mapping[str, np.ndarray],
+    ) -> None:
+        self.decoder.step(features, group, cache, h, out)
+        out["contacts"][...] = 0.0
 
 
 def run(engine: Engine, frames: dict[str, list[TrackerFrame]]) -> dict[str, list[PoseOut]]:
@@ -178,14 +184,13 @@ def corrupt_hidden(value: float | np.ndarray) -> Corruption:
 
 def corrupt_latent(value: np.ndarray) -> Corruption:
     def apply(engine: Engine, slot: int, sample: int) -> None:
-        engine.slots["eps"][slot, sample] = value
+        engine.set_latents(engine._order[slot], value, sample)
 
     return apply
 
 
 def inject(
     make_engine: MakeEngine,
-    anomaly_artifact: Artifact,
     frames: list[TrackerFrame],
     corrupt: Corruption,
 ) -> tuple[Engine, list[tuple[int, np.ndarray, int, int]], list[PoseOut]]:
@@ -196,8 +201,8 @@ def inject(
     Stops 10 ticks after the first transition (when its last frame is out), or 2 ticks
     after the injection if none has started by then.
     """
-    scorer = RecordingScorer(anomaly_artifact)
-    engine = make_engine(anomaly=scorer, samples=20, lookahead=10, transition_frames=10)
+    engine = make_engine(samples=20, lookahead=10, transition_frames=10)
+    engine.pool = scorer = RecordingPool(engine.pool)
     engine.add_player("p", seed=0, selector=Never())
     log: list[tuple[int, np.ndarray, int, int]] = []
     poses: list[PoseOut] = []
@@ -225,7 +230,7 @@ def is_outlier(scores: np.ndarray, current: int) -> bool:
 
 
 def test_an_implausible_sample_triggers_a_transition_to_the_best(
-    make_engine: MakeEngine, anomaly_artifact: Artifact, walk_frames: WalkFrames
+    make_engine: MakeEngine, walk_frames: WalkFrames
 ) -> None:
     """After 20 frames on sample 0, its GRU hidden state (or latent) is overwritten with
     extreme values, so its pose turns to garbage. Within 3 frames its error ``R`` is an
@@ -247,7 +252,7 @@ def test_an_implausible_sample_triggers_a_transition_to_the_best(
         corrupt_latent(40.0 * np.ones(30)),
     ]
     for corruption in candidates:
-        engine, log, poses = inject(make_engine, anomaly_artifact, frames, corruption)
+        engine, log, poses = inject(make_engine, frames, corruption)
         started = [t for t, _, n, _ in log if t >= WARMUP and n]
         if started:
             break
@@ -306,8 +311,7 @@ def test_no_new_transition_while_one_is_in_flight(
 
 @pytest.mark.parametrize(("tau", "at"), [(10, 25), (3, 60)])
 def test_transition_jumps_stay_bounded(
-    decoder: Artifact,
-    scorer: AnomalyScorer,
+    backend: BackendLoader,
     walk_frames: WalkFrames,
     tau: int,
     at: int,
@@ -338,10 +342,10 @@ def test_transition_jumps_stay_bounded(
     """
     frames = {"p": walk_frames(1)}
     T = 10
-    cfg = EngineConfig(samples=20, lookahead=tau, transition_frames=T)
+    no_contacts = NoContacts(backend().decoder)
 
     def show(selector: Selector) -> list[PoseOut]:
-        engine = Engine(NoContacts(decoder), scorer, cfg)  # type: ignore[arg-type]
+        engine = backend.engine(decoder=no_contacts, samples=20, lookahead=tau, transition_frames=T)
         engine.add_player("p", seed=3, selector=selector)
         return run(engine, frames)["p"]
 

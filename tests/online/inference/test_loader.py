@@ -13,6 +13,12 @@ def test_load_engine_serves_the_layout_it_was_asked_for() -> None:
     assert engine.layout == spec(Layout.HMD3)
 
 
+def test_load_engine_says_which_backend_runs() -> None:
+    cfg = EngineConfig(samples=4, lookahead=1)
+    assert load_engine(cfg, backend="onnx").backend_name == "onnx"
+    assert load_engine(cfg).backend_name in ("native", "onnx")  # native, or its fallback
+
+
 def test_load_multi_engine_builds_one_engine_per_layout_and_batches_each() -> None:
     multi = load_multi_engine(EngineConfig(samples=4, lookahead=1), tuple(Layout))
     assert set(multi.layouts) == set(Layout)

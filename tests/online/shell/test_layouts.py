@@ -12,11 +12,9 @@ import pytest
 from websockets.exceptions import ConnectionClosed
 
 from posecast.online.config import ServerConfig
-from posecast.online.engine.anomaly import AnomalyScorer
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.multi import MultiEngine
-from posecast.online.engine.ssi import Engine
-from posecast.online.inference.artifact import load_artifact
+from posecast.online.inference.loader import load_engine
 from posecast.online.protocol.messages import Error, Frame, Welcome
 from posecast.skeleton import Joint
 from posecast.tracking.features import TrackerSlot
@@ -29,10 +27,9 @@ BOTH = "hmd3+waist,hmd3"
 
 def _factory(cfg: ServerConfig) -> Callable[[], MultiEngine]:
     ecfg = EngineConfig(samples=cfg.samples, lookahead=cfg.lookahead, fps=cfg.tick_hz)
-    scorer = AnomalyScorer(load_artifact("anomaly"))
     engines = {
-        layout: Engine(load_artifact(name), scorer, ecfg)
-        for layout, name in (("hmd3+waist", "cvae_decoder"), ("hmd3", "cvae_decoder_hmd3"))
+        layout: load_engine(ecfg, layout=layout, backend="onnx")
+        for layout in ("hmd3+waist", "hmd3")
     }
     return lambda: MultiEngine(engines)
 

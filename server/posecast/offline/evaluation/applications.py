@@ -24,12 +24,11 @@ from typing import Any
 import numpy as np
 
 from posecast.offline.dataset.frames import Frames
-from posecast.online.engine.anomaly import AnomalyScorer
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.selectors import ObstacleSelector, Selector, TargetSelector
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
-from posecast.online.inference.artifact import Artifact
+from posecast.online.inference.backends import Backend
 from posecast.skeleton import Joint
 from posecast.tracking.features import TrackerSlot, from_character_frame, to_character_frame
 
@@ -42,8 +41,7 @@ class Setting:
 
 
 def _run(
-    dec: Artifact,
-    scorer: AnomalyScorer,
+    backend: Backend,
     fr: Frames,
     selector_at: Callable[[int], Selector],
     samples: int,
@@ -52,15 +50,13 @@ def _run(
 ) -> np.ndarray:
     """Emitted world positions ``(runs, T, 19, 3)`` of ``runs`` players on one clip."""
     cfg = EngineConfig(samples=samples)
-    engine = Engine(dec, scorer, cfg, capacity=runs)
+    engine = Engine(backend.decoder, backend.pool, cfg, runs, backend_name=backend.name)
     for r in range(runs):
         engine.add_player(str(r), seed=seed0 + r, selector=selector_at(0))
         # Every sample random, the first too (the engine makes it the prior's mean),
         # so the 1-sample row is a random sample, as in the paper.
-        slot = engine.players[str(r)].slot
-        engine.slots["eps"][slot, 0] = np.random.default_rng(seed0 + r).standard_normal(
-            engine.latent
-        )
+        eps0 = np.random.default_rng(seed0 + r).standard_normal(engine.latent)
+        engine.set_latents(str(r), eps0, 0)
     T = len(fr["features"])
     out = np.full((runs, T, 19, 3), np.nan, np.float32)
     for t in range(T + cfg.lookahead):
@@ -100,8 +96,7 @@ def _constant(selector: Selector) -> Callable[[int], Selector]:
 
 
 def table3(
-    dec: Artifact,
-    scorer: AnomalyScorer,
+    backend: Backend,
     kick: Frames,
     foot: Joint = Joint.RIGHT_FOOT,
     knee: Joint = Joint.LEFT_SHIN,
@@ -127,7 +122,7 @@ def table3(
         row: dict[str, Any] = {}
         for label, target in targets.items():
             out = _run(
-                dec, scorer, kick, _constant(TargetSelector(foot, target, 0.0)), n, runs, 1000 * n
+                backend, kick, _constant(TargetSelector(foot, target, 0.0)), n, runs, 1000 * n
             )
             err = np.linalg.norm(out[:, apex, foot] - np.asarray(target), axis=-1)
             row[f"{label}_kick_m"] = {"mean": float(err.mean()), "std": float(err.std())}
@@ -136,12 +131,13 @@ def table3(
             o = obstacles[min(t, len(obstacles) - 1)]
             return ObstacleSelector(knee, (float(o[0]), float(o[1]), float(o[2])), radius)
 
-        out = _run(dec, scorer, kick, obstacle_at, n, runs, seed0=7000 * n)
+        out = _run(backend, kick, obstacle_at, n, runs, seed0=7000 * n)
         inside = np.linalg.norm(out[:, :, knee] - obstacles[None], axis=-1) < radius
         share = inside.mean(axis=1)
         row["collision_share"] = {"mean": float(share.mean()), "std": float(share.std())}
         rows[str(n)] = row
     return {
+        "backend": backend.name,
         "apex_frame": apex,
         "targets_m": targets,
         "obstacle_local_m": obstacle_local.tolist(),

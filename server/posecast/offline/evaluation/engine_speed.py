@@ -8,6 +8,9 @@ when transitions run). Players replay a generated walk, each from its own phase.
 With ``hmd3_share`` above 0 both shipped models are loaded (a :class:`MultiEngine`,
 as ``posecast serve`` runs them) and that share of the players is headset-only: each
 model steps its own players in one batch, so a tick costs two decoder calls.
+
+Every figure is for one backend (``native``, ``onnx`` or ``torch``); the report names
+the one that ran, which is ``onnx`` where ``native`` was asked for and could not load.
 """
 
 from __future__ import annotations
@@ -22,12 +25,11 @@ import numpy as np
 
 from posecast.offline.dataset.frames import derive_frames
 from posecast.offline.motion.synthetic import walk_clip
-from posecast.online.engine.anomaly import AnomalyScorer
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.multi import MultiEngine
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
-from posecast.online.inference.artifact import load_artifact
+from posecast.online.inference.loader import load_engine, load_multi_engine
 from posecast.tracking.layouts import Layout
 
 FRAME_BUDGET_MS = 1000.0 / 60.0
@@ -48,6 +50,7 @@ class BenchResult:
     players: int
     samples: int
     hmd3_players: int
+    backend: str  # the backend that ran
     tick_p50_ms: float
     tick_p99_ms: float
     gflops: float
@@ -78,24 +81,17 @@ def bench(
     threads: int = 2,
     lookahead: int = 10,
     hmd3_share: float = 0.0,
+    backend: str = "native",
 ) -> BenchResult:
-    scorer = AnomalyScorer(load_artifact("anomaly", threads=threads))
     cfg = EngineConfig(samples=samples, lookahead=lookahead)
     n3 = round(hmd3_share * players)
     engine: Engine | MultiEngine
     if hmd3_share > 0:
-        engine = MultiEngine(
-            {
-                Layout.HMD3_WAIST: Engine(
-                    load_artifact("cvae_decoder", threads=threads), scorer, cfg
-                ),
-                Layout.HMD3: Engine(
-                    load_artifact("cvae_decoder_hmd3", threads=threads), scorer, cfg
-                ),
-            }
-        )
+        engine = load_multi_engine(cfg, (Layout.HMD3_WAIST, Layout.HMD3), None, threads, backend)
+        used = "+".join(sorted(set(engine.backends.values())))
     else:
-        engine = Engine(load_artifact("cvae_decoder", threads=threads), scorer, cfg, players)
+        engine = load_engine(cfg, None, threads, Layout.HMD3_WAIST, backend, capacity=players)
+        used = engine.backend_name
     rss0 = _rss_mb()
     for p in range(players):
         if isinstance(engine, MultiEngine):
@@ -119,6 +115,7 @@ def bench(
         players=players,
         samples=samples,
         hmd3_players=n3,
+        backend=used,
         tick_p50_ms=round(p50, 3),
         tick_p99_ms=round(float(np.percentile(ms, 99)), 3),
         gflops=round(flop / (p50 / 1000.0) / 1e9, 2),
@@ -126,13 +123,15 @@ def bench(
     )
 
 
-def naive_loop(players: int, samples: int = 100, ticks: int = 60, threads: int = 2) -> float:
+def naive_loop(
+    players: int, samples: int = 100, ticks: int = 60, threads: int = 2, backend: str = "native"
+) -> float:
     """p50 tick (ms) when each player has its own engine, stepped one after another."""
-    dec = load_artifact("cvae_decoder", threads=threads)
-    scorer = AnomalyScorer(load_artifact("anomaly", threads=threads))
+    cfg = EngineConfig(samples=samples)
+    one = load_engine(cfg, None, threads, Layout.HMD3_WAIST, backend, capacity=1)
     engines = []
-    for p in range(players):
-        e = Engine(dec, scorer, EngineConfig(samples=samples), 1)
+    for p in range(players):  # every engine on the one backend's decoder and pool
+        e = Engine(one.decoder, one.pool, cfg, 1, backend_name=one.backend_name)
         e.add_player("p", seed=p)
         engines.append(e)
     pos, quat = _frames()
@@ -155,17 +154,24 @@ def run(
     ticks: int,
     naive_players: int,
     hmd3_share: float = 0.0,
+    backend: str = "native",
 ) -> dict[str, Any]:
-    results = [bench(p, samples, ticks=ticks, threads=threads) for p in player_counts]
+    """The whole report for ``backend`` (``backend`` in it: the one that ran)."""
+    first = bench(player_counts[0], samples, ticks=ticks, threads=threads, backend=backend)
+    asked, backend = backend, first.backend  # a fallback is taken (and logged) once
+    results = [first] + [
+        bench(p, samples, ticks=ticks, threads=threads, backend=backend) for p in player_counts[1:]
+    ]
     ok = [r.players for r in results if r.realtime()]
     mixed: dict[str, Any] = {}
     if hmd3_share > 0:
         both = [
-            bench(p, samples, ticks=ticks, threads=threads, hmd3_share=hmd3_share)
+            bench(p, samples, ticks=ticks, threads=threads, hmd3_share=hmd3_share, backend=backend)
             for p in player_counts
         ]
         fits = [r.players for r in both if r.realtime()]
         mixed = {
+            "backend": both[0].backend,
             "hmd3_share": hmd3_share,
             "hmd3_players": [r.hmd3_players for r in both],
             "tick_p50_ms": [r.tick_p50_ms for r in both],
@@ -174,6 +180,8 @@ def run(
             "rss_mb_per_player": [r.rss_mb for r in both],
         }
     return {
+        "backend": backend,
+        "backend_asked": asked,
         "players": [r.players for r in results],
         "samples": samples,
         "tick_p50_ms": [r.tick_p50_ms for r in results],
@@ -184,9 +192,9 @@ def run(
         "rss_mb_per_player": [r.rss_mb for r in results],
         "naive_loop": {
             "players": naive_players,
-            "tick_p50_ms": naive_loop(naive_players, samples, threads=threads),
+            "tick_p50_ms": naive_loop(naive_players, samples, threads=threads, backend=backend),
             "batched_tick_p50_ms": bench(
-                naive_players, samples, ticks=60, threads=threads
+                naive_players, samples, ticks=60, threads=threads, backend=backend
             ).tick_p50_ms,
         },
         "threads": threads,

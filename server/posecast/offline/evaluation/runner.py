@@ -22,7 +22,8 @@ from posecast.online.engine.anomaly import AnomalyScorer
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
-from posecast.online.inference.artifact import Artifact, load_artifact
+from posecast.online.inference.artifact import load_artifact
+from posecast.online.inference.backends import Backend, load_backend
 from posecast.skeleton import LOWER_BODY, NUM_ROTATIONS
 from posecast.tracking.features import TrackerSlot
 from posecast.tracking.layouts import Layout, pelvis_from_head, spec
@@ -65,9 +66,12 @@ def evaluate(
     log: Callable[[str], None] | None = None,
     engine_cfg: EngineConfig | None = None,
     layout: str = Layout.HMD3_WAIST,
+    backend: str = "native",
 ) -> dict[str, Any]:
     """Metrics per variant over ``clips`` (each a :data:`Frames` dict with ground truth),
-    for the model of tracker ``layout``.
+    for the model of tracker ``layout``. The full method (``cvae_ik_ssi``) runs the SSI
+    engine on ``backend`` (the report's ``backend`` names the one that ran); the other
+    variants and the scores behind ``implausible_rate`` run the ONNX models.
 
     ``baseline_mean_lower_body`` takes the true upper body and pelvis whatever the
     layout, so only its lower-body numbers are a floor to beat.
@@ -90,12 +94,19 @@ def evaluate(
         for fr in clips
     ]
     truth = [_truth(fr) for fr in clips]
+    engine_cfg = engine_cfg or EngineConfig()
+    ssi_backend = (
+        load_backend(backend, ls.layout, models_dir, cfg=engine_cfg)
+        if "cvae_ik_ssi" in variants
+        else None
+    )
     for name in variants:
         acc, t0 = m.Accumulator(), time.perf_counter()
         ssi: list[tuple[np.ndarray, np.ndarray, int]] = []
         transitions = 0
         if name == "cvae_ik_ssi":
-            ssi = run_ssi(dec, scorer, clips, engine_cfg or EngineConfig())
+            assert ssi_backend is not None
+            ssi = run_ssi(ssi_backend, clips, engine_cfg)
         for ci, fr in enumerate(clips):
             feats = feats_of[ci]
             wpos = fr["tracker_pos"][:, TrackerSlot.WAIST].astype(np.float64)
@@ -153,6 +164,7 @@ def evaluate(
         gt_jitter.add("jitter", m.jitter(gt, fps))
     return {
         "layout": str(ls.layout),
+        "backend": ssi_backend.name if ssi_backend is not None else None,
         "variants": results,
         "clips": len(clips),
         "frames": int(sum(len(c["features"]) for c in clips)),
@@ -163,15 +175,18 @@ def evaluate(
 
 
 def run_ssi(
-    dec: Artifact, scorer: AnomalyScorer, clips: Sequence[Frames], cfg: EngineConfig
+    backend: Backend, clips: Sequence[Frames], cfg: EngineConfig
 ) -> list[tuple[np.ndarray, np.ndarray, int]]:
-    """The full method: every clip as one player of one engine, all stepped together.
+    """The full method: every clip as one player of one engine on ``backend``, all
+    stepped together.
 
     Returns per clip the emitted world rotations ``(T, 19, 3, 3)`` and positions
     ``(T, 19, 3)``, aligned with the input frames (the engine's ``tau``-frame delay
     undone by ``seq``), and the number of transitions.
     """
-    engine = Engine(dec, scorer, cfg, capacity=len(clips))
+    engine = Engine(
+        backend.decoder, backend.pool, cfg, capacity=len(clips), backend_name=backend.name
+    )
     for i in range(len(clips)):
         engine.add_player(str(i), seed=i)
     out = [np.full((len(fr["features"]), 19, 3), np.nan, np.float32) for fr in clips]
@@ -204,7 +219,10 @@ def run_ssi(
 
 def format_table(report: dict[str, Any]) -> str:
     head = f"{'variant':26s}" + "".join(f"{k:>22s}" for k in METRIC_KEYS) + f"{'seconds':>9s}"
-    lines = [f"layout {report.get('layout', Layout.HMD3_WAIST)}", head]
+    title = f"layout {report.get('layout', Layout.HMD3_WAIST)}"
+    if report.get("backend"):
+        title += f", SSI on backend {report['backend']}"
+    lines = [title, head]
     for name, res in report["variants"].items():
         row = f"{name:26s}" + "".join(f"{res.get(k, float('nan')):22.3f}" for k in METRIC_KEYS)
         lines.append(row + f"{res.get('seconds', 0):9.1f}")

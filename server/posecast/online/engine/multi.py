@@ -38,6 +38,11 @@ class MultiEngine:
     def player_count(self) -> int:
         return len(self.players)
 
+    @property
+    def backends(self) -> dict[str, str]:
+        """The backend each layout's engine runs (``Engine.backend_name``)."""
+        return {str(k): e.backend_name for k, e in self.engines.items()}
+
     def counts(self) -> dict[str, int]:
         """Players per layout (what each batch holds)."""
         return {str(k): e.player_count for k, e in self.engines.items()}

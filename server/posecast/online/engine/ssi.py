@@ -4,22 +4,25 @@ Per tick, for all ``P`` players x ``N`` samples at once:
 
 1. tracker frames -> calibrated positions -> features ``(P, 24)`` (``(P, 36)`` for the
    headset-only layout, see :mod:`posecast.tracking.layouts`)
-2. one decoder call on ``P*N`` rows -> rotations, contacts, next hidden states (and,
+2. one decoder step on ``P*N`` rows -> rotations, contacts, next hidden states (and,
    for ``hmd3``, each sample's pelvis pose in the head's yaw frame)
-3. FK with the root from the waist tracker (``hmd3``: from the sample's own pelvis
-   output), then per-sample contact IK
-4. anomaly error ``R`` of every sample, and each player's selector decides whether
-   its current sample must give way (detected at frame ``n``, the newest)
+3. one candidate-pool step: FK with the root from the waist tracker (``hmd3``: from
+   the sample's own pelvis output), per-sample contact IK, and the anomaly error ``R``
+   of every sample
+4. each player's selector decides whether its current sample must give way (detected
+   at frame ``n``, the newest)
 5. emit frame ``n - tau`` per player: the current sample's pose, or during a
    transition the decoder re-run on the interpolated latent and hidden state
    (one more batched call), then that player's own display IK
 
 The engine is pure: frames go in with :meth:`Engine.push`, :meth:`Engine.tick`
 returns poses and events (:mod:`posecast.online.engine.types`). No sockets, no
-clocks, no threads; the decoder and the anomaly scorer arrive built
-(:func:`posecast.online.inference.loader.load_engine` loads the shipped ones). One engine serves one
-model (one layout); :class:`posecast.online.engine.multi.MultiEngine` batches each model's
-players together when a server serves both.
+clocks, no threads; steps 2 and 3 are a backend's :class:`~posecast.online.engine.backend.Decoder`
+and :class:`~posecast.online.engine.backend.Pool`, which arrive built
+(:func:`posecast.online.inference.loader.load_engine` loads the shipped models on the backend
+named). One engine serves one model (one layout);
+:class:`posecast.online.engine.multi.MultiEngine` batches each model's players together
+when a server serves both.
 
 Look-ahead (paper Sec. 3.2.4): each player keeps a ring of ``tau + 1`` frames of
 inputs, pre-step hidden states and raw outputs for all samples. An outlier found at
@@ -30,16 +33,16 @@ new sample is fully in place exactly at the frame where the outlier would have s
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from posecast.geometry.fk import fk_positions
 from posecast.geometry.rotations import mat2quat, quat2mat
-from posecast.online.engine.anomaly import AnomalyScorer
+from posecast.online.engine.backend import Decoder, Pool, PoolIK
 from posecast.online.engine.batch_fk import fk32
 from posecast.online.engine.calibration import Calibration, WaistFilter
 from posecast.online.engine.config import EngineConfig
@@ -50,9 +53,6 @@ from posecast.online.engine.types import EngineEvent, PoseOut, TickResult, Track
 from posecast.skeleton import NUM_JOINTS, REST_PELVIS_HEIGHT_M, reference_offsets
 from posecast.tracking.features import TRACKER_JOINT_INDEX, TrackerSlot
 from posecast.tracking.layouts import Layout, pelvis_from_head, spec
-
-if TYPE_CHECKING:  # the decoder arrives built (inference/loader.py): no runtime import here
-    from posecast.online.inference.artifact import Artifact
 
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
@@ -83,18 +83,30 @@ class _Player:
 
 
 class Engine:
-    """Batched SSI for many players. See the module docstring for one tick's steps."""
+    """Batched SSI for many players. See the module docstring for one tick's steps.
+
+    Args:
+        decoder, pool: a backend's two halves (``load_backend`` in
+            :mod:`posecast.online.inference.backends`); the pool's contact-IK settings
+            should be this ``cfg``'s.
+        cfg: sample selection and interpolation settings (defaults: :class:`EngineConfig`).
+        capacity: player slots preallocated (doubles when full).
+        backend_name: which backend ``decoder`` and ``pool`` are, for logs and reports.
+    """
 
     def __init__(
         self,
-        decoder: Artifact,
-        scorer: AnomalyScorer,
+        decoder: Decoder,
+        pool: Pool,
         cfg: EngineConfig | None = None,
         capacity: int = 8,
+        *,
+        backend_name: str = "custom",
     ) -> None:
         self.cfg = cfg or EngineConfig()
         self.decoder = decoder
-        self.scorer = scorer
+        self.pool = pool
+        self.backend_name = backend_name
         mc = decoder.meta["model_config"]
         self.latent, self.hidden = int(mc["latent"]), int(mc["hidden"])
         self.layout = spec(decoder.meta.get("layout", Layout.HMD3_WAIST))
@@ -107,6 +119,7 @@ class Engine:
         self.slots = SlotArrays(
             {
                 "eps": ((N, self.latent), np.float32),
+                "zc": ((N, decoder.cache_width), np.float32),  # the decoder's latent cache
                 "ik_locked": ((N, 2), np.bool_),
                 "ik_lock_pos": ((N, 2, 3), np.float64),
                 "ik_release": ((N, 2), np.int64),
@@ -129,6 +142,7 @@ class Engine:
         )
         self.players: dict[str, _Player] = {}
         self._order: list[str] = []  # player id per slot
+        self._world = np.empty((0, NUM_JOINTS, 3), np.float32)  # the pool's output, grown
 
     # --- membership -----------------------------------------------------------------
 
@@ -146,7 +160,7 @@ class Engine:
         slot = self.slots.add()
         eps = np.random.default_rng(seed).standard_normal((self.cfg.samples, self.latent))
         eps[0] = 0.0
-        self.slots["eps"][slot] = eps
+        self._set_eps(slot, slice(None), eps)
         wf = (
             WaistFilter(self.cfg.waist_filter_hz, self.cfg.fps)
             if self.cfg.waist_filter_hz and not self.layout.predicts_root
@@ -168,6 +182,17 @@ class Engine:
         if moved is not None:
             self._order[p.slot] = last_id
             self.players[last_id].slot = p.slot
+
+    def set_latents(self, player: str, eps: NDArray[np.floating], samples: Any = None) -> None:
+        """Replace the latents ``eps (n, latent)`` of ``player``'s samples ``samples``
+        (an index, slice or index array; ``None``: all ``N``), cache included."""
+        self._set_eps(self.players[player].slot, slice(None) if samples is None else samples, eps)
+
+    def _set_eps(self, slot: int, samples: Any, eps: NDArray[np.floating]) -> None:
+        self.slots["eps"][slot, samples] = eps
+        rows = np.asarray(self.slots["eps"][slot, samples], np.float32).reshape(-1, self.latent)
+        shape = self.slots["zc"][slot, samples].shape
+        self.slots["zc"][slot, samples] = self.decoder.cache_latents(rows).reshape(shape)
 
     def set_selector(self, player: str, selector: Selector) -> None:
         self.players[player].selector = selector
@@ -200,33 +225,33 @@ class Engine:
         k = self._tick % L
         events = self._gather_inputs(k)
         pos, quat = s.row("ring_pos", k), s.row("ring_quat", k)  # (P, 4, 3), (P, 4, 4)
-        # One decoder call for all P*N samples; ONNX Runtime reads the hidden states from
-        # this frame's ring row and writes the next ones straight into the following row.
+        R = P * N
+        # One decoder step for all P*N samples: it reads the hidden states from this
+        # frame's ring row and writes the next ones straight into the following row.
         outputs = {
-            "rotations": s.row("ring_rot", k).reshape(P * N, 108),
-            "contacts": s.row("ring_con", k).reshape(P * N, 2),
-            "h_out": s.row("ring_h", (k + 1) % L).reshape(P * N, self.hidden),
+            "rotations": s.row("ring_rot", k).reshape(R, 108),
+            "contacts": s.row("ring_con", k).reshape(R, 2),
+            "h_out": s.row("ring_h", (k + 1) % L).reshape(R, self.hidden),
         }
         if self.layout.predicts_root:
-            outputs["root"] = s.row("ring_root", k).reshape(P * N, self.layout.root_outputs)
-        self.decoder.run_into(
-            {
-                "features": np.repeat(s.row("ring_x", k), N, axis=0),
-                "z": s.view("eps").reshape(P * N, self.latent),
-                "h": s.row("ring_h", k).reshape(P * N, self.hidden),
-            },
+            outputs["root"] = s.row("ring_root", k).reshape(R, self.layout.root_outputs)
+        self.decoder.step(
+            s.row("ring_x", k),  # (P, F): a player's row serves its N samples
+            N,
+            s.view("zc").reshape(R, -1),
+            s.row("ring_h", k).reshape(R, self.hidden),
             outputs,
         )
-        rot, con = outputs["rotations"], outputs["contacts"]
-        root_mat, root_pos = self._roots(pos, quat, outputs.get("root"), N)
-        _, wp = fk32(rot, root_mat, root_pos, False)
-        self._ik(s.view, P * N).step(None, wp, con)
-        if self.layout.predicts_root:  # every sample has its own pelvis
-            scores = self.scorer.score_mats(wp, root_pos, root_mat).reshape(P, N)
-        else:  # the N samples of a player share the waist tracker's
-            waist_pos, waist_quat = pos[:, TrackerSlot.WAIST], quat[:, TrackerSlot.WAIST]
-            scores = self.scorer.score(wp, waist_pos, waist_quat, repeat=N).reshape(P, N)
-        wp = wp.reshape(P, N, -1, 3)
+        # One pool step: FK, contact IK and anomaly error of every sample.
+        root_mat, root_pos, group = self._roots(pos, quat, outputs.get("root"), N)
+        if len(self._world) < R:
+            self._world = np.empty((R, NUM_JOINTS, 3), np.float32)
+        world = self._world[:R]
+        ik = PoolIK(*(s.view(f"ik_{n}").reshape(R, *_IK_SHAPES[n]) for n in _IK_SHAPES))
+        scores = self.pool.step(
+            outputs["rotations"], outputs["contacts"], root_mat, root_pos, group, ik, world
+        ).reshape(P, N)
+        wp = world.reshape(P, N, NUM_JOINTS, 3)
 
         started = 0
         for i, pid in enumerate(self._order):
@@ -237,31 +262,33 @@ class Engine:
         self._tick += 1
         return TickResult(poses, events, started)
 
-    def _roots(self, pos: F64, quat: F64, root_out: F32 | None, repeat: int) -> tuple[F32, F32]:
-        """World pelvis rotations ``(R, 3, 3)`` and positions ``(R, 3)`` for
-        ``R = len(pos) * repeat`` decoded rows.
+    def _roots(
+        self, pos: F64, quat: F64, root_out: F32 | None, repeat: int
+    ) -> tuple[F32, F32, int]:
+        """World pelvis rotations ``(G, 3, 3)`` and positions ``(G, 3)`` (float32) for
+        ``R = len(pos) * repeat`` decoded rows, and how many rows share each: ``R / G``.
 
-        ``hmd3+waist``: the waist tracker's, shared by a player's ``repeat`` rows.
-        ``hmd3``: each row's own pelvis output (6D rotation, position), moved out of
-        the player's head frame into the world.
+        ``hmd3+waist``: the waist tracker's, one per player (``G = len(pos)``), shared
+        by its ``repeat`` rows. ``hmd3``: each row's own pelvis output (6D rotation,
+        position), moved out of the player's head frame into the world (``G = R``).
         """
         if root_out is None:
             m = quat2mat(quat[:, TrackerSlot.WAIST]).astype(np.float32)
             p = pos[:, TrackerSlot.WAIST].astype(np.float32)
-            return np.repeat(m, repeat, axis=0), np.repeat(p, repeat, axis=0)
+            return m, p, repeat
         head_pos = np.repeat(pos[:, TrackerSlot.HEAD], repeat, axis=0)
         head_quat = np.repeat(quat[:, TrackerSlot.HEAD], repeat, axis=0)
         mats, places = pelvis_from_head(root_out, head_pos, head_quat)
-        return mats.astype(np.float32), places.astype(np.float32)
+        return mats.astype(np.float32), places.astype(np.float32), 1
 
-    def _ik(self, get: Callable[[str], NDArray[Any]], rows: int, prefix: str = "ik") -> ContactIK:
-        """Contact IK over ``rows`` rows of the ``<prefix>_*`` state arrays (views)."""
+    def _display_ik(self, state: Mapping[str, NDArray[Any]], rows: int) -> ContactIK:
+        """The players' own display IK over ``rows`` gathered ``disp_*`` state arrays."""
         return ContactIK(
-            get(f"{prefix}_locked").reshape(rows, 2),
-            get(f"{prefix}_lock_pos").reshape(rows, 2, 3),
-            get(f"{prefix}_release").reshape(rows, 2),
+            state["disp_locked"].reshape(rows, 2),
+            state["disp_lock_pos"].reshape(rows, 2, 3),
+            state["disp_release"].reshape(rows, 2),
             self.cfg.ik_release_frames,
-            get(f"{prefix}_suppressed").reshape(rows, 2),
+            state["disp_suppressed"].reshape(rows, 2),
             self.cfg.ik_max_drift_m,
         )
 
@@ -364,30 +391,43 @@ class Engine:
         root = s["ring_root"][k, slots, samples] if self.layout.predicts_root else None
         interp = [i for i, (_, _, w) in enumerate(emit) if 0.0 < w < 1.0]
         if interp:
+            # Re-decode on the blended latent and hidden state. The cache is affine in
+            # the latent, so the blend of two caches is the cache of the blended latent.
             zs, hs = [], []
             for i in interp:
                 p, _, w = emit[i]
                 assert p.plan is not None
-                eps, hr = s["eps"][p.slot], s["ring_h"][k, p.slot]
-                zs.append((1 - w) * eps[p.plan.src] + w * eps[p.plan.dst])
+                zc, hr = s["zc"][p.slot], s["ring_h"][k, p.slot]
+                zs.append((1 - w) * zc[p.plan.src] + w * zc[p.plan.dst])
                 hs.append((1 - w) * hr[p.plan.src] + w * hr[p.plan.dst])
-            out = self.decoder.run(
-                features=s["ring_x"][k, slots[interp]],
-                z=np.asarray(zs, np.float32),
-                h=np.asarray(hs, np.float32),
-            )
-            rot[interp], con[interp] = out[0], out[-2]
+            E = len(interp)
+            out = {
+                "rotations": np.empty((E, 108), np.float32),
+                "contacts": np.empty((E, 2), np.float32),
+                "h_out": np.empty((E, self.hidden), np.float32),  # not kept
+            }
             if root is not None:
-                root[interp] = out[1]
+                out["root"] = np.empty((E, self.layout.root_outputs), np.float32)
+            self.decoder.step(
+                np.ascontiguousarray(s["ring_x"][k, slots[interp]]),
+                1,
+                np.asarray(zs, np.float32),
+                np.asarray(hs, np.float32),
+                out,
+            )
+            rot[interp], con[interp] = out["rotations"], out["contacts"]
+            if root is not None:
+                root[interp] = out["root"]
         for p, _, w in emit:
             if p.plan is not None and w >= 1.0:
                 p.plan = None
         pos, quat = s["ring_pos"][k, slots], s["ring_quat"][k, slots]
-        wm, wp = fk32(rot, *self._roots(pos, quat, root, 1))
+        root_mat, root_pos, _ = self._roots(pos, quat, root, 1)
+        wm, wp = fk32(rot, root_mat, root_pos)
         assert wm is not None
         # The players' own display IK, batched: gather their states, step, scatter back.
         state = {n: s[n][slots] for n in _DISPLAY_IK}
-        self._ik(state.__getitem__, len(emit), "disp").step(wm, wp, con)
+        self._display_ik(state, len(emit)).step(wm, wp, con)
         for n in _DISPLAY_IK:
             s[n][slots] = state[n]
         scale = np.array([p.calibration.scale for p, _, _ in emit], np.float32)
@@ -410,6 +450,13 @@ class Engine:
 
 
 _DISPLAY_IK = ("disp_locked", "disp_lock_pos", "disp_release", "disp_suppressed")
+# Per-sample shapes of the candidate pool's contact-IK state, in PoolIK's field order.
+_IK_SHAPES: dict[str, tuple[int, ...]] = {
+    "locked": (2,),
+    "lock_pos": (2, 3),
+    "release": (2,),
+    "suppressed": (2,),
+}
 
 
 def _rest_trackers() -> F64:

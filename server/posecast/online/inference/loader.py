@@ -2,19 +2,20 @@
 
 ``load_engine`` builds one :class:`~posecast.online.engine.ssi.Engine` for one tracker
 layout; ``load_multi_engine`` one per layout, each on its own model, as the server
-runs them (:class:`~posecast.online.engine.multi.MultiEngine`).
+runs them (:class:`~posecast.online.engine.multi.MultiEngine`). Both run the backend
+named (:mod:`posecast.online.inference.backends`); ``Engine.backend_name`` says which
+one runs, ``onnx`` where ``native`` was asked for and could not load.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable
 
-from posecast.online.engine.anomaly import AnomalyScorer
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.multi import MultiEngine
 from posecast.online.engine.ssi import Engine
-from posecast.online.inference.artifact import load_artifact
-from posecast.tracking.layouts import Layout, spec
+from posecast.online.inference.backends import load_backend
+from posecast.tracking.layouts import Layout
 
 
 def load_engine(
@@ -22,12 +23,14 @@ def load_engine(
     models_dir: str | None = None,
     threads: int = 1,
     layout: str = Layout.HMD3_WAIST,
+    backend: str = "native",
+    capacity: int = 8,
 ) -> Engine:
-    """An engine on the shipped models (or those in ``models_dir``) for ``layout``."""
-    ls = spec(layout)
-    decoder = load_artifact(ls.decoder, models_dir, threads=threads)
-    scorer = AnomalyScorer(load_artifact(ls.anomaly, models_dir, threads=threads))
-    return Engine(decoder, scorer, cfg)
+    """An engine on the shipped models (or those in ``models_dir``) for ``layout``, on
+    ``backend`` (``native``, ``onnx`` or ``torch``) with ``threads`` threads."""
+    cfg = cfg or EngineConfig()
+    b = load_backend(backend, layout, models_dir, threads, cfg)
+    return Engine(b.decoder, b.pool, cfg, capacity, backend_name=b.name)
 
 
 def load_multi_engine(
@@ -35,8 +38,11 @@ def load_multi_engine(
     layouts: Iterable[str],
     models_dir: str | None = None,
     threads: int = 1,
+    backend: str = "native",
 ) -> MultiEngine:
     """One engine per layout in ``layouts``, each on its own shipped model."""
-    return MultiEngine(
-        {layout: load_engine(cfg, models_dir, threads, layout) for layout in layouts}
-    )
+    engines: dict[str, Engine] = {}
+    for layout in layouts:
+        engines[layout] = engine = load_engine(cfg, models_dir, threads, layout, backend)
+        backend = engine.backend_name  # a fallback is taken (and logged) once, not per model
+    return MultiEngine(engines)
