@@ -297,6 +297,7 @@ def test_export_user_error(tmp_path: Path, capsys) -> None:
         (["--split", "holdout"], "CONFIG_INVALID"),
         (["--samples", "0"], "CONFIG_INVALID"),
         (["--outlier-factor", "-1"], "CONFIG_INVALID"),
+        (["--backend", "cuda"], "CONFIG_INVALID"),
         (["--json", "/no/such/dir/eval.json"], "CONFIG_INVALID"),
         (["--models", "/no/such/models"], "MODEL_INVALID"),
         ([], "DATASET_INVALID"),  # --data names no directory
@@ -317,6 +318,8 @@ def test_eval_apps_user_error(bvh_dir: Path, tmp_path: Path, capsys) -> None:
     user_error(capsys, main(["eval-apps", "--data", str(data), "--runs", "0"]), "CONFIG_INVALID")
     rc = main(["eval-apps", "--data", str(data), "--samples", "1,x"])
     user_error(capsys, rc, "CONFIG_INVALID")
+    rc = main(["eval-apps", "--data", str(data), "--backend", "cuda"])
+    user_error(capsys, rc, "CONFIG_INVALID")
     assert main(["data", "prepare", "--bvh", str(bvh_dir), "--out", str(data)]) == 0
     capsys.readouterr()
     rc = main(["eval-apps", "--data", str(data), "--clip", "no_such_clip"])
@@ -332,11 +335,28 @@ def test_eval_apps_user_error(bvh_dir: Path, tmp_path: Path, capsys) -> None:
         ["--samples", "0"],
         ["--ticks", "0"],
         ["--hmd3-share", "1.5"],
+        ["--backend", "cuda"],
+        ["--backend", "onnx,onnx"],
+        ["--backend", "native,"],
         ["--json", "/no/such/dir/bench.json"],
     ],
 )
 def test_bench_engine_user_error(capsys, extra: list[str]) -> None:
     user_error(capsys, main(["bench", "engine", *extra]), "CONFIG_INVALID")
+
+
+def test_an_unknown_backend_is_named_with_the_known_ones(capsys) -> None:
+    err = user_error(capsys, main(["bench", "engine", "--backend", "cuda"]), "CONFIG_INVALID")
+    assert "'cuda'" in err and "native, onnx, torch" in err.splitlines()[-1]
+
+
+def test_bench_engine_runs_each_backend_asked_for(capsys) -> None:
+    pytest.importorskip("torch")
+    argv = ["bench", "engine", "--players", "1", "--samples", "2", "--ticks", "2"]
+    argv += ["--naive-players", "1", "--hmd3-share", "0", "--threads", "1"]
+    assert main([*argv, "--backend", "onnx,torch"]) == 0
+    headers = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("backend ")]
+    assert headers == ["backend onnx", "backend torch"]
 
 
 def test_serve_without_a_secret_is_a_config_error(capsys, monkeypatch) -> None:
@@ -355,6 +375,7 @@ def test_serve_without_a_secret_is_a_config_error(capsys, monkeypatch) -> None:
         (["--port", "70000"], "CONFIG_INVALID"),
         (["--samples", "0"], "CONFIG_INVALID"),
         (["--layouts", "hmd4"], "CONFIG_INVALID"),
+        (["--backend", "cuda"], "CONFIG_INVALID"),
         (["--models-dir", "/no/such/models"], "MODEL_INVALID"),
     ],
 )

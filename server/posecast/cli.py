@@ -96,6 +96,22 @@ def _int_list(option: str, text: str, command: str) -> list[int]:
     return values
 
 
+def _backends(option: str, text: str, command: str, *, many: bool = False) -> list[str]:
+    """Backend names (``native``, ``onnx``, ``torch``); with ``many``, a comma-separated
+    list of distinct ones (``"native,onnx"``)."""
+    from posecast.online.engine.backend import BACKENDS
+
+    names = [n.strip() for n in text.split(",")] if many else [text]
+    if not all(n in BACKENDS for n in names) or len(set(names)) < len(names):
+        what = "a comma-separated list of distinct backends" if many else "a backend"
+        raise _config(
+            f"{option} {text!r} is not {what}",
+            f"use {'some' if many else 'one'} of {', '.join(BACKENDS)}, e.g. {option} "
+            f"{'native,onnx' if many else 'onnx'} (`posecast {command} --help`)",
+        )
+    return names
+
+
 def _json_out(path: Path | None) -> None:
     """Fail now, not after a long run, when the report could not be written."""
     if path is None:
@@ -416,6 +432,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         raise _config(f"--split {args.split!r} unknown", f"use one of {', '.join(SPLITS)}")
     _at_least("--samples", args.samples, 1, "eval")
     _finite("--outlier-factor", args.outlier_factor, "eval", positive=True)
+    (backend,) = _backends("--backend", args.backend, "eval")
     engine_cfg = EngineConfig(  # a ConfigError for a bad --samples
         samples=args.samples,
         outlier_baseline=args.outlier_baseline,
@@ -468,6 +485,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         log=lambda m: print(m, file=sys.stderr),
         engine_cfg=engine_cfg,
         layout=args.layout,
+        backend=backend,
     )
     print(format_table(report))
     if args.json is not None:
@@ -482,6 +500,7 @@ def _cmd_eval_apps(args: argparse.Namespace) -> int:
     counts = _int_list("--samples", args.samples, "eval-apps")
     _at_least("--runs", args.runs, 1, "eval-apps")
     _at_least("--threads", args.threads, 1, "eval-apps")
+    (backend,) = _backends("--backend", args.backend, "eval-apps")
     _json_out(args.json)
     _models_dir(args.models)
     _manifest(args.data)
@@ -503,7 +522,7 @@ def _cmd_eval_apps(args: argparse.Namespace) -> int:
             f"--clip {args.clip!r} is not in {args.data}",
             f"pass the name of a clip of the dataset ({shown or 'it has none'})",
         )
-    loaded = load_backend("native", Layout.HMD3_WAIST, args.models, args.threads)
+    loaded = load_backend(backend, Layout.HMD3_WAIST, args.models, args.threads)
     report = table3(loaded, kick, sample_counts=counts, runs=args.runs)
     report["clip"] = args.clip
     print(json.dumps(report, indent=1))
@@ -529,25 +548,47 @@ def _cmd_bench_engine(args: argparse.Namespace) -> int:
             f"--hmd3-share {args.hmd3_share} outside [0, 1]",
             "the share of players on the headset-only model, e.g. 0.5 (0: none)",
         )
+    backends = _backends("--backend", args.backend, cmd, many=True)
     _json_out(args.json)
     from posecast.offline.evaluation.engine_speed import run
 
-    report = run(
-        counts, args.samples, args.threads, args.ticks, args.naive_players, args.hmd3_share
-    )
+    reports = []
+    for backend in backends:
+        report = run(
+            counts,
+            args.samples,
+            args.threads,
+            args.ticks,
+            args.naive_players,
+            args.hmd3_share,
+            backend,
+        )
+        _print_bench(report, args.samples)
+        reports.append(report)
+    if args.json is not None:
+        out = reports[0] if len(reports) == 1 else reports
+        args.json.write_text(json.dumps(out, indent=1) + "\n", encoding="utf-8")
+    return 0
+
+
+def _print_bench(report: dict[str, Any], samples: int) -> None:
+    """One backend's tables of ``posecast bench engine``."""
+    used, asked = report["backend"], report["backend_asked"]
+    print(f"backend {used}" + (f" ({asked} asked for; unavailable)" if used != asked else ""))
     print(f"{'players':>8s} {'p50 ms':>8s} {'p99 ms':>8s} {'GFLOP/s':>8s} {'MB/player':>10s}")
     for i, p in enumerate(report["players"]):
         print(
             f"{p:8d} {report['tick_p50_ms'][i]:8.2f} {report['tick_p99_ms'][i]:8.2f} "
             f"{report['gflops'][i]:8.1f} {report['rss_mb_per_player'][i]:10.2f}"
         )
-    print(
-        f"max players at 60 Hz (p99 < 16.7 ms), N={args.samples}: {report['max_realtime_players']}"
-    )
+    print(f"max players at 60 Hz (p99 < 16.7 ms), N={samples}: {report['max_realtime_players']}")
     print(f"peak: {report['peak_gflops']} GFLOP/s; naive loop: {report['naive_loop']}")
     both = report.get("both_models")
     if both:
-        print(f"both models loaded, {both['hmd3_share']:.0%} of the players headset-only:")
+        print(
+            f"both models loaded (backend {both['backend']}), {both['hmd3_share']:.0%} of the "
+            "players headset-only:"
+        )
         print(f"{'players':>8s} {'hmd3':>5s} {'p50 ms':>8s} {'p99 ms':>8s} {'MB/player':>10s}")
         for i, p in enumerate(report["players"]):
             print(
@@ -555,9 +596,6 @@ def _cmd_bench_engine(args: argparse.Namespace) -> int:
                 f"{both['tick_p99_ms'][i]:8.2f} {both['rss_mb_per_player'][i]:10.2f}"
             )
         print(f"max players at 60 Hz, both models: {both['max_realtime_players']}")
-    if args.json is not None:
-        args.json.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
-    return 0
 
 
 def _cmd_serve(args: argparse.Namespace) -> int:
@@ -729,6 +767,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="tracker layout, i.e. which model (default hmd3+waist)",
     )
     ev.add_argument("--samples", type=int, default=100, help="SSI latent samples N (100)")
+    ev.add_argument(
+        "--backend",
+        default="native",
+        help="inference backend of the SSI engine: native (default; falls back to onnx "
+        "where the extension does not load), onnx or torch",
+    )
     ev.add_argument("--outlier-factor", type=float, default=2.0, help="SSI outlier factor (2)")
     ev.add_argument(
         "--outlier-baseline",
@@ -745,6 +789,9 @@ def build_parser() -> argparse.ArgumentParser:
     apps.add_argument("--runs", type=int, default=100, help="runs (seeds) per setting")
     apps.add_argument("--models", type=Path, help="models directory (default: shipped)")
     apps.add_argument("--threads", type=int, default=2)
+    apps.add_argument(
+        "--backend", default="native", help="inference backend: native (default), onnx or torch"
+    )
     apps.add_argument("--json", type=Path, help="write the report here")
     apps.set_defaults(func=_cmd_eval_apps)
 
@@ -753,7 +800,14 @@ def build_parser() -> argparse.ArgumentParser:
     be = bench_sub.add_parser("engine", help="per-tick cost of the SSI engine")
     be.add_argument("--players", default="1,10,50,100,200", help="player counts")
     be.add_argument("--samples", type=int, default=100, help="latent samples N")
-    be.add_argument("--threads", type=int, default=2, help="ONNX Runtime intra-op threads")
+    be.add_argument("--threads", type=int, default=2, help="the backend's intra-op threads")
+    be.add_argument(
+        "--backend",
+        default="native",
+        help="inference backend, or a comma-separated list to run each in turn, one table "
+        "each (native, onnx, torch; default native, which falls back to onnx where the "
+        "extension does not load; --json then writes a list)",
+    )
     be.add_argument("--ticks", type=int, default=120, help="measured ticks per count")
     be.add_argument("--naive-players", type=int, default=10, help="players for the naive loop")
     be.add_argument(

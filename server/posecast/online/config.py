@@ -18,6 +18,7 @@ from typing import Any
 
 from posecast.errors import ConfigError
 from posecast.online.auth.tokens import new_secret
+from posecast.online.engine.backend import BACKENDS
 from posecast.online.protocol.messages import Limits
 from posecast.tracking.layouts import Layout
 
@@ -44,7 +45,12 @@ class ServerConfig:
     tick_hz: float = _opt(60.0, "engine ticks per second (the shipped model runs at 60)")
     samples: int = _opt(100, "latent samples per player, N")
     lookahead: int = _opt(10, "look-ahead tau in frames; poses lag frames by tau ticks")
-    engine_threads: int = _opt(1, "ONNX Runtime intra-op threads of the engine thread")
+    engine_threads: int = _opt(1, "intra-op threads of the engine's inference backend")
+    backend: str = _opt(
+        "native",
+        "inference backend: native (the C extension; onnx where it does not load), onnx "
+        "or torch (needs posecast[train])",
+    )
     models_dir: str | None = _opt(None, "directory of ONNX models (default: shipped)")
     frame_queue: int = _opt(2, "frames kept per player between ticks; 1: only the newest")
     layouts: str = _opt(
@@ -115,6 +121,8 @@ class ServerConfig:
             raise ConfigError("socket_sndbuf_bytes must be >= 0")
         if self.lookahead < 0:
             raise ConfigError("lookahead must be >= 0")
+        if self.backend not in BACKENDS:
+            raise ConfigError(f"backend {self.backend!r} unknown: one of {', '.join(BACKENDS)}")
         if self.log_level.upper() not in ("DEBUG", "INFO", "WARNING", "ERROR"):
             raise ConfigError(f"log_level {self.log_level!r} unknown")
         if self.redis_node_ttl_s < 2 * self.redis_heartbeat_s:

@@ -95,7 +95,7 @@ class PosecastServer:
             samples=self.cfg.samples, lookahead=self.cfg.lookahead, fps=self.cfg.tick_hz
         )
         layouts, threads = self.cfg.served_layouts, self.cfg.engine_threads
-        return load_multi_engine(ecfg, layouts, self.cfg.models_dir, threads)
+        return load_multi_engine(ecfg, layouts, self.cfg.models_dir, threads, self.cfg.backend)
 
     # --- lifecycle ----------------------------------------------------------------------
 
@@ -117,6 +117,7 @@ class PosecastServer:
         engine = await loop.run_in_executor(self.executor, self._engine_factory)
         if isinstance(engine, Engine):  # one model: its layout's batch only
             engine = MultiEngine({engine.layout.layout: engine})
+        log.info("engine", extra={"backends": engine.backends, "asked": self.cfg.backend})
         worker = EngineWorker(engine)
         self._ticks = asyncio.create_task(
             run_ticks(
