@@ -6,6 +6,7 @@
 #define PC_NB 2
 #include <immintrin.h>
 #define PC_SPLAT(x) _mm256_set1_ps(x)
+#define PC_RCP(x) _mm256_rcp_ps((__m256)(x))
 #define PC_BF16 0
 #define PC_NAME "avx2"
 #define PC_TABLE pc_kernels_avx2

@@ -7,6 +7,7 @@
 #define PC_NB 4
 #include <immintrin.h>
 #define PC_SPLAT(x) _mm512_set1_ps(x)
+#define PC_RCP(x) _mm512_rcp14_ps((__m512)(x))
 #define PC_BF16 1
 #define PC_NAME "avx512bf16"
 #define PC_TABLE pc_kernels_avx512bf16

@@ -95,10 +95,14 @@ static struct {
 } P = {PTHREAD_MUTEX_INITIALIZER, PTHREAD_COND_INITIALIZER, PTHREAD_COND_INITIALIZER,
        PTHREAD_MUTEX_INITIALIZER, 1, 1, 0, 0, 1, 0, NULL, NULL, 0, 0, 0, {0}, {0}};
 
-static void run_tiles(float *scratch) {
+static int64_t tiles_by[MAX_THREADS]; /* tiles each thread ran (pool_stats) */
+
+static void run_tiles(int me) {
+    float *scratch = P.scratch[me];
     for (;;) {
         int64_t t = __atomic_fetch_add(&P.next, 1, __ATOMIC_RELAXED);
         if (t >= P.tiles) return;
+        __atomic_fetch_add(&tiles_by[me], 1, __ATOMIC_RELAXED);
         int64_t r0 = t * PC_TILE, r1 = r0 + PC_TILE;
         P.fn(P.ctx, r0, r1 < P.rows ? r1 : P.rows, scratch);
     }
@@ -114,7 +118,7 @@ static void *worker(void *arg) {
         seen = P.generation;
         int active = P.active;
         pthread_mutex_unlock(&P.mu);
-        if (me < active) run_tiles(P.scratch[me]);
+        if (me < active) run_tiles(me);
         pthread_mutex_lock(&P.mu);
         if (--P.busy == 0) pthread_cond_signal(&P.done);
     }
@@ -156,7 +160,7 @@ static void parallel_rows(TileFn fn, void *ctx, int64_t rows) {
         pthread_cond_broadcast(&P.work);
         pthread_mutex_unlock(&P.mu);
     }
-    run_tiles(P.scratch[0]);
+    run_tiles(0);
     if (helpers > 0) {
         pthread_mutex_lock(&P.mu);
         while (P.busy > 0) pthread_cond_wait(&P.done, &P.mu);
@@ -555,12 +559,20 @@ static PyObject *py_set_threads(PyObject *self, PyObject *arg) {
 
 static PyObject *py_threads(PyObject *self, PyObject *noargs) { return PyLong_FromLong(P.threads); }
 
+static PyObject *py_pool_stats(PyObject *self, PyObject *noargs) {
+    PyObject *out = PyTuple_New(P.started);
+    for (int i = 0; out && i < P.started; i++)
+        PyTuple_SET_ITEM(out, i, PyLong_FromLongLong(__atomic_load_n(&tiles_by[i], __ATOMIC_RELAXED)));
+    return out;
+}
+
 static PyMethodDef METHODS[] = {
     {"isa", py_isa, METH_NOARGS, "The instruction-set level in use."},
     {"isas", py_isas, METH_NOARGS, "Levels this CPU runs, best first."},
     {"set_isa", py_set_isa, METH_O, "Use this level (one from isas())."},
     {"set_threads", py_set_threads, METH_O, "Threads for the kernels (the caller is one)."},
     {"threads", py_threads, METH_NOARGS, "Threads the kernels use."},
+    {"pool_stats", py_pool_stats, METH_NOARGS, "Tiles each pool thread has run (the caller first)."},
     {"pack_decoder", py_pack_decoder, METH_VARARGS, "Pack decoder weights."},
     {"pack_pool", py_pack_pool, METH_VARARGS, "Pack skeleton and anomaly-AE weights."},
     {"decode", py_decode, METH_VARARGS, "One decoder step for R rows."},
