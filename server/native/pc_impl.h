@@ -300,8 +300,10 @@ static void two_bone(const double *hip, const double *knee, const double *ankle,
     }
 }
 
-/* ik.ContactIK.step for one row (positions only, as the candidate pool runs it). */
-static void ik_row(const PcPoolArgs *a, int64_t row, float *wp) {
+/* ik.ContactIK.step for one row (positions only, as the candidate pool runs it).
+ * Returns which legs it moved (bit 0 left, bit 1 right). */
+static int ik_row(const PcPoolArgs *a, int64_t row, float *wp) {
+    int moved = 0;
     static const int LEG[2][4] = {{11, 12, 13, 14}, {15, 16, 17, 18}};
     const int rf = a->release_frames, den = rf > 1 ? rf : 1;
     for (int s = 0; s < 2; s++) {
@@ -328,6 +330,7 @@ static void ik_row(const PcPoolArgs *a, int64_t row, float *wp) {
         a->suppressed[i] = (uint8_t)sup;
         int releasing = rel > 0;
         if (contact || releasing) {
+            moved |= 1 << s;
             double w = (double)rel / den, target[3];
             for (int k = 0; k < 3; k++) target[k] = contact ? lock[k] : w * lock[k] + (1 - w) * feet[k];
             double hip[3], knee[3], k2[3], a2[3];
@@ -346,6 +349,7 @@ static void ik_row(const PcPoolArgs *a, int64_t row, float *wp) {
         if (releasing) rel -= 1;
         a->release[i] = rel;
     }
+    return moved;
 }
 
 static void pool_tile(const PcPool *w, const PcPoolArgs *a, int64_t r0, int64_t r1, float *scratch) {
@@ -415,4 +419,110 @@ static void pool_tile(const PcPool *w, const PcPoolArgs *a, int64_t r0, int64_t 
     }
 }
 
-const PcKernels PC_TABLE = {PC_NAME, decode_tile, pool_tile};
+/* --- the shown pose: FK with rotations, the display IK, quaternions ------------------ */
+
+/* ik.swing_mat for one pair: the smallest rotation turning a onto b (row-major). */
+static void swing(const double *a, const double *b, double *m) {
+    double na = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+    double nb = sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
+    na = na > 1e-9 ? na : 1e-9, nb = nb > 1e-9 ? nb : 1e-9;
+    double ua[3] = {a[0] / na, a[1] / na, a[2] / na}, ub[3] = {b[0] / nb, b[1] / nb, b[2] / nb};
+    double v[3] = {ua[1] * ub[2] - ua[2] * ub[1], ua[2] * ub[0] - ua[0] * ub[2], ua[0] * ub[1] - ua[1] * ub[0]};
+    double c = ua[0] * ub[0] + ua[1] * ub[1] + ua[2] * ub[2];
+    if (c < -0.999) { /* near-opposite: the quaternion construction (rotations.vecs2quat) */
+        double q[4] = {v[0], v[1], v[2], 1.0 + c};
+        if (1.0 + c < 1e-9) {
+            double hlp[3] = {fabs(ua[0]) < 0.9 ? 1.0 : 0.0, fabs(ua[0]) < 0.9 ? 0.0 : 1.0, 0.0};
+            double p[3] = {ua[1] * hlp[2] - ua[2] * hlp[1], ua[2] * hlp[0] - ua[0] * hlp[2],
+                           ua[0] * hlp[1] - ua[1] * hlp[0]};
+            double pn = sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+            pn = pn > 1e-9 ? pn : 1e-9;
+            q[0] = p[0] / pn, q[1] = p[1] / pn, q[2] = p[2] / pn, q[3] = 0.0;
+        }
+        double qn = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+        double x = q[0] / qn, y = q[1] / qn, z = q[2] / qn, w = q[3] / qn;
+        m[0] = 1 - 2 * (y * y + z * z), m[1] = 2 * (x * y - w * z), m[2] = 2 * (x * z + w * y);
+        m[3] = 2 * (x * y + w * z), m[4] = 1 - 2 * (x * x + z * z), m[5] = 2 * (y * z - w * x);
+        m[6] = 2 * (x * z - w * y), m[7] = 2 * (y * z + w * x), m[8] = 1 - 2 * (x * x + y * y);
+        return;
+    }
+    double vx[9] = {0, -v[2], v[1], v[2], 0, -v[0], -v[1], v[0], 0};
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 3; k++) {
+            double sq = vx[i * 3] * vx[k] + vx[i * 3 + 1] * vx[3 + k] + vx[i * 3 + 2] * vx[6 + k];
+            m[i * 3 + k] = (i == k ? 1.0 : 0.0) + vx[i * 3 + k] + sq / (1.0 + c);
+        }
+}
+
+static void dmat_mul(const double *a, const double *b, double *c) {
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 3; k++)
+            c[i * 3 + k] = a[i * 3] * b[k] + a[i * 3 + 1] * b[3 + k] + a[i * 3 + 2] * b[6 + k];
+}
+
+/* rotations.mat2quat (Shepperd, w >= 0), xyzw. */
+static void mat_quat(const float *mf, float *q) {
+    double m[9];
+    for (int i = 0; i < 9; i++) m[i] = mf[i];
+    double tr = m[0] + m[4] + m[8], c[4];
+    int best = 0;
+    double key[4] = {tr, m[0], m[4], m[8]};
+    for (int i = 1; i < 4; i++)
+        if (key[i] > key[best]) best = i;
+    if (best == 0) c[0] = m[7] - m[5], c[1] = m[2] - m[6], c[2] = m[3] - m[1], c[3] = 1 + tr;
+    else if (best == 1) c[0] = 1 + m[0] - m[4] - m[8], c[1] = m[1] + m[3], c[2] = m[2] + m[6], c[3] = m[7] - m[5];
+    else if (best == 2) c[0] = m[1] + m[3], c[1] = 1 - m[0] + m[4] - m[8], c[2] = m[5] + m[7], c[3] = m[2] - m[6];
+    else c[0] = m[2] + m[6], c[1] = m[5] + m[7], c[2] = 1 - m[0] - m[4] + m[8], c[3] = m[3] - m[1];
+    double n = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2] + c[3] * c[3]);
+    n = n > 1e-12 ? n : 1e-12;
+    double sgn = c[3] / n < 0 ? -1.0 : 1.0;
+    for (int i = 0; i < 4; i++) q[i] = (float)(sgn * c[i] / n);
+}
+
+/* One shown pose: positions (57) and world rotations as quaternions (76), after the
+ * player's own display IK (ik.ContactIK.step with rotations: thigh and shin swing). */
+static void emit_row(const PcPool *w, const PcPoolArgs *a, int64_t row, float *quat) {
+    static const int LEG[2][4] = {{11, 12, 13, 14}, {15, 16, 17, 18}};
+    const float *rot = a->rot + (size_t)row * 108;
+    float wm[PC_J][9], *wp = a->wp + (size_t)row * PC_J * 3;
+    memcpy(wm[0], a->root_mat + row * 9, sizeof(float) * 9);
+    memcpy(wp, a->root_pos + row * 3, sizeof(float) * 3);
+    for (int j = 1; j < PC_J; j++) {
+        const int p = PARENT[j];
+        place(wm[p], wp + 3 * p, w->offsets[j], wp + 3 * j);
+        float loc[9];
+        r6d_mat(rot + 6 * (j - 1), loc);
+        mat_mul(wm[p], loc, wm[j]);
+    }
+    float before[PC_J * 3];
+    memcpy(before, wp, sizeof(before));
+    const int moved = ik_row(a, row, wp); /* positions and state, as the candidate pool */
+    for (int s = 0; s < 2; s++) {
+        const int thigh = LEG[s][0], shin = LEG[s][1], foot = LEG[s][2];
+        if (!(moved >> s & 1)) continue;
+        double hip[3], knee[3], ankle[3], k2[3], a2[3], d1[3], d2[3], d3[3], d4[3];
+        for (int k = 0; k < 3; k++) {
+            hip[k] = before[3 * thigh + k], knee[k] = before[3 * shin + k], ankle[k] = before[3 * foot + k];
+            k2[k] = wp[3 * shin + k], a2[k] = wp[3 * foot + k];
+            d1[k] = knee[k] - hip[k], d2[k] = k2[k] - hip[k];
+        }
+        double st[9], ss[9], sw[9], t[9], u[9], wt[9], ws[9], dir[3];
+        swing(d1, d2, st);
+        for (int k = 0; k < 3; k++) d3[k] = ankle[k] - knee[k];
+        for (int i = 0; i < 3; i++) dir[i] = st[i * 3] * d3[0] + st[i * 3 + 1] * d3[1] + st[i * 3 + 2] * d3[2];
+        for (int k = 0; k < 3; k++) d4[k] = a2[k] - k2[k];
+        swing(dir, d4, sw);
+        dmat_mul(sw, st, ss);
+        for (int i = 0; i < 9; i++) wt[i] = wm[thigh][i], ws[i] = wm[shin][i];
+        dmat_mul(st, wt, t);
+        dmat_mul(ss, ws, u);
+        for (int i = 0; i < 9; i++) wm[thigh][i] = (float)t[i], wm[shin][i] = (float)u[i];
+    }
+    for (int j = 0; j < PC_J; j++) mat_quat(wm[j], quat + 4 * j);
+}
+
+static void emit_tile(const PcPool *w, const PcPoolArgs *a, int64_t r0, int64_t r1, float *scratch) {
+    for (int64_t r = r0; r < r1; r++) emit_row(w, a, r, a->quat + r * PC_J * 4);
+}
+
+const PcKernels PC_TABLE = {PC_NAME, decode_tile, pool_tile, emit_tile};

@@ -6,7 +6,9 @@
  *
  *   decode: the CVAE decoder step (first layer from a per-player tracker part and a
  *           per-row latent part, GRU gates, ReLU, pose/root/contact heads);
- *   pool:   6D -> matrices, FK, foot-contact IK, and the anomaly error of every row.
+ *   pool:   6D -> matrices, FK, foot-contact IK, and the anomaly error of every row;
+ *   emit:   the shown poses: FK with world rotations, the display IK (thigh and shin
+ *           swing with the feet), quaternions.
  *
  * The same source (pc_impl.h) is compiled once per instruction-set level, each in
  * its own file with its own target pragma; pc_module.c picks one at load time.
@@ -65,13 +67,15 @@ typedef struct {
     int release_frames;
     double max_drift;                   /* < 0: never release early */
     float *wp;                          /* (R, 19, 3) out */
-    double *scores;                     /* (R) out */
+    double *scores;                     /* (R) out (pool) */
+    float *quat;                        /* (R, 19, 4) out (emit): world rotations, xyzw */
 } PcPoolArgs;
 
 typedef struct {
     const char *name;
     void (*decode)(const PcDecoder *, const PcDecodeArgs *, int64_t r0, int64_t r1, float *scratch);
     void (*pool)(const PcPool *, const PcPoolArgs *, int64_t r0, int64_t r1, float *scratch);
+    void (*emit)(const PcPool *, const PcPoolArgs *, int64_t r0, int64_t r1, float *scratch);
 } PcKernels;
 
 /* Bytes of scratch one thread needs for either kernel (H <= 256, checked at pack time). */

@@ -470,6 +470,47 @@ static void pool_fn(void *ctx, int64_t r0, int64_t r1, float *scratch) {
     c->k->pool(c->p, &c->a, r0, r1, scratch);
 }
 
+static void emit_fn(void *ctx, int64_t r0, int64_t r1, float *scratch) {
+    PoolCtx *c = ctx;
+    c->k->emit(c->p, &c->a, r0, r1, scratch);
+}
+
+static PyObject *py_emit(PyObject *self, PyObject *args) {
+    PyObject *cap, *o[10];
+    int release_frames;
+    double max_drift;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOidOO", &cap, &o[0], &o[1], &o[2], &o[3], &o[4], &o[5], &o[6],
+                          &o[7], &release_frames, &max_drift, &o[8], &o[9]))
+        return NULL;
+    PoolBox *box = PyCapsule_GetPointer(cap, "posecast.pool");
+    if (!box) return NULL;
+    Buf b[10];
+    memset(b, 0, sizeof(b));
+    if (get_buf(o[0], &b[0], "rotations", F32, -1, 0)) goto fail;
+    Py_ssize_t R = b[0].view.len / 4 / 108;
+    if (R * 108 * 4 != b[0].view.len) {
+        PyErr_SetString(PyExc_ValueError, "rotations: not (R, 108)");
+        goto fail;
+    }
+    if (get_buf(o[1], &b[1], "contacts", F32, R * 2, 0) || get_buf(o[2], &b[2], "root_mat", F32, R * 9, 0) ||
+        get_buf(o[3], &b[3], "root_pos", F32, R * 3, 0) || get_buf(o[4], &b[4], "locked", BOOL, R * 2, 1) ||
+        get_buf(o[5], &b[5], "lock_pos", F64, R * 6, 1) || get_buf(o[6], &b[6], "release", I64, R * 2, 1) ||
+        get_buf(o[7], &b[7], "suppressed", BOOL, R * 2, 1) || get_buf(o[8], &b[8], "positions", F32, R * 57, 1) ||
+        get_buf(o[9], &b[9], "rotations_out", F32, R * 76, 1))
+        goto fail;
+    PoolCtx c = {LEVELS[g_level].k, &box->p,
+                 {b[0].view.buf, b[1].view.buf, b[2].view.buf, b[3].view.buf, 1, b[4].view.buf, b[7].view.buf,
+                  b[5].view.buf, b[6].view.buf, release_frames, max_drift, b[8].view.buf, NULL, b[9].view.buf}};
+    Py_BEGIN_ALLOW_THREADS;
+    if (R > 0) parallel_rows(emit_fn, &c, R);
+    Py_END_ALLOW_THREADS;
+    release(b, 10);
+    Py_RETURN_NONE;
+fail:
+    release(b, 10);
+    return NULL;
+}
+
 static PyObject *py_pool(PyObject *self, PyObject *args) {
     PyObject *cap, *o[11];
     Py_ssize_t group;
@@ -502,7 +543,7 @@ static PyObject *py_pool(PyObject *self, PyObject *args) {
     PoolCtx c = {LEVELS[g_level].k, &box->p,
                  {b[0].view.buf, b[1].view.buf, b[2].view.buf, b[3].view.buf, group, b[4].view.buf,
                   b[7].view.buf, b[5].view.buf, b[6].view.buf, release_frames, max_drift, b[8].view.buf,
-                  b[9].view.buf}};
+                  b[9].view.buf, NULL}};
     Py_BEGIN_ALLOW_THREADS;
     if (R > 0) parallel_rows(pool_fn, &c, R);
     Py_END_ALLOW_THREADS;
@@ -577,6 +618,7 @@ static PyMethodDef METHODS[] = {
     {"pack_pool", py_pack_pool, METH_VARARGS, "Pack skeleton and anomaly-AE weights."},
     {"decode", py_decode, METH_VARARGS, "One decoder step for R rows."},
     {"pool", py_pool, METH_VARARGS, "FK, contact IK and anomaly error of R rows."},
+    {"emit", py_emit, METH_VARARGS, "The shown poses: FK, display IK, quaternions."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -54,3 +54,20 @@ def pool(
     scores: Any,
     /,
 ) -> None: ...
+def emit(
+    packed: object,
+    rotations: Any,
+    contacts: Any,
+    root_mat: Any,
+    root_pos: Any,
+    locked: Any,
+    lock_pos: Any,
+    release: Any,
+    suppressed: Any,
+    release_frames: int,
+    max_drift: float,
+    positions: Any,
+    rotations_out: Any,
+    /,
+) -> None: ...
+def pool_stats() -> tuple[int, ...]: ...

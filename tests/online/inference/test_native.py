@@ -16,7 +16,10 @@ import sys
 import numpy as np
 import pytest
 
+from posecast.geometry.rotations import mat2quat
 from posecast.online.engine.backend import PoolIK
+from posecast.online.engine.batch_fk import fk32
+from posecast.online.engine.ik import ContactIK
 from tests.online.inference import reference64 as ref
 
 native = pytest.importorskip("posecast.online.inference.native")
@@ -144,6 +147,30 @@ def test_pool_matches_float64_fk_ik_and_scores(level: str, group: int) -> None:
     assert np.abs(ik.lock_pos - ik64["lock_pos"]).max() < 1e-5
     # the IK did something: some feet were locked or released and moved
     assert (ik.locked | (ik.release > 0)).mean() > 0.2
+
+
+def test_emit_matches_the_numpy_display_path(level: str) -> None:
+    """The shown pose: FK with rotations, the display IK (thigh and shin swing) and
+    quaternions, against batch_fk.fk32 + ContactIK.step(world_mat) + mat2quat."""
+    _, pool = native.load_native("cvae_decoder", "anomaly", None, 2, 10, 0.2)
+    rng = np.random.default_rng(4)
+    inp = _pool_inputs(rng, 300, 1)
+    ik = PoolIK(*(inp[k].copy() for k in ("locked", "lock_pos", "release", "suppressed")))
+    positions, quats = pool.emit(inp["rot"], inp["con"], inp["root_mat"], inp["root_pos"], ik)
+    s = {k: inp[k].copy() for k in ("locked", "lock_pos", "release", "suppressed")}
+    wm, wp = fk32(inp["rot"], inp["root_mat"], inp["root_pos"])
+    assert wm is not None
+    ContactIK(s["locked"], s["lock_pos"], s["release"], 10, s["suppressed"], 0.2).step(
+        wm, wp, inp["con"]
+    )
+    q = mat2quat(wm)
+    assert np.abs(positions - wp).max() < 1e-4  # 0.1 mm (float32 FK, float64 IK)
+    # q and -q are one rotation; mat2quat keeps w >= 0, so compare up to sign
+    dq = np.minimum(np.abs(quats - q).max(-1), np.abs(quats + q).max(-1))
+    assert dq.max() < 1e-4
+    for k in ("locked", "release", "suppressed"):
+        assert np.array_equal(getattr(ik, k), s[k]), k
+    assert (s["locked"] | (s["release"] > 0)).mean() > 0.2  # the IK moved legs
 
 
 def test_threads_do_not_change_results(level: str) -> None:

@@ -224,6 +224,31 @@ class NativePool:
         )
         return scores
 
+    def emit(
+        self, rotations: F32, contacts: F32, root_mat: F32, root_pos: F32, ik: PoolIK
+    ) -> tuple[F32, F32]:
+        """The shown poses of ``E`` rows: world positions ``(E, 19, 3)`` and rotations
+        ``(E, 19, 4)`` xyzw after the display IK (``ik`` steps in place)."""
+        E = len(rotations)
+        positions = np.empty((E, 19, 3), np.float32)
+        quats = np.empty((E, 19, 4), np.float32)
+        _native.emit(
+            self._packed,
+            np.ascontiguousarray(rotations, dtype=np.float32),
+            np.ascontiguousarray(contacts, dtype=np.float32),
+            np.ascontiguousarray(root_mat, dtype=np.float32),
+            np.ascontiguousarray(root_pos, dtype=np.float32),
+            ik.locked,
+            ik.lock_pos,
+            ik.release,
+            ik.suppressed,
+            self.release_frames,
+            self.max_drift,
+            positions,
+            quats,
+        )
+        return positions, quats
+
 
 def load_native(
     decoder_name: str,
