@@ -245,3 +245,27 @@ def test_posecast_native_isa_caps_the_level() -> None:
         assert r.returncode == 0 and r.stdout.strip() == lv, r.stderr
     r = _isa_in_subprocess("sse9")
     assert r.returncode != 0 and "POSECAST_NATIVE_ISA=sse9" in r.stderr
+
+
+def test_a_level_that_disagrees_with_generic_is_dropped(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    if LEVELS[0] == "generic":
+        pytest.skip("only the generic level runs here")
+    before = native.native_isa()
+    real = native._probe
+
+    def probe(dec: object, pool: object, level: str) -> list[np.ndarray]:
+        out = real(dec, pool, level)
+        return [a + 1.0 for a in out] if level == LEVELS[0] else out
+
+    monkeypatch.setattr(native, "_probe", probe)
+    monkeypatch.setattr(native, "_checked", set())
+    native.set_native_isa(LEVELS[0])
+    try:
+        with caplog.at_level("WARNING", logger="posecast.engine"):
+            native.load_native("cvae_decoder", "anomaly", None, 1, 10, 0.2)
+        assert native.native_isa() == LEVELS[1]
+        assert f"level {LEVELS[0]} disagrees with generic" in caplog.text
+    finally:
+        native.set_native_isa(before)

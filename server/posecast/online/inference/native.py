@@ -8,8 +8,11 @@ computed once per player per frame inside :func:`posecast._native.decode`.
 
 Instruction-set level: the best this CPU runs (``avx512bf16``, ``avx512f``, ``avx2``,
 ``generic``), capped by ``POSECAST_NATIVE_ISA``; :func:`native_isa` says which.
-On ``avx512bf16`` the GRU gates multiply bf16 weights into fp32 state; every other
-level, and every other product, is fp32 (docs/engine.md gives the measured effect).
+``avx512bf16`` (the GRU gates as bf16 weights times fp32 state; every other product
+fp32) runs only when ``POSECAST_NATIVE_ISA=avx512bf16`` asks for it: its effect on
+the evaluation figures has not been measured on a machine that runs it. Before a
+level above ``generic`` is first used, :func:`load_native` checks it against
+``generic`` on one small batch and steps down a level if they disagree.
 """
 
 from __future__ import annotations
@@ -250,6 +253,66 @@ class NativePool:
         return positions, quats
 
 
+_checked: set[str] = set()
+
+
+def _self_check(dec: NativeDecoder, pool: NativePool) -> None:
+    """Before the first use of a level above ``generic``: run one small batch on it
+    and on ``generic`` and drop to the next level if they disagree (a level this
+    project's machine cannot run is checked on the machine that runs it)."""
+    import logging
+
+    log = logging.getLogger("posecast.engine")
+    levels = list(native_isas())
+    while True:
+        level = native_isa()
+        if level == "generic" or level in _checked:
+            return
+        got = _probe(dec, pool, level)
+        ref = _probe(dec, pool, "generic")
+        tol = 5e-2 if level == "avx512bf16" else 1e-4
+        worst = max(float(np.abs(a - b).max()) for a, b in zip(got, ref, strict=True))
+        if worst <= tol:
+            _checked.add(level)
+            set_native_isa(level)
+            return
+        lower = levels[levels.index(level) + 1]
+        log.warning(
+            "native kernels: level %s disagrees with generic by %.3g; using %s", level, worst, lower
+        )
+        set_native_isa(lower)
+
+
+def _probe(dec: NativeDecoder, pool: NativePool, level: str) -> list[F32 | F64]:
+    set_native_isa(level)
+    rng = np.random.default_rng(0)
+    G, N = 3, 37  # rows that fill neither a tile nor a register block
+    R = G * N
+    F = len(dec.meta["feature_layout"])
+    x = rng.standard_normal((G, F)).astype(np.float32) * 0.1
+    cache = dec.cache_latents(rng.standard_normal((R, dec.latent)).astype(np.float32))
+    h = rng.standard_normal((R, dec.hidden)).astype(np.float32) * 0.5
+    out = {
+        "rotations": np.zeros((R, 108), np.float32),
+        "contacts": np.zeros((R, 2), np.float32),
+        "h_out": np.zeros((R, dec.hidden), np.float32),
+    }
+    if dec.n_root:
+        out["root"] = np.zeros((R, dec.n_root), np.float32)
+    dec.step(x, N, cache, h, out)
+    eye = np.tile(np.eye(3, dtype=np.float32), (G, 1, 1))
+    root = np.tile(np.array([0.0, 0.9, 0.0], np.float32), (G, 1))
+    ik = PoolIK(
+        np.zeros((R, 2), np.bool_),
+        np.zeros((R, 2, 3)),
+        np.zeros((R, 2), np.int64),
+        np.zeros((R, 2), np.bool_),
+    )
+    world = np.zeros((R, 19, 3), np.float32)
+    scores = pool.step(out["rotations"], out["contacts"], eye, root, N, ik, world)
+    return [*out.values(), world, scores]
+
+
 def load_native(
     decoder_name: str,
     anomaly_name: str,
@@ -262,6 +325,7 @@ def load_native(
     _native.set_threads(max(1, int(threads)))
     meta, path = read_sidecar(decoder_name, models_dir)
     ae_meta, ae_path = read_sidecar(anomaly_name, models_dir)
-    return NativeDecoder(decoder_name, meta, path), NativePool(
-        ae_meta, ae_path, release_frames, max_drift_m
-    )
+    dec = NativeDecoder(decoder_name, meta, path)
+    pool = NativePool(ae_meta, ae_path, release_frames, max_drift_m)
+    _self_check(dec, pool)
+    return dec, pool
