@@ -10,6 +10,7 @@ and removes it from every later frame.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -96,6 +97,29 @@ class Calibration:
                 quat[TrackerSlot.WAIST], np.asarray(self.waist_offset_m)
             )
         return out
+
+
+def orient_all(calibrations: Sequence[Calibration], quat: F64) -> F64:
+    """:meth:`Calibration.orient` of ``M`` players at once: ``quat (M, 4, 4)``, row ``i``
+    by ``calibrations[i]``, with the same arithmetic (so the same bits) as one by one."""
+    rows = [i for i, c in enumerate(calibrations) if c.rot_offsets]
+    if not rows:
+        return quat
+    out = quat.copy()
+    offsets = np.array([calibrations[i].rot_offsets for i in rows])  # (m, 4, 4)
+    out[rows] = quat_normalize(quat_mul(quat[rows], offsets))
+    return out
+
+
+def apply_all(calibrations: Sequence[Calibration], pos: F64, quat: F64) -> F64:
+    """:meth:`Calibration.apply` of ``M`` players at once: ``pos (M, 4, 3)``,
+    ``quat (M, 4, 4)``, row ``i`` by ``calibrations[i]``, bit for bit as one by one."""
+    out: F64 = pos * np.array([c.scale for c in calibrations])[:, None, None]
+    rows = [i for i, c in enumerate(calibrations) if any(c.waist_offset_m)]
+    if rows:
+        offsets = np.array([calibrations[i].waist_offset_m for i in rows])  # (m, 3)
+        out[rows, TrackerSlot.WAIST] -= quat_apply(quat[rows, TrackerSlot.WAIST], offsets)
+    return out
 
 
 @dataclass

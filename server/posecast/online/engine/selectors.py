@@ -67,6 +67,31 @@ class AnomalySelector:
         return best if np.isfinite(others[best]) else None
 
 
+def choose_anomaly_rows(
+    current: NDArray[np.intp], scores: NDArray[np.float64], factor: F64, from_min: NDArray[np.bool_]
+) -> NDArray[np.intp]:
+    """:meth:`AnomalySelector.choose` for ``M`` players at once: the sample each moves to,
+    ``-1`` to stay.
+
+    ``current (M,)``, ``scores (M, N)`` float64, and per player its selector's
+    ``factor (M,)`` and ``from_min (M,)`` (``baseline == "min"``). Row ``i`` gives exactly
+    what ``AnomalySelector(factor[i], ...).choose(current[i], scores[i], _)`` gives: the
+    same float64 operations, a NaN anywhere in a row never moves, and ties go to the
+    lowest index (``argmin`` with the current sample excluded).
+    """
+    rows = np.arange(len(scores))
+    low = scores.min(axis=1)  # (M,)
+    with np.errstate(invalid="ignore"):  # inf - inf is NaN, and NaN never moves, as in choose
+        r = np.median(scores, axis=1) - low
+        base = np.where(from_min, low, 0.0)
+        outlier = scores[rows, current] - base > factor * r
+    others = scores.copy()
+    others[rows, current] = np.inf
+    best = np.argmin(others, axis=1)
+    move = outlier & np.isfinite(others[rows, best])
+    return np.where(move, best, -1)
+
+
 @dataclass(frozen=True)
 class TargetSelector:
     """Hit ``target_m`` (world, metres) with ``joint``; switch when another sample is

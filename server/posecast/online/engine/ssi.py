@@ -44,10 +44,10 @@ from posecast.geometry.fk import fk_positions
 from posecast.geometry.rotations import mat2quat, quat2mat
 from posecast.online.engine.backend import Decoder, Pool, PoolIK
 from posecast.online.engine.batch_fk import fk32
-from posecast.online.engine.calibration import Calibration, WaistFilter
+from posecast.online.engine.calibration import Calibration, WaistFilter, apply_all, orient_all
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.ik import ContactIK
-from posecast.online.engine.selectors import AnomalySelector, Selector
+from posecast.online.engine.selectors import AnomalySelector, Selector, choose_anomaly_rows
 from posecast.online.engine.slots import SlotArrays
 from posecast.online.engine.types import EngineEvent, PoseOut, TickResult, TrackerFrame
 from posecast.skeleton import NUM_JOINTS, REST_PELVIS_HEIGHT_M, reference_offsets
@@ -253,9 +253,7 @@ class Engine:
         ).reshape(P, N)
         wp = world.reshape(P, N, NUM_JOINTS, 3)
 
-        started = 0
-        for i, pid in enumerate(self._order):
-            started += self._select(self.players[pid], scores[i], wp[i])
+        started = self._select(np.asarray(scores, np.float64), wp)
         poses = self._emit()
         for pid in self._order:
             self.players[pid].frames += 1
@@ -300,73 +298,108 @@ class Engine:
         return out
 
     def _gather_inputs(self, k: int) -> list[EngineEvent]:
-        """Write this frame's inputs into ring row ``k``; hold missing frames."""
+        """Write this frame's inputs into ring row ``k``; hold missing frames.
+
+        Per player only the bookkeeping (missing, stale, which frame); calibration,
+        the hold and the features run once over all players.
+        """
         kp = (k - 1) % self._ring
         events: list[EngineEvent] = []
         s = self.slots
-        fresh: list[tuple[_Player, NDArray[np.float64], NDArray[np.float64]]] = []
+        fresh: list[tuple[_Player, TrackerFrame]] = []
+        held: list[int] = []  # slots without a new frame (a rest frame stands in too)
+        kept: list[int] = []  # slots whose inputs stay those of the frame before
         for pid in self._order:
             p = self.players[pid]
-            frame, held = p.pending, False
+            frame = p.pending
+            p.pending = None
             if frame is None:
-                held = True
+                held.append(p.slot)
                 p.missing += 1
                 if p.missing >= self.cfg.stale_after_frames and not p.stale:
                     p.stale = True
                     events.append(EngineEvent("stale", pid))
-            else:
-                p.missing = 0
-                if p.stale:
-                    p.stale = False
-                    events.append(EngineEvent("active", pid))
-            p.pending = None
-            if frame is None and p.last is None:
-                # Nothing ever arrived: stand still at the origin in the rest pose.
-                frame = TrackerFrame(-1, _rest_trackers(), _identity_quats())
-            if frame is None:
-                for name in ("ring_x", "ring_pos", "ring_quat", "ring_seq"):
-                    s[name][k, p.slot] = s[name][kp, p.slot]
-            else:
-                q = np.array(frame.quat, dtype=np.float64)
-                if p.waist_filter is not None:
-                    q[TrackerSlot.WAIST] = p.waist_filter(q[TrackerSlot.WAIST])
-                q = p.calibration.orient(q)
-                raw = np.array(frame.pos, dtype=np.float64)
-                if self.layout.predicts_root:
-                    # No waist: keep the unused slot finite whatever the client sent.
-                    raw[TrackerSlot.WAIST], q[TrackerSlot.WAIST] = raw[TrackerSlot.HEAD], _IDENT
-                cal = p.calibration.apply(raw, q)
-                prev = s["ring_pos"][kp, p.slot] if p.last is not None else cal
-                s["ring_pos"][k, p.slot] = cal
-                s["ring_quat"][k, p.slot] = q
-                s["ring_seq"][k, p.slot] = frame.seq
-                fresh.append((p, cal, prev))
-                if frame.seq >= 0:
-                    p.last = frame
-            s["ring_held"][k, p.slot] = held
-        if fresh:  # the features of every fresh frame in one vectorised call
-            idx = [p.slot for p, _, _ in fresh]
-            s["ring_x"][k, idx] = self.layout.features(
-                np.stack([c for _, c, _ in fresh]),
-                np.stack([v for _, _, v in fresh]),
-                s["ring_quat"][k, idx],
-                self.cfg.fps,
-            )
+                if p.last is None:
+                    # Nothing ever arrived: stand still at the origin in the rest pose.
+                    fresh.append((p, _REST_FRAME))
+                else:
+                    kept.append(p.slot)
+                continue
+            p.missing = 0
+            if p.stale:
+                p.stale = False
+                events.append(EngineEvent("active", pid))
+            fresh.append((p, frame))
+        s["ring_held"][k, : s.count] = False
+        s["ring_held"][k, held] = True
+        if kept:
+            for name in ("ring_x", "ring_pos", "ring_quat", "ring_seq"):
+                s[name][k, kept] = s[name][kp, kept]
+        if not fresh:
+            return events
+        players = [p for p, _ in fresh]
+        idx = [p.slot for p in players]
+        q = np.array([f.quat for _, f in fresh], dtype=np.float64)  # (M, 4, 4)
+        for i, p in enumerate(players):
+            if p.waist_filter is not None:
+                q[i, TrackerSlot.WAIST] = p.waist_filter(q[i, TrackerSlot.WAIST])
+        calibrations = [p.calibration for p in players]
+        q = orient_all(calibrations, q)
+        raw = np.array([f.pos for _, f in fresh], dtype=np.float64)  # (M, 4, 3)
+        if self.layout.predicts_root:
+            # No waist: keep the unused slot finite whatever the client sent.
+            raw[:, TrackerSlot.WAIST], q[:, TrackerSlot.WAIST] = raw[:, TrackerSlot.HEAD], _IDENT
+        cal = apply_all(calibrations, raw, q)
+        # Velocities from the frame before; a player's first frame has none.
+        first = [i for i, p in enumerate(players) if p.last is None]
+        prev = s["ring_pos"][kp, idx]
+        prev[first] = cal[first]
+        s["ring_pos"][k, idx] = cal
+        s["ring_quat"][k, idx] = q
+        s["ring_seq"][k, idx] = [f.seq for _, f in fresh]
+        s["ring_x"][k, idx] = self.layout.features(cal, prev, q, self.cfg.fps)
+        for p, f in fresh:
+            if f.seq >= 0:
+                p.last = f
         return events
 
-    def _select(self, p: _Player, scores: F64, positions: F32) -> int:
-        """Run the player's selector at the newest frame; plan a transition if asked."""
-        if p.plan is not None:
-            return 0
-        best = p.selector.choose(p.current, scores, positions)
-        if best is None or best == p.current:
-            return 0
-        n = p.frames
-        start = n - min(self.cfg.lookahead, self.cfg.transition_frames) + 1
-        p.plan = _Transition(p.current, best, start)
-        p.current = best
-        p.transitions += 1
-        return 1
+    def _select(self, scores: F64, positions: F32) -> int:
+        """Run every idle player's selector at the newest frame (``scores (P, N)``,
+        ``positions (P, N, 19, 3)``); plan the transitions asked for, return how many.
+
+        A player in a transition is not asked. Players on an :class:`AnomalySelector`
+        (the default) are decided together on the score matrix, exactly as each
+        selector would decide alone; any other selector is asked player by player.
+        """
+        moves: list[tuple[_Player, int]] = []
+        rows: list[int] = []
+        batch: list[tuple[_Player, AnomalySelector]] = []
+        for i, pid in enumerate(self._order):
+            p = self.players[pid]
+            if p.plan is not None:
+                continue
+            sel = p.selector
+            if type(sel) is AnomalySelector:  # not a subclass: it could choose otherwise
+                rows.append(i)
+                batch.append((p, sel))
+                continue
+            best = sel.choose(p.current, scores[i], positions[i])
+            if best is not None and best != p.current:
+                moves.append((p, best))
+        if batch:
+            chosen = choose_anomaly_rows(
+                np.array([p.current for p, _ in batch], np.intp),
+                scores[rows],
+                np.array([sel.factor for _, sel in batch], np.float64),
+                np.array([sel.baseline == "min" for _, sel in batch]),
+            )
+            moves += [(p, b) for (p, _), b in zip(batch, chosen.tolist(), strict=True) if b >= 0]
+        start_in = min(self.cfg.lookahead, self.cfg.transition_frames) - 1
+        for p, best in moves:
+            p.plan = _Transition(p.current, best, p.frames - start_in)
+            p.current = best
+            p.transitions += 1
+        return len(moves)
 
     def _emit(self) -> list[PoseOut]:
         tau, T = self.cfg.lookahead, self.cfg.transition_frames
@@ -393,13 +426,16 @@ class Engine:
         if interp:
             # Re-decode on the blended latent and hidden state. The cache is affine in
             # the latent, so the blend of two caches is the cache of the blended latent.
-            zs, hs = [], []
-            for i in interp:
-                p, _, w = emit[i]
-                assert p.plan is not None
-                zc, hr = s["zc"][p.slot], s["ring_h"][k, p.slot]
-                zs.append((1 - w) * zc[p.plan.src] + w * zc[p.plan.dst])
-                hs.append((1 - w) * hr[p.plan.src] + w * hr[p.plan.dst])
+            plans = [emit[i][0].plan for i in interp]
+            src = np.array([t.src for t in plans if t is not None])
+            dst = np.array([t.dst for t in plans if t is not None])
+            weight = np.array([emit[i][2] for i in interp])
+            # Weights in float32, as a Python float scales a float32 row: (E, 1)
+            w_src = (1 - weight).astype(np.float32)[:, None]
+            w_dst = weight.astype(np.float32)[:, None]
+            at = slots[interp]
+            zs = w_src * s["zc"][at, src] + w_dst * s["zc"][at, dst]  # (E, W)
+            hs = w_src * s["ring_h"][k, at, src] + w_dst * s["ring_h"][k, at, dst]  # (E, H)
             E = len(interp)
             out = {
                 "rotations": np.empty((E, 108), np.float32),
@@ -408,13 +444,7 @@ class Engine:
             }
             if root is not None:
                 out["root"] = np.empty((E, self.layout.root_outputs), np.float32)
-            self.decoder.step(
-                np.ascontiguousarray(s["ring_x"][k, slots[interp]]),
-                1,
-                np.asarray(zs, np.float32),
-                np.asarray(hs, np.float32),
-                out,
-            )
+            self.decoder.step(s["ring_x"][k, at], 1, zs, hs, out)
             rot[interp], con[interp] = out["rotations"], out["contacts"]
             if root is not None:
                 root[interp] = out["root"]
@@ -433,17 +463,17 @@ class Engine:
         scale = np.array([p.calibration.scale for p, _, _ in emit], np.float32)
         positions = wp / scale[:, None, None]
         rotations = mat2quat(wm).astype(np.float32)
-        seqs, held = s["ring_seq"][k, slots], s["ring_held"][k, slots]
+        seqs, held = s["ring_seq"][k, slots].tolist(), s["ring_held"][k, slots].tolist()
         return [
             PoseOut(
                 player=p.id,
-                seq=int(seqs[i]),
+                seq=seqs[i],
                 positions=positions[i],
                 rotations=rotations[i],
                 contacts=con[i],
                 sample=sample,
                 transitioning=0.0 < w < 1.0,
-                held=bool(held[i]),
+                held=held[i],
             )
             for i, (p, sample, w) in enumerate(emit)
         ]
@@ -473,3 +503,7 @@ def _identity_quats() -> F64:
     q = np.zeros((4, 4))
     q[:, 3] = 1.0
     return q
+
+
+# What a player that never sent a frame stands on (seq -1: never kept as its last).
+_REST_FRAME = TrackerFrame(-1, _rest_trackers(), _identity_quats())
