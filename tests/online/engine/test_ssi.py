@@ -58,6 +58,9 @@ class RecordingPool:
         self.last = scores.copy()
         return scores
 
+    def emit(self, *args: Any) -> tuple[np.ndarray, np.ndarray]:
+        return self.pool.emit(*args)
+
 
 class NoContacts:
     """The backend's decoder with its foot contacts forced to 0, so no contact IK runs

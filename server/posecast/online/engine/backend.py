@@ -2,7 +2,8 @@
 
 A tick needs two things done for all ``R = P * N`` candidate rows: the decoder step
 (:class:`Decoder`) and the candidate pool's FK, contact IK and anomaly error
-(:class:`Pool`). A backend supplies both; the engine calls nothing else. Backends:
+(:class:`Pool`), and then the shown pose of each player (``Pool.emit``). A backend
+supplies both; the engine calls nothing else. Backends:
 
 * ``native``: the C extension ``posecast._native`` (fused GRU step, FK, IK and scoring
   on one thread pool; :mod:`posecast.online.inference.native`), the default where it
@@ -91,4 +92,14 @@ class Pool(Protocol):
         = N`` with a waist tracker, ``1`` when every sample has its own pelvis). The
         post-IK world positions go into ``world_out (R, 19, 3)``; ``ik`` steps in place.
         """
+        ...
+
+    def emit(
+        self, rotations: F32, contacts: F32, root_mat: F32, root_pos: F32, ik: PoolIK
+    ) -> tuple[F32, F32]:
+        """The shown poses of ``E`` rows (one per emitting player): FK with world
+        rotations from ``rotations (E, 108)`` and the pelvis ``root_mat (E, 3, 3)`` /
+        ``root_pos (E, 3)``, then the players' own display IK (``ik``, stepped in
+        place; the thighs and shins swing with the feet). Returns world positions
+        ``(E, 19, 3)`` and world rotations ``(E, 19, 4)`` xyzw, float32."""
         ...

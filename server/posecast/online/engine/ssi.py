@@ -33,7 +33,6 @@ new sample is fully in place exactly at the frame where the outlier would have s
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -41,12 +40,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from posecast.geometry.fk import fk_positions
-from posecast.geometry.rotations import mat2quat, quat2mat
+from posecast.geometry.rotations import quat2mat
 from posecast.online.engine.backend import Decoder, Pool, PoolIK
-from posecast.online.engine.batch_fk import fk32
 from posecast.online.engine.calibration import Calibration, WaistFilter, apply_all, orient_all
 from posecast.online.engine.config import EngineConfig
-from posecast.online.engine.ik import ContactIK
 from posecast.online.engine.selectors import AnomalySelector, Selector, choose_anomaly_rows
 from posecast.online.engine.slots import SlotArrays
 from posecast.online.engine.types import EngineEvent, PoseOut, TickResult, TrackerFrame
@@ -279,17 +276,6 @@ class Engine:
         mats, places = pelvis_from_head(root_out, head_pos, head_quat)
         return mats.astype(np.float32), places.astype(np.float32), 1
 
-    def _display_ik(self, state: Mapping[str, NDArray[Any]], rows: int) -> ContactIK:
-        """The players' own display IK over ``rows`` gathered ``disp_*`` state arrays."""
-        return ContactIK(
-            state["disp_locked"].reshape(rows, 2),
-            state["disp_lock_pos"].reshape(rows, 2, 3),
-            state["disp_release"].reshape(rows, 2),
-            self.cfg.ik_release_frames,
-            state["disp_suppressed"].reshape(rows, 2),
-            self.cfg.ik_max_drift_m,
-        )
-
     def hidden_state(self, player: str) -> NDArray[np.float32]:
         """The GRU states ``(N, 128)`` the next tick decodes from (a writable view)."""
         out: NDArray[np.float32] = self.slots["ring_h"][
@@ -453,16 +439,21 @@ class Engine:
                 p.plan = None
         pos, quat = s["ring_pos"][k, slots], s["ring_quat"][k, slots]
         root_mat, root_pos, _ = self._roots(pos, quat, root, 1)
-        wm, wp = fk32(rot, root_mat, root_pos)
-        assert wm is not None
-        # The players' own display IK, batched: gather their states, step, scatter back.
+        # FK and the players' own display IK, batched: gather their states, step,
+        # scatter back.
+        E = len(emit)
         state = {n: s[n][slots] for n in _DISPLAY_IK}
-        self._display_ik(state, len(emit)).step(wm, wp, con)
+        ik = PoolIK(
+            *(
+                state[n].reshape(E, *shape)
+                for n, shape in zip(_DISPLAY_IK, _IK_SHAPES.values(), strict=True)
+            )
+        )
+        wp, rotations = self.pool.emit(rot, con, root_mat, root_pos, ik)
         for n in _DISPLAY_IK:
             s[n][slots] = state[n]
         scale = np.array([p.calibration.scale for p, _, _ in emit], np.float32)
         positions = wp / scale[:, None, None]
-        rotations = mat2quat(wm).astype(np.float32)
         seqs, held = s["ring_seq"][k, slots].tolist(), s["ring_held"][k, slots].tolist()
         return [
             PoseOut(

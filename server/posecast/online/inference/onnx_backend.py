@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from posecast.geometry.rotations import mat2quat
 from posecast.online.engine.anomaly import AnomalyScorer
 from posecast.online.engine.backend import F32, F64, PoolIK
 from posecast.online.engine.batch_fk import fk32
@@ -80,6 +81,17 @@ class NumpyPool:
         # The scorer's frame math runs once per pelvis, on the unrepeated (G, ...) rows.
         scores = self.scorer.score_mats(wp, root_pos, root_mat, repeat=group)
         return np.asarray(scores, dtype=np.float64)
+
+    def emit(
+        self, rotations: F32, contacts: F32, root_mat: F32, root_pos: F32, ik: PoolIK
+    ) -> tuple[F32, F32]:
+        wm, wp = fk32(rotations, root_mat, root_pos)
+        assert wm is not None
+        ContactIK(
+            ik.locked, ik.lock_pos, ik.release, self.release_frames, ik.suppressed, self.max_drift_m
+        ).step(wm, wp, contacts)
+        quats: F32 = mat2quat(wm).astype(np.float32)
+        return wp, quats
 
 
 def load_onnx(
