@@ -550,25 +550,41 @@ def _cmd_bench_engine(args: argparse.Namespace) -> int:
         )
     backends = _backends("--backend", args.backend, cmd, many=True)
     _json_out(args.json)
-    from posecast.offline.evaluation.engine_speed import run
+    from posecast.offline.evaluation.engine_speed import run_side_by_side
 
-    reports = []
-    for backend in backends:
-        report = run(
-            counts,
-            args.samples,
-            args.threads,
-            args.ticks,
-            args.naive_players,
-            args.hmd3_share,
-            backend,
-        )
+    reports = run_side_by_side(
+        list(backends),
+        counts,
+        args.samples,
+        args.threads,
+        args.ticks,
+        args.naive_players,
+        args.hmd3_share,
+    )
+    for report in reports:
         _print_bench(report, args.samples)
-        reports.append(report)
+    if len(reports) > 1:
+        _print_ratios(reports)
     if args.json is not None:
         out = reports[0] if len(reports) == 1 else reports
         args.json.write_text(json.dumps(out, indent=1) + "\n", encoding="utf-8")
     return 0
+
+
+def _print_ratios(reports: list[dict[str, Any]]) -> None:
+    """p50 and p99 of every backend per player count, and each one's speed-up over
+    the last (measured side by side, count by count)."""
+    names = [r["backend"] for r in reports]
+    ref = reports[-1]
+    print(f"side by side (speed-up over {names[-1]}, p50):")
+    head = "".join(f" {n + ' p50':>12s} {n + ' p99':>12s}" for n in names)
+    print(f"{'players':>8s}{head} {'speed-up':>9s}")
+    for i, p in enumerate(ref["players"]):
+        cells = "".join(
+            f" {r['tick_p50_ms'][i]:12.2f} {r['tick_p99_ms'][i]:12.2f}" for r in reports
+        )
+        ratio = ref["tick_p50_ms"][i] / max(reports[0]["tick_p50_ms"][i], 1e-9)
+        print(f"{p:8d}{cells} {ratio:8.2f}x")
 
 
 def _print_bench(report: dict[str, Any], samples: int) -> None:
@@ -582,7 +598,9 @@ def _print_bench(report: dict[str, Any], samples: int) -> None:
             f"{report['gflops'][i]:8.1f} {report['rss_mb_per_player'][i]:10.2f}"
         )
     print(f"max players at 60 Hz (p99 < 16.7 ms), N={samples}: {report['max_realtime_players']}")
-    print(f"peak: {report['peak_gflops']} GFLOP/s; naive loop: {report['naive_loop']}")
+    if report["native_isa"]:
+        print(f"native kernels: {report['native_isa']}")
+    print(f"naive loop: {report['naive_loop']}")
     both = report.get("both_models")
     if both:
         print(

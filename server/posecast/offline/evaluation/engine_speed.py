@@ -41,8 +41,6 @@ MAC_PER_SAMPLE = (
     + 128 * 110
     + (57 * 28 + 28 * 14 + 14 * 7 + 7 * 7 + 7 * 14 + 14 * 28 + 28 * 108)
 )
-# 2 cores x 2.5 GHz x AVX-512 (2 FMA units x 16 float32 lanes x 2 FLOP).
-PEAK_GFLOPS = 2 * 2.5 * 2 * 16 * 2
 
 
 @dataclass(frozen=True)
@@ -157,18 +155,78 @@ def run(
     backend: str = "native",
 ) -> dict[str, Any]:
     """The whole report for ``backend`` (``backend`` in it: the one that ran)."""
-    first = bench(player_counts[0], samples, ticks=ticks, threads=threads, backend=backend)
-    asked, backend = backend, first.backend  # a fallback is taken (and logged) once
-    results = [first] + [
-        bench(p, samples, ticks=ticks, threads=threads, backend=backend) for p in player_counts[1:]
+    return run_side_by_side(
+        [backend], player_counts, samples, threads, ticks, naive_players, hmd3_share
+    )[0]
+
+
+def run_side_by_side(
+    backends: list[str],
+    player_counts: list[int],
+    samples: int,
+    threads: int,
+    ticks: int,
+    naive_players: int,
+    hmd3_share: float = 0.0,
+) -> list[dict[str, Any]]:
+    """One report per backend, measured side by side: every player count runs on each
+    backend in turn before the next count, so a change in the machine's load between
+    counts moves all backends alike and their ratio stays meaningful."""
+    firsts = [
+        bench(player_counts[0], samples, ticks=ticks, threads=threads, backend=b) for b in backends
     ]
+    used = [f.backend for f in firsts]  # a fallback is taken (and logged) once
+    results = [[f] for f in firsts]
+    for p in player_counts[1:]:
+        for i, b in enumerate(used):
+            results[i].append(bench(p, samples, ticks=ticks, threads=threads, backend=b))
+    both: list[list[BenchResult]] = [[] for _ in backends]
+    if hmd3_share > 0:
+        for p in player_counts:
+            for i, b in enumerate(used):
+                both[i].append(
+                    bench(
+                        p, samples, ticks=ticks, threads=threads, hmd3_share=hmd3_share, backend=b
+                    )
+                )
+    naive = [
+        {
+            "players": naive_players,
+            "tick_p50_ms": naive_loop(naive_players, samples, threads=threads, backend=b),
+            "batched_tick_p50_ms": bench(
+                naive_players, samples, ticks=60, threads=threads, backend=b
+            ).tick_p50_ms,
+        }
+        for b in used
+    ]
+    return [
+        _report(asked, b, results[i], both[i], naive[i], samples, threads, hmd3_share)
+        for i, (asked, b) in enumerate(zip(backends, used, strict=True))
+    ]
+
+
+def _isa(backend: str) -> str | None:
+    """The native kernels' instruction-set level, for a native report."""
+    if "native" not in backend:
+        return None
+    from posecast.online.inference.native import native_isa
+
+    return native_isa()
+
+
+def _report(
+    asked: str,
+    backend: str,
+    results: list[BenchResult],
+    both: list[BenchResult],
+    naive: dict[str, Any],
+    samples: int,
+    threads: int,
+    hmd3_share: float,
+) -> dict[str, Any]:
     ok = [r.players for r in results if r.realtime()]
     mixed: dict[str, Any] = {}
-    if hmd3_share > 0:
-        both = [
-            bench(p, samples, ticks=ticks, threads=threads, hmd3_share=hmd3_share, backend=backend)
-            for p in player_counts
-        ]
+    if both:
         fits = [r.players for r in both if r.realtime()]
         mixed = {
             "backend": both[0].backend,
@@ -182,21 +240,15 @@ def run(
     return {
         "backend": backend,
         "backend_asked": asked,
+        "native_isa": _isa(backend),
         "players": [r.players for r in results],
         "samples": samples,
         "tick_p50_ms": [r.tick_p50_ms for r in results],
         "tick_p99_ms": [r.tick_p99_ms for r in results],
         "max_realtime_players": max(ok) if ok else 0,
         "gflops": [r.gflops for r in results],
-        "peak_gflops": PEAK_GFLOPS,
         "rss_mb_per_player": [r.rss_mb for r in results],
-        "naive_loop": {
-            "players": naive_players,
-            "tick_p50_ms": naive_loop(naive_players, samples, threads=threads, backend=backend),
-            "batched_tick_p50_ms": bench(
-                naive_players, samples, ticks=60, threads=threads, backend=backend
-            ).tick_p50_ms,
-        },
+        "naive_loop": naive,
         "threads": threads,
         "frame_budget_ms": round(FRAME_BUDGET_MS, 3),
     } | ({"both_models": mixed} if mixed else {})
