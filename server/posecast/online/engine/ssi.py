@@ -132,6 +132,7 @@ class Engine:
                 "ring_root": ((N, max(1, n_root)), np.float32, L),  # hmd3: pelvis outputs
                 "ring_pos": ((4, 3), np.float64, L),  # calibrated tracker positions
                 "ring_quat": ((4, 4), np.float64, L),
+                "ring_rootm": ((3, 3), np.float32, L),  # the waist's rotation (waist layouts)
                 "ring_seq": ((), np.int64, L),
                 "ring_held": ((), np.bool_, L),
             },
@@ -240,7 +241,9 @@ class Engine:
             outputs,
         )
         # One pool step: FK, contact IK and anomaly error of every sample.
-        root_mat, root_pos, group = self._roots(pos, quat, outputs.get("root"), N)
+        root_mat, root_pos, group = self._roots(
+            pos, quat, s.row("ring_rootm", k), outputs.get("root"), N
+        )
         if len(self._world) < R:
             self._world = np.empty((R, NUM_JOINTS, 3), np.float32)
         world = self._world[:R]
@@ -258,19 +261,18 @@ class Engine:
         return TickResult(poses, events, started)
 
     def _roots(
-        self, pos: F64, quat: F64, root_out: F32 | None, repeat: int
+        self, pos: F64, quat: F64, rootm: F32, root_out: F32 | None, repeat: int
     ) -> tuple[F32, F32, int]:
         """World pelvis rotations ``(G, 3, 3)`` and positions ``(G, 3)`` (float32) for
         ``R = len(pos) * repeat`` decoded rows, and how many rows share each: ``R / G``.
 
-        ``hmd3+waist``: the waist tracker's, one per player (``G = len(pos)``), shared
-        by its ``repeat`` rows. ``hmd3``: each row's own pelvis output (6D rotation,
-        position), moved out of the player's head frame into the world (``G = R``).
+        ``hmd3+waist``: the waist tracker's (``rootm``, its rotation as the ring keeps
+        it), one per player (``G = len(pos)``), shared by its ``repeat`` rows.
+        ``hmd3``: each row's own pelvis output (6D rotation, position), moved out of
+        the player's head frame into the world (``G = R``).
         """
         if root_out is None:
-            m = quat2mat(quat[:, TrackerSlot.WAIST]).astype(np.float32)
-            p = pos[:, TrackerSlot.WAIST].astype(np.float32)
-            return m, p, repeat
+            return rootm, pos[:, TrackerSlot.WAIST].astype(np.float32), repeat
         head_pos = np.repeat(pos[:, TrackerSlot.HEAD], repeat, axis=0)
         head_quat = np.repeat(quat[:, TrackerSlot.HEAD], repeat, axis=0)
         mats, places = pelvis_from_head(root_out, head_pos, head_quat)
@@ -319,7 +321,7 @@ class Engine:
         s["ring_held"][k, : s.count] = False
         s["ring_held"][k, held] = True
         if kept:
-            for name in ("ring_x", "ring_pos", "ring_quat", "ring_seq"):
+            for name in ("ring_x", "ring_pos", "ring_quat", "ring_rootm", "ring_seq"):
                 s[name][k, kept] = s[name][kp, kept]
         if not fresh:
             return events
@@ -342,6 +344,8 @@ class Engine:
         prev[first] = cal[first]
         s["ring_pos"][k, idx] = cal
         s["ring_quat"][k, idx] = q
+        if not self.layout.predicts_root:  # the pelvis is the waist tracker's, per frame
+            s["ring_rootm"][k, idx] = quat2mat(q[:, TrackerSlot.WAIST])
         s["ring_seq"][k, idx] = [f.seq for _, f in fresh]
         s["ring_x"][k, idx] = self.layout.features(cal, prev, q, self.cfg.fps)
         for p, f in fresh:
@@ -438,7 +442,7 @@ class Engine:
             if p.plan is not None and w >= 1.0:
                 p.plan = None
         pos, quat = s["ring_pos"][k, slots], s["ring_quat"][k, slots]
-        root_mat, root_pos, _ = self._roots(pos, quat, root, 1)
+        root_mat, root_pos, _ = self._roots(pos, quat, s["ring_rootm"][k, slots], root, 1)
         # FK and the players' own display IK, batched: gather their states, step,
         # scatter back.
         E = len(emit)
