@@ -1,29 +1,44 @@
-"""Load and soak: real ``posecast-sim`` clients against a real ``posecast serve``.
+"""Load and soak: simulated players against a real ``posecast serve``.
 
-    python benchmarks/load.py ramp --samples 100 --step 4 --json ramp-n100.json
+    python benchmarks/load.py ramp --samples 100 --room-size 8 --step 4 --json ramp-n100.json
+    python benchmarks/load.py ramp --clients sdk --samples 100 --step 4    # SDK clients
     python benchmarks/load.py soak --samples 10 --players 64 --seconds 600 \\
                                    --churn-every 3 --json soak.json
 
-Both start the server as a subprocess (``python -m posecast serve --port 0``) and load
-it with ``posecast-sim`` processes (the SDK's simulator: each player a real SDK
-``Client`` replaying the built-in procedural walk at 60 Hz, joined to a room of
-``--room-size`` players, receiving every room-mate's pose). The clients run on the
-same machine as the server and share its cores: their CPU is measured and printed
-beside the server's, and the machine's other load (``other_cores``) too. A Python
-SDK client costs about 0.02-0.03 of a core per player (mostly sending its 60 frames a
-second), so on a small machine the clients take as much CPU as the server: the
-figures are for server and clients together, unless ``--server-cpus``/
-``--client-cpus`` pin them apart (or ``--client-nice`` lowers the clients' priority).
+Both start the server as a subprocess (``python -m posecast serve --port 0``) on the
+same machine as the clients, which share its cores: the clients' CPU is measured and
+printed beside the server's, and the machine's other load (``other_cores``) too.
+``--server-cpus``/``--client-cpus`` pin them apart, ``--client-nice`` lowers the
+clients' priority.
 
-**ramp** adds ``--step`` players at a time (one more ``posecast-sim`` process per
-step), waits until they have joined and ``--settle`` seconds more, then measures a
-``--window`` of seconds from the server's ``/metrics`` (differences of the counters
-over the window). A step is *sustainable* when, over its window:
+The ramp's clients (``--clients``):
+
+* ``lean`` (the default): every player in one ``lean_clients.py`` process (one
+  asyncio loop on ``websockets``; frames pre-encoded once per player, 60 Hz, seq
+  counting up; poses counted from their first bytes, never decoded), so that the load
+  generator takes as little of the server's CPU as it can: about 0.008 of a core per
+  player (0.15 at 20 players), against 0.025 for SDK clients. Rooms are filled in
+  order across steps, so ``--room-size 8 --step 4`` really gives rooms of 8. It
+  reports its own CPU (``process_time`` over wall time) and, per player, the poses
+  received against the expected ``welcome.rate_hz x room members x seconds``.
+* ``sdk``: one ``posecast-sim`` process per step (the SDK's simulator: each player a
+  real SDK ``Client`` replaying the built-in procedural walk, receiving and decoding
+  every room-mate's pose), in rooms of at most ``--room-size`` within that step's
+  players (``--step 4`` gives rooms of 4). A Python SDK client costs about 0.02-0.03
+  of a core per player, so on a small machine the clients take as much CPU as the
+  server. The soak always uses these.
+
+**ramp** adds ``--step`` players at a time, waits until they have joined and
+``--settle`` seconds more, then measures a ``--window`` of seconds from the server's
+``/metrics`` (differences of the counters over the window). A step is *sustainable*
+when, over its window:
 
 * at most 1 % of ticks took longer than 16.7 ms (one 60 Hz period): tick p99 <= 16.7 ms;
   the histogram has a bucket edge at 0.0167 s, so this is read exactly, not estimated;
 * at most 1 % of ticks overran (started a whole period late, ``posecast_tick_overruns``);
 * ticks ran at >= 59 per second;
+* (lean clients) the players received >= 99 % of the poses expected
+  (``load_rig.lean_window``);
 * every player had joined and no client lost its connection.
 
 The maximum sustainable players is the largest step such that it and every step
@@ -57,7 +72,8 @@ sample after it, RSS "end" the last sample before the clients stop). Checks:
   at the end.
 
 It prints its figures, writes them with ``--json``, and exits 1 when a check failed.
-The processes and the window arithmetic are in ``load_rig.py``.
+The processes and the window arithmetic are in ``load_rig.py``, the lean generator
+in ``lean_clients.py``.
 """
 
 from __future__ import annotations
@@ -72,12 +88,15 @@ from pathlib import Path
 from typing import Any
 
 from load_rig import (
+    MIN_DELIVERY,
+    LeanClients,
     Metrics,
     Server,
     Sim,
     Snapshot,
     criteria,
     expected_poses_per_s,
+    lean_window,
     losses,
     parse_cpus,
     players_in,
@@ -91,48 +110,89 @@ from load_rig import (
 # --- ramp ----------------------------------------------------------------------------------
 
 
+class RampLoad:
+    """The ramp's clients: ``add`` players, take a :class:`Snapshot`, read a window."""
+
+    def __init__(self, args: argparse.Namespace, server: Server, workdir: Path) -> None:
+        self.args, self.server, self.workdir = args, server, workdir
+        self.players = 0
+        self.sims: list[Sim] = []
+        self.lean: LeanClients | None = None
+        if args.clients == "lean":
+            cpus, nice = args.client_cpus, args.client_nice
+            self.lean = LeanClients.start(server, workdir, args.room_size, cpus=cpus, nice=nice)
+
+    def add(self, n: int) -> bool:
+        """``n`` more players; whether every player has joined (the server's count)."""
+        self.players += n
+        if self.lean is not None:
+            self.lean.add(n, self.args.join_timeout)
+        else:
+            step = len(self.sims)
+            self.sims.append(
+                Sim.start(
+                    self.server, self.workdir, f"ramp{step}", n, self.args.room_size, 3600.0,
+                    seed=1000 * step, cpus=self.args.client_cpus, nice=self.args.client_nice,
+                )
+            )  # fmt: skip
+        return wait_players(self.server, self.players, self.args.join_timeout)
+
+    def snapshot(self) -> Snapshot:
+        return Snapshot.take(self.server, self.sims, self.lean)
+
+    def window(self, a: Snapshot, b: Snapshot) -> dict[str, Any]:
+        if self.lean is None:
+            row = window(a, b, expected_poses_per_s(self.sims))
+            row["connection_losses"] = losses(self.sims)
+            return row
+        assert a.lean is not None and b.lean is not None
+        lean = lean_window(a.lean, b.lean)
+        row = window(a, b, lean["expected_poses_per_s"])
+        row.update(lean)  # its delivery is per player, on the generator's own clock
+        row["connection_losses"] = b.lean["connection_losses"]
+        return row
+
+    def stop(self) -> list[dict[str, Any]]:
+        if self.lean is not None:
+            return [self.lean.stop()]
+        return [s.stop() for s in self.sims]
+
+
 def ramp(args: argparse.Namespace, workdir: Path) -> dict[str, Any]:
     rows: list[dict[str, Any]] = []
-    sims: list[Sim] = []
     failing = 0
+    min_delivery = MIN_DELIVERY if args.clients == "lean" else None
     with serve(args.samples, workdir, args.server_arg, args.server_cpus) as server:
+        load = RampLoad(args, server, workdir)
         try:
             while True:
-                step = len(sims)
-                players = sum(s.players for s in sims) + args.step
-                sims.append(
-                    Sim.start(
-                        server,
-                        workdir,
-                        f"ramp{step}",
-                        args.step,
-                        args.room_size,
-                        3600.0,
-                        seed=1000 * step,
-                        cpus=args.client_cpus,
-                        nice=args.client_nice,
-                    )
-                )
-                joined = wait_players(server, players, args.join_timeout)
+                joined = load.add(args.step)
                 time.sleep(args.settle)
-                a = Snapshot.take(server, sims)
+                a = load.snapshot()
                 time.sleep(args.window)
-                b = Snapshot.take(server, sims)
+                b = load.snapshot()
                 row = {
-                    "players": players,
+                    "players": load.players,
                     "joined": players_in(b.metrics),
-                    **window(a, b, expected_poses_per_s(sims)),
-                    "connection_losses": losses(sims),
+                    **load.window(a, b),
                 }
-                row["client_cpu_per_player"] = round(row["client_cpu_cores"] / players, 4)
-                row["sustainable"] = joined and row["connection_losses"] == 0 and sustainable(row)
+                row["client_cpu_per_player"] = round(row["client_cpu_cores"] / load.players, 4)
+                row["sustainable"] = (
+                    joined and row["connection_losses"] == 0 and sustainable(row, min_delivery)
+                )
                 rows.append(row)
                 _print_ramp_row(row, header=len(rows) == 1)
+                if row.get("generator_late_ticks"):
+                    print(
+                        f"        the lean generator sent {row['generator_late_ticks']} of its "
+                        f"{row['generator_ticks']} ticks a period late: the clients fell behind",
+                        flush=True,
+                    )
                 failing = 0 if row["sustainable"] else failing + 1
-                if failing >= 2 or players + args.step > args.max_players:
+                if failing >= 2 or load.players + args.step > args.max_players:
                     break
         finally:
-            summaries = [s.stop() for s in sims]
+            summaries = load.stop()
         alive = server.alive()
     best = 0
     for row in rows:
@@ -141,13 +201,14 @@ def ramp(args: argparse.Namespace, workdir: Path) -> dict[str, Any]:
         best = row["players"]
     return {
         "mode": "ramp",
+        "clients": args.clients,
         "samples": args.samples,
         "room_size": args.room_size,
         "step": args.step,
         "window_s": args.window,
         "machine_cores": os.cpu_count(),
         "pinning": _pinning(args),
-        "criteria": criteria(),
+        "criteria": criteria(min_delivery),
         "rows": rows,
         "max_sustainable_players": best,
         "server_alive": alive,
@@ -166,17 +227,27 @@ def _pinning(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _print_ramp_row(row: dict[str, Any], header: bool) -> None:
+    """One step. ``clients`` is their CPU from ``/proc``; ``gen`` the lean generator's
+    own ``process_time`` share and ``worst`` its lowest player's delivery (lean only)."""
     if header:
-        print("players tick p50    p99 >16.7ms overrun tick Hz server clients other  deliv  ok")
-        print("              ms     ms   share   share          cores   cores cores")
+        print("players tick p50    p99 >16.7ms overrun tick Hz server clients   gen other"
+              "  deliv  worst  ok")  # fmt: skip
+        print("              ms     ms   share   share          cores   cores cores cores")
+    lean = "generator_cpu_cores" in row
+    gen = f"{row['generator_cpu_cores']:5.2f}" if lean else "    -"
+    worst = _share(row.get("delivery_worst"))
     print(
         f"{row['players']:7d} {row['tick_ms_p50']:8.2f} {row['tick_ms_p99']:6.2f} "
         f"{row['ticks_over_16_7ms']:7.2%} {row['overrun_share']:7.2%} {row['tick_hz']:7.2f} "
-        f"{row['server_cpu_cores']:6.2f} {row['client_cpu_cores']:7.2f} "
-        f"{row['other_cpu_cores']:5.2f} {row['delivery']:6.1%}  "
+        f"{row['server_cpu_cores']:6.2f} {row['client_cpu_cores']:7.2f} {gen} "
+        f"{row['other_cpu_cores']:5.2f} {_share(row['delivery'])} {worst}  "
         f"{'yes' if row['sustainable'] else 'NO'}",
         flush=True,
     )
+
+
+def _share(value: float | None) -> str:
+    return "     -" if value is None else f"{value:6.1%}"
 
 
 # --- soak ----------------------------------------------------------------------------------
@@ -463,6 +534,11 @@ def build_parser() -> argparse.ArgumentParser:
         )  # fmt: skip
         p.add_argument("--json", type=Path, help="also write the figures here")
     r = sub.choices["ramp"]
+    r.add_argument(
+        "--clients", choices=("lean", "sdk"), default="lean",
+        help="lean: every player in one lean_clients.py process (pre-encoded frames, poses "
+        "counted, not decoded); sdk: a posecast-sim process of SDK clients per step (lean)",
+    )  # fmt: skip
     r.add_argument("--step", type=int, default=4, help="players added per step (4)")
     r.add_argument("--max-players", type=int, default=256, help="stop before passing this")
     r.add_argument("--settle", type=float, default=3.0, help="seconds after joining (3)")

@@ -1,11 +1,13 @@
 r"""What ``load.py`` drives and reads: the processes and the measurements.
 
 A ``posecast serve`` subprocess (:func:`serve`, :class:`Server`: a
-:class:`posecast.testing.serve.ServeProcess`: ``/metrics``, RSS, FDs, CPU),
-``posecast-sim`` subprocesses (:class:`Sim`: progress lines, the final JSON summary,
-CPU), and the arithmetic of one measured window between two
+:class:`posecast.testing.serve.ServeProcess`: ``/metrics``, RSS, FDs, CPU), the
+clients: ``posecast-sim`` subprocesses (:class:`Sim`: progress lines, the final JSON
+summary, CPU) or the one lean generator (:class:`LeanClients`, driving
+``lean_clients.py``), and the arithmetic of one measured window between two
 :class:`Snapshot`\ s (:func:`window`: tick quantiles from histogram deltas, overruns,
-CPU shares, poses received against what full rooms would get).
+CPU shares, poses received against what full rooms would get; :func:`lean_window`:
+the lean generator's exact per-player delivery and its own CPU share).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import contextlib
 import json
 import math
 import os
+import select
 import signal
 import subprocess
 import sys
@@ -31,7 +34,9 @@ TICK_HZ = 60.0
 DEADLINE_LE = "0.0167"  # the tick histogram's bucket edge at one 60 Hz period
 LIMIT_SHARE = 0.01  # ticks over the deadline, and overruns, per window
 MIN_TICK_HZ = 59.0
+MIN_DELIVERY = 0.99  # lean clients: poses received / expected, per window
 REPO = Path(__file__).resolve().parents[1]
+LEAN_CLIENTS = Path(__file__).resolve().with_name("lean_clients.py")
 
 
 # --- the processes -------------------------------------------------------------------------
@@ -196,6 +201,87 @@ class Sim:
         return self.summary
 
 
+@dataclass
+class LeanClients:
+    """The lean generator (``lean_clients.py``): one process for every player of a
+    ramp, driven one JSON line each way over its stdin and stdout."""
+
+    proc: subprocess.Popen[bytes]
+    log: Path
+    cpu_at_exit_s: float = 0.0
+
+    @classmethod
+    def start(
+        cls,
+        server: Server,
+        workdir: Path,
+        room_size: int,
+        *,
+        cpus: set[int] | None = None,
+        nice: int = 0,
+    ) -> LeanClients:
+        log = workdir / "lean.log"
+        cmd = [sys.executable, str(LEAN_CLIENTS), "--url", server.url, "--secret", SECRET,
+               "--room-size", str(room_size)]  # fmt: skip
+        with log.open("wb") as err:
+            proc = subprocess.Popen(
+                cmd,
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                stderr=err,
+                preexec_fn=confined(cpus, nice),
+            )
+        lean = cls(proc, log)
+        lean._read(60.0)  # {"ready": true}, once the walks are built
+        return lean
+
+    def _read(self, timeout_s: float) -> dict[str, Any]:
+        assert self.proc.stdout is not None
+        ready, _, _ = select.select([self.proc.stdout], [], [], timeout_s)
+        line = self.proc.stdout.readline() if ready else b""
+        if not line:
+            tail = self.log.read_text(errors="replace")[-2000:]
+            raise RuntimeError(f"lean_clients.py did not answer (exit {self.proc.poll()}): {tail}")
+        answer: dict[str, Any] = json.loads(line)
+        return answer
+
+    def ask(self, cmd: dict[str, Any], timeout_s: float = 30.0) -> dict[str, Any]:
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(json.dumps(cmd).encode() + b"\n")
+        self.proc.stdin.flush()
+        return self._read(timeout_s)
+
+    def add(self, players: int, timeout_s: float) -> dict[str, Any]:
+        """``players`` more players join; returns once all are in (or failed)."""
+        cmd = {"cmd": "add", "players": players, "timeout_s": timeout_s}
+        return self.ask(cmd, timeout_s + 10.0 + 0.02 * players)
+
+    def stats(self) -> dict[str, Any]:
+        """The generator's counters now (``lean_clients.Generator.stats``)."""
+        return self.ask({"cmd": "stats"})
+
+    def cpu_s(self) -> float:
+        if self.proc.poll() is None:
+            with contextlib.suppress(FileNotFoundError, ProcessLookupError):
+                self.cpu_at_exit_s = cpu_seconds(self.proc.pid)
+        return self.cpu_at_exit_s
+
+    def stop(self, timeout_s: float = 60.0) -> dict[str, Any]:
+        """Every player closes; the final ``stats`` (``failed`` when it did not answer)."""
+        final: dict[str, Any]
+        try:
+            self.cpu_s()
+            final = self.ask({"cmd": "stop"}, timeout_s)
+        except (OSError, RuntimeError) as exc:
+            final = {"failed": {"process": repr(exc)}}
+        try:
+            self.proc.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        return final
+
+
 # --- windows -------------------------------------------------------------------------------
 
 
@@ -208,19 +294,19 @@ class Snapshot:
     machine_busy_s: float
     machine_total_s: float
     poses: int  # received by the clients so far
+    lean: dict[str, Any] | None = None  # the lean generator's stats, when it is the client
 
     @classmethod
-    def take(cls, server: Server, sims: list[Sim]) -> Snapshot:
+    def take(cls, server: Server, sims: list[Sim], lean: LeanClients | None = None) -> Snapshot:
         busy, total = _machine_busy_s()
-        return cls(
-            t=time.monotonic(),
-            metrics=server.metrics(),
-            server_cpu_s=cpu_seconds(server.pid),
-            client_cpu_s=sum(s.cpu_s() for s in sims),
-            machine_busy_s=busy,
-            machine_total_s=total,
-            poses=sum(int(s.progress().get("poses", 0)) for s in sims),
-        )
+        t, metrics, server_cpu = time.monotonic(), server.metrics(), cpu_seconds(server.pid)
+        if lean is not None:
+            stats = lean.stats()
+            client_cpu, poses = lean.cpu_s(), sum(int(row[2]) for row in stats["players"])
+        else:
+            stats, client_cpu = None, sum(s.cpu_s() for s in sims)
+            poses = sum(int(s.progress().get("poses", 0)) for s in sims)
+        return cls(t, metrics, server_cpu, client_cpu, busy, total, poses, stats)
 
 
 def _bucket_counts(m: Metrics, name: str) -> list[tuple[float, float]]:
@@ -285,20 +371,57 @@ def window(a: Snapshot, b: Snapshot, full_rooms_poses_per_s: float) -> dict[str,
     }
 
 
-def sustainable(w: dict[str, Any]) -> bool:
+def lean_window(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
+    """Delivery and the generator's own CPU between two ``stats`` of the lean generator.
+
+    The server sends each of a room's poses to every member, the sender included, once
+    per tick, so a player in a room of ``m`` members (itself included) at the room's pose
+    rate ``r`` (``welcome.rate_hz``, 60) should receive ``r * m * dt`` poses in ``dt``
+    seconds (``dt`` on the generator's clock, read with the counts). ``delivery`` is
+    what all players received over what they all should have; ``delivery_worst`` the
+    lowest player's share. Players that joined within the window are left out.
+    """
+    dt = b["t"] - a["t"]
+    before = {row[0]: row for row in a["players"]}
+    got = want = 0.0
+    worst = math.inf
+    for player, _room, poses, members, rate_hz, _open in b["players"]:
+        if player not in before:
+            continue
+        expected = rate_hz * members * dt
+        received = poses - before[player][2]
+        got, want = got + received, want + expected
+        worst = min(worst, received / expected if expected else 0.0)
+    ticks = b["ticks"] - a["ticks"]
+    return {
+        "expected_poses_per_s": round(want / dt, 1),
+        "delivery": round(got / want, 4) if want else None,
+        "delivery_worst": round(worst, 4) if want else None,
+        "generator_cpu_cores": round((b["cpu_s"] - a["cpu_s"]) / dt, 3),
+        "generator_frames_per_s": round((b["frames_sent"] - a["frames_sent"]) / dt, 1),
+        "generator_late_ticks": b["late_ticks"] - a["late_ticks"],
+        "generator_ticks": ticks,
+        "client_errors": b["errors"] - a["errors"],
+    }
+
+
+def sustainable(w: dict[str, Any], min_delivery: float | None = None) -> bool:
+    """The tick criteria; with ``min_delivery``, poses delivered too (lean clients)."""
     return bool(
         w["ticks"]
         and w["ticks_over_16_7ms"] <= LIMIT_SHARE
         and w["overrun_share"] <= LIMIT_SHARE
         and w["tick_hz"] >= MIN_TICK_HZ
+        and (min_delivery is None or (w["delivery"] or 0.0) >= min_delivery)
     )
 
 
-def criteria() -> str:
+def criteria(min_delivery: float | None = None) -> str:
+    delivered = "" if min_delivery is None else f"poses delivered >= {min_delivery:.0%}, "
     return (
         f"per window: ticks over 16.7 ms <= {LIMIT_SHARE:.0%} (tick p99 <= 16.7 ms), "
         f"overruns <= {LIMIT_SHARE:.0%} of ticks, tick rate >= {MIN_TICK_HZ:g} Hz, "
-        "all players joined, no connection lost"
+        f"{delivered}all players joined, no connection lost"
     )
 
 
