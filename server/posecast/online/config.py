@@ -45,7 +45,11 @@ class ServerConfig:
     tick_hz: float = _opt(60.0, "engine ticks per second (the shipped model runs at 60)")
     samples: int = _opt(100, "latent samples per player, N")
     lookahead: int = _opt(10, "look-ahead tau in frames; poses lag frames by tau ticks")
-    engine_threads: int = _opt(1, "intra-op threads of the engine's inference backend")
+    engine_threads: int = _opt(
+        2,
+        "threads of the engine's inference backend (the native kernels' pool, or ONNX "
+        "Runtime's intra-op pool); 2 is both cores of the reference node",
+    )
     backend: str = _opt(
         "native",
         "inference backend: native (the C extension; onnx where it does not load), onnx "
