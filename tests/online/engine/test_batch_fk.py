@@ -6,8 +6,9 @@ import numpy as np
 
 from posecast.geometry.fk import fk_mat
 from posecast.geometry.rotations import normalize, quat2mat, r6d2mat
-from posecast.online.engine.batch_fk import fk32, r6d2mat32
+from posecast.online.engine.batch_fk import fk32, pelvis_from_head32, r6d2mat32
 from posecast.skeleton import NUM_JOINTS, NUM_ROTATIONS, reference_offsets
+from posecast.tracking.layouts import pelvis_from_head
 
 
 def test_r6d2mat32_matches_float64(rng: np.random.Generator) -> None:
@@ -48,3 +49,18 @@ def test_fk32_accepts_joint_shaped_input(rng: np.random.Generator) -> None:
     b = fk32(rot6d.reshape(4, -1), root_mat, root_pos)
     np.testing.assert_array_equal(a[0], b[0])
     np.testing.assert_array_equal(a[1], b[1])
+
+
+def test_pelvis_from_head32_matches_the_float64_reference() -> None:
+    rng = np.random.default_rng(5)
+    G, n = 7, 13
+    root = rng.standard_normal((G * n, 9)).astype(np.float32)
+    head_pos = rng.standard_normal((G, 3))
+    q = rng.standard_normal((G, 4))
+    head_quat = q / np.linalg.norm(q, axis=1, keepdims=True)
+    mats, places = pelvis_from_head32(root, head_pos, head_quat)
+    want_m, want_p = pelvis_from_head(
+        root, np.repeat(head_pos, n, axis=0), np.repeat(head_quat, n, axis=0)
+    )
+    assert mats.dtype == places.dtype == np.float32
+    assert np.abs(mats - want_m).max() < 1e-6 and np.abs(places - want_p).max() < 1e-5

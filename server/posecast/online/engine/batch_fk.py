@@ -14,7 +14,9 @@ import functools
 import numpy as np
 from numpy.typing import NDArray
 
+from posecast.geometry.rotations import quat2mat, quat_conj
 from posecast.skeleton import NUM_ROTATIONS, PARENTS, reference_offsets
+from posecast.tracking.features import character_frame
 
 F32 = NDArray[np.float32]
 _OFFSETS = reference_offsets().astype(np.float32)
@@ -95,3 +97,22 @@ def fk32(
         return None, pos
     mats: F32 = np.ascontiguousarray(wm.transpose(3, 0, 1, 2))
     return mats, pos
+
+
+def pelvis_from_head32(
+    root_out: F32, head_pos: NDArray[np.floating], head_quat: NDArray[np.floating]
+) -> tuple[F32, F32]:
+    """:func:`posecast.tracking.layouts.pelvis_from_head` for ``G`` heads ``(G, 3)`` /
+    ``(G, 4)`` whose rows of ``root_out (G * n, 9)`` come in consecutive groups of
+    ``n`` (a player's samples): the head frame is built once per head and the rows
+    go through float32 (within 1e-6 of the float64 reference,
+    ``tests/online/engine/test_batch_fk.py``)."""
+    G = len(head_pos)
+    n = len(root_out) // max(G, 1)
+    origin, inv_yaw = character_frame(head_pos, head_quat)
+    yaw = quat2mat(quat_conj(inv_yaw)).astype(np.float32)  # (G, 3, 3)
+    out = np.asarray(root_out, dtype=np.float32).reshape(G, n, -1)
+    m = r6d2mat32(np.ascontiguousarray(out[..., :6]))  # (G, n, 3, 3)
+    mats: F32 = np.matmul(yaw[:, None], m).reshape(G * n, 3, 3)
+    places: F32 = origin.astype(np.float32)[:, None] + np.einsum("gij,gnj->gni", yaw, out[..., 6:9])
+    return mats, places.reshape(G * n, 3)

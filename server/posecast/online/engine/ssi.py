@@ -42,6 +42,7 @@ from numpy.typing import NDArray
 from posecast.geometry.fk import fk_positions
 from posecast.geometry.rotations import quat2mat
 from posecast.online.engine.backend import Decoder, Pool, PoolIK
+from posecast.online.engine.batch_fk import pelvis_from_head32
 from posecast.online.engine.calibration import Calibration, WaistFilter, apply_all, orient_all
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.selectors import AnomalySelector, Selector, choose_anomaly_rows
@@ -49,7 +50,7 @@ from posecast.online.engine.slots import SlotArrays
 from posecast.online.engine.types import EngineEvent, PoseOut, TickResult, TrackerFrame
 from posecast.skeleton import NUM_JOINTS, REST_PELVIS_HEIGHT_M, reference_offsets
 from posecast.tracking.features import TRACKER_JOINT_INDEX, TrackerSlot
-from posecast.tracking.layouts import Layout, pelvis_from_head, spec
+from posecast.tracking.layouts import Layout, spec
 
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
@@ -273,10 +274,10 @@ class Engine:
         """
         if root_out is None:
             return rootm, pos[:, TrackerSlot.WAIST].astype(np.float32), repeat
-        head_pos = np.repeat(pos[:, TrackerSlot.HEAD], repeat, axis=0)
-        head_quat = np.repeat(quat[:, TrackerSlot.HEAD], repeat, axis=0)
-        mats, places = pelvis_from_head(root_out, head_pos, head_quat)
-        return mats.astype(np.float32), places.astype(np.float32), 1
+        mats, places = pelvis_from_head32(
+            root_out, pos[:, TrackerSlot.HEAD], quat[:, TrackerSlot.HEAD]
+        )
+        return mats, places, 1
 
     def hidden_state(self, player: str) -> NDArray[np.float32]:
         """The GRU states ``(N, 128)`` the next tick decodes from (a writable view)."""
