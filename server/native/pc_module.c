@@ -87,6 +87,7 @@ static struct {
     int busy;   /* workers still on this generation */
     int active; /* threads that take tiles in this generation (the caller is 0) */
     int stop;
+    int respawn; /* set in a forked child: start the workers again on the next call */
     TileFn fn;
     void *ctx;
     int64_t rows, tiles;
@@ -94,7 +95,7 @@ static struct {
     float *scratch[MAX_THREADS];
     pthread_t tid[MAX_THREADS];
 } P = {PTHREAD_MUTEX_INITIALIZER, PTHREAD_COND_INITIALIZER, PTHREAD_COND_INITIALIZER,
-       PTHREAD_MUTEX_INITIALIZER, 1, 1, 0, 0, 1, 0, NULL, NULL, 0, 0, 0, {0}, {0}};
+       PTHREAD_MUTEX_INITIALIZER, 1, 1, 0, 0, 1, 0, 0, NULL, NULL, 0, 0, 0, {0}, {0}};
 
 static int64_t tiles_by[MAX_THREADS]; /* tiles each thread ran (pool_stats) */
 
@@ -133,6 +134,17 @@ static float *alloc_scratch(void) {
     return (float *)p;
 }
 
+/* A forked child has only the thread that forked: forget the workers, so its first
+ * parallel call starts new ones instead of waiting for threads that do not exist. */
+static void after_fork_child(void) {
+    pthread_mutex_init(&P.mu, NULL);
+    pthread_mutex_init(&P.call, NULL);
+    pthread_cond_init(&P.work, NULL);
+    pthread_cond_init(&P.done, NULL);
+    P.started = 1, P.busy = 0, P.generation = 0, P.stop = 0; /* scratch blocks are reused */
+    P.respawn = P.threads > 1;
+}
+
 static int ensure_threads(int n) {
     if (!P.scratch[0] && !(P.scratch[0] = alloc_scratch())) return -1;
     while (P.started < n) {
@@ -146,6 +158,10 @@ static int ensure_threads(int n) {
 
 static void parallel_rows(TileFn fn, void *ctx, int64_t rows) {
     pthread_mutex_lock(&P.call);
+    if (P.respawn) {
+        P.respawn = 0;
+        if (ensure_threads(P.threads) != 0) P.threads = P.started; /* fewer workers, still correct */
+    }
     int64_t tiles = (rows + PC_TILE - 1) / PC_TILE;
     int helpers = P.threads - 1;
     if (helpers > tiles - 1) helpers = (int)(tiles > 0 ? tiles - 1 : 0);
@@ -278,7 +294,7 @@ static PyObject *py_pack_decoder(PyObject *self, PyObject *args) {
     if (!PyArg_ParseTuple(args, "iiiiOOOOOOOOOOp", &F, &H, &n_rot, &n_root, &o[0], &o[1], &o[2],
                           &o[3], &o[4], &o[5], &o[6], &o[7], &o[8], &o[9], &use_bf16))
         return NULL;
-    if (F < 1 || H < 64 || H > 256 || H % 64 || n_rot != 108 || (n_root != 0 && n_root != 9)) {
+    if (F < 1 || F > 512 || H < 64 || H > 256 || H % 64 || n_rot != 108 || (n_root != 0 && n_root != 9)) {
         PyErr_SetString(PyExc_ValueError, "unsupported decoder shape");
         return NULL;
     }
@@ -642,5 +658,6 @@ PyMODINIT_FUNC PyInit__native(void) {
     }
     g_level = best_level(cap);
     if (ensure_threads(1) != 0) return PyErr_NoMemory();
+    pthread_atfork(NULL, NULL, after_fork_child);
     return PyModule_Create(&MODULE);
 }

@@ -12,6 +12,7 @@ import os
 import shutil
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -269,3 +270,35 @@ def test_a_level_that_disagrees_with_generic_is_dropped(
         assert f"level {LEVELS[0]} disagrees with generic" in caplog.text
     finally:
         native.set_native_isa(before)
+
+
+def test_a_forked_child_runs_the_kernels_on_new_workers() -> None:
+    """After fork the child has only the forking thread: the pool must start workers
+    again instead of waiting for the parent's (which would hang the child)."""
+    dec, _ = native.load_native("cvae_decoder", "anomaly", None, 2, 10, 0.2)
+    R = 500
+    rng = np.random.default_rng(6)
+    x = rng.standard_normal((5, 24)).astype(np.float32)
+    cache = dec.cache_latents(rng.standard_normal((R, 30)).astype(np.float32))
+    h = np.zeros((R, 128), np.float32)
+
+    def run() -> np.ndarray:
+        o = {k: np.zeros((R, n), np.float32) for k, n in (("rotations", 108), ("contacts", 2))}
+        o["h_out"] = np.zeros((R, 128), np.float32)
+        dec.step(x, 100, cache, h, o)
+        return o["h_out"]
+
+    want = run()
+    read, write = os.pipe()
+    with warnings.catch_warnings():  # 3.12+ warns about fork with threads running
+        warnings.simplefilter("ignore", DeprecationWarning)
+        pid = os.fork()
+    if pid == 0:  # the child: one call, then report whether it matched
+        try:
+            os.write(write, b"1" if np.array_equal(run(), want) else b"0")
+        finally:
+            os._exit(0)
+    os.close(write)
+    got = os.read(read, 1)
+    _, status = os.waitpid(pid, 0)
+    assert got == b"1" and status == 0
