@@ -437,6 +437,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         samples=args.samples,
         outlier_baseline=args.outlier_baseline,
         outlier_factor=args.outlier_factor,
+        upper_body_ik=not args.no_upper_ik,
     )
     _json_out(args.json)
     _models_dir(args.models)
@@ -797,6 +798,12 @@ def build_parser() -> argparse.ArgumentParser:
         default="zero",
         choices=("min", "zero"),
         help="SSI outlier rule: R_c > 2r (zero, the paper; default) or R_c - min R > 2r (min)",
+    )
+    ev.add_argument(
+        "--no-upper-ik",
+        action="store_true",
+        help="cvae_ik_ssi without the upper-body pass (head and hands on their trackers): "
+        "the network's own upper body, as the other variants show it",
     )
     ev.set_defaults(func=_cmd_eval)
 

@@ -53,6 +53,11 @@ class Metrics:
         self.transitions = Counter(
             "posecast_ssi_transitions", "SSI sample transitions started", registry=r
         )
+        self.reach_limited = Counter(
+            "posecast_reach_limited",
+            "Poses sent with the head or a hand more than 1 mm from its tracker (out of reach)",
+            registry=r,
+        )
         self.frames_in = Counter("posecast_frames", "Tracker frames accepted", registry=r)
         self.reads_paced = Counter(
             "posecast_reads_paced",

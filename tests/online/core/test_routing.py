@@ -17,3 +17,11 @@ def test_poses_reach_the_room_audience_only() -> None:
     raw = {conn: h.hub.outbox(conn).take() for conn in (a, b, c, spec)}  # type: ignore[union-attr]
     assert raw == {a: [b"pose-a2"], b: [b"pose-a2"], c: [b"pose-c2"], spec: [b"pose-a2"]}
     assert h.hub.metrics.value("posecast_poses_superseded_total") == 4
+
+
+def test_reach_limited_poses_are_counted() -> None:
+    h = Harness()
+    h.inbox(h.join("a"))
+    h.hub.deliver(TickOutput([("a", b"pose-a")], reach_limited=1), h.now)
+    h.hub.deliver(TickOutput([("a", b"pose-a2")]), h.now)
+    assert h.hub.metrics.value("posecast_reach_limited_total") == 1

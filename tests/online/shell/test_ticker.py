@@ -110,3 +110,20 @@ def test_tick_loop_runs_engine_work_in_one_dedicated_thread(worker: EngineWorker
     asyncio.run(main())
     assert len(threads) == 1 and next(iter(threads)).startswith("engine")
     assert 8 <= len(delivered) <= 20  # about 60 Hz for a quarter of a second
+
+
+def test_poses_whose_trackers_are_out_of_reach_are_counted(worker: EngineWorker) -> None:
+    """A thrown controller (2 m from the body): every pose sent after it is reach-limited."""
+
+    def thrown(seq: int) -> TrackerFrame:
+        f = _frame(seq)
+        pos = f.pos.copy()
+        pos[1, 0] += 2.0  # the left controller
+        return TrackerFrame(f.seq, pos, f.quat)
+
+    counts = []
+    for seq in range(5):
+        ops = [EngineOp("add", "a"), EngineOp("add", "b")] if seq == 0 else []
+        out = worker.step(TickInput(ops, {"a": thrown(seq), "b": _frame(seq)}), 0.0)
+        counts.append((len(out.poses), out.reach_limited))
+    assert counts[2:] == [(2, 1)] * 3  # tau = 2; only player a

@@ -87,3 +87,5 @@ class Router:
         m.batch_size.observe(out.batch)
         if out.transitions:
             m.transitions.inc(out.transitions)
+        if out.reach_limited:
+            m.reach_limited.inc(out.reach_limited)

@@ -60,6 +60,7 @@ class TickOutput:
     transitions: int = 0
     batch: int = 0  # players in the step
     seconds: float = 0.0  # wall time of the step in the engine thread
+    reach_limited: int = 0  # poses sent whose head or a hand could not reach its tracker
 
 
 class EngineInbox:

@@ -26,6 +26,9 @@ class EngineConfig:
         stale_after_frames: frames without input before a player is marked stale (30).
         waist_filter_hz: cutoff of the waist-orientation low-pass, ``None`` for off.
         fps: tick rate the model was trained at (60).
+        upper_body_ik: put the shown pose's head on the headset and hands on the
+            controllers (:mod:`posecast.online.engine.upper_ik`; default on, off for
+            research evaluation of the network's own upper body).
     """
 
     samples: int = 100
@@ -38,6 +41,7 @@ class EngineConfig:
     stale_after_frames: int = 30
     waist_filter_hz: float | None = None
     fps: float = 60.0
+    upper_body_ik: bool = True
 
     def __post_init__(self) -> None:
         if self.samples < 1:

@@ -13,7 +13,8 @@ Per tick, for all ``P`` players x ``N`` samples at once:
    at frame ``n``, the newest)
 5. emit frame ``n - tau`` per player: the current sample's pose, or during a
    transition the decoder re-run on the interpolated latent and hidden state
-   (one more batched call), then that player's own display IK
+   (one more batched call), then that player's own display IK, then the upper-body
+   pass (:mod:`posecast.online.engine.upper_ik`: head and hands on their trackers)
 
 The engine is pure: frames go in with :meth:`Engine.push`, :meth:`Engine.tick`
 returns poses and events (:mod:`posecast.online.engine.types`). No sockets, no
@@ -48,6 +49,7 @@ from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.selectors import AnomalySelector, Selector, choose_anomaly_rows
 from posecast.online.engine.slots import SlotArrays
 from posecast.online.engine.types import EngineEvent, PoseOut, TickResult, TrackerFrame
+from posecast.online.engine.upper_ik import solve_upper_body
 from posecast.skeleton import NUM_JOINTS, REST_PELVIS_HEIGHT_M, reference_offsets
 from posecast.tracking.features import TRACKER_JOINT_INDEX, TrackerSlot
 from posecast.tracking.layouts import Layout, spec
@@ -457,6 +459,11 @@ class Engine:
         wp, rotations = self.pool.emit(rot, con, root_mat, root_pos, ik)
         for n in _DISPLAY_IK:
             s[n][slots] = state[n]
+        reach_limited = np.zeros(E, np.bool_)
+        if self.cfg.upper_body_ik:
+            # Head and hands onto their (calibrated) trackers, before the user's scale.
+            wp, rotations, reach_limited = solve_upper_body(wp, rotations, pos, quat)
+        limited = reach_limited.tolist()
         scale = np.array([p.calibration.scale for p, _, _ in emit], np.float32)
         positions = wp / scale[:, None, None]
         seqs, held = s["ring_seq"][k, slots].tolist(), s["ring_held"][k, slots].tolist()
@@ -470,6 +477,7 @@ class Engine:
                 sample=sample,
                 transitioning=0.0 < w < 1.0,
                 held=held[i],
+                reach_limited=limited[i],
             )
             for i, (p, sample, w) in enumerate(emit)
         ]

@@ -39,6 +39,9 @@ class PoseOut:
     sample: int  # the latent sample shown (the destination during a transition)
     transitioning: bool
     held: bool  # the input was held over a missing frame
+    # The upper-body pass left the head or a hand more than 1 mm from its tracker (out of
+    # the body's reach: bad calibration, a thrown controller). Not on the wire yet.
+    reach_limited: bool = False
 
 
 @dataclass(frozen=True)

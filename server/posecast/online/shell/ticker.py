@@ -51,9 +51,11 @@ class EngineWorker:
                 e.push(player, frame)
         result = e.tick()
         poses = []
+        limited = 0
         for p in result.poses:
             if p.held or p.seq < 0:
                 continue  # one pose per source frame: nothing new over a gap or when stale
+            limited += p.reach_limited
             pose = Pose(
                 player=p.player,
                 seq=p.seq,
@@ -71,6 +73,7 @@ class EngineWorker:
             result.transitions,
             e.player_count,
             time.perf_counter() - t0,
+            limited,
         )
 
     def _apply(self, op: EngineOp) -> None:

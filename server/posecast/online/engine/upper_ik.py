@@ -1,0 +1,260 @@
+"""The upper-body pass: head on the headset, hands on the controllers (numpy, batched).
+
+The network places the head and hands *near* their trackers; a VR user expects them *on*
+them. This pass runs on the shown poses of a tick (``E`` players, after SSI and the
+display foot IK, in calibrated canonical-body metres) and changes rotations only:
+every bone keeps its length, and every joint's world rotation stays what FK of the
+local rotations gives (a joint that turns carries its whole subtree with it).
+
+1. **Spine chain** (``SPINE -> CHEST -> NECK -> HEAD``): one FABRIK sweep from
+   the network's own bend spread the correction over the three bones, then two exact
+   two-bone solves (spine-chest against the rest of the chain, then chest-neck-head)
+   put the head on the headset; each of ``SPINE``, ``CHEST``, ``NECK`` turns by the
+   smallest rotation (a swing) that points its bone at its new child, carrying the
+   arms along. The head's world rotation becomes the headset's.
+2. **Arms**, from the shoulders where the chest now holds them: a two-bone solve
+   (upper arm, forearm) puts the hand on the controller, the elbow in the plane of
+   shoulder, target and the network's own elbow, on the network's side of the
+   shoulder-target line (so the elbow never flips). The hand's world rotation becomes
+   the controller's.
+3. **Out of reach** (bad calibration, a thrown controller): the chain reaches straight
+   along the line to the target, as far as its bones allow, and the pose is flagged:
+   ``reach_limited`` is true when any of the three effectors ends more than
+   :data:`REACH_TOLERANCE_M` from its tracker.
+
+Glossary as in :mod:`posecast.geometry.rotations` (``mat`` acts on column vectors,
+``quat`` is xyzw). Pure numpy: no inference library, no I/O.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+from numpy.typing import NDArray
+
+from posecast.geometry.rotations import mat2quat, quat2mat
+from posecast.skeleton import NUM_JOINTS, PARENTS, Joint, reference_offsets
+from posecast.tracking.features import TRACKER_JOINT_INDEX, TrackerSlot
+
+F32 = NDArray[np.float32]
+F64 = NDArray[np.float64]
+
+REACH_TOLERANCE_M = 1e-3  # an effector further than this from its tracker is "not reached"
+FABRIK_SWEEPS = 1  # shaping only: two exact solves finish (solve_upper_body)
+_EPS = 1e-9
+
+_SPINE_CHAIN = (Joint.SPINE, Joint.CHEST, Joint.NECK, Joint.HEAD)
+# Both arms at once, left then right: upper arm, forearm, hand, and the hand's tracker.
+_ARM_UPPER = [int(Joint.LEFT_UPPER_ARM), int(Joint.RIGHT_UPPER_ARM)]
+_ARM_FORE = [int(Joint.LEFT_FOREARM), int(Joint.RIGHT_FOREARM)]
+_ARM_HAND = [int(Joint.LEFT_HAND), int(Joint.RIGHT_HAND)]
+_HAND_SLOTS = [int(TrackerSlot.LEFT_HAND), int(TrackerSlot.RIGHT_HAND)]
+# Joints whose rotation the pass may change (the rest are copied through untouched).
+_UPPER = list(range(Joint.SPINE, Joint.LEFT_THIGH))  # spine, neck, head and the arms
+_BONE_M = np.linalg.norm(reference_offsets(), axis=-1)  # (19,) length of each joint's bone
+
+
+def _descendants() -> dict[int, list[int]]:
+    out: dict[int, list[int]] = {j: [] for j in range(NUM_JOINTS)}
+    for j in range(NUM_JOINTS):
+        p = PARENTS[j]
+        while p >= 0:
+            out[p].append(j)
+            p = PARENTS[p]
+    return out
+
+
+_DESCENDANTS = _descendants()
+
+
+# Small-array helpers written out by component: numpy's ``cross`` and ``linalg.norm``
+# cost more in call overhead than in arithmetic at a tick's few rows.
+def _norm(v: F64) -> F64:
+    out: F64 = np.sqrt(np.einsum("...i,...i->...", v, v))
+    return out
+
+
+def _cross(a: F64, b: F64) -> F64:
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def _unit(v: F64) -> tuple[F64, F64]:
+    """``v (..., 3)`` -> (direction, length ``(...,)``); a zero vector keeps direction 0."""
+    n = _norm(v)
+    return v / np.maximum(n, _EPS)[..., None], n
+
+
+def swing_mat(a: F64, b: F64) -> F64:
+    """The smallest rotation ``(..., 3, 3)`` taking direction ``a (..., 3)`` onto ``b``
+    (Rodrigues' formula, ``R = c I + [v]x + v v^T / (1 + c)`` with ``v = a x b``,
+    ``c = a . b``; opposite directions turn half a turn about a perpendicular)."""
+    ua, _ = _unit(a)
+    ub, _ = _unit(b)
+    x, y, z = np.moveaxis(_cross(ua, ub), -1, 0)  # the axis times sin
+    c = np.einsum("...i,...i->...", ua, ub)  # cos
+    opposite = c < -1.0 + 1e-9
+    h = 1.0 / np.where(opposite, 1.0, 1.0 + c)
+    xh, yh, zh = x * h, y * h, z * h
+    R = np.stack(
+        [
+            c + x * xh, y * xh - z, z * xh + y,
+            y * xh + z, c + y * yh, z * yh - x,
+            z * xh - y, z * yh + x, c + z * zh,
+        ],
+        axis=-1,
+    ).reshape(*c.shape, 3, 3)  # fmt: skip
+    if opposite.any():
+        helper = np.where(np.abs(ua[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+        p, _ = _unit(_cross(ua, helper))
+        half = 2.0 * p[..., :, None] * p[..., None, :] - np.eye(3)
+        R = np.where(opposite[..., None, None], half, R)
+    return R
+
+
+def _turn(pos: F64, mat: F64, joint: int, R: F64) -> None:
+    """Turn ``joint``'s world rotation by ``R (E, 3, 3)`` (on the left) about its own
+    position, with its whole subtree, in place: what FK gives after that change."""
+    sub = _DESCENDANTS[joint]
+    pivot = pos[:, joint, None]  # (E, 1, 3)
+    pos[:, sub] = pivot + np.einsum("eab,ekb->eka", R, pos[:, sub] - pivot)
+    rows = [joint, *sub]
+    mat[:, rows] = R[:, None] @ mat[:, rows]
+
+
+def _point_bone(pos: F64, mat: F64, joint: int, child: int, new_child: F64) -> None:
+    """Swing ``joint`` so that its bone to ``child`` points at ``new_child (E, 3)``."""
+    R = swing_mat(pos[:, child] - pos[:, joint], new_child - pos[:, joint])
+    _turn(pos, mat, joint, R)
+
+
+def fabrik(chain: F64, lengths: F64, target: F64, iterations: int = 1) -> F64:
+    """``iterations`` sweeps of FABRIK (Aristidou & Lasenby 2011) on ``E`` chains
+    ``(E, n, 3)`` with fixed roots and bone ``lengths (n - 1,)``: the new joint
+    positions (each sweep: from the target back to the root, then forward again)."""
+    p = chain.copy()
+    root = p[:, 0].copy()
+    n = p.shape[1]
+    for _ in range(iterations):
+        p[:, -1] = target
+        for i in range(n - 2, -1, -1):  # backward: from the target to the root
+            u, _ = _unit(p[:, i] - p[:, i + 1])
+            p[:, i] = p[:, i + 1] + lengths[i] * u
+        p[:, 0] = root
+        for i in range(n - 1):  # forward: from the root to the end
+            u, _ = _unit(p[:, i + 1] - p[:, i])
+            p[:, i + 1] = p[:, i] + lengths[i] * u
+    return p
+
+
+def two_bone(
+    shoulder: F64, elbow: F64, target: F64, l1: float, l2: F64 | float, bend: F64
+) -> tuple[F64, F64]:
+    """Elbow and hand positions ``(E, 3)`` of a two-bone limb (lengths ``l1``, ``l2``,
+    the second may differ per row) from ``shoulder`` to a hand on ``target``, the elbow
+    in the plane of shoulder, target and the current ``elbow``, on its side of the
+    shoulder-target line; a straight limb gives no plane and bends toward ``bend (E, 3)``.
+    Out of reach: straight at the target."""
+    u, d = _unit(target - shoulder)
+    w, wn = _unit(_across(elbow - shoulder, u))
+    for fallback in (bend, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]]):
+        bad = wn < 1e-6
+        if not bad.any():
+            break
+        alt, altn = _unit(_across(np.broadcast_to(np.asarray(fallback, np.float64), u.shape), u))
+        w, wn = np.where(bad[:, None], alt, w), np.where(bad, altn, wn)
+    l2 = np.asarray(l2, np.float64)
+    dc = np.clip(d, np.abs(l1 - l2) + _EPS, l1 + l2)
+    cos_a = np.clip((l1 * l1 + dc * dc - l2 * l2) / (2.0 * l1 * dc), -1.0, 1.0)
+    sin_a = np.sqrt(1.0 - cos_a * cos_a)
+    new_elbow = shoulder + l1 * (cos_a[:, None] * u + sin_a[:, None] * w)
+    return new_elbow, shoulder + dc[:, None] * u
+
+
+def _across(v: F64, u: F64) -> F64:
+    """The part of ``v`` perpendicular to the unit ``u`` (both ``(E, 3)``)."""
+    out: F64 = v - np.einsum("ei,ei->e", v, u)[:, None] * u
+    return out
+
+
+def solve_upper_body(
+    positions: NDArray[np.floating],
+    rotations: NDArray[np.floating],
+    tracker_pos: NDArray[np.floating],
+    tracker_quat: NDArray[np.floating],
+) -> tuple[F32, F32, NDArray[np.bool_]]:
+    """Head and hands of ``E`` poses onto their trackers.
+
+    Args:
+        positions: world joint positions ``(E, 19, 3)`` (FK of ``rotations``), metres.
+        rotations: world joint rotations ``(E, 19, 4)`` xyzw.
+        tracker_pos: the trackers ``(E, 4, 3)`` in the same frame and scale, slot order.
+        tracker_quat: their orientations ``(E, 4, 4)`` xyzw (calibration offsets applied).
+
+    Returns:
+        ``(positions (E, 19, 3), rotations (E, 19, 4), reach_limited (E,))``: float32
+        poses whose world rotations are still FK-consistent with the positions, and
+        per pose whether an effector was left more than :data:`REACH_TOLERANCE_M` away.
+    """
+    pos = np.asarray(positions, np.float64).copy()  # (E, 19, 3)
+    quat_in = np.asarray(rotations)
+    mat = quat2mat(quat_in)  # (E, 19, 3, 3)
+    tp = np.asarray(tracker_pos, np.float64)
+    tq = np.asarray(tracker_quat, np.float64)
+
+    # 1. The spine chain. A FABRIK sweep spreads the bend over the three bones (more
+    # sweeps converge slowly near full extension, where a standing user's headset is,
+    # and cost a tick's time); two exact two-bone solves finish from its shape: the
+    # chest at its distance from the target (within what neck and head can span), then
+    # neck and head onto the target.
+    chain = [int(j) for j in _SPINE_CHAIN]
+    head_target = tp[:, TrackerSlot.HEAD]
+    lengths = _BONE_M[chain[1:]]  # spine-chest, chest-neck, neck-head
+    shaped = fabrik(pos[:, chain], lengths, head_target, FABRIK_SWEEPS)  # (E, 4, 3)
+    forward = mat[:, Joint.CHEST, :, 2]  # the chest's +Z: where a straight spine bends
+    span = np.clip(
+        _norm(head_target - shaped[:, 1]),
+        abs(lengths[1] - lengths[2]),
+        lengths[1] + lengths[2],
+    )
+    chest, _ = two_bone(pos[:, Joint.SPINE], shaped[:, 1], head_target, lengths[0], span, forward)
+    neck, head = two_bone(chest, shaped[:, 2], head_target, lengths[1], lengths[2], forward)
+    for (joint, child), placed in zip(itertools.pairwise(chain), (chest, neck, head), strict=True):
+        _point_bone(pos, mat, joint, child, placed)
+    tracker_mat = quat2mat(tq)  # (E, 4, 3, 3)
+    mat[:, Joint.HEAD] = tracker_mat[:, TrackerSlot.HEAD]
+
+    # 2. Both arms in one batch, from where the chest now holds the shoulders.
+    upper, fore, hand = _ARM_UPPER, _ARM_FORE, _ARM_HAND
+    shoulder = pos[:, upper]  # (E, 2, 3)
+    elbow, wrist = two_bone(
+        shoulder.reshape(-1, 3),
+        pos[:, fore].reshape(-1, 3),
+        tp[:, _HAND_SLOTS].reshape(-1, 3),
+        float(_BONE_M[fore[0]]),
+        float(_BONE_M[hand[0]]),
+        np.array([[0.0, -1.0, 0.0]]),  # where a straight network arm bends its elbow
+    )
+    elbow, wrist = elbow.reshape(-1, 2, 3), wrist.reshape(-1, 2, 3)
+    # The upper arms turn, carrying forearm and hand; then the forearms.
+    R = swing_mat(pos[:, fore] - shoulder, elbow - shoulder)  # (E, 2, 3, 3)
+    for j in (fore, hand):
+        pos[:, j] = shoulder + np.einsum("ekab,ekb->eka", R, pos[:, j] - shoulder)
+    for j in (upper, fore):
+        mat[:, j] = R @ mat[:, j]
+    R = swing_mat(pos[:, hand] - pos[:, fore], wrist - pos[:, fore])
+    pos[:, hand] = pos[:, fore] + np.einsum("ekab,ekb->eka", R, pos[:, hand] - pos[:, fore])
+    mat[:, fore] = R @ mat[:, fore]
+    mat[:, hand] = tracker_mat[:, _HAND_SLOTS]
+
+    # 3. What was not reached.
+    slots = [int(TrackerSlot.HEAD), *_HAND_SLOTS]
+    effectors = [TRACKER_JOINT_INDEX[slot] for slot in slots]
+    miss = _norm(pos[:, effectors] - tp[:, slots])  # (E, 3)
+    reach_limited = np.any(miss > REACH_TOLERANCE_M, axis=-1)
+
+    quats = np.array(quat_in, np.float32, copy=True)
+    quats[:, _UPPER] = mat2quat(mat[:, _UPPER])
+    return pos.astype(np.float32), quats, reach_limited

@@ -1,0 +1,253 @@
+"""The upper-body pass (:mod:`posecast.online.engine.upper_ik`): head and hands on their
+trackers, bones unchanged, rotations FK-consistent, no elbow flips, out-of-reach
+targets reached for and flagged; and the engine streaming it (or not)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from posecast.geometry.fk import fk_mat, world2local_mat
+from posecast.geometry.rotations import aa2mat, mat2quat, quat2mat
+from posecast.online.engine.calibration import Calibration
+from posecast.online.engine.ssi import Engine
+from posecast.online.engine.types import PoseOut, TrackerFrame
+from posecast.online.engine.upper_ik import solve_upper_body
+from posecast.skeleton import LOWER_BODY, PARENTS, Joint, reference_offsets
+from posecast.tracking.features import TrackerSlot
+from tests.online.engine.conftest import BackendLoader
+
+WalkFrames = Callable[..., list[TrackerFrame]]
+HANDS = ((Joint.LEFT_HAND, TrackerSlot.LEFT_HAND), (Joint.RIGHT_HAND, TrackerSlot.RIGHT_HAND))
+ARMS = (
+    (Joint.LEFT_UPPER_ARM, Joint.LEFT_FOREARM, TrackerSlot.LEFT_HAND),
+    (Joint.RIGHT_UPPER_ARM, Joint.RIGHT_FOREARM, TrackerSlot.RIGHT_HAND),
+)
+BONES = np.linalg.norm(reference_offsets(), axis=-1)
+
+
+def random_poses(E: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """``E`` poses of the reference body: world positions ``(E, 19, 3)`` and quats
+    ``(E, 19, 4)``; small random local rotations, elbows bent 90-115 degrees so the
+    hands are well inside the arms' reach."""
+    rng = np.random.default_rng(seed)
+    local = aa2mat(rng.normal(0.0, 0.25, (E, 19, 3)))
+    local[:, 0] = aa2mat(rng.normal(0.0, 0.1, (E, 3)))
+    for fore, sign in ((Joint.LEFT_FOREARM, -1.0), (Joint.RIGHT_FOREARM, 1.0)):
+        bend = np.zeros((E, 3))
+        bend[:, 1] = sign * rng.uniform(1.6, 2.0, E)  # about +-Y: the forearm turns forward
+        local[:, fore] = local[:, fore] @ aa2mat(bend)
+    root = np.array([0.0, 0.98, 0.0]) + rng.normal(0.0, 0.05, (E, 3))
+    wm, wp = fk_mat(local, root, reference_offsets())
+    return wp, mat2quat(wm)
+
+
+def trackers(pos: np.ndarray, shift: np.ndarray, quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Trackers on the joints of ``pos`` moved by ``shift (E, 4, 3)``, orientations ``quat``."""
+    tp = pos[:, [Joint.HEAD, Joint.LEFT_HAND, Joint.RIGHT_HAND, Joint.PELVIS]] + shift
+    return tp, quat
+
+
+def reachable_head(pos: np.ndarray, seed: int) -> np.ndarray:
+    """Headset positions ``(E, 3)`` the spine chain can reach: the network's head turned
+    about the spine joint by a few degrees, and 0-10 % nearer (at most 0.51 m of 0.52)."""
+    rng = np.random.default_rng(seed)
+    v = pos[:, Joint.HEAD] - pos[:, Joint.SPINE]
+    v = np.einsum("eab,eb->ea", aa2mat(rng.normal(0.0, 0.1, (len(pos), 3))), v)
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    length = np.minimum(n * rng.uniform(0.9, 1.0, (len(pos), 1)), 0.51)
+    out: np.ndarray = pos[:, Joint.SPINE] + v / n * length
+    return out
+
+
+def random_quats(E: int, seed: int) -> np.ndarray:
+    return mat2quat(aa2mat(np.random.default_rng(seed).normal(0.0, 1.0, (E, 4, 3))))
+
+
+def assert_fk_consistent(pos: np.ndarray, quat: np.ndarray, atol: float = 1e-5) -> None:
+    """FK of the local rotations (``parent^T world``) gives back the positions."""
+    wm = quat2mat(quat.astype(np.float64))
+    local = world2local_mat(wm)
+    _, again = fk_mat(local, pos[:, 0].astype(np.float64), reference_offsets())
+    np.testing.assert_allclose(again, pos, atol=atol)
+
+
+def assert_bones_kept(pos: np.ndarray, atol: float = 1e-6) -> None:
+    p = pos.astype(np.float64)
+    for j, parent in enumerate(PARENTS):
+        if parent >= 0:
+            length = np.linalg.norm(p[:, j] - p[:, parent], axis=-1)
+            np.testing.assert_allclose(length, BONES[j], atol=atol, err_msg=Joint(j).name)
+
+
+def test_reachable_targets_are_hit_with_bones_and_fk_kept() -> None:
+    E = 64
+    pos, quat = random_poses(E, seed=0)
+    shift = np.random.default_rng(1).uniform(-0.05, 0.05, (E, 4, 3))
+    tp, tq = trackers(pos, shift, random_quats(E, seed=2))
+    tp[:, TrackerSlot.HEAD] = reachable_head(pos, seed=3)
+    out_pos, out_quat, limited = solve_upper_body(pos, quat, tp, tq)
+    assert out_pos.dtype == np.float32 and out_quat.dtype == np.float32
+    assert not limited.any()
+    np.testing.assert_array_less(
+        np.linalg.norm(out_pos[:, Joint.HEAD] - tp[:, TrackerSlot.HEAD], axis=-1), 1e-3
+    )
+    for joint, slot in HANDS:
+        np.testing.assert_array_less(np.linalg.norm(out_pos[:, joint] - tp[:, slot], axis=-1), 1e-3)
+    assert_bones_kept(out_pos)
+    assert_fk_consistent(out_pos, out_quat)
+    # The effectors' world rotations are the trackers'.
+    for joint, slot in ((Joint.HEAD, TrackerSlot.HEAD), *HANDS):
+        np.testing.assert_allclose(
+            quat2mat(out_quat[:, joint].astype(np.float64)), quat2mat(tq[:, slot]), atol=1e-6
+        )
+    # Pelvis and legs are not the pass's.
+    legs = [int(Joint.PELVIS), *(int(j) for j in LOWER_BODY)]
+    np.testing.assert_allclose(out_pos[:, legs], pos[:, legs], atol=1e-6)
+    np.testing.assert_array_equal(out_quat[:, legs], quat[:, legs].astype(np.float32))
+
+
+def test_targets_already_met_change_nothing() -> None:
+    pos, quat = random_poses(8, seed=3)
+    tp, _ = trackers(pos, np.zeros((8, 4, 3)), quat)
+    tq = quat[:, [Joint.HEAD, Joint.LEFT_HAND, Joint.RIGHT_HAND, Joint.PELVIS]]
+    out_pos, out_quat, limited = solve_upper_body(pos, quat, tp, tq)
+    assert not limited.any()
+    np.testing.assert_allclose(out_pos, pos, atol=1e-6)
+    np.testing.assert_allclose(quat2mat(out_quat.astype(np.float64)), quat2mat(quat), atol=1e-6)
+
+
+def side(shoulder: np.ndarray, target: np.ndarray, elbow: np.ndarray) -> np.ndarray:
+    """The elbow's offset from the shoulder-target line, perpendicular to it ``(E, 3)``."""
+    u = target - shoulder
+    u /= np.linalg.norm(u, axis=-1, keepdims=True)
+    v = elbow - shoulder
+    return v - np.sum(v * u, axis=-1, keepdims=True) * u
+
+
+def test_the_elbow_stays_on_the_networks_side_over_a_sweep_of_targets() -> None:
+    """The head stays where the network put it (so the shoulders do not move); each hand
+    target sweeps a 9 x 9 x 9 grid of +-8 cm around the network's hand. The solved
+    elbow is on the same side of the shoulder-target line as the network's, and well
+    away from it (no flip through the line)."""
+    pos, quat = random_poses(4, seed=4)
+    grid = np.linspace(-0.08, 0.08, 9)
+    offsets = np.stack(np.meshgrid(grid, grid, grid, indexing="ij"), -1).reshape(-1, 3)
+    E = len(offsets) * len(pos)
+    pos_e = np.repeat(pos, len(offsets), axis=0)
+    quat_e = np.repeat(quat, len(offsets), axis=0)
+    shift = np.zeros((E, 4, 3))
+    shift[:, 1] = np.tile(offsets, (len(pos), 1))
+    shift[:, 2] = -np.tile(offsets, (len(pos), 1))
+    tp, tq = trackers(pos_e, shift, random_quats(E, seed=5))
+    out_pos, out_quat, limited = solve_upper_body(pos_e, quat_e, tp, tq)
+    assert not limited.any()
+    for upper, fore, slot in ARMS:
+        np.testing.assert_allclose(out_pos[:, upper], pos_e[:, upper], atol=1e-6)
+        net = side(pos_e[:, upper], tp[:, slot], pos_e[:, fore])
+        got = side(out_pos[:, upper], tp[:, slot], out_pos[:, fore].astype(np.float64))
+        cos = np.sum(net * got, -1) / np.linalg.norm(net, axis=-1) / np.linalg.norm(got, axis=-1)
+        assert cos.min() > 0.999, cos.min()  # the same plane, the same side
+    assert_bones_kept(out_pos)
+    assert_fk_consistent(out_pos, out_quat)
+
+
+def test_out_of_reach_targets_get_a_straight_chain_and_a_flag() -> None:
+    """A controller 2 m from its shoulder: the arm points straight at it, bones kept,
+    ``reach_limited``; a headset 2 m above the spine: the spine chain straight up."""
+    E = 6
+    pos, quat = random_poses(E, seed=6)
+    shift = np.zeros((E, 4, 3))
+    tp, tq = trackers(pos, shift, random_quats(E, seed=7))
+    tp[:3, TrackerSlot.LEFT_HAND] = pos[:3, Joint.LEFT_UPPER_ARM] + [2.0, 0.0, 0.0]
+    tp[3:, TrackerSlot.HEAD] = pos[3:, Joint.SPINE] + [0.0, 2.0, 0.0]
+    out_pos, out_quat, limited = solve_upper_body(pos, quat, tp, tq)
+    np.testing.assert_array_equal(limited, True)
+    assert_bones_kept(out_pos)
+    assert_fk_consistent(out_pos, out_quat)
+    p = out_pos.astype(np.float64)
+    # The thrown controller: shoulder, elbow and hand on the line toward it.
+    u = tp[:3, TrackerSlot.LEFT_HAND] - p[:3, Joint.LEFT_UPPER_ARM]
+    u /= np.linalg.norm(u, axis=-1, keepdims=True)
+    for joint in (Joint.LEFT_FOREARM, Joint.LEFT_HAND):
+        d = p[:3, joint] - p[:3, Joint.LEFT_UPPER_ARM]
+        np.testing.assert_allclose(d / np.linalg.norm(d, axis=-1, keepdims=True), u, atol=1e-6)
+    reach = BONES[Joint.LEFT_FOREARM] + BONES[Joint.LEFT_HAND]
+    np.testing.assert_allclose(
+        np.linalg.norm(p[:3, Joint.LEFT_HAND] - p[:3, Joint.LEFT_UPPER_ARM], axis=-1),
+        reach,
+        atol=1e-6,
+    )
+    # The other effectors of those poses are still on their trackers.
+    np.testing.assert_array_less(
+        np.linalg.norm(p[:3, Joint.RIGHT_HAND] - tp[:3, TrackerSlot.RIGHT_HAND], axis=-1), 1e-3
+    )
+    # The headset far above: the spine chain straight up from the spine joint.
+    for joint in (Joint.CHEST, Joint.NECK, Joint.HEAD):
+        d = p[3:, joint] - p[3:, Joint.SPINE]
+        up = np.tile([0.0, 1.0, 0.0], (3, 1))
+        np.testing.assert_allclose(d / np.linalg.norm(d, axis=-1, keepdims=True), up, atol=1e-6)
+
+
+# --- the engine -----------------------------------------------------------------------
+
+
+def run(
+    engine: Engine, frames: list[TrackerFrame], calibration: Calibration | None = None
+) -> list[PoseOut]:
+    engine.add_player("p", seed=0, calibration=calibration)
+    poses = []
+    for f in frames:
+        engine.push("p", f)
+        poses += engine.tick().poses
+    return poses
+
+
+def test_the_engine_streams_head_and_hands_on_the_trackers(
+    backend: BackendLoader, walk_frames: WalkFrames
+) -> None:
+    """On a synthetic walk (trackers on the reference body's joints, so the walk's own
+    head and hands are within reach) every streamed pose has its head and hands within
+    1 cm of the trackers (measured: within 1 mm) and FK-consistent rotations; with
+    ``upper_body_ik=False`` the pose is the one before the pass: the pass applied to it
+    gives the streamed pose, and the pelvis and legs are the same either way."""
+    frames = walk_frames(0)
+    by_seq = {f.seq: f for f in frames}
+    on = run(backend.engine(samples=10, lookahead=2), frames)
+    off = run(backend.engine(samples=10, lookahead=2, upper_body_ik=False), frames)
+    assert len(on) == len(off) == len(frames) - 2
+    for pose in on:
+        f = by_seq[pose.seq]
+        for joint, slot in ((Joint.HEAD, TrackerSlot.HEAD), *HANDS):
+            assert np.linalg.norm(pose.positions[joint] - f.pos[slot]) < 0.01, (pose.seq, joint)
+    assert not any(p.reach_limited for p in on)
+    assert not any(p.reach_limited for p in off)
+    pos_on = np.stack([p.positions for p in on])
+    quat_on = np.stack([p.rotations for p in on])
+    pos_off = np.stack([p.positions for p in off])
+    quat_off = np.stack([p.rotations for p in off])
+    assert_fk_consistent(pos_on, quat_on, atol=1e-4)
+    legs = [int(Joint.PELVIS), *(int(j) for j in LOWER_BODY)]
+    np.testing.assert_array_equal(pos_on[:, legs], pos_off[:, legs])
+    assert np.abs(pos_on - pos_off).max() > 1e-3  # the pass did something
+    tp = np.stack([by_seq[p.seq].pos for p in off])
+    tq = np.stack([by_seq[p.seq].quat for p in off])
+    again, again_q, _ = solve_upper_body(pos_off, quat_off, tp, tq)
+    np.testing.assert_allclose(again, pos_on, atol=1e-5)
+    np.testing.assert_allclose(quat2mat(again_q), quat2mat(quat_on), atol=1e-5)
+
+
+def test_the_engine_reaches_calibrated_trackers_at_the_users_scale(
+    backend: BackendLoader, walk_frames: WalkFrames
+) -> None:
+    """A half-size user (``scale = 2``): the pass works on the calibrated trackers, and the
+    streamed head and hands land on the user's own trackers at the user's size."""
+    frames = [TrackerFrame(f.seq, f.pos / 2.0, f.quat) for f in walk_frames(0)[:30]]
+    by_seq = {f.seq: f for f in frames}
+    poses = run(backend.engine(samples=10, lookahead=2), frames, Calibration(scale=2.0))
+    assert poses
+    for pose in poses:
+        f = by_seq[pose.seq]
+        for joint, slot in ((Joint.HEAD, TrackerSlot.HEAD), *HANDS):
+            assert np.linalg.norm(pose.positions[joint] - f.pos[slot]) < 0.005
