@@ -92,3 +92,13 @@ def test_docs_table_lists_every_option_with_env_and_default() -> None:
         assert f"`--{name.replace('_', '-')}`" in row or name == "token_secret", row
         if default:
             assert re.search(rf"`{re.escape(default)}`", row), (name, default, row)
+
+
+def test_no_upper_ik_reaches_the_engine() -> None:
+    """``POSECAST_NO_UPPER_IK`` turns the engine's upper-body pass off; it is on by default."""
+    from posecast.online.shell.app import PosecastServer
+
+    for env, on in (({}, True), ({"POSECAST_NO_UPPER_IK": "1"}, False)):
+        cfg = ServerConfig.from_sources({"POSECAST_TOKEN_SECRET": SECRET, **env})
+        multi = PosecastServer(cfg)._default_engine()
+        assert all(e.cfg.upper_body_ik is on for e in multi.engines.values())

@@ -45,6 +45,11 @@ class ServerConfig:
     tick_hz: float = _opt(60.0, "engine ticks per second (the shipped model runs at 60)")
     samples: int = _opt(100, "latent samples per player, N")
     lookahead: int = _opt(10, "look-ahead tau in frames; poses lag frames by tau ticks")
+    no_upper_ik: bool = _opt(
+        False,
+        "stream the poses without the upper-body pass (head on the headset, hands on the "
+        "controllers): about twice the players per node, hands where the network puts them",
+    )
     engine_threads: int = _opt(
         2,
         "threads of the engine's inference backend (the native kernels' pool, or ONNX "

@@ -92,7 +92,10 @@ class PosecastServer:
     def _default_engine(self) -> MultiEngine:
         """One engine per served layout, each on its model (``--layouts``)."""
         ecfg = EngineConfig(
-            samples=self.cfg.samples, lookahead=self.cfg.lookahead, fps=self.cfg.tick_hz
+            samples=self.cfg.samples,
+            lookahead=self.cfg.lookahead,
+            fps=self.cfg.tick_hz,
+            upper_body_ik=not self.cfg.no_upper_ik,
         )
         layouts, threads = self.cfg.served_layouts, self.cfg.engine_threads
         return load_multi_engine(ecfg, layouts, self.cfg.models_dir, threads, self.cfg.backend)
