@@ -76,6 +76,14 @@ def none_lost(a: Client, b: Client, t0: float, t1: float) -> int:
     return len(sa)
 
 
+def _joined_and_stayed(events: list[str]) -> bool:
+    """``events`` (one player's presence, in order) hold a join with no leave after it."""
+    if "join" not in events:
+        return False
+    last_join = len(events) - 1 - events[::-1].index("join")
+    return "leave" not in events[last_join:]
+
+
 def test_a_killed_nodes_players_fail_over_and_the_room_resumes(
     cluster: tuple[ServerProc, ServerProc],
 ) -> None:
@@ -120,7 +128,6 @@ def test_a_killed_nodes_players_fail_over_and_the_room_resumes(
         await asyncio.sleep(NODE_TTL_S + HEARTBEAT_S + 1.0)
         t_end = obs.poses("mate")[-1].t
         churn = [m for m in obs.messages[start:] if isinstance(m, Presence)]
-        last_event = {n: [m.event for m in churn if m.player == n][-1:] for n in movers}
         after = {n: [p for p in obs.poses(n) if p.t > t_end - 1.5] for n in movers}
         local = [p for p in obs.poses("mate") if p.t >= t_local0]
         local_gap, server_gap = max_gap_s(local), server_gap_s(local, mate.sent_at)
@@ -153,7 +160,11 @@ def test_a_killed_nodes_players_fail_over_and_the_room_resumes(
         assert all(cl.stats.reconnects == 1 for cl in sdk.values())
         # Nobody announces the movers gone when B's records expire: they play on A now
         # (the cluster sink's remote_snapshot / remote_leave skip players that are local).
-        ghosts = [n for n in movers if last_event[n] != ["join"]]
+        # A leave after the mover's (re)join is the ghost; stale/active around it only
+        # say that frames paused (the in-process senders share the test's CPU).
+        ghosts = [
+            n for n in movers if not _joined_and_stayed([m.event for m in churn if m.player == n])
+        ]
         assert not ghosts, f"spurious leave for {ghosts} after failover: {churn}"
 
     asyncio.run(scenario())
