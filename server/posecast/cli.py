@@ -82,6 +82,16 @@ def _finite(option: str, value: float, command: str, *, positive: bool = False) 
         raise _config(f"{option} {value} must be {need}", f"see `posecast {command} --help`")
 
 
+def _float_arg(option: str, text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value) or value < 0:
+        raise _config(f"{option} {text!r} must be a finite number >= 0", "or `off`")
+    return value
+
+
 def _int_list(option: str, text: str, command: str) -> list[int]:
     """A comma-separated list of integers >= 1 (``"1,10,100"``)."""
     try:
@@ -432,12 +442,20 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         raise _config(f"--split {args.split!r} unknown", f"use one of {', '.join(SPLITS)}")
     _at_least("--samples", args.samples, 1, "eval")
     _finite("--outlier-factor", args.outlier_factor, "eval", positive=True)
+    ssi_defaults = EngineConfig()
+    latent_scale = ssi_defaults.latent_scale if args.latent_scale is None else args.latent_scale
+    _finite("--latent-scale", latent_scale, "eval", positive=True)
+    home: float | None = ssi_defaults.home_factor
+    if args.home_factor is not None:
+        home = None if args.home_factor == "off" else _float_arg("--home-factor", args.home_factor)
     (backend,) = _backends("--backend", args.backend, "eval")
-    engine_cfg = EngineConfig(  # a ConfigError for a bad --samples
+    engine_cfg = EngineConfig(  # a ConfigError for a bad --samples or --home-factor
         samples=args.samples,
         outlier_baseline=args.outlier_baseline,
         outlier_factor=args.outlier_factor,
         upper_body_ik=not args.no_upper_ik,
+        latent_scale=latent_scale,
+        home_factor=home,
     )
     _json_out(args.json)
     _models_dir(args.models)
@@ -800,10 +818,22 @@ def build_parser() -> argparse.ArgumentParser:
         help="SSI outlier rule: R_c > 2r (zero, the paper; default) or R_c - min R > 2r (min)",
     )
     ev.add_argument(
+        "--latent-scale",
+        type=float,
+        default=None,
+        help="SSI: scale of the pool's latents (1 = the prior; default: the engine's)",
+    )
+    ev.add_argument(
+        "--home-factor",
+        default=None,
+        help="SSI: return to sample 0 (eps = 0) when it scores under this times r, or "
+        "`off` for the paper's selector (default: the engine's)",
+    )
+    ev.add_argument(
         "--no-upper-ik",
         action="store_true",
-        help="cvae_ik_ssi without the upper-body pass (head and hands on their trackers): "
-        "the network's own upper body, as the other variants show it",
+        help="cvae_ik and cvae_ik_ssi without the upper-body pass (head and hands on their "
+        "trackers): the network's own upper body",
     )
     ev.set_defaults(func=_cmd_eval)
 

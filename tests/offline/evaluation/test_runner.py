@@ -47,8 +47,22 @@ def test_the_streamed_variant_has_its_hands_on_the_trackers(report: dict[str, ob
     v = report["variants"]
     assert isinstance(v, dict)
     assert v["cvae_ik_ssi"]["hand_pe_cm"] < 0.1
+    assert v["cvae_ik"]["hand_pe_cm"] < 0.1  # the same pass: SSI against cvae_ik is SSI alone
+    assert v["cvae_ik_ssi"]["head_pe_cm"] < 0.1
+    assert v["cvae_1sample"]["hand_pe_cm"] > 1.0  # the network's raw hands
     clips = [derive_frames(walk_clip(3.0, 60.0, seed=s)) for s in (0, 1)]
     off = evaluate(
         clips, 60.0, ["cvae_ik_ssi"], engine_cfg=EngineConfig(samples=12, upper_body_ik=False)
     )["variants"]["cvae_ik_ssi"]
     assert off["hand_pe_cm"] > 1.0
+
+
+def test_ground_truth_reports_its_own_flags_and_jitter(report: dict[str, object]) -> None:
+    gt = report["ground_truth"]
+    assert isinstance(gt, dict)
+    assert {"jitter", "flagged_rate", "flagged_floor_rate", "flagged_skate_rate"} <= set(gt)
+    assert gt["jitter"] > 0
+    # Every category's rate is a fraction, and "any" is at least each of them.
+    rates = [gt[k] for k in gt if k.startswith("flagged_") and k != "flagged_rate"]
+    assert len(rates) == 4 and all(0.0 <= r <= gt["flagged_rate"] <= 1.0 for r in rates)
+    assert "ground_truth" in format_table(report)  # type: ignore[arg-type]

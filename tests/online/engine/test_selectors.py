@@ -91,8 +91,32 @@ def test_anomaly_returns_a_plain_int() -> None:
     assert type(best) is int
 
 
+def test_home_returns_to_the_mean_sample_inside_the_band() -> None:
+    """``home``: away from sample 0 and not an outlier, return once sample 0 scores under
+    ``home * r``; an outlier prefers sample 0 to the best sample while 0 is no outlier."""
+    sel = AnomalySelector(2.0, home=1.0)
+    # min 1/8, median 3/8: r = 1/4 (exact in binary); sample 0 at 1/4 <= 1.0 r: go home.
+    scores = np.array([0.25, 0.125, 0.375, 0.375, 0.375])
+    assert sel.choose(3, scores, NO_POSES) == 0
+    assert AnomalySelector(2.0).choose(3, scores, NO_POSES) is None  # the paper stays
+    # Sample 0 at 3/8 > 1.0 r but no outlier (<= 2 r): inside the band, stay.
+    assert sel.choose(3, np.array([0.375, 0.125, 0.375, 0.375, 0.375]), NO_POSES) is None
+    assert sel.choose(0, scores, NO_POSES) is None  # already home
+    # Current sample 4 an outlier (2 > 2 r): sample 0 (3/8) is no outlier, so go there.
+    out = np.array([0.375, 0.125, 0.375, 0.375, 2.0])
+    assert sel.choose(4, out, NO_POSES) == 0
+    assert AnomalySelector(2.0).choose(4, out, NO_POSES) == 1  # the paper: the best
+    # Sample 0 an outlier too: the best other sample.
+    assert sel.choose(4, np.array([2.0, 0.125, 0.375, 0.375, 2.0]), NO_POSES) == 1
+    with pytest.raises(ValueError):
+        AnomalySelector(2.0, home=3.0)
+
+
+@pytest.mark.parametrize("home", [None, 0.5, 1.0])
 @pytest.mark.parametrize("N", [1, 2, 5, 100])
-def test_anomaly_rows_decide_each_row_as_its_selector(rng: np.random.Generator, N: int) -> None:
+def test_anomaly_rows_decide_each_row_as_its_selector(
+    rng: np.random.Generator, N: int, home: float | None
+) -> None:
     """The engine decides every AnomalySelector player in one call: row for row the same
     answer as ``choose``, for both baselines and several factors, with ties (scores on
     a coarse grid, so the median, the minimum and argmin ties all occur), a NaN row, an
@@ -107,10 +131,16 @@ def test_anomaly_rows_decide_each_row_as_its_selector(rng: np.random.Generator, 
     scores[11, current[11]] = 0.5
     factor = rng.choice([0.5, 1.0, 2.0, 3.0], size=M)
     from_min = rng.uniform(size=M) < 0.5
-    got = choose_anomaly_rows(current, scores, factor, from_min)
+    homes = None if home is None else np.where(rng.uniform(size=M) < 0.8, home, np.nan)
+    homes = None if homes is None else np.minimum(homes, factor)
+    got = choose_anomaly_rows(current, scores, factor, from_min, homes)
     want = [
-        AnomalySelector(float(f), "min" if m else "zero").choose(int(c), row, NO_POSES)
-        for c, row, f, m in zip(current, scores, factor, from_min, strict=True)
+        AnomalySelector(
+            float(f), "min" if m else "zero", None if homes is None or np.isnan(h) else float(h)
+        ).choose(int(c), row, NO_POSES)
+        for c, row, f, m, h in zip(
+            current, scores, factor, from_min, [np.nan] * M if homes is None else homes, strict=True
+        )
     ]
     assert got.tolist() == [-1 if w is None else w for w in want]
     if N > 2:

@@ -155,6 +155,16 @@ def test_the_seed_draws_the_latent_samples(make_engine: MakeEngine) -> None:
     assert all(engine.current_sample(p) == 0 for p in "abc")
 
 
+def test_latent_scale_truncates_the_pool(make_engine: MakeEngine) -> None:
+    """``latent_scale`` draws the same samples, scaled: a truncated pool nearer the mean."""
+    full, half = make_engine(samples=10), make_engine(samples=10, latent_scale=0.5)
+    full.add_player("a", seed=3)
+    half.add_player("a", seed=3)
+    np.testing.assert_allclose(
+        half.slots.view("eps")[0], 0.5 * full.slots.view("eps")[0], rtol=1e-6
+    )
+
+
 def test_a_different_seed_gives_a_different_sample(
     make_engine: MakeEngine, walk_frames: WalkFrames
 ) -> None:

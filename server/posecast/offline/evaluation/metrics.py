@@ -64,6 +64,26 @@ def hand_pe(pred: F64, gt: F64) -> Acc:
     return mpjpe(pred, gt, [int(Joint.LEFT_HAND), int(Joint.RIGHT_HAND)])
 
 
+def head_pe(pred: F64, gt: F64) -> Acc:
+    """Position error of the head joint, cm."""
+    return mpjpe(pred, gt, [int(Joint.HEAD)])
+
+
+def _geodesic_deg(a: F64, b: F64) -> F64:
+    """Angle between rotation matrices ``(..., 3, 3)``, degrees."""
+    rel = np.swapaxes(a, -1, -2) @ b
+    cos = np.clip((np.trace(rel, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
+    return np.asarray(np.degrees(np.arccos(cos)), dtype=np.float64)
+
+
+def hand_rot_err(pred_world_mat: F64, gt_world_mat: F64) -> Acc:
+    """Geodesic angle between predicted and true *world* rotations of both hands,
+    degrees (what a user holding the controllers sees)."""
+    hands = [int(Joint.LEFT_HAND), int(Joint.RIGHT_HAND)]
+    d = _geodesic_deg(pred_world_mat[:, hands], gt_world_mat[:, hands])
+    return float(d.sum()), int(d.size)
+
+
 def local_rotations(world_mat: F64) -> F64:
     """World joint rotations ``(T, 19, 3, 3)`` -> local ones (the pelvis keeps its world
     rotation)."""
@@ -77,10 +97,7 @@ def local_rotations(world_mat: F64) -> F64:
 def mpjre(pred_world_mat: F64, gt_world_mat: F64) -> Acc:
     """Mean per-joint rotation error, degrees: the geodesic angle between predicted and
     true *local* rotations of all 19 joints (the pelvis: its world rotation)."""
-    a, b = local_rotations(pred_world_mat), local_rotations(gt_world_mat)
-    rel = np.swapaxes(a, -1, -2) @ b
-    cos = np.clip((np.trace(rel, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
-    d = np.degrees(np.arccos(cos))  # (T, 19)
+    d = _geodesic_deg(local_rotations(pred_world_mat), local_rotations(gt_world_mat))  # (T, 19)
     return float(d.sum()), int(d.size)
 
 
@@ -89,6 +106,16 @@ def jitter(pred: F64, fps: float) -> Acc:
     times ``fps^3``, over every joint and frame (lower is smoother)."""
     d = np.linalg.norm(np.diff(pred, 3, axis=0), axis=-1) * fps**3
     return float(d.sum()), int(d.size)
+
+
+def flag_rates(flags: dict[str, NDArray[np.bool_]]) -> dict[str, Acc]:
+    """Per-frame plausibility flags of one clip (:func:`posecast.offline.evaluation.
+    plausibility.flags`) -> ``flagged_rate`` (any category) and ``flagged_<category>_rate``
+    as ``(count, frames)`` pairs (fractions once averaged)."""
+    frames = len(next(iter(flags.values())))
+    out = {f"flagged_{c}_rate": (float(f.sum()), frames) for c, f in flags.items()}
+    out["flagged_rate"] = (float(np.logical_or.reduce(list(flags.values())).sum()), frames)
+    return out
 
 
 def implausible(scores: F64, threshold_m: float) -> Acc:

@@ -9,9 +9,10 @@ from typing import Any
 
 import numpy as np
 
-from posecast.geometry.rotations import quat2mat
+from posecast.geometry.rotations import mat2quat, quat2mat
 from posecast.offline.dataset.frames import Frames
 from posecast.offline.evaluation import metrics as m
+from posecast.offline.evaluation import plausibility as pl
 from posecast.offline.evaluation.reconstruct import (
     contact_ik,
     decode_ae,
@@ -22,6 +23,7 @@ from posecast.online.engine.anomaly import AnomalyScorer
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
+from posecast.online.engine.upper_ik import solve_upper_body
 from posecast.online.inference.artifact import load_artifact
 from posecast.online.inference.backends import Backend, load_backend
 from posecast.skeleton import LOWER_BODY, NUM_ROTATIONS
@@ -29,20 +31,25 @@ from posecast.tracking.features import TrackerSlot
 from posecast.tracking.layouts import Layout, pelvis_from_head, spec
 
 VARIANTS = ("cvae_1sample", "cvae_ik", "cvae_ik_ssi", "ae_ik", "baseline_mean_lower_body")
+FLAG_KEYS = ("flagged_rate", *(f"flagged_{c}_rate" for c in pl.CATEGORIES))
 METRIC_KEYS = (
     "mpjpe_cm",
     "lower_mpjpe_cm",
+    "head_pe_cm",
+    "hand_pe_cm",
+    "hand_rot_err_deg",
+    "mpjre_deg",
+    "jitter",
+    "root_pe_cm",
+    *FLAG_KEYS,
+    "transitions_per_min",
     "mpjve_cm_s",
     "mpjae_cm_s2",
     "foot_skate_cm_s",
     "ground_penetration_cm",
     "implausible_rate",
-    "transitions_per_min",
-    "root_pe_cm",
-    "hand_pe_cm",
-    "mpjre_deg",
-    "jitter",
 )
+TABLE_KEYS = METRIC_KEYS[:13]  # the text table's columns (the JSON has every key)
 
 
 def _mean_leg_pose(meta: dict[str, Any]) -> np.ndarray | None:
@@ -75,6 +82,11 @@ def evaluate(
 
     ``baseline_mean_lower_body`` takes the true upper body and pelvis whatever the
     layout, so only its lower-body numbers are a floor to beat.
+
+    ``cvae_ik`` and ``ae_ik`` are what the server would stream without SSI: contact
+    IK, then (when ``engine_cfg.upper_body_ik``, the default) the engine's upper-body
+    pass, so that ``cvae_ik_ssi`` against ``cvae_ik`` measures SSI alone.
+    ``cvae_1sample`` is the network's raw pose.
     """
     ls = spec(layout)
     dec = load_artifact(ls.decoder, models_dir)
@@ -136,6 +148,8 @@ def evaluate(
                 wm, wp = pose_from_rotations(rot, root_mat, root_pos)
                 if name.endswith("_ik"):
                     contact_ik(wm, wp, con)
+                    if engine_cfg.upper_body_ik:
+                        wm, wp = _upper_body(wm, wp, fr)
             gt_mat, gt = truth[ci]
             acc.add("mpjpe_cm", m.mpjpe(wp, gt))
             acc.add("lower_mpjpe_cm", m.lower_mpjpe(wp, gt))
@@ -148,8 +162,12 @@ def evaluate(
             acc.add("implausible_rate", m.implausible(scores, scorer.threshold_m))
             acc.add("root_pe_cm", m.root_pe(wp, gt))
             acc.add("hand_pe_cm", m.hand_pe(wp, gt))
+            acc.add("head_pe_cm", m.head_pe(wp, gt))
+            acc.add("hand_rot_err_deg", m.hand_rot_err(wm, gt_mat))
             acc.add("mpjre_deg", m.mpjre(wm, gt_mat))
             acc.add("jitter", m.jitter(wp, fps))
+            for key, pair in m.flag_rates(pl.flags(wm, wp, fps)).items():
+                acc.add(key, pair)
         means = acc.means()
         if name == "cvae_ik_ssi":
             minutes = sum(len(fr["features"]) for fr in clips) / fps / 60.0
@@ -159,9 +177,12 @@ def evaluate(
         results[name] = res
         if log:
             log(f"{name}: {res}")
-    gt_jitter = m.Accumulator()
-    for _, gt in truth:
-        gt_jitter.add("jitter", m.jitter(gt, fps))
+    gt_acc = m.Accumulator()
+    for gt_mat, gt in truth:
+        gt_acc.add("jitter", m.jitter(gt, fps))
+        for key, pair in m.flag_rates(pl.flags(gt_mat, gt, fps)).items():
+            gt_acc.add(key, pair)
+    ground_truth = {k: round(v, 4) for k, v in gt_acc.means().items()}
     return {
         "layout": str(ls.layout),
         "backend": ssi_backend.name if ssi_backend is not None else None,
@@ -170,8 +191,19 @@ def evaluate(
         "frames": int(sum(len(c["features"]) for c in clips)),
         "fps": fps,
         "implausible_threshold_m": scorer.threshold_m,
-        "ground_truth_jitter": round(gt_jitter.means()["jitter"], 4),
+        "ground_truth": ground_truth,
     }
+
+
+def _upper_body(wm: np.ndarray, wp: np.ndarray, fr: Frames) -> tuple[np.ndarray, np.ndarray]:
+    """The engine's upper-body pass over a clip: head and hands onto the clip's trackers."""
+    pos, quat, _ = solve_upper_body(
+        wp,
+        mat2quat(wm),
+        fr["tracker_pos"].astype(np.float64),
+        fr["tracker_quat"].astype(np.float64),
+    )
+    return quat2mat(quat.astype(np.float64)), pos.astype(np.float64)
 
 
 def run_ssi(
@@ -218,12 +250,18 @@ def run_ssi(
 
 
 def format_table(report: dict[str, Any]) -> str:
-    head = f"{'variant':26s}" + "".join(f"{k:>22s}" for k in METRIC_KEYS) + f"{'seconds':>9s}"
+    head = f"{'variant':26s}" + "".join(f"{k:>22s}" for k in TABLE_KEYS) + f"{'seconds':>9s}"
     title = f"layout {report.get('layout', Layout.HMD3_WAIST)}"
     if report.get("backend"):
         title += f", SSI on backend {report['backend']}"
     lines = [title, head]
     for name, res in report["variants"].items():
-        row = f"{name:26s}" + "".join(f"{res.get(k, float('nan')):22.3f}" for k in METRIC_KEYS)
+        row = f"{name:26s}" + "".join(f"{res.get(k, float('nan')):22.3f}" for k in TABLE_KEYS)
         lines.append(row + f"{res.get('seconds', 0):9.1f}")
+    gt = report.get("ground_truth") or {}
+    if gt:
+        row = f"{'ground_truth':26s}" + "".join(
+            f"{gt.get(k, float('nan')):22.3f}" for k in TABLE_KEYS
+        )
+        lines.append(row)
     return "\n".join(lines)

@@ -29,6 +29,11 @@ class EngineConfig:
         upper_body_ik: put the shown pose's head on the headset and hands on the
             controllers (:mod:`posecast.online.engine.upper_ik`; default on, off for
             research evaluation of the network's own upper body).
+        latent_scale: the pool's latents are ``latent_scale * eps``, ``eps ~ N(0, I)``
+            (1.0: the prior; below 1 a truncated pool, nearer the mean).
+        home_factor: ``None`` (the paper) or the threshold at which a player returns
+            to sample 0, the prior's mean (:class:`~posecast.online.engine.selectors.
+            AnomalySelector`'s ``home``).
     """
 
     samples: int = 100
@@ -42,6 +47,8 @@ class EngineConfig:
     waist_filter_hz: float | None = None
     fps: float = 60.0
     upper_body_ik: bool = True
+    latent_scale: float = 1.0
+    home_factor: float | None = None
 
     def __post_init__(self) -> None:
         if self.samples < 1:
@@ -52,5 +59,9 @@ class EngineConfig:
             raise ConfigError("outlier_factor must be > 0 and stale_after_frames >= 1")
         if self.outlier_baseline not in ("min", "zero"):
             raise ConfigError("outlier_baseline must be 'min' or 'zero'")
+        if not self.latent_scale > 0:
+            raise ConfigError("latent_scale must be positive")
+        if self.home_factor is not None and not 0.0 <= self.home_factor <= self.outlier_factor:
+            raise ConfigError("home_factor must be within [0, outlier_factor]")
         if self.waist_filter_hz is not None and not self.waist_filter_hz > 0:
             raise ConfigError("waist_filter_hz must be positive")

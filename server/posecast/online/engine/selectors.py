@@ -48,19 +48,34 @@ class Selector(Protocol):
 
 @dataclass(frozen=True)
 class AnomalySelector:
+    """The trimmed estimator. ``home`` (``None``: off, the paper) makes sample 0, the
+    prior's mean (``eps = 0``, the network's single best guess), the resting place:
+    a player away from it returns when sample 0 scores at most ``home * r`` (measured
+    like the outlier rule), and an outlier moves to sample 0 rather than to the best
+    sample whenever sample 0 is not an outlier itself. With ``home < factor`` the two
+    thresholds form a hysteresis band, so a player does not flap between them."""
+
     factor: float = 2.0
     baseline: str = "zero"  # "zero": R_c > k r (the paper);  "min": R_c - min R > k r
+    home: float | None = None
 
     def __post_init__(self) -> None:
         if self.baseline not in ("min", "zero"):
             raise ValueError(f"baseline must be 'min' or 'zero', not {self.baseline!r}")
+        if self.home is not None and not 0.0 <= self.home <= self.factor:
+            raise ValueError("home must be within [0, factor]")
 
     def choose(self, current: int, scores: F64, positions: F64) -> int | None:
         low = float(np.min(scores))
         r = float(np.median(scores)) - low
         base = low if self.baseline == "min" else 0.0
+        zero_ok = self.home is not None and not scores[0] - base > self.factor * r
         if not scores[current] - base > self.factor * r:
+            if self.home is not None and current != 0 and scores[0] - base <= self.home * r:
+                return 0
             return None
+        if zero_ok and current != 0:
+            return 0
         others = scores.copy()
         others[current] = np.inf
         best = int(np.argmin(others))
@@ -68,16 +83,21 @@ class AnomalySelector:
 
 
 def choose_anomaly_rows(
-    current: NDArray[np.intp], scores: NDArray[np.float64], factor: F64, from_min: NDArray[np.bool_]
+    current: NDArray[np.intp],
+    scores: NDArray[np.float64],
+    factor: F64,
+    from_min: NDArray[np.bool_],
+    home: F64 | None = None,
 ) -> NDArray[np.intp]:
     """:meth:`AnomalySelector.choose` for ``M`` players at once: the sample each moves to,
     ``-1`` to stay.
 
     ``current (M,)``, ``scores (M, N)`` float64, and per player its selector's
-    ``factor (M,)`` and ``from_min (M,)`` (``baseline == "min"``). Row ``i`` gives exactly
-    what ``AnomalySelector(factor[i], ...).choose(current[i], scores[i], _)`` gives: the
-    same float64 operations, a NaN anywhere in a row never moves, and ties go to the
-    lowest index (``argmin`` with the current sample excluded).
+    ``factor (M,)``, ``from_min (M,)`` (``baseline == "min"``) and ``home (M,)`` (NaN for
+    ``None``; ``None`` for all off). Row ``i`` gives exactly what
+    ``AnomalySelector(factor[i], ...).choose(current[i], scores[i], _)`` gives: the same
+    float64 operations, a NaN anywhere in a row never moves, and ties go to the lowest
+    index (``argmin`` with the current sample excluded).
     """
     rows = np.arange(len(scores))
     low = scores.min(axis=1)  # (M,)
@@ -85,11 +105,21 @@ def choose_anomaly_rows(
         r = np.median(scores, axis=1) - low
         base = np.where(from_min, low, 0.0)
         outlier = scores[rows, current] - base > factor * r
+        zero_out = scores[:, 0] - base > factor * r
     others = scores.copy()
     others[rows, current] = np.inf
     best = np.argmin(others, axis=1)
     move = outlier & np.isfinite(others[rows, best])
-    return np.where(move, best, -1)
+    chosen = np.where(move, best, -1)
+    if home is None:
+        return chosen
+    on = ~np.isnan(home)
+    away = current != 0
+    with np.errstate(invalid="ignore"):
+        zero_ok = on & ~zero_out & ~np.isnan(r)  # NaN rows never move
+        back = on & away & ~outlier & (scores[:, 0] - base <= home * r)
+    to_zero = (outlier & zero_ok & away) | back
+    return np.where(to_zero, 0, chosen)
 
 
 @dataclass(frozen=True)

@@ -160,6 +160,7 @@ class Engine:
             raise ValueError(f"player {player!r} is already in the engine")
         slot = self.slots.add()
         eps = np.random.default_rng(seed).standard_normal((self.cfg.samples, self.latent))
+        eps *= self.cfg.latent_scale
         eps[0] = 0.0
         self._set_eps(slot, slice(None), eps)
         wf = (
@@ -170,7 +171,10 @@ class Engine:
         self.players[player] = _Player(
             player,
             slot,
-            selector or AnomalySelector(self.cfg.outlier_factor, self.cfg.outlier_baseline),
+            selector
+            or AnomalySelector(
+                self.cfg.outlier_factor, self.cfg.outlier_baseline, self.cfg.home_factor
+            ),
             calibration or Calibration(),
             wf,
         )
@@ -385,6 +389,9 @@ class Engine:
                 scores[rows],
                 np.array([sel.factor for _, sel in batch], np.float64),
                 np.array([sel.baseline == "min" for _, sel in batch]),
+                None
+                if all(sel.home is None for _, sel in batch)
+                else np.array([np.nan if sel.home is None else sel.home for _, sel in batch]),
             )
             moves += [(p, b) for (p, _), b in zip(batch, chosen.tolist(), strict=True) if b >= 0]
         start_in = min(self.cfg.lookahead, self.cfg.transition_frames) - 1
