@@ -12,7 +12,7 @@ import msgpack
 from posecast.errors import ProtocolError
 from posecast.online.protocol import codec
 from posecast.online.protocol import messages as m
-from posecast.online.protocol.wire import FIELD_ORDER
+from posecast.online.protocol.wire import FIELD_ORDER, FIELD_ORDER_V1
 
 
 class Raw(bytes):
@@ -79,7 +79,7 @@ def _f32_exact(x: float) -> bool:
     return float(struct.unpack(">f", struct.pack(">f", x))[0]) == x
 
 
-def variants(wire: dict[str, Any]) -> list[bytes]:
+def variants(wire: dict[str, Any], version: int = 1) -> list[bytes]:
     """Other encodings of ``wire`` that every decoder must accept as the same message."""
     floats = _floats(wire)
     styles = [Style(reverse_keys=True), Style(wide_ints=True), Style(wide_headers=True)]
@@ -88,7 +88,8 @@ def variants(wire: dict[str, Any]) -> list[bytes]:
     if any(f.is_integer() for f in floats):
         styles.append(Style(int_floats=True))
     out = [pack(wire, s) for s in styles]
-    absent = [k for k in FIELD_ORDER[wire["type"]] if k not in wire]
+    order = FIELD_ORDER if version >= 2 else FIELD_ORDER_V1
+    absent = [k for k in order[wire["type"]] if k not in wire]
     if absent:  # nil is the same as absent
         out.append(pack({**wire, **dict.fromkeys(absent)}))
     out.append(pack({**wire, "x_future": {"note": "ignored", "list": [1, 2.5, None]}}))
@@ -107,37 +108,67 @@ def to_json(v: Any) -> Any:
 
 
 def valid(
-    name: str, msg: m.Message, description: str, extra: tuple[bytes, ...] = ()
+    name: str,
+    msg: m.Message,
+    description: str,
+    extra: tuple[bytes, ...] = (),
+    version: int = 1,
 ) -> dict[str, Any]:
+    """A valid case written for protocol ``version``; it lists every version it holds in."""
     wire = codec.to_wire(msg)
     canonical = codec.encode(msg)
     assert canonical == pack(wire), name  # the canonical packer == msgpack-python's
     alts: list[str] = []
-    for b in [*extra, *variants(wire)]:
+    for b in [*extra, *variants(wire, version)]:
         if b != canonical and b.hex() not in alts:
-            assert codec.encode(codec.decode(b)) == canonical, name
+            assert codec.encode(codec.decode(b, version=version)) == canonical, name
             alts.append(b.hex())
-    assert codec.encode(codec.decode(canonical)) == canonical, name
+    assert codec.encode(codec.decode(canonical, version=version)) == canonical, name
     return {
         "name": name,
         "description": description,
+        "versions": [v for v in m.VERSIONS if v == version or _holds(canonical, alts, v)],
         "message": to_json(wire),
         "canonical_hex": canonical.hex(),
         "also_accept_hex": alts,
     }
 
 
-def invalid(
-    name: str, data: bytes | dict[str, Any], error: str, description: str, field: str | None = None
-) -> dict[str, Any]:
-    b = data if isinstance(data, bytes) else pack(data)
+def _holds(canonical: bytes, alts: list[str], version: int) -> bool:
+    """Whether a valid case written for one version is just as valid in ``version``."""
     try:
-        codec.decode(b)
+        for b in [canonical, *map(bytes.fromhex, alts)]:
+            if codec.encode(codec.decode(b, version=version)) != canonical:
+                return False
+    except ProtocolError:
+        return False
+    return True
+
+
+def _fails(b: bytes, version: int) -> tuple[str, str | None] | None:
+    try:
+        codec.decode(b, version=version)
     except ProtocolError as exc:
-        assert (exc.code, exc.field) == (error, field), (name, exc.code, exc.field, exc.message)
-    else:
-        raise AssertionError(f"{name}: decoded")
-    case = {"name": name, "description": description, "hex": b.hex(), "error": error}
+        return exc.code, exc.field
+    return None
+
+
+def invalid(
+    name: str,
+    data: bytes | dict[str, Any],
+    error: str,
+    description: str,
+    field: str | None = None,
+    version: int = 1,
+) -> dict[str, Any]:
+    """An invalid case written for ``version``; it lists every version that refuses it
+    with the same code and field."""
+    b = data if isinstance(data, bytes) else pack(data)
+    got = _fails(b, version)
+    assert got == (error, field), (name, got)
+    versions = [v for v in m.VERSIONS if v == version or _fails(b, v) == (error, field)]
+    case = {"name": name, "description": description, "versions": versions, "hex": b.hex(),
+            "error": error}  # fmt: skip
     if field is not None:
         case["field"] = field
     return case

@@ -1,4 +1,4 @@
-"""Write the protocol v1 test vectors (``proto/vectors/*.json``) and ``proto/errors.json``.
+"""Write the protocol test vectors (v1 and v2) (``proto/vectors/*.json``) and ``proto/errors.json``.
 
     .venv/bin/python proto/vectors/generate.py           # rewrite the files
     .venv/bin/python proto/vectors/generate.py --check   # exit 1 if they are stale
@@ -8,7 +8,9 @@ Valid cases are built as typed messages and encoded with the codec, so
 msgpack writer in ``_writer.py``, which can choose float32, wide ints, 16-bit
 headers, another key order, nil optionals and unknown fields. The cases themselves
 are in ``_cases_session.py`` (envelope, hello, welcome, presence, kick, ping, pong,
-error, bye) and ``_cases_motion.py`` (calibrate, frame, pose, selector). Each
+error, bye), ``_cases_motion.py`` (calibrate, frame, pose, selector) and
+``_cases_v2.py`` (what v2 adds, including the pose-record streams). Every case lists
+the protocol ``versions`` it holds in (the generator checks each one). Each
 invalid case breaks one rule, so its code does not depend on the order a decoder
 checks fields in beyond the envelope order the spec fixes.
 
@@ -29,23 +31,28 @@ sys.path.insert(0, str(HERE))  # the helper modules beside this script
 
 import _cases_motion as motion  # noqa: E402
 import _cases_session as session  # noqa: E402
+import _cases_v2 as v2  # noqa: E402
 from _writer import render  # noqa: E402
 
 from posecast.errors import ProtocolError  # noqa: E402
 
 FILES = {
-    "envelope": session.envelope_cases,
-    "hello": session.hello_cases,
-    "welcome": session.welcome_cases,
+    "envelope": lambda: session.envelope_cases() + v2.envelope_cases(),
+    "hello": lambda: session.hello_cases() + v2.hello_cases(),
+    "welcome": lambda: session.welcome_cases() + v2.welcome_cases(),
     "calibrate": motion.calibrate_cases,
     "frame": motion.frame_cases,
     "pose": motion.pose_cases,
-    "presence": session.presence_cases,
+    "presence": lambda: session.presence_cases() + v2.presence_cases(),
     "selector": motion.selector_cases,
     **{
         name: (lambda name=name: session.small_cases()[name])
         for name in ("kick", "ping", "pong", "error", "bye")
     },
+    "poses": v2.poses_cases,
+    "skeleton": v2.skeleton_cases,
+    "pose_rate": v2.pose_rate_cases,
+    "resync": v2.resync_cases,
 }
 
 

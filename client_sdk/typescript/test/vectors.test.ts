@@ -19,6 +19,7 @@ import { fromHex, keyOrder, repoRoot, toHex, wireToJson } from "./helpers.js";
 interface ValidCase {
   name: string;
   description: string;
+  versions: number[];
   message: Record<string, unknown>;
   canonical_hex: string;
   also_accept_hex: string[];
@@ -26,6 +27,7 @@ interface ValidCase {
 interface InvalidCase {
   name: string;
   description: string;
+  versions: number[];
   hex: string;
   error: string;
   field?: string;
@@ -34,10 +36,12 @@ type Case = ValidCase | InvalidCase;
 
 const VECTORS = join(repoRoot(), "proto", "vectors");
 const FILES = readdirSync(VECTORS).filter((f) => f.endsWith(".json")).sort();
+// This codec speaks v1: it runs every case that holds in v1 (`versions` includes 1). The
+// v2 cases (poses streams among them) wait for the TypeScript v2 codec.
 const CASES: [string, Case][] = FILES.flatMap((file) =>
-  (JSON.parse(readFileSync(join(VECTORS, file), "utf8")) as Case[]).map(
-    (c) => [file.replace(/\.json$/, ""), c] as [string, Case],
-  ),
+  (JSON.parse(readFileSync(join(VECTORS, file), "utf8")) as Case[])
+    .filter((c) => c.versions.includes(1))
+    .map((c) => [file.replace(/\.json$/, ""), c] as [string, Case]),
 );
 
 function decodeError(hex: string): ProtocolError {
@@ -50,7 +54,7 @@ function decodeError(hex: string): ProtocolError {
   assert.fail("decoded without an error");
 }
 
-for (const file of FILES.map((f) => f.replace(/\.json$/, ""))) {
+for (const file of [...new Set(CASES.map(([f]) => f))]) {
   describe(`vectors/${file}`, () => {
     for (const [, c] of CASES.filter(([f]) => f === file)) {
       if ("message" in c) {
@@ -77,8 +81,9 @@ for (const file of FILES.map((f) => f.replace(/\.json$/, ""))) {
 }
 
 test("the vectors cover every message type and every decoder code", () => {
-  const files = new Set(CASES.map(([f]) => f));
-  assert.deepEqual([...files].sort(), [...MESSAGE_TYPES, "envelope"].sort());
+  const types = new Set(CASES.flatMap(([, c]) => ("message" in c ? [c.message["type"]] : [])));
+  assert.deepEqual([...types].sort(), [...MESSAGE_TYPES].sort());
+  assert.ok(CASES.some(([f]) => f === "envelope"));
   const errors = new Set(CASES.flatMap(([, c]) => ("error" in c ? [c.error] : [])));
   assert.deepEqual([...errors].sort(), [...DECODER_CODES].sort());
   assert.ok(CASES.length > 150, `only ${CASES.length} cases`);

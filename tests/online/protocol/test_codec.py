@@ -11,7 +11,9 @@ from posecast.online.protocol import (
     DEFAULT_LIMITS,
     MESSAGE_TYPES,
     ROLE_MAY_SEND,
+    ROLE_MAY_SEND_V2,
     SERVER_SENDS,
+    SERVER_SENDS_V2,
     Bye,
     Calibrate,
     Error,
@@ -24,8 +26,12 @@ from posecast.online.protocol import (
     Ping,
     Pong,
     Pose,
+    PoseRate,
+    Poses,
     Presence,
+    Resync,
     Selector,
+    Skeleton,
     Welcome,
     decode,
     encode,
@@ -35,7 +41,13 @@ from posecast.online.protocol import (
     seq_next,
     to_wire,
 )
-from posecast.online.protocol.messages import LIMIT_RANGES, MAX_HEIGHT_M, MIN_HEIGHT_M
+from posecast.online.protocol.messages import (
+    LIMIT_RANGES,
+    MAX_HEIGHT_M,
+    MIN_HEIGHT_M,
+    V1_TYPES,
+    V2_TYPES,
+)
 
 
 def _unit(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -71,12 +83,44 @@ def _samples(rng: np.random.Generator) -> list[Message]:
     ]
 
 
-def test_every_type_round_trips(rng: np.random.Generator) -> None:
-    samples = _samples(rng)
-    assert {type(s) for s in samples} == set(MESSAGE_TYPES)
+def _samples_v2(rng: np.random.Generator) -> list[Message]:
+    """The messages v2 adds or changes (v1's others are the same in v2)."""
+    bones = rng.integers(-3000, 3000, size=(18, 3)).astype("<i2").tobytes()
+    return [
+        Hello(2, "tok", "lobby", "Ada", pose_rate_hz=30.0),
+        Welcome(
+            2,
+            "p-1",
+            "s-1",
+            "player",
+            "lobby",
+            5.5,
+            60.0,
+            10,
+            (Member("p-2", "Bea", 3, bones), Member("p-1", "Ada", 0, bones)),
+            Limits(),
+            20.0,
+        ),
+        Presence("join", "lobby", "p-2", "Bea", 3, bones),
+        Presence("leave", "lobby", "p-2", "Bea"),
+        Poses(7.5, bytes(range(256)) * 40),
+        Skeleton("p-2", 300, bones),
+        PoseRate(15.0),
+        Resync(),
+    ]
+
+
+@pytest.mark.parametrize("version", [1, 2])
+def test_every_type_round_trips(rng: np.random.Generator, version: int) -> None:
+    samples = _samples(rng) if version == 1 else _samples_v2(rng)
+    types = {type(s) for s in samples}
+    if version == 1:
+        assert types == {t for t in MESSAGE_TYPES if t.TYPE in V1_TYPES}
+    else:
+        assert {t.TYPE for t in types} | {"frame", "ping"} >= V2_TYPES - V1_TYPES
     for msg in samples:
         data = encode(msg)
-        back = decode(data)
+        back = decode(data, version=version)
         assert type(back) is type(msg)
         if not isinstance(msg, Frame | Calibrate):  # those renormalise and blank slots
             assert encode(back) == data, msg.TYPE
@@ -223,11 +267,13 @@ def test_height_range_matches_the_engine() -> None:
 
 
 def test_roles_cover_every_client_message() -> None:
-    every = {cls.TYPE for cls in MESSAGE_TYPES}
     client = set().union(*ROLE_MAY_SEND.values())
-    assert client | SERVER_SENDS == every
+    assert client | SERVER_SENDS == V1_TYPES
     assert client & SERVER_SENDS == {"bye"}
     assert all({"hello", "ping", "bye"} <= sends for sends in ROLE_MAY_SEND.values())
+    client2 = set().union(*ROLE_MAY_SEND_V2.values())
+    assert client2 | SERVER_SENDS_V2 == V2_TYPES == {cls.TYPE for cls in MESSAGE_TYPES} - {"pose"}
+    assert client2 & SERVER_SENDS_V2 == {"bye"}
 
 
 def test_sequence_numbers_wrap() -> None:

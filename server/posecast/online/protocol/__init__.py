@@ -1,4 +1,4 @@
-"""Wire protocol v1: typed messages and their canonical msgpack bytes (no I/O).
+"""Wire protocols v1 and v2: typed messages and their canonical msgpack bytes (no I/O).
 
 The spec lives in ``proto/README.md`` with language-neutral test vectors in
 ``proto/vectors/``; this package is its Python implementation::
@@ -12,10 +12,15 @@ from posecast.online.protocol.codec import decode, encode, from_wire, to_wire
 from posecast.online.protocol.messages import (
     DEFAULT_LIMITS,
     MESSAGE_TYPES,
+    PROTOCOL_V2,
     PROTOCOL_VERSION,
     ROLE_MAY_SEND,
+    ROLE_MAY_SEND_V2,
     SERVER_SENDS,
+    SERVER_SENDS_V2,
     SUBPROTOCOL,
+    SUBPROTOCOL_V2,
+    SUBPROTOCOLS,
     Bye,
     Calibrate,
     Error,
@@ -28,8 +33,12 @@ from posecast.online.protocol.messages import (
     Ping,
     Pong,
     Pose,
+    PoseRate,
+    Poses,
     Presence,
+    Resync,
     Selector,
+    Skeleton,
     Welcome,
     seq_delta,
     seq_next,
@@ -38,10 +47,15 @@ from posecast.online.protocol.messages import (
 __all__ = [
     "DEFAULT_LIMITS",
     "MESSAGE_TYPES",
+    "PROTOCOL_V2",
     "PROTOCOL_VERSION",
     "ROLE_MAY_SEND",
+    "ROLE_MAY_SEND_V2",
     "SERVER_SENDS",
+    "SERVER_SENDS_V2",
     "SUBPROTOCOL",
+    "SUBPROTOCOLS",
+    "SUBPROTOCOL_V2",
     "Bye",
     "Calibrate",
     "Error",
@@ -54,8 +68,12 @@ __all__ = [
     "Ping",
     "Pong",
     "Pose",
+    "PoseRate",
+    "Poses",
     "Presence",
+    "Resync",
     "Selector",
+    "Skeleton",
     "Welcome",
     "decode",
     "encode",

@@ -1,4 +1,4 @@
-"""Bytes <-> messages for protocol v1. Pure functions: no sockets, no clocks, no state.
+"""Bytes <-> messages for protocols v1 and v2. Pure functions: no sockets, no clocks, no state.
 
 :func:`encode` writes the canonical bytes (``proto/README.md``, "Canonical
 encoding"): a msgpack map, ``type`` first and then the fields in spec order, absent
@@ -10,6 +10,10 @@ produces for the maps :func:`to_wire` builds.
 (TOO_LARGE), msgpack syntax and the structural bounds (MALFORMED / TOO_LARGE), that
 the root is a map, nesting depth and key types (MALFORMED), ``type`` (BAD_FIELD /
 UNKNOWN_TYPE), then the fields of that type (:mod:`posecast.online.protocol.wire`).
+``version`` picks the connection's protocol (``posecast.v1`` or ``posecast.v2``):
+the types it knows, the fields of ``hello``, ``welcome`` and ``presence``, and the
+structural bounds (v2 lets a server message, and its bins, reach 16384 bytes; a
+message a client sends stays within ``max_message_bytes``).
 """
 
 from __future__ import annotations
@@ -31,7 +35,11 @@ from posecast.online.protocol.messages import (
     MAX_BIN_BYTES,
     MAX_DEPTH,
     MAX_MAP_LEN,
+    MAX_SERVER_MESSAGE_BYTES_V2,
     MAX_STR_BYTES,
+    PROTOCOL_V2,
+    PROTOCOL_VERSION,
+    ROLE_MAY_SEND_V2,
     Limits,
     Message,
 )
@@ -56,8 +64,15 @@ def to_wire(msg: Message) -> Map:
     return ENCODERS[msg.TYPE](msg)
 
 
+_CLIENT_TYPES_V2 = frozenset().union(*ROLE_MAY_SEND_V2.values())
+
+
 def decode(
-    data: bytes, *, max_bytes: int | None = None, limits: Limits = DEFAULT_LIMITS
+    data: bytes,
+    *,
+    max_bytes: int | None = None,
+    limits: Limits = DEFAULT_LIMITS,
+    version: int = PROTOCOL_VERSION,
 ) -> Message:
     """Parse and validate one WebSocket message.
 
@@ -66,14 +81,15 @@ def decode(
         max_bytes: a tighter size cap than ``limits.max_message_bytes``, if given.
         limits: the limits in force (string lengths, rates, ...); defaults to the v1
             maxima, which is what a client should use before its ``welcome``.
+        version: the connection's protocol version, 1 or 2.
 
     Raises:
         ProtocolError: the subclass for the first rule broken, with ``field`` (and
             ``ref_seq`` for a frame whose ``seq`` was readable) set where they apply.
     """
-    cap = (
-        limits.max_message_bytes if max_bytes is None else min(max_bytes, limits.max_message_bytes)
-    )
+    v2 = version >= PROTOCOL_V2
+    top = MAX_SERVER_MESSAGE_BYTES_V2 if v2 else limits.max_message_bytes
+    cap = top if max_bytes is None else min(max_bytes, top)
     if len(data) > cap:
         raise TooLargeError(f"message of {len(data)} bytes, limit {cap}")
     try:
@@ -82,7 +98,7 @@ def decode(
             raw=False,
             strict_map_key=True,
             max_str_len=MAX_STR_BYTES,
-            max_bin_len=MAX_BIN_BYTES,
+            max_bin_len=MAX_SERVER_MESSAGE_BYTES_V2 if v2 else MAX_BIN_BYTES,
             max_array_len=MAX_ARRAY_LEN,
             max_map_len=MAX_MAP_LEN,
             max_ext_len=0,
@@ -95,10 +111,21 @@ def decode(
         if "exceeds max_" in text and "max_ext_len" not in text:
             raise TooLargeError(f"msgpack: {text}") from None
         raise MalformedError(f"not one msgpack value: {type(exc).__name__}: {text}") from None
-    return from_wire(obj, limits=limits)
+    if (
+        v2
+        and len(data) > limits.max_message_bytes
+        and type(obj) is dict
+        and obj.get("type") in _CLIENT_TYPES_V2
+    ):
+        raise TooLargeError(
+            f"a {obj['type']} of {len(data)} bytes, limit {limits.max_message_bytes}"
+        )
+    return from_wire(obj, limits=limits, version=version)
 
 
-def from_wire(obj: object, *, limits: Limits = DEFAULT_LIMITS) -> Message:
+def from_wire(
+    obj: object, *, limits: Limits = DEFAULT_LIMITS, version: int = PROTOCOL_VERSION
+) -> Message:
     """Validate an unpacked msgpack value into a message (the second half of decode)."""
     if type(obj) is not dict:
         raise MalformedError(f"a message is a msgpack map, not {_kind(obj)}")
@@ -106,7 +133,7 @@ def from_wire(obj: object, *, limits: Limits = DEFAULT_LIMITS) -> Message:
         kind = obj.get("type")
         if type(kind) is not str:
             raise BadFieldError("missing or non-string field type", field="type")
-        entry = DECODERS.get(kind)
+        entry = DECODERS[version].get(kind)
         if entry is None:
             raise UnknownTypeError(f"unknown message type {kind[:40]!r}", field="type")
         known, decoder = entry
@@ -114,7 +141,7 @@ def from_wire(obj: object, *, limits: Limits = DEFAULT_LIMITS) -> Message:
             # Unknown fields are ignored but held to the bounds; welcome's nested maps
             # may carry unknown keys too. Both are rare, so walk the whole map.
             _check_structure(obj, 1)
-        return decoder(obj, limits)
+        return decoder(obj, limits, version)
     except MalformedError:
         raise
     except ProtocolError:

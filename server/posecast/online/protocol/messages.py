@@ -1,4 +1,4 @@
-"""The v1 wire messages as typed values, with the protocol's constants and limits.
+"""The wire messages (v1 and v2) as typed values, with the protocol's constants and limits.
 
 One frozen dataclass per message ``type``; its fields, in declaration order, are the
 wire fields in canonical key order (``proto/README.md`` is the spec, and
@@ -26,6 +26,11 @@ F64 = NDArray[np.float64]
 
 PROTOCOL_VERSION = 1
 SUBPROTOCOL = "posecast.v1"
+PROTOCOL_V2 = 2
+SUBPROTOCOL_V2 = "posecast.v2"
+VERSIONS = (1, 2)  # the versions this peer speaks
+SUBPROTOCOLS = {1: SUBPROTOCOL, 2: SUBPROTOCOL_V2}
+POSE_RATES_HZ = (60.0, 30.0, 20.0, 15.0)  # v2 per-client pose rates: divisors of the tick
 
 ROLES = ("player", "spectator", "backend")
 PRESENCE_EVENTS = ("join", "leave", "stale", "active")
@@ -47,6 +52,10 @@ MAX_ARRAY_LEN = 64
 MAX_MAP_LEN = 32
 MAX_STR_BYTES = 4096
 MAX_BIN_BYTES = 256
+# v2: a server message may be up to 16384 bytes (a welcome with 32 skeletons, a poses
+# message with 31 keyframes), so bins may be that long too (only poses.data is).
+MAX_SERVER_MESSAGE_BYTES_V2 = 16384
+MAX_BIN_BYTES_V2 = MAX_SERVER_MESSAGE_BYTES_V2
 
 # Which message types each role may send; the server answers FORBIDDEN to the rest.
 ROLE_MAY_SEND: dict[str, frozenset[str]] = {
@@ -55,6 +64,12 @@ ROLE_MAY_SEND: dict[str, frozenset[str]] = {
     "backend": frozenset({"hello", "selector", "kick", "ping", "bye"}),
 }
 SERVER_SENDS = frozenset({"welcome", "pose", "presence", "pong", "error", "bye"})
+# v2: every role may also ask for a pose rate and for keyframes; the server sends
+# poses (one message per tick) and skeletons instead of pose.
+ROLE_MAY_SEND_V2: dict[str, frozenset[str]] = {
+    role: types | {"pose_rate", "resync"} for role, types in ROLE_MAY_SEND.items()
+}
+SERVER_SENDS_V2 = (SERVER_SENDS - {"pose"}) | {"poses", "skeleton"}
 
 # (floor, v1 maximum) of each limit; the defaults are the maxima.
 LIMIT_RANGES: dict[str, tuple[int, int]] = {
@@ -130,12 +145,20 @@ class Hello:
     layout: Layout | None = None  # absent: the server takes Layout.HMD3_WAIST
     rate_hz: float | None = None  # frames per second the client will send; absent: 60
     watch: tuple[str, ...] = ()  # further rooms a backend watches
+    pose_rate_hz: float | None = None  # v2: poses per second to receive; absent: 60
 
 
 @dataclass(frozen=True, slots=True)
 class Member:
+    """A player in a room. v2 adds its ``handle`` (how ``poses`` records name it on
+    this connection) and its ``skeleton``: 108 bytes, the bone offsets ``SPINE`` ..
+    ``RIGHT_TOE`` from their parents at the player's calibrated scale, 18 x 3 int16
+    LE in 0.1 mm (:mod:`posecast.online.protocol.records`)."""
+
     player: str
     name: str
+    handle: int | None = None
+    skeleton: bytes | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -153,6 +176,7 @@ class Welcome:
     lookahead_frames: int  # poses lag their source frames by this many frames
     members: tuple[Member, ...]
     limits: Limits
+    pose_rate_hz: float | None = None  # v2: the poses per second this client gets
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -200,6 +224,47 @@ class Presence:
     room: str
     player: str
     name: str
+    handle: int | None = None  # v2 join: the new player's handle
+    skeleton: bytes | None = None  # v2 join: its skeleton (see Member)
+
+    def v1(self) -> Presence:
+        """The same presence without the v2 fields."""
+        return Presence(self.event, self.room, self.player, self.name)
+
+
+@dataclass(frozen=True, slots=True)
+class Poses:
+    """v2 server -> client: every pose of one tick for this client, as records
+    (:mod:`posecast.online.protocol.records`); ``t`` is the newest tick's time."""
+
+    TYPE: ClassVar[str] = "poses"
+    t: float
+    data: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class Skeleton:
+    """v2 server -> client: a player's calibration changed; FK from now on with this."""
+
+    TYPE: ClassVar[str] = "skeleton"
+    player: str
+    handle: int
+    skeleton: bytes  # 108 bytes, as Member.skeleton
+
+
+@dataclass(frozen=True, slots=True)
+class PoseRate:
+    """v2 client -> server: receive ``rate_hz`` poses per second (60, 30, 20 or 15)."""
+
+    TYPE: ClassVar[str] = "pose_rate"
+    rate_hz: float
+
+
+@dataclass(frozen=True, slots=True)
+class Resync:
+    """v2 client -> server: send a keyframe of every avatar with its next pose."""
+
+    TYPE: ClassVar[str] = "resync"
 
 
 @dataclass(frozen=True, slots=True)
@@ -287,6 +352,10 @@ Message = (
     | Pong
     | Error
     | Bye
+    | Poses
+    | Skeleton
+    | PoseRate
+    | Resync
 )
 MESSAGE_TYPES: tuple[type[Message], ...] = (
     Hello,
@@ -301,4 +370,10 @@ MESSAGE_TYPES: tuple[type[Message], ...] = (
     Pong,
     Error,
     Bye,
+    Poses,
+    Skeleton,
+    PoseRate,
+    Resync,
 )
+V1_TYPES = frozenset(t.TYPE for t in MESSAGE_TYPES[:12])
+V2_TYPES = (V1_TYPES - {"pose"}) | {"poses", "skeleton", "pose_rate", "resync"}

@@ -1,6 +1,10 @@
 """Per message type: the wire map -> dataclass check, and the dataclass -> canonical map.
 
-``DECODERS[type] = (known keys, decode)`` and ``ENCODERS[type] = encode``. A decoder
+``DECODERS[version][type] = (known keys, decode)`` and ``ENCODERS[type] = encode``.
+v2 (``posecast.v2``) keeps every v1 type but ``pose``, adds ``poses``, ``skeleton``,
+``pose_rate`` and ``resync``, and changes ``hello`` (``version`` 2, ``pose_rate_hz``),
+``welcome`` (members with ``handle`` and ``skeleton``, ``pose_rate_hz``) and
+``presence`` (a ``join`` carries ``handle`` and ``skeleton``). A decoder
 sees a map already held to the structural bounds, reads every known field with the
 :mod:`posecast.online.protocol.fields` validators and ignores the rest. An encoder builds
 the map in canonical key order (``type``, then the spec's field order), leaving
@@ -14,8 +18,13 @@ from typing import Any
 
 import numpy as np
 
-from posecast.errors import BadFieldError, ProtocolError, VersionUnsupportedError
-from posecast.online.protocol import quantize
+from posecast.errors import (
+    BadFieldError,
+    OutOfRangeError,
+    ProtocolError,
+    VersionUnsupportedError,
+)
+from posecast.online.protocol import quantize, records
 from posecast.online.protocol.fields import (
     CODE_PATTERN,
     Map,
@@ -35,16 +44,21 @@ from posecast.online.protocol.fields import (
 from posecast.online.protocol.messages import (
     ALL_TRACKERS_VALID,
     LIMIT_RANGES,
+    MAX_BIN_BYTES_V2,
     MAX_HEIGHT_M,
     MAX_ID_BYTES,
     MAX_LOOKAHEAD_FRAMES,
     MAX_TIME_S,
     MIN_HEIGHT_M,
+    POSE_RATES_HZ,
     PRESENCE_EVENTS,
+    PROTOCOL_V2,
     PROTOCOL_VERSION,
     ROLES,
     SELECTOR_KINDS,
     UINT32_MAX,
+    V1_TYPES,
+    V2_TYPES,
     Bye,
     Calibrate,
     Error,
@@ -57,8 +71,12 @@ from posecast.online.protocol.messages import (
     Ping,
     Pong,
     Pose,
+    PoseRate,
+    Poses,
     Presence,
+    Resync,
     Selector,
+    Skeleton,
     Welcome,
 )
 from posecast.skeleton import JOINT_NAMES
@@ -87,15 +105,32 @@ def _text(m: Map, key: str, lim: Limits) -> str | None:
     return as_str(m, key, lim.max_text_bytes, min_bytes=0) if _has(m, key) else None
 
 
-def _hello(m: Map, lim: Limits) -> Hello:
+def _pose_rate(m: Map, key: str) -> float:
+    """A v2 pose rate: a number equal to one of 60, 30, 20, 15 (else OUT_OF_RANGE)."""
+    v = as_float(m, key, 0.0, 1000.0)  # BAD_FIELD for a non-number, OUT_OF_RANGE for NaN
+    if v not in POSE_RATES_HZ:
+        raise OutOfRangeError(f"{key}={v} is not one of 60, 30, 20, 15", field=key)
+    return v
+
+
+def _handle(m: Map, key: str, at: str = "") -> int:
+    return as_int(m, key, 0, records.MAX_HANDLE, at=at)
+
+
+def _skeleton(m: Map, key: str, at: str = "") -> bytes:
+    return as_bin(m, key, records.SKELETON_BYTES, at=at)
+
+
+def _hello(m: Map, lim: Limits, v: int = PROTOCOL_VERSION) -> Hello:
     version = m.get("version")
     if type(version) is not int:
         raise BadFieldError("field version must be an integer", field="version")
-    if version != PROTOCOL_VERSION:
+    if version != v:
         raise VersionUnsupportedError(
-            f"version {version} is not supported (this peer speaks {PROTOCOL_VERSION})",
+            f"version {version} is not supported on this connection (posecast.v{v})",
             field="version",
         )
+    rate = _pose_rate(m, "pose_rate_hz") if v >= PROTOCOL_V2 and _has(m, "pose_rate_hz") else None
     return Hello(
         version=version,
         token=as_str(m, "token", lim.max_token_bytes, min_bytes=0),
@@ -104,21 +139,23 @@ def _hello(m: Map, lim: Limits) -> Hello:
         layout=Layout(as_enum(m, "layout", tuple(Layout))) if _has(m, "layout") else None,
         rate_hz=as_float(m, "rate_hz", 1.0, lim.max_rate_hz) if _has(m, "rate_hz") else None,
         watch=_ids(m, "watch", lim.max_watch_rooms, lim.max_room_bytes),
+        pose_rate_hz=rate,
     )
 
 
-def _welcome(m: Map, lim: Limits) -> Welcome:
+def _welcome(m: Map, lim: Limits, v: int = PROTOCOL_VERSION) -> Welcome:
     members = []
     for i, item in enumerate(as_list(m, "members", lim.max_players)):
         at = f"members[{i}]."
         if type(item) is not dict:
             raise BadFieldError(f"members[{i}]: expected a map", field=f"members[{i}]")
-        members.append(
-            Member(
-                as_id(item, "player", MAX_ID_BYTES, at=at),
-                as_name(item, "name", lim.max_name_bytes, at=at),
-            )
-        )
+        player = as_id(item, "player", MAX_ID_BYTES, at=at)
+        name = as_name(item, "name", lim.max_name_bytes, at=at)
+        if v >= PROTOCOL_V2:
+            members.append(Member(player, name, _handle(item, "handle", at),
+                                  _skeleton(item, "skeleton", at)))  # fmt: skip
+        else:
+            members.append(Member(player, name))
     lm = as_map(m, "limits")
     limits = Limits(
         **{k: as_int(lm, k, lo, hi, at="limits.") for k, (lo, hi) in LIMIT_RANGES.items()}
@@ -134,6 +171,7 @@ def _welcome(m: Map, lim: Limits) -> Welcome:
         lookahead_frames=as_int(m, "lookahead_frames", 0, MAX_LOOKAHEAD_FRAMES),
         members=tuple(members),
         limits=limits,
+        pose_rate_hz=_pose_rate(m, "pose_rate_hz") if v >= PROTOCOL_V2 else None,
     )
 
 
@@ -177,12 +215,16 @@ def _pose(m: Map, lim: Limits) -> Pose:
     )
 
 
-def _presence(m: Map, lim: Limits) -> Presence:
+def _presence(m: Map, lim: Limits, v: int = PROTOCOL_VERSION) -> Presence:
+    event = as_enum(m, "event", PRESENCE_EVENTS)
+    v2_join = v >= PROTOCOL_V2 and event == "join"
     return Presence(
-        event=as_enum(m, "event", PRESENCE_EVENTS),
+        event=event,
         room=as_id(m, "room", lim.max_room_bytes),
         player=as_id(m, "player", MAX_ID_BYTES),
         name=as_name(m, "name", lim.max_name_bytes),
+        handle=_handle(m, "handle") if v2_join else None,
+        skeleton=_skeleton(m, "skeleton") if v2_join else None,
     )
 
 
@@ -242,9 +284,14 @@ def _enc_welcome(w: Welcome) -> Map:
         "t": float(w.t),
         "rate_hz": float(w.rate_hz),
         "lookahead_frames": w.lookahead_frames,
-        "members": [{"player": p.player, "name": p.name} for p in w.members],
+        "members": [_member(p) for p in w.members],
         "limits": {k: getattr(w.limits, k) for k in LIMIT_RANGES},
+        **({} if w.pose_rate_hz is None else {"pose_rate_hz": float(w.pose_rate_hz)}),
     }
+
+
+def _member(p: Member) -> Map:
+    return _opt({"player": p.player, "name": p.name}, handle=p.handle, skeleton=p.skeleton)
 
 
 def _enc_pose(p: Pose) -> Map:
@@ -262,6 +309,7 @@ _ENC: dict[type[Any], Callable[[Any], Map]] = {
         layout=h.layout,
         rate_hz=_fl(h.rate_hz),
         watch=list(h.watch) or None,
+        pose_rate_hz=_fl(h.pose_rate_hz),
     ),
     Welcome: _enc_welcome,
     Calibrate: lambda c: (
@@ -274,13 +322,20 @@ _ENC: dict[type[Any], Callable[[Any], Map]] = {
         valid=None if f.valid == ALL_TRACKERS_VALID else f.valid,
     ),
     Pose: _enc_pose,
-    Presence: lambda p: {
-        "type": "presence",
-        "event": p.event,
-        "room": p.room,
-        "player": p.player,
-        "name": p.name,
+    Presence: lambda p: _opt(
+        {"type": "presence", "event": p.event, "room": p.room, "player": p.player, "name": p.name},
+        handle=p.handle,
+        skeleton=p.skeleton,
+    ),
+    Poses: lambda p: {"type": "poses", "t": float(p.t), "data": bytes(p.data)},
+    Skeleton: lambda k: {
+        "type": "skeleton",
+        "player": k.player,
+        "handle": k.handle,
+        "skeleton": k.skeleton,
     },
+    PoseRate: lambda p: {"type": "pose_rate", "rate_hz": float(p.rate_hz)},
+    Resync: lambda r: {"type": "resync"},
     Selector: lambda s: _opt(
         {"type": "selector", "player": s.player, "kind": s.kind},
         joint=s.joint,
@@ -301,8 +356,12 @@ _ENC: dict[type[Any], Callable[[Any], Map]] = {
 }
 ENCODERS: dict[str, Callable[[Any], Map]] = {cls.TYPE: fn for cls, fn in _ENC.items()}
 
-_DEC: dict[type[Message], tuple[tuple[str, ...], Callable[[Map, Limits], Message]]] = {
-    Hello: (("version", "token", "room", "name", "layout", "rate_hz", "watch"), _hello),
+_Dec = Callable[[Map, Limits, int], Message]
+_DEC: dict[type[Message], tuple[tuple[str, ...], _Dec]] = {
+    Hello: (
+        ("version", "token", "room", "name", "layout", "rate_hz", "watch", "pose_rate_hz"),
+        _hello,
+    ),
     Welcome: (
         (
             "version",
@@ -315,31 +374,73 @@ _DEC: dict[type[Message], tuple[tuple[str, ...], Callable[[Map, Limits], Message
             "lookahead_frames",
             "members",
             "limits",
+            "pose_rate_hz",
         ),
         _welcome,
     ),
-    Calibrate: (("height_m", "tpose", "trackers"), _calibrate),
-    Frame: (("seq", "t", "trackers", "valid"), _frame),
-    Pose: (("player", "seq", "t", "root", "pos_mm", "rot"), _pose),
-    Presence: (("event", "room", "player", "name"), _presence),
+    Calibrate: (("height_m", "tpose", "trackers"), lambda m, lim, v: _calibrate(m, lim)),
+    Frame: (("seq", "t", "trackers", "valid"), lambda m, lim, v: _frame(m, lim)),
+    Pose: (("player", "seq", "t", "root", "pos_mm", "rot"), lambda m, lim, v: _pose(m, lim)),
+    Presence: (("event", "room", "player", "name", "handle", "skeleton"), _presence),
     Selector: (
         ("player", "kind", "joint", "point", "radius_m", "margin_m", "factor"),
-        _selector,
+        lambda m, lim, v: _selector(m, lim),
     ),
     Kick: (
         ("player", "reason"),
-        lambda m, lim: Kick(as_id(m, "player", MAX_ID_BYTES), _text(m, "reason", lim)),
+        lambda m, lim, v: Kick(as_id(m, "player", MAX_ID_BYTES), _text(m, "reason", lim)),
     ),
-    Ping: (("t0",), lambda m, lim: Ping(as_float(m, "t0", *_T))),
+    Ping: (("t0",), lambda m, lim, v: Ping(as_float(m, "t0", *_T))),
     Pong: (
         ("t0", "t1", "t2"),
-        lambda m, lim: Pong(as_float(m, "t0", *_T), as_float(m, "t1", *_T), as_float(m, "t2", *_T)),
+        lambda m, lim, v: Pong(
+            as_float(m, "t0", *_T), as_float(m, "t1", *_T), as_float(m, "t2", *_T)
+        ),
     ),
-    Error: (("code", "message", "fatal", "field", "ref_seq"), _error),
-    Bye: (("reason",), lambda m, lim: Bye(_text(m, "reason", lim))),
+    Error: (("code", "message", "fatal", "field", "ref_seq"), lambda m, lim, v: _error(m, lim)),
+    Bye: (("reason",), lambda m, lim, v: Bye(_text(m, "reason", lim))),
+    Poses: (
+        ("t", "data"),
+        lambda m, lim, v: Poses(as_float(m, "t", *_T), _data(m)),
+    ),
+    Skeleton: (
+        ("player", "handle", "skeleton"),
+        lambda m, lim, v: Skeleton(
+            as_id(m, "player", MAX_ID_BYTES), _handle(m, "handle"), _skeleton(m, "skeleton")
+        ),
+    ),
+    PoseRate: (("rate_hz",), lambda m, lim, v: PoseRate(_pose_rate(m, "rate_hz"))),
+    Resync: ((), lambda m, lim, v: Resync()),
 }
+
+
+def _data(m: Map) -> bytes:
+    v = m.get("data")
+    if type(v) is not bytes:
+        raise BadFieldError("data: expected a bin", field="data")
+    if len(v) > MAX_BIN_BYTES_V2:  # pragma: no cover - the structural bound comes first
+        raise OutOfRangeError("data is too long", field="data")
+    return v
+
+
 # Spec field order per type (canonical key order after "type"), and the decoders.
 FIELD_ORDER: dict[str, tuple[str, ...]] = {cls.TYPE: keys for cls, (keys, _) in _DEC.items()}
-DECODERS: dict[str, tuple[frozenset[str], Callable[[Map, Limits], Message]]] = {
+_ALL: dict[str, tuple[frozenset[str], _Dec]] = {
     cls.TYPE: (frozenset(("type", *keys)), fn) for cls, (keys, fn) in _DEC.items()
+}
+# The fields each version knows (v1 never learns the v2 fields: they are unknown there).
+_V1_FIELDS = {"hello": ("pose_rate_hz",), "welcome": ("pose_rate_hz",),
+              "presence": ("handle", "skeleton")}  # fmt: skip
+DECODERS: dict[int, dict[str, tuple[frozenset[str], _Dec]]] = {
+    PROTOCOL_VERSION: {
+        k: (keys - frozenset(_V1_FIELDS.get(k, ())), fn)
+        for k, (keys, fn) in _ALL.items()
+        if k in V1_TYPES
+    },
+    PROTOCOL_V2: {k: entry for k, entry in _ALL.items() if k in V2_TYPES},
+}
+FIELD_ORDER_V1 = {
+    k: tuple(f for f in keys if f not in _V1_FIELDS.get(k, ()))
+    for k, keys in FIELD_ORDER.items()
+    if k in V1_TYPES
 }
