@@ -6,6 +6,8 @@
  * - {@link fromXRFrame}: a WebXR frame as posecast trackers.
  * - {@link encode} / {@link decode}: the canonical codec, for tools and tests.
  * - Errors: one class per wire code ({@link ProtocolError} and subclasses).
+ * - {@link Interpolator} / {@link PoseBuffer}: a jitter buffer, poses at any display rate.
+ * - {@link poseToEngine}, {@link BONES}: Unity, Unreal and three.js frames; bone names.
  */
 
 export {
@@ -41,3 +43,28 @@ export {
   type XRPoseLike,
   type XRRigidTransformLike,
 } from "./webxr.js";
+export {
+  BONE_RIGS,
+  BONES,
+  boneName,
+  ENGINE_FRAMES,
+  ENGINES,
+  engineToPos,
+  engineToQuat,
+  headToXRView,
+  poseToEngine,
+  posToEngine,
+  quatToEngine,
+  type BoneRig,
+  type Engine,
+  type EngineFrame,
+} from "./conventions.js";
+export {
+  Interpolator,
+  PoseBuffer,
+  quatSlerp,
+  type InterpOptions,
+  type InterpolatedPose,
+  type PoseInput,
+  type SampleMode,
+} from "./interp.js";

@@ -15,12 +15,28 @@ Quick start (a dev server prints its token secret: ``posecast serve --dev``)::
 Layers: :mod:`~posecast_client.codec` (bytes <-> messages, pure),
 :mod:`~posecast_client.session` (protocol state, pure), :mod:`~posecast_client.client`
 (the asyncio shell), :mod:`~posecast_client.sources` (trackers: replay, serial, HID),
-:mod:`~posecast_client.recording` (room recordings and BVH export).
+:mod:`~posecast_client.recording` (room recordings and BVH export),
+:mod:`~posecast_client.interp` (a jitter buffer: smooth poses at any display rate),
+:mod:`~posecast_client.conventions` (Unity, Unreal and three.js frames; bone names).
 """
 
 from posecast_client.client import Client, Connecting, connect
 from posecast_client.clock import ClockSample, ClockSync
 from posecast_client.codec import decode, encode, to_wire
+from posecast_client.conventions import (
+    BONE_RIGS,
+    BONES,
+    FRAMES,
+    Engine,
+    EngineFrame,
+    EnginePose,
+    engine2pos,
+    engine2quat,
+    head2xrview_quat,
+    pos2engine,
+    pose2engine,
+    quat2engine,
+)
 from posecast_client.errors import (
     ERRORS,
     BvhError,
@@ -28,6 +44,14 @@ from posecast_client.errors import (
     ConnectionLostError,
     PosecastClientError,
     ProtocolError,
+)
+from posecast_client.interp import (
+    DEFAULT_INTERP,
+    InterpConfig,
+    InterpolatedPose,
+    Interpolator,
+    PoseBuffer,
+    quat_slerp,
 )
 from posecast_client.protocol import (
     DEFAULT_LIMITS,
@@ -67,8 +91,12 @@ from posecast_client.tokens import mint_token
 __version__ = "0.1.0"
 
 __all__ = [
+    "BONES",
+    "BONE_RIGS",
+    "DEFAULT_INTERP",
     "DEFAULT_LIMITS",
     "ERRORS",
+    "FRAMES",
     "JOINT_NAMES",
     "SUBPROTOCOL",
     "BvhError",
@@ -81,11 +109,17 @@ __all__ = [
     "ClockSync",
     "Connecting",
     "ConnectionLostError",
+    "Engine",
+    "EngineFrame",
+    "EnginePose",
     "Error",
     "Event",
     "Frame",
     "Hello",
     "HidTrackerSource",
+    "InterpConfig",
+    "InterpolatedPose",
+    "Interpolator",
     "Joint",
     "Kick",
     "Layout",
@@ -95,6 +129,7 @@ __all__ = [
     "Ping",
     "Pong",
     "Pose",
+    "PoseBuffer",
     "PosecastClientError",
     "Presence",
     "ProtocolError",
@@ -111,7 +146,14 @@ __all__ = [
     "connect",
     "decode",
     "encode",
+    "engine2pos",
+    "engine2quat",
+    "head2xrview_quat",
     "mint_token",
+    "pos2engine",
+    "pose2engine",
+    "quat2engine",
+    "quat_slerp",
     "seq_delta",
     "seq_next",
     "to_wire",

@@ -1,0 +1,379 @@
+"""Interpolation: a jitter buffer per player, sampled at any display rate. Pure: the
+caller passes every time, nothing here reads a clock.
+
+Poses arrive at uneven moments (network jitter, a lost pose, a burst after a stall),
+but each carries the server time ``t`` of the tick that made it. A
+:class:`PoseBuffer` keeps a player's recent poses ordered by ``t`` and shows them a
+fixed ``delay_s`` late, on the server's timeline, so arrival jitter up to the delay
+never shows::
+
+    buffers = pc.Interpolator()                       # one PoseBuffer per player
+    async for event in client.events():
+        buffers.feed(event)                           # poses, leaves, welcomes
+    ...
+    now = client.clock.to_server(time.monotonic())    # each rendered frame
+    for player, shown in buffers.poses_at(now).items():
+        draw(player, shown.positions, shown.rotations)
+
+At query time ``time``, the buffer shows ``tau = time - delay_s``. With ``a`` the
+newest pose at or before ``tau`` and ``b`` the one after it:
+
+1. **interpolate**: positions lerp and rotations slerp (shortest arc, so ``q`` and
+   ``-q`` give the same result) from ``a`` to ``b``.
+2. **snap**: ``b`` starts a new segment when its pelvis moved more than
+   ``teleport_m`` from ``a`` (a teleport), when it follows ``a`` by more than
+   ``gap_s`` (a stall or a rejoin), or when it was pushed as a ``keyframe`` and its
+   ``seq`` does not follow ``a``'s (a resync). Nothing is blended across a segment
+   start: until ``tau`` reaches ``b.t``, ``a`` is shown as if it were the newest
+   pose (rule 3), so what is on screen does not depend on whether ``b`` has
+   arrived yet; from ``b.t`` on, ``b``.
+3. **extrapolate**: past the newest pose, ``a`` moves on at the velocity from its
+   predecessor (positions linearly, rotations along the same great circle) for at
+   most ``max_extrapolate_s``, then **holds** there (no jump when the bound is hit).
+4. **hold**: before the first pose, and from a pose with no predecessor in its
+   segment, that pose is shown as it is.
+5. **correct smoothly**: :meth:`PoseBuffer.pose_at` remembers what it showed last.
+   When poses that arrived since then change that answer (a burst of lost poses ran
+   past the buffer, rule 3 guessed, and the late poses now say otherwise), the
+   difference is added back and fades as ``exp(-dt / correction_s)``, so a wrong
+   guess costs no step. A segment start (rule 2) between the two frames, time going
+   back, or a pause longer than ``gap_s`` shows the new answer at once.
+
+Memory is bounded: ``capacity`` poses per player (the oldest go first) and
+``max_players`` buffers in an :class:`Interpolator` (the player heard from least
+recently goes first). Arrays are ``float64``: positions ``(J, 3)`` metres, rotations
+``(J, 4)`` xyzw (renormalised on the way out), ``J`` = 19 in joint order for posecast
+poses; a pose without rotations gives samples without rotations.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from collections import OrderedDict
+from dataclasses import dataclass
+from typing import Literal, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from posecast_client.protocol import Pose, Presence, Welcome, seq_delta
+from posecast_client.rotations import quat_mul
+
+F64 = NDArray[np.float64]
+_IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
+_CONJ = np.array([-1.0, -1.0, -1.0, 1.0])  # q * _CONJ is q's inverse, for unit q
+Mode = Literal["interpolate", "extrapolate", "hold"]
+ROOT = 0  # PELVIS: the joint whose jump is a teleport
+
+
+class PoseLike(Protocol):
+    """What a buffer reads from a pose: :class:`~posecast_client.protocol.Pose` fits."""
+
+    @property
+    def player(self) -> str: ...
+    @property
+    def seq(self) -> int: ...
+    @property
+    def t(self) -> float: ...
+    @property
+    def positions(self) -> F64: ...
+    @property
+    def rotations(self) -> F64 | None: ...
+
+
+@dataclass(frozen=True, slots=True)
+class InterpConfig:
+    """How a :class:`PoseBuffer` smooths; validated once, shared by every buffer.
+
+    Args:
+        delay_s: render delay, seconds behind the query time (0.1). Jitter up to
+            ``delay_s`` minus the pose interval never shows; each lost pose in a row
+            costs one pose interval of that margin.
+        max_extrapolate_s: the longest time a pose is carried on at its velocity past
+            the newest one before it holds (0.1).
+        teleport_m: a pelvis jump between consecutive poses beyond this snaps (1.0 m).
+        gap_s: consecutive poses further apart than this snap (0.25 s).
+        capacity: poses kept per player (32: a 0.5 s delay at 60 Hz).
+        correction_s: time constant over which a correction fades out (0.05 s):
+            when poses that arrived late change what was already shown, the shown
+            pose approaches the new one as ``exp(-dt / correction_s)``; 0 shows each
+            correction at once.
+    """
+
+    delay_s: float = 0.1
+    max_extrapolate_s: float = 0.1
+    teleport_m: float = 1.0
+    gap_s: float = 0.25
+    capacity: int = 32
+    correction_s: float = 0.05
+
+    def __post_init__(self) -> None:
+        for name in ("delay_s", "max_extrapolate_s", "correction_s"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise ValueError(f"{name} must be finite and >= 0, got {v}")
+        for name in ("teleport_m", "gap_s"):
+            v = getattr(self, name)
+            if not v > 0.0:  # inf allowed: never snap on that rule
+                raise ValueError(f"{name} must be > 0, got {v}")
+        if self.capacity < 2:
+            raise ValueError(f"capacity must be >= 2, got {self.capacity}")
+
+
+DEFAULT_INTERP = InterpConfig()
+
+
+@dataclass(frozen=True, slots=True)
+class InterpolatedPose:
+    """One player's pose as shown at ``t`` (the query time minus the delay)."""
+
+    player: str
+    t: float  # server time shown, seconds
+    seq: int  # seq of the received pose at or before t (the first one while holding it)
+    positions: F64  # (J, 3) world metres
+    rotations: F64 | None  # (J, 4) world xyzw, unit; None when the poses had none
+    mode: Mode
+
+
+@dataclass(frozen=True, slots=True)
+class _Entry:
+    t: float
+    seq: int
+    keyframe: bool
+    positions: F64
+    rotations: F64 | None
+
+
+def quat_slerp(q0: F64, q1: F64, u: float) -> F64:
+    """Spherical interpolation ``(..., 4)`` xyzw on the shorter arc; ``u`` outside
+    ``[0, 1]`` extrapolates along the same great circle. Inputs need not be unit."""
+    a = q0 / np.linalg.norm(q0, axis=-1, keepdims=True)
+    b = q1 / np.linalg.norm(q1, axis=-1, keepdims=True)
+    dot = (a * b).sum(-1, keepdims=True)
+    b = np.where(dot < 0.0, -b, b)  # the same rotation, on a's hemisphere
+    cos = np.minimum(np.abs(dot), 1.0)
+    omega = np.arccos(cos)  # (..., 1) half the angle between them
+    sin = np.sin(omega)
+    small = sin < 1e-6  # nearly equal: the sines cancel badly, lerp is exact enough
+    safe = np.where(small, 1.0, sin)
+    w0 = np.where(small, 1.0 - u, np.sin((1.0 - u) * omega) / safe)
+    w1 = np.where(small, u, np.sin(u * omega) / safe)
+    out = w0 * a + w1 * b
+    res: F64 = out / np.linalg.norm(out, axis=-1, keepdims=True)
+    return res
+
+
+class PoseBuffer:
+    """The jitter buffer of one player (see the module docstring for the rules).
+
+    Args:
+        config: delay, extrapolation bound, snap thresholds and capacity
+            (:data:`DEFAULT_INTERP`).
+    """
+
+    def __init__(self, config: InterpConfig = DEFAULT_INTERP) -> None:
+        self.config = config
+        self.player: str | None = None
+        self._entries: list[_Entry] = []  # sorted by t, no two with the same t
+        self._times: list[float] = []  # the entries' t, for bisect
+        self._last: InterpolatedPose | None = None  # what pose_at showed last
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    @property
+    def newest_t(self) -> float | None:
+        """Server time of the newest pose kept (``None`` while empty)."""
+        return self._times[-1] if self._times else None
+
+    def push(self, pose: PoseLike, *, keyframe: bool = False) -> bool:
+        """Keep ``pose``; ``False`` when it was dropped: a duplicate of a kept ``t``, a
+        non-finite ``t``, or older than everything kept while the buffer is full.
+
+        ``keyframe``: the pose is a resync point (a v2 keyframe); after a ``seq`` gap
+        it snaps instead of being blended into.
+        """
+        t = float(pose.t)
+        if not math.isfinite(t):
+            return False
+        i = bisect.bisect_left(self._times, t)
+        if i < len(self._times) and self._times[i] == t:
+            return False
+        if i == 0 and len(self._entries) >= self.config.capacity:
+            return False
+        rot = None if pose.rotations is None else np.array(pose.rotations, dtype=np.float64)
+        entry = _Entry(t, int(pose.seq), keyframe, np.array(pose.positions, dtype=np.float64), rot)
+        self.player = pose.player
+        self._entries.insert(i, entry)
+        self._times.insert(i, t)
+        if len(self._entries) > self.config.capacity:
+            del self._entries[0], self._times[0]
+        return True
+
+    def clear(self) -> None:
+        """Forget every pose (after a reconnect: the server's clock may have changed)."""
+        self._entries.clear()
+        self._times.clear()
+        self._last = None
+
+    def pose_at(self, time: float) -> InterpolatedPose | None:
+        """The pose shown at server time ``time`` (``time - delay_s`` on the poses'
+        timeline), or ``None`` before the first pose arrived.
+
+        Call it once per displayed frame, with times that do not go back: where poses
+        that arrived since the last call change what that call showed (a late pose
+        replacing an extrapolation), the difference fades out over ``correction_s``
+        instead of showing as one step (rule 5). :meth:`sample_at` is the same sample
+        without that memory.
+        """
+        tau = time - self.config.delay_s
+        raw = self._raw(tau)
+        last, self._last = self._last, None
+        if raw is None:
+            return None
+        shown = raw
+        if last is not None and self._blends(last.t, tau):
+            before = self._raw(last.t)  # what the last frame would show with today's poses
+            assert before is not None
+            k = math.exp(-(tau - last.t) / self.config.correction_s)
+            pos = raw.positions + (last.positions - before.positions) * k
+            rot = raw.rotations
+            if rot is not None and last.rotations is not None and before.rotations is not None:
+                off = quat_mul(last.rotations, before.rotations * _CONJ)  # (J, 4) world delta
+                rot = quat_mul(quat_slerp(_IDENTITY, off, k), rot)
+            shown = InterpolatedPose(raw.player, tau, raw.seq, pos, rot, raw.mode)
+        self._last = shown
+        return shown
+
+    def sample_at(self, time: float) -> InterpolatedPose | None:
+        """The pose at server time ``time`` from the poses kept now, rules 1 to 4 only
+        (no memory of earlier calls)."""
+        return self._raw(time - self.config.delay_s)
+
+    def _blends(self, last_tau: float, tau: float) -> bool:
+        """Whether a correction since the frame at ``last_tau`` fades (rule 5): time
+        moved on, by less than ``gap_s``, and no segment starts in between."""
+        if self.config.correction_s == 0.0 or not 0.0 < tau - last_tau <= self.config.gap_s:
+            return False
+        lo = bisect.bisect_right(self._times, last_tau)
+        hi = bisect.bisect_right(self._times, tau)
+        return not any(
+            k > 0 and self._snaps(self._entries[k - 1], self._entries[k])
+            for k in range(max(lo, 1), hi)
+        )
+
+    def _raw(self, tau: float) -> InterpolatedPose | None:
+        """Rules 1 to 4 at ``tau`` on the poses' timeline."""
+        if not self._entries:
+            return None
+        i = bisect.bisect_right(self._times, tau) - 1  # a = entries[i]: newest at or before tau
+        if i < 0:
+            return self._hold(self._entries[0], tau)
+        a = self._entries[i]
+        if i + 1 < len(self._entries):
+            b = self._entries[i + 1]
+            if not self._snaps(a, b):
+                u = (tau - a.t) / (b.t - a.t)
+                pos = a.positions + (b.positions - a.positions) * u
+                rot = None
+                if a.rotations is not None and b.rotations is not None:
+                    rot = quat_slerp(a.rotations, b.rotations, u)
+                return self._sample(a, tau, pos, "interpolate", rot)
+        # a is the newest pose of its segment: carry it on, then hold.
+        p = self._entries[i - 1] if i > 0 else None
+        if p is None or self._snaps(p, a) or self.config.max_extrapolate_s == 0.0:
+            return self._hold(a, tau)
+        ahead = tau - a.t
+        mode: Mode = "extrapolate" if ahead <= self.config.max_extrapolate_s else "hold"
+        s = min(ahead, self.config.max_extrapolate_s) / (a.t - p.t)
+        pos = a.positions + (a.positions - p.positions) * s
+        rot = None
+        if a.rotations is not None and p.rotations is not None:
+            rot = quat_slerp(p.rotations, a.rotations, 1.0 + s)
+        return self._sample(a, tau, pos, mode, rot)
+
+    def _snaps(self, a: _Entry, b: _Entry) -> bool:
+        """Whether ``b`` starts a new segment after ``a`` (rule 2)."""
+        cfg = self.config
+        if b.t - a.t > cfg.gap_s:
+            return True
+        if b.keyframe and seq_delta(b.seq, a.seq) != 1:
+            return True
+        jump = float(np.linalg.norm(b.positions[ROOT] - a.positions[ROOT]))
+        return jump > cfg.teleport_m
+
+    def _hold(self, a: _Entry, tau: float) -> InterpolatedPose:
+        rot = None
+        if a.rotations is not None:
+            rot = a.rotations / np.linalg.norm(a.rotations, axis=-1, keepdims=True)
+        return self._sample(a, tau, a.positions.copy(), "hold", rot)
+
+    def _sample(
+        self, a: _Entry, tau: float, pos: F64, mode: Mode, rot: F64 | None = None
+    ) -> InterpolatedPose:
+        return InterpolatedPose(self.player or "", tau, a.seq, pos, rot, mode)
+
+
+class Interpolator:
+    """A :class:`PoseBuffer` per player, created on a player's first pose.
+
+    Args:
+        config: shared by every buffer (:data:`DEFAULT_INTERP`).
+        max_players: buffers kept at most (512); past it, the player whose last pose
+            is the oldest arrival is forgotten.
+    """
+
+    def __init__(self, config: InterpConfig = DEFAULT_INTERP, *, max_players: int = 512) -> None:
+        if max_players < 1:
+            raise ValueError("max_players must be >= 1")
+        self.config = config
+        self.max_players = max_players
+        self._buffers: OrderedDict[str, PoseBuffer] = OrderedDict()
+
+    @property
+    def players(self) -> tuple[str, ...]:
+        return tuple(self._buffers)
+
+    def buffer(self, player: str) -> PoseBuffer | None:
+        return self._buffers.get(player)
+
+    def push(self, pose: PoseLike, *, keyframe: bool = False) -> bool:
+        """Route ``pose`` to its player's buffer (see :meth:`PoseBuffer.push`)."""
+        buf = self._buffers.get(pose.player)
+        if buf is None:
+            buf = self._buffers[pose.player] = PoseBuffer(self.config)
+            while len(self._buffers) > self.max_players:
+                self._buffers.popitem(last=False)
+        self._buffers.move_to_end(pose.player)
+        return buf.push(pose, keyframe=keyframe)
+
+    def feed(self, event: object) -> None:
+        """Take any client event: a pose is pushed, a ``leave`` forgets its player, a
+        ``welcome`` (a join or a resume, maybe on another server clock) clears all."""
+        if isinstance(event, Pose):
+            self.push(event)
+        elif isinstance(event, Presence) and event.event == "leave":
+            self.forget(event.player)
+        elif isinstance(event, Welcome):
+            self.clear()
+
+    def forget(self, player: str) -> None:
+        self._buffers.pop(player, None)
+
+    def clear(self) -> None:
+        self._buffers.clear()
+
+    def pose_at(self, player: str, time: float) -> InterpolatedPose | None:
+        """``player``'s pose shown at server time ``time``, or ``None`` if unknown."""
+        buf = self._buffers.get(player)
+        return None if buf is None else buf.pose_at(time)
+
+    def poses_at(self, time: float) -> dict[str, InterpolatedPose]:
+        """Every known player's pose shown at server time ``time``."""
+        out = {}
+        for player, buf in self._buffers.items():
+            shown = buf.pose_at(time)
+            if shown is not None:
+                out[player] = shown
+        return out
