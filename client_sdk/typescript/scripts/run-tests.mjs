@@ -1,4 +1,4 @@
-// Transpile src/ and test/ with esbuild (type checking is `npm run typecheck`'s job)
+// Transpile src/, test/ and viewer/ with esbuild (type checking is `npm run typecheck`'s job)
 // into .test-build/, then run them with Node's own test runner.
 //
 //   node scripts/run-tests.mjs                 every test
@@ -19,7 +19,7 @@ const ts = (dir) =>
 
 rmSync(out, { recursive: true, force: true });
 await build({
-  entryPoints: [...ts("src"), ...ts("test")],
+  entryPoints: [...ts("src"), ...ts("test"), ...ts("viewer")], // viewer/: its avatar's tests
   outdir: out,
   outbase: root,
   format: "esm",

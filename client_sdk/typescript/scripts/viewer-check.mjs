@@ -3,14 +3,25 @@
 //
 //   node scripts/viewer-check.mjs URL OUT_DIR [GAP_MS] [TRIES]
 //
-// It waits until the page lists >= 2 players with drawn skeletons, then takes real
+// Twice: the page as it opens (the skinned meshes), then with `&avatar=sticks` (the stick
+// figures). Each time it waits until the page lists >= 2 drawn players, then takes real
 // screenshots GAP_MS apart (default 400). For each screenshot it counts, outside the
 // HUD panel, the pixels in each player's colour (by hue: the meshes are lit, so the
 // brightness varies); for each consecutive pair, the pixels that changed, and those
-// that changed where a skeleton is (in a player's colour in either shot). The demo's
+// that changed where an avatar is (in a player's colour in either shot). The demo's
 // walkers stand still for 2.4 s of every 12 s clip, so it keeps taking screenshots
-// (up to TRIES, default 8) until a pair shows skeleton motion. It also reads the
-// names on the page (player list, and the labels over the heads).
+// (up to TRIES, default 8) until a pair shows motion. It also reads the names on the
+// page (player list, and the labels over the heads).
+//
+// For the meshes, also: (a) with the page frozen on one frame (`posecastViewer.freeze`),
+// a screenshot and the page's body pieces on the screen (`posecastViewer.screen`: each
+// piece's bone between the streamed joints, with its half-width plus 4 cm in pixels at
+// that depth): the pixels of each player's colour outside all of that player's pieces
+// are strays, a limb drawn off its joints; (b) over 20 frames, the page's CPU skinning
+// of the mesh (`posecastViewer.skin`: rings of the mesh at its joints and halfway along
+// each bone, against the streamed joint positions; see viewer/avatar.ts); (b') both
+// again with four bones turned away on purpose (`posecastViewer.tamper`), which they
+// must notice; (c) the `s` key switches to sticks and back.
 import { mkdtempSync, rmSync, writeFileSync } from "node:fs";
 import { tmpdir } from "node:os";
 import { join } from "node:path";
@@ -24,10 +35,14 @@ if (!url || !outDir) {
 }
 const gapMs = Number(gapArg ?? 400);
 const tries = Number(triesArg ?? 8);
-const MOVED_PIXELS = 400; // skeleton pixels that must change between two shots
+const MOVED_PIXELS = 400; // avatar pixels that must change between two shots
 
-/** Runs in the page: pixel statistics of two PNG screenshots (base64). */
-async function analyse({ a, b }) {
+/**
+ * Runs in the page: pixel statistics of two PNG screenshots (base64), or of one (`b`
+ * absent) with each player's bones on the screen (`bones`: player -> segments `[x0, y0,
+ * x1, y1, reach]`, CSS pixels), to count the strays beyond reach.
+ */
+async function analyse({ a, b, bones }) {
   const decode = async (b64) => {
     const bytes = Uint8Array.from(atob(b64), (c) => c.charCodeAt(0));
     const bmp = await createImageBitmap(new Blob([bytes], { type: "image/png" }));
@@ -53,7 +68,8 @@ async function analyse({ a, b }) {
   const players = window.posecastViewer.players();
   const hues = players.map((p) => hueOf(p.color));
   const hud = document.getElementById("hud").getBoundingClientRect();
-  const [ia, ib] = [await decode(a), await decode(b)];
+  const ia = await decode(a);
+  const ib = b === undefined ? ia : await decode(b);
   const sx = ia.width / window.innerWidth;
   const sy = ia.height / window.innerHeight;
   /** Index of the player whose colour pixel i of img has, or -1. */
@@ -64,6 +80,19 @@ async function analyse({ a, b }) {
   };
   const pixelsA = players.map(() => 0);
   const pixelsB = players.map(() => 0);
+  const segments = players.map((p) => bones?.[p.player] ?? []);
+  const strays = players.map(() => 0);
+  const farthest = players.map(() => 0); // px beyond reach, the worst stray
+  /** How far CSS pixel (x, y) lies beyond the reach of the nearest of `segs` (<= 0: within). */
+  const beyond = (segs, x, y) => {
+    let best = Infinity;
+    for (const [x0, y0, x1, y1, reach] of segs) {
+      const [dx, dy] = [x1 - x0, y1 - y0];
+      const t = Math.max(0, Math.min(1, ((x - x0) * dx + (y - y0) * dy) / Math.max(1e-9, dx * dx + dy * dy)));
+      best = Math.min(best, Math.hypot(x - x0 - t * dx, y - y0 - t * dy) - reach);
+    }
+    return best;
+  };
   let changed = 0;
   let changedSkeleton = 0;
   let total = 0;
@@ -77,6 +106,13 @@ async function analyse({ a, b }) {
       const oa = owner(ia, i);
       const ob = owner(ib, i);
       if (oa >= 0) pixelsA[oa]++;
+      if (oa >= 0 && bones !== undefined) {
+        const over = beyond(segments[oa], x / sx, y / sy);
+        if (over > 0) {
+          strays[oa]++;
+          farthest[oa] = Math.max(farthest[oa], over);
+        }
+      }
       if (ob >= 0) pixelsB[ob]++;
       const d = Math.max(
         Math.abs(ia.data[i] - ib.data[i]),
@@ -90,7 +126,12 @@ async function analyse({ a, b }) {
     }
   }
   return {
-    players: players.map((p, k) => ({ ...p, pixels_a: pixelsA[k], pixels_b: pixelsB[k] })),
+    players: players.map((p, k) => ({
+      ...p,
+      pixels_a: pixelsA[k],
+      pixels_b: pixelsB[k],
+      ...(bones === undefined ? {} : { stray_pixels: strays[k], stray_beyond_px: Math.round(farthest[k]) }),
+    })),
     changed_pixels: changed,
     changed_skeleton_pixels: changedSkeleton,
     total_pixels: total,
@@ -111,30 +152,135 @@ const browser = await chromium.launchPersistentContext(profile, {
   ],
 });
 const logs = [];
+let stage = "start"; // where it was, for the error line
 try {
   const page = browser.pages()[0] ?? (await browser.newPage());
   page.on("console", (m) => logs.push(`${m.type()}: ${m.text()}`));
   page.on("pageerror", (e) => logs.push(`pageerror: ${e.message}`));
-  await page.goto(url, { waitUntil: "load", timeout: 20_000 });
-  await page.waitForFunction(
-    () => {
-      const v = window.posecastViewer;
-      return v && v.frames > 10 && v.players().filter((p) => p.drawn).length >= 2;
-    },
-    null,
-    { timeout: 20_000, polling: 100 },
-  );
-  await page.waitForTimeout(700); // let the camera settle on the players
-  const shots = [await page.screenshot({ type: "png" })];
-  const pairs = [];
-  while (shots.length <= tries) {
-    await page.waitForTimeout(gapMs);
-    shots.push(await page.screenshot({ type: "png" }));
-    const [a, b] = shots.slice(-2).map((s) => s.toString("base64"));
-    const stats = await page.evaluate(analyse, { a, b });
-    pairs.push(stats);
-    if (stats.changed_skeleton_pixels >= MOVED_PIXELS) break;
+  const screenshots = [];
+  const save = (png, name) => {
+    const path = join(outDir, `viewer-${name}.png`);
+    writeFileSync(path, png);
+    screenshots.push(path);
+  };
+  const frames = (n) =>
+    page.evaluate(
+      (k) => new Promise((done) => {
+        const step = () => (k-- > 0 ? requestAnimationFrame(step) : done());
+        step();
+      }),
+      n,
+    );
+
+  /** Opens `address`, waits for two drawn players, and measures motion between screenshots. */
+  async function motion(address, name) {
+    stage = `${name}: opening ${address}`;
+    await page.goto(address, { waitUntil: "load", timeout: 20_000 });
+    await page.waitForFunction(
+      () => {
+        const v = window.posecastViewer;
+        return v && v.frames > 10 && v.players().filter((p) => p.drawn).length >= 2;
+      },
+      null,
+      { timeout: 20_000, polling: 100 },
+    );
+    stage = `${name}: screenshots`;
+    await page.waitForTimeout(700); // let the camera settle on the players
+    const shots = [await page.screenshot({ type: "png" })];
+    const pairs = [];
+    while (shots.length <= tries) {
+      await page.waitForTimeout(gapMs);
+      shots.push(await page.screenshot({ type: "png" }));
+      const [a, b] = shots.slice(-2).map((s) => s.toString("base64"));
+      const stats = await page.evaluate(analyse, { a, b });
+      pairs.push(stats);
+      if (stats.changed_skeleton_pixels >= MOVED_PIXELS) break;
+    }
+    shots.slice(-2).forEach((png, i) => save(png, `${name}-${"ab"[i]}`));
+    const mode = await page.evaluate(() => window.posecastViewer.mode);
+    return { mode, ...pairs.at(-1), pairs: pairs.length };
   }
+
+  // The page as it opens: skinned meshes.
+  const mesh = await motion(url, "mesh");
+
+  stage = "mesh: attachment checks";
+  // (a) Strays: one frozen frame, its screenshot and its bones on the screen.
+  await page.evaluate(() => window.posecastViewer.freeze(true));
+  await frames(3);
+  const still = await page.screenshot({ type: "png" });
+  const bones = Object.fromEntries(
+    (await page.evaluate(() => window.posecastViewer.screen())).map((p) => [p.player, p.segments]),
+  );
+  const strays = await page.evaluate(analyse, { a: still.toString("base64"), bones });
+  await page.evaluate(() => window.posecastViewer.freeze(false));
+  save(still, "mesh-frozen");
+  mesh.strays = strays.players.map(({ player, pixels_a, stray_pixels, stray_beyond_px }) => ({
+    player,
+    pixels: pixels_a,
+    stray_pixels,
+    stray_beyond_px,
+    bones: bones[player]?.length ?? 0,
+  }));
+
+  // (b) The skinned mesh against the streamed joints, over 20 frames.
+  const skin = {};
+  for (let k = 0; k < 20; k++) {
+    await frames(1);
+    for (const s of await page.evaluate(() => window.posecastViewer.skin())) {
+      const acc = (skin[s.player] ??= { samples: 0, max_m: 0, mean_m: 0, bone_max_m: 0, worst: "", scale: s.scale });
+      acc.samples++;
+      acc.mean_m += (s.mean_m - acc.mean_m) / acc.samples;
+      acc.bone_max_m = Math.max(acc.bone_max_m, s.bone_max_m);
+      if (s.max_m >= acc.max_m) [acc.max_m, acc.worst] = [s.max_m, s.worst];
+    }
+  }
+  mesh.skin = skin;
+
+  // (b') The same checks with four bones turned away from their joints: they must notice.
+  // The thighs swing out sideways and the upper arms forward (90 degrees in their own
+  // frames): from any side, some of it stands out of the body.
+  const h = Math.SQRT1_2;
+  const turns = {
+    LEFT_THIGH: [0, 0, h, h],
+    RIGHT_THIGH: [0, 0, -h, h],
+    LEFT_UPPER_ARM: [0, -h, 0, h],
+    RIGHT_UPPER_ARM: [0, h, 0, h],
+  };
+  await page.evaluate((t) => Object.entries(t).forEach(([j, q]) => window.posecastViewer.tamper(j, q)), turns);
+  await frames(2);
+  await page.evaluate(() => window.posecastViewer.freeze(true));
+  await frames(3);
+  const bent = await page.screenshot({ type: "png" });
+  const bentBones = Object.fromEntries(
+    (await page.evaluate(() => window.posecastViewer.screen())).map((p) => [p.player, p.segments]),
+  );
+  const bentStrays = await page.evaluate(analyse, { a: bent.toString("base64"), bones: bentBones });
+  const bentSkin = await page.evaluate(() => window.posecastViewer.skin());
+  await page.evaluate((t) => Object.keys(t).forEach((j) => window.posecastViewer.tamper(j, null)), turns);
+  await page.evaluate(() => window.posecastViewer.freeze(false));
+  save(bent, "mesh-tampered");
+  mesh.tampered = {
+    strays: bentStrays.players.map(({ player, pixels_a, stray_pixels, stray_beyond_px }) => ({
+      player, pixels: pixels_a, stray_pixels, stray_beyond_px,
+    })),
+    skin: bentSkin,
+  };
+
+  // (c) The toggle: the `s` key to sticks and back.
+  const shown = () => page.evaluate(() => window.posecastViewer.players().map((p) => p.shown));
+  await page.keyboard.press("s");
+  await frames(2);
+  const toggled = { key_once: await page.evaluate(() => window.posecastViewer.mode), shown_once: await shown() };
+  await page.keyboard.press("s");
+  await frames(2);
+  Object.assign(toggled, { key_twice: await page.evaluate(() => window.posecastViewer.mode), shown_twice: await shown() });
+  mesh.toggle = toggled;
+  const restOffsets = await page.evaluate(() => window.posecastViewer.restOffsets());
+
+  // The stick figures, by URL parameter.
+  const sticks = await motion(`${url}${url.includes("?") ? "&" : "?"}avatar=sticks`, "sticks");
+
   const names = await page.evaluate(() => ({
     list_names: [...document.querySelectorAll("#players .name")].map((e) => e.textContent),
     label_names: [...document.querySelectorAll("#labels .label")]
@@ -143,14 +289,9 @@ try {
     status: document.getElementById("status").textContent,
     frames: window.posecastViewer.frames,
   }));
-  const screenshots = shots.slice(-2).map((png, i) => {
-    const path = join(outDir, `viewer-${"ab"[i]}.png`);
-    writeFileSync(path, png);
-    return path;
-  });
-  console.log(JSON.stringify({ ...pairs.at(-1), pairs: pairs.length, ...names, screenshots, logs }));
+  console.log(JSON.stringify({ mesh, sticks, rest_offsets: restOffsets, ...names, screenshots, logs }));
 } catch (err) {
-  console.log(JSON.stringify({ error: String(err), logs }));
+  console.log(JSON.stringify({ error: `${err} (at ${stage})`, logs }));
   process.exitCode = 1;
 } finally {
   await browser.close();

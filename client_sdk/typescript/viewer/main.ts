@@ -1,7 +1,9 @@
 /**
  * The posecast live viewer: joins a room as a spectator with the SDK and draws every
- * player's 19-joint skeleton in 3D (three.js), with name labels, a player list and a
- * room picker. `scripts/build-viewer.mjs` bundles it into the one file the server
+ * player in 3D (three.js) as a skinned humanoid mesh driven by the streamed joint
+ * rotations (`avatar.ts`), or as a stick figure from the joint positions (`sticks.ts`;
+ * the button in the panel, the `s` key or `?avatar=sticks` switch), with name labels,
+ * a player list and a room picker. `scripts/build-viewer.mjs` bundles it into the one file the server
  * serves at `/viewer/viewer.js` (`server/posecast/online/shell/http.py`).
  *
  * Token: `#token=` (preferred: a fragment never reaches the server or its logs) or
@@ -15,34 +17,34 @@ import {
   AmbientLight,
   BufferGeometry,
   Color,
-  CylinderGeometry,
   DirectionalLight,
   Float32BufferAttribute,
   HemisphereLight,
-  InstancedMesh,
   LineBasicMaterial,
   LineSegments,
-  Matrix4,
   MeshLambertMaterial,
   PerspectiveCamera,
   Quaternion,
   Scene,
-  SphereGeometry,
   Vector3,
   WebGLRenderer,
 } from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
 
 import { connect, type PosecastClient, PosecastError, type Pose, type TokenSource } from "../src/index.js";
-import { Joint, NUM_JOINTS, PARENTS } from "../src/messages.js";
+import { Joint, type JointName, NUM_JOINTS } from "../src/messages.js";
+import { avatarMaterials, buildAvatarGeometry, PIECES, SkinnedAvatar, stripeMaterial } from "./avatar.js";
+import { REFERENCE_OFFSETS_M } from "./bones.js";
+import { StickFigure } from "./sticks.js";
 
 /** Saturated, well-separated hues on a dark background; players take them in join order. */
 const PALETTE = ["#ff7a1a", "#1ec8ff", "#b86bff", "#5fe35f", "#ff4f8b", "#ffd23f", "#3d7bff", "#ff3b30"];
-const BONE_RADIUS_M = 0.03;
-const JOINT_RADIUS_M = 0.045;
-const HEAD_RADIUS_M = 0.11;
 const LABEL_ABOVE_HEAD_M = 0.28;
-const BONES = PARENTS.map((parent, child) => [parent, child] as const).filter(([p]) => p >= 0);
+/**
+ * Debug hook: a pixel of a player's colour farther than this beyond every piece of the
+ * player's body (its half-width around the streamed bone) is a stray.
+ */
+const STRAY_MARGIN_M = 0.04;
 
 const params = new URLSearchParams(location.search);
 const fragment = new URLSearchParams(location.hash.slice(1));
@@ -63,6 +65,28 @@ const playerList = $<HTMLUListElement>("players");
 const labels = $<HTMLDivElement>("labels");
 const roomInput = $<HTMLInputElement>("room");
 roomInput.value = room;
+
+/** `mesh`: the skinned avatar (poses without rotations fall back to sticks); `sticks`: the stick figure. */
+type AvatarMode = "mesh" | "sticks";
+let mode: AvatarMode = params.get("avatar") === "sticks" ? "sticks" : "mesh";
+const modeButton = $<HTMLButtonElement>("avatar-mode");
+
+function setMode(next: AvatarMode): void {
+  mode = next;
+  modeButton.textContent = next === "mesh" ? "show sticks" : "show mesh";
+  modeButton.setAttribute("aria-pressed", String(next === "sticks"));
+  const q = new URLSearchParams(location.search);
+  if (next === "mesh") q.delete("avatar");
+  else q.set("avatar", next);
+  history.replaceState(null, "", `${location.pathname}?${q}${location.hash}`); // a reload keeps it
+}
+setMode(mode);
+modeButton.addEventListener("click", () => setMode(mode === "mesh" ? "sticks" : "mesh"));
+document.addEventListener("keydown", (ev) => {
+  if (ev.key !== "s" || ev.ctrlKey || ev.metaKey || ev.altKey) return;
+  if (ev.target instanceof HTMLInputElement) return; // typing a room name
+  setMode(mode === "mesh" ? "sticks" : "mesh");
+});
 
 function setStatus(text: string, error = false): void {
   status.textContent = text;
@@ -167,17 +191,19 @@ function floorGrid(size: number, color: string, axisColor: string): LineSegments
   return new LineSegments(geometry, new LineBasicMaterial({ vertexColors: true }));
 }
 
-const boneGeometry = new CylinderGeometry(BONE_RADIUS_M, BONE_RADIUS_M, 1, 10, 1); // along +Y
-const jointGeometry = new SphereGeometry(1, 14, 10);
+const bodyShape = buildAvatarGeometry(); // one geometry for every player
+const stripes = stripeMaterial();
 
 interface Avatar {
   readonly player: string;
   readonly color: string;
-  readonly bones: InstancedMesh;
-  readonly joints: InstancedMesh;
+  readonly skinned: SkinnedAvatar;
+  readonly sticks: StickFigure;
   readonly label: HTMLDivElement;
   readonly item: HTMLLIElement;
   name: string;
+  /** The pose last drawn, and as what (undefined: none yet). */
+  shown?: { readonly pose: Pose; readonly as: AvatarMode };
 }
 
 const avatars = new Map<string, Avatar>();
@@ -190,12 +216,10 @@ function avatarFor(player: string, name: string): Avatar {
     return existing;
   }
   const color = PALETTE[colorsUsed++ % PALETTE.length]!;
-  const material = new MeshLambertMaterial({ color, emissive: color, emissiveIntensity: 0.25 });
-  const bones = new InstancedMesh(boneGeometry, material, BONES.length);
-  const joints = new InstancedMesh(jointGeometry, material, NUM_JOINTS);
-  bones.frustumCulled = joints.frustumCulled = false;
-  bones.visible = joints.visible = false; // until the first pose
-  scene.add(bones, joints);
+  const skinned = new SkinnedAvatar(bodyShape, avatarMaterials(color, stripes));
+  const sticks = new StickFigure(new MeshLambertMaterial({ color, emissive: color, emissiveIntensity: 0.25 }));
+  skinned.mesh.visible = sticks.visible = false; // until the first pose
+  scene.add(skinned.mesh, sticks.bones, sticks.joints);
   const label = document.createElement("div");
   label.className = "label";
   label.hidden = true;
@@ -203,7 +227,7 @@ function avatarFor(player: string, name: string): Avatar {
   const item = document.createElement("li");
   item.dataset["player"] = player;
   item.dataset["color"] = color;
-  const avatar: Avatar = { player, color, bones, joints, label, item, name };
+  const avatar: Avatar = { player, color, skinned, sticks, label, item, name };
   rename(avatar, name);
   playerList.append(item);
   avatars.set(player, avatar);
@@ -228,40 +252,34 @@ function rename(a: Avatar, name: string): void {
 function removeAvatar(player: string): void {
   const a = avatars.get(player);
   if (a === undefined) return;
-  scene.remove(a.bones, a.joints);
+  scene.remove(a.skinned.mesh, a.sticks.bones, a.sticks.joints);
   a.label.remove();
   a.item.remove();
   avatars.delete(player);
 }
 
-const m = new Matrix4();
-const q = new Quaternion();
-const a3 = new Vector3();
-const b3 = new Vector3();
-const dir = new Vector3();
-const scale = new Vector3();
-const UP = new Vector3(0, 1, 0);
+/**
+ * Debug hook, for the test that shows the attachment checks can fail: bones turned by a
+ * quaternion in their own frame before they are placed (a rotation that disagrees with
+ * the positions), by joint index.
+ */
+const tampered = new Map<number, Quaternion>();
+const tamperedRotations = new Float64Array(4 * NUM_JOINTS);
+const turned = new Quaternion();
 
 function place(avatar: Avatar, pose: Pose): void {
-  const p = pose.positions;
-  BONES.forEach(([parent, child], i) => {
-    a3.set(p[3 * parent]!, p[3 * parent + 1]!, p[3 * parent + 2]!);
-    b3.set(p[3 * child]!, p[3 * child + 1]!, p[3 * child + 2]!);
-    dir.subVectors(b3, a3);
-    const length = dir.length();
-    q.setFromUnitVectors(UP, length > 1e-6 ? dir.divideScalar(length) : UP);
-    m.compose(a3.add(b3).multiplyScalar(0.5), q, scale.set(1, Math.max(length, 1e-4), 1));
-    avatar.bones.setMatrixAt(i, m);
-  });
-  q.identity();
-  for (let j = 0; j < NUM_JOINTS; j++) {
-    const r = j === Joint.HEAD ? HEAD_RADIUS_M : JOINT_RADIUS_M;
-    m.compose(a3.set(p[3 * j]!, p[3 * j + 1]!, p[3 * j + 2]!), q, scale.set(r, r, r));
-    avatar.joints.setMatrixAt(j, m);
+  const asMesh = mode === "mesh" && pose.rotations !== undefined;
+  let rotations = pose.rotations;
+  if (asMesh && tampered.size > 0) {
+    tamperedRotations.set(rotations!);
+    for (const [j, q] of tampered) turned.fromArray(tamperedRotations, 4 * j).multiply(q).toArray(tamperedRotations, 4 * j);
+    rotations = tamperedRotations;
   }
-  avatar.bones.instanceMatrix.needsUpdate = true;
-  avatar.joints.instanceMatrix.needsUpdate = true;
-  avatar.bones.visible = avatar.joints.visible = true;
+  if (asMesh) avatar.skinned.place(pose.positions, rotations!);
+  else avatar.sticks.place(pose.positions);
+  avatar.skinned.mesh.visible = asMesh;
+  avatar.sticks.visible = !asMesh;
+  avatar.shown = { pose, as: asMesh ? "mesh" : "sticks" };
 }
 
 // --- the frame loop -------------------------------------------------------------------------
@@ -282,11 +300,14 @@ function resize(): void {
   }
 }
 
+/** Debug hook: while frozen, the page keeps drawing the poses it last drew (and the camera stays). */
+let frozen = false;
+
 function draw(): void {
   resize();
   let n = 0;
   centroid.set(0, 0, 0);
-  for (const [player, pose] of client?.poses ?? []) {
+  for (const [player, pose] of frozen ? [] : (client?.poses ?? [])) {
     const avatar = avatarFor(player, client?.members.get(player)?.name ?? player);
     place(avatar, pose);
     centroid.x += pose.positions[0]!;
@@ -306,7 +327,7 @@ function draw(): void {
   const w = canvas.clientWidth;
   const h = canvas.clientHeight;
   for (const avatar of avatars.values()) {
-    const pose = client?.poses.get(avatar.player);
+    const pose = frozen ? avatar.shown?.pose : client?.poses.get(avatar.player);
     if (pose === undefined) {
       avatar.label.hidden = true;
       continue;
@@ -326,6 +347,52 @@ function loop(): void {
   requestAnimationFrame(loop);
 }
 
+const tipWorld = new Vector3();
+const tipRot = new Quaternion();
+
+/**
+ * The pieces of the body that avatar `a` shows, as screen segments in CSS pixels `[x0,
+ * y0, x1, y1, reach]` between the streamed joints, `reach` being the piece's largest
+ * half-width (its ends are as round) plus {@link STRAY_MARGIN_M}, in pixels at the
+ * nearer end: every pixel of an attached mesh lies within reach of one of them. The
+ * tips of the leaf pieces (head, hands, toes), where no joint is streamed, follow their
+ * bones. For sticks: the pieces between joints, with a reach of 15 cm.
+ */
+function screenBones(a: Avatar): number[][] {
+  const shown = a.shown;
+  if (shown === undefined) return [];
+  const p = shown.pose.positions;
+  const w = canvas.clientWidth;
+  const h = canvas.clientHeight;
+  const focal = h / 2 / Math.tan((camera.fov * Math.PI) / 360); // pixels per metre at 1 m depth
+  const toScreen = (v: Vector3): [number, number, number] => {
+    const depth = -v.clone().applyMatrix4(camera.matrixWorldInverse).z;
+    v.project(camera);
+    return [((v.x + 1) / 2) * w, ((1 - v.y) / 2) * h, depth];
+  };
+  const bones = a.skinned.current;
+  const segments: number[][] = [];
+  for (const piece of PIECES) {
+    const j = Joint[piece.bone];
+    const from = new Vector3(p[3 * j]!, p[3 * j + 1]!, p[3 * j + 2]!);
+    let to: Vector3;
+    if (typeof piece.to === "string") {
+      const c = Joint[piece.to];
+      to = new Vector3(p[3 * c]!, p[3 * c + 1]!, p[3 * c + 2]!);
+    } else if (shown.as === "mesh") {
+      tipRot.fromArray(bones.rotations, 4 * j);
+      to = tipWorld.set(...piece.to).multiplyScalar(bones.scale).applyQuaternion(tipRot).add(from).clone();
+    } else {
+      continue;
+    }
+    const [x0, y0, d0] = toScreen(from);
+    const [x1, y1, d1] = toScreen(to);
+    const reach = (shown.as === "mesh" ? Math.max(...piece.r0, ...piece.r1) : 0.11) + STRAY_MARGIN_M;
+    segments.push([x0, y0, x1, y1, (reach * focal) / Math.max(0.05, Math.min(d0, d1))]);
+  }
+  return segments;
+}
+
 /** For tests and the curious: what the page shows, without parsing pixels or DOM. */
 Object.assign(window, {
   posecastViewer: {
@@ -336,13 +403,34 @@ Object.assign(window, {
     get state() {
       return client?.state ?? "connecting";
     },
+    get mode() {
+      return mode;
+    },
+    setMode,
+    freeze(on: boolean) {
+      frozen = on;
+    },
+    tamper(joint: JointName, q: [number, number, number, number] | null) {
+      if (q === null) tampered.delete(Joint[joint]);
+      else tampered.set(Joint[joint], new Quaternion(...q).normalize());
+    },
     players: () =>
       [...avatars.values()].map((a) => ({
         player: a.player,
         name: a.name,
         color: a.color,
-        drawn: a.bones.visible,
+        drawn: a.skinned.mesh.visible || a.sticks.visible,
+        shown: a.shown?.as ?? null,
       })),
+    /** Per player: how far the skinned mesh is from the joints it was placed from (`avatar.ts`). */
+    skin: () =>
+      [...avatars.values()]
+        .filter((a) => a.shown?.as === "mesh")
+        .map((a) => ({ player: a.player, scale: a.skinned.current.scale, ...a.skinned.attachment(a.shown!.pose.positions) })),
+    /** Per player: its bones on the screen (see screenBones). */
+    screen: () => [...avatars.values()].map((a) => ({ player: a.player, segments: screenBones(a) })),
+    /** The reference body's rest offsets the mesh is built on (tests compare them with the server's). */
+    restOffsets: () => REFERENCE_OFFSETS_M.map((o) => [...o]),
   },
 });
 
