@@ -101,3 +101,18 @@ def test_positions_only_poses_convert_without_rotations() -> None:
 def test_unknown_engine_is_refused() -> None:
     with pytest.raises(ValueError):
         pos2engine([0.0, 0.0, 1.0], "godot")
+
+
+def test_the_docs_bone_table_is_the_sdk_table() -> None:
+    """docs/engines.md's bone table says what BONES holds, row for row."""
+    doc = Path(__file__).resolve().parents[3] / "docs" / "engines.md"
+    if not doc.exists():
+        pytest.skip("docs/engines.md not found (repo only)")
+    rows = [
+        [cell.strip() for cell in line.strip("|").split("|")]
+        for line in doc.read_text("utf-8").splitlines()
+        if line.startswith("| ") and line.split("|")[1].strip() in pc.JOINT_NAMES
+    ]
+    assert [r[0] for r in rows] == list(pc.JOINT_NAMES)
+    for r in rows:
+        assert r[1:] == [BONES[rig][pc.Joint[r[0]]] for rig in BONE_RIGS], r[0]
