@@ -205,16 +205,36 @@ try {
   const mesh = await motion(url, "mesh");
 
   stage = "mesh: attachment checks";
+  /**
+   * Freezes the page on a frame where every player's body lies inside the view (a
+   * walker that loops back to its start can be off-screen until the camera catches up),
+   * and returns that frame's screenshot and each player's pieces on the screen.
+   */
+  async function frozenFrame() {
+    const [w, h] = [1000, 640];
+    for (let k = 0; ; k++) {
+      await page.evaluate(() => window.posecastViewer.freeze(true));
+      await frames(3);
+      const screen = await page.evaluate(() => window.posecastViewer.screen());
+      const inView = screen.every((p) =>
+        p.segments.length > 0 &&
+        p.segments.every(([x0, y0, x1, y1]) => [x0, x1].every((x) => x > 0 && x < w) && [y0, y1].every((y) => y > 0 && y < h)),
+      );
+      if (inView || k >= 40) {
+        const png = await page.screenshot({ type: "png" });
+        return { png, in_view: inView, bones: Object.fromEntries(screen.map((p) => [p.player, p.segments])) };
+      }
+      await page.evaluate(() => window.posecastViewer.freeze(false));
+      await page.waitForTimeout(150);
+    }
+  }
+
   // (a) Strays: one frozen frame, its screenshot and its bones on the screen.
-  await page.evaluate(() => window.posecastViewer.freeze(true));
-  await frames(3);
-  const still = await page.screenshot({ type: "png" });
-  const bones = Object.fromEntries(
-    (await page.evaluate(() => window.posecastViewer.screen())).map((p) => [p.player, p.segments]),
-  );
+  const { png: still, bones, in_view: stillInView } = await frozenFrame();
   const strays = await page.evaluate(analyse, { a: still.toString("base64"), bones });
   await page.evaluate(() => window.posecastViewer.freeze(false));
   save(still, "mesh-frozen");
+  mesh.in_view = stillInView;
   mesh.strays = strays.players.map(({ player, pixels_a, stray_pixels, stray_beyond_px }) => ({
     player,
     pixels: pixels_a,
@@ -249,18 +269,14 @@ try {
   };
   await page.evaluate((t) => Object.entries(t).forEach(([j, q]) => window.posecastViewer.tamper(j, q)), turns);
   await frames(2);
-  await page.evaluate(() => window.posecastViewer.freeze(true));
-  await frames(3);
-  const bent = await page.screenshot({ type: "png" });
-  const bentBones = Object.fromEntries(
-    (await page.evaluate(() => window.posecastViewer.screen())).map((p) => [p.player, p.segments]),
-  );
+  const { png: bent, bones: bentBones, in_view: bentInView } = await frozenFrame();
   const bentStrays = await page.evaluate(analyse, { a: bent.toString("base64"), bones: bentBones });
   const bentSkin = await page.evaluate(() => window.posecastViewer.skin());
   await page.evaluate((t) => Object.keys(t).forEach((j) => window.posecastViewer.tamper(j, null)), turns);
   await page.evaluate(() => window.posecastViewer.freeze(false));
   save(bent, "mesh-tampered");
   mesh.tampered = {
+    in_view: bentInView,
     strays: bentStrays.players.map(({ player, pixels_a, stray_pixels, stray_beyond_px }) => ({
       player, pixels: pixels_a, stray_pixels, stray_beyond_px,
     })),
