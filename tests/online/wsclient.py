@@ -18,7 +18,15 @@ from websockets.exceptions import ConnectionClosed
 from posecast.online.config import ServerConfig
 from posecast.online.engine.ssi import Engine
 from posecast.online.protocol import decode, encode
-from posecast.online.protocol.messages import SUBPROTOCOL, Error, Hello, Message, Pose, Welcome
+from posecast.online.protocol.messages import (
+    SUBPROTOCOL,
+    SUBPROTOCOLS,
+    Error,
+    Hello,
+    Message,
+    Pose,
+    Welcome,
+)
 from posecast.online.shell.app import PosecastServer
 from tests.online.conftest import walk_frame
 
@@ -36,8 +44,9 @@ async def serving(cfg: ServerConfig, factory: Factory) -> AsyncIterator[Posecast
 
 
 class Client:
-    def __init__(self, ws: ClientConnection, read: bool) -> None:
+    def __init__(self, ws: ClientConnection, read: bool, version: int = 1) -> None:
         self.ws = ws
+        self.version = version
         self.messages: list[Message] = []
         self._new = asyncio.Event()
         self.closed = asyncio.Event()
@@ -46,15 +55,17 @@ class Client:
         self.sent_at: dict[int, float] = {}  # seq -> time.monotonic() it was sent (stream)
 
     @classmethod
-    async def open(cls, port: int, *, read: bool = True, **kw: Any) -> Client:
-        ws = await connect(f"ws://127.0.0.1:{port}/", subprotocols=[SUBPROTOCOL], **kw)
-        return cls(ws, read)
+    async def open(cls, port: int, *, read: bool = True, version: int = 1, **kw: Any) -> Client:
+        """``version=2`` offers ``posecast.v2`` (and decodes what it gets as v2)."""
+        proto = SUBPROTOCOLS[version] if version != 1 else SUBPROTOCOL
+        ws = await connect(f"ws://127.0.0.1:{port}/", subprotocols=[proto], **kw)  # type: ignore[list-item]
+        return cls(ws, read, version)
 
     async def _read(self) -> None:
         try:
             async for data in self.ws:
                 assert isinstance(data, bytes)
-                self.messages.append(decode(data))
+                self.messages.append(decode(data, version=self.version))
                 self._new.set()
         except ConnectionClosed:
             pass
@@ -66,7 +77,7 @@ class Client:
         await self.ws.send(msg if isinstance(msg, bytes) else encode(msg))
 
     async def hello(self, tok: str, room: str = "r1", name: str = "Ann", **kw: Any) -> Message:
-        await self.send(Hello(1, tok, room, name, **kw))
+        await self.send(Hello(self.version, tok, room, name, **kw))
         return await self.wait_for(lambda m: isinstance(m, Welcome | Error))
 
     async def wait_for(

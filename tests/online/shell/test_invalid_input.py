@@ -1,6 +1,8 @@
 """Every invalid vector in ``proto/vectors/`` sent by a connected player, end to end.
 
-Each gets its error code (and field) back; a fatal one closes that connection only.
+The cases of each protocol version go over a connection of that version (v2: a
+``posecast.v2`` one, with the new messages and fields). Each gets its error code
+(and field) back; a fatal one closes that connection only.
 Meanwhile another player streams frames and a spectator watches: its pose stream
 must go on, in order, through the whole barrage.
 """
@@ -22,10 +24,11 @@ from tests.online.wsclient import Client, Factory, serving
 PROTO = Path(__file__).resolve().parents[3] / "proto"
 
 
-def _invalid_vectors() -> list[dict[str, Any]]:
+def _invalid_vectors(version: int = 1) -> list[dict[str, Any]]:
     out = []
     for path in sorted((PROTO / "vectors").glob("*.json")):
-        out += [v for v in json.loads(path.read_text("utf-8")) if "error" in v]
+        cases = json.loads(path.read_text("utf-8"))
+        out += [v for v in cases if "hex" in v and version in v["versions"]]
     return out
 
 
@@ -42,10 +45,11 @@ def test_the_vector_table_is_there() -> None:
 
 
 @pytest.mark.timeout(60)
+@pytest.mark.parametrize("version", [1, 2])
 def test_every_invalid_vector_gets_its_code_and_nobody_else_notices(
-    engine_factory: Factory,
+    engine_factory: Factory, version: int
 ) -> None:
-    vectors, fatal = _invalid_vectors(), _fatal_codes()
+    vectors, fatal = _invalid_vectors(version), _fatal_codes()
 
     async def scenario() -> None:
         cfg = make_cfg(lookahead=1, error_rate_hz=10_000.0)
@@ -58,7 +62,7 @@ def test_every_invalid_vector_gets_its_code_and_nobody_else_notices(
             t0, before = time.monotonic(), len(watcher.poses("good"))
 
             bad_token = token(player="bad")
-            bad = await Client.open(server.port)
+            bad = await Client.open(server.port, version=version)
             await bad.hello(bad_token)
             mismatches = []
             for v in vectors:
@@ -71,7 +75,7 @@ def test_every_invalid_vector_gets_its_code_and_nobody_else_notices(
                     mismatches.append((v["name"], got, want))
                 if err.fatal:
                     await asyncio.wait_for(bad.closed.wait(), 2)
-                    bad = await Client.open(server.port)
+                    bad = await Client.open(server.port, version=version)
                     assert isinstance(await bad.hello(bad_token), Welcome)
             assert mismatches == []
 

@@ -42,6 +42,7 @@ from posecast.online.cluster.bus import Bus
 from posecast.online.config import ServerConfig
 from posecast.online.core.connections import Conn, Connections
 from posecast.online.core.outbox import Outbox
+from posecast.online.core.posestream import PoseStream
 from posecast.online.core.ratelimit import FatalBudget, TokenBucket
 from posecast.online.core.remote import RemoteRooms
 from posecast.online.core.rooms import Rooms
@@ -54,13 +55,16 @@ from posecast.online.core.session import (
     KickIn,
     Leave,
     Phase,
+    PoseRateIn,
     Reply,
+    ResyncIn,
     SelectorIn,
     Session,
 )
 from posecast.online.core.tick import EngineInbox, EngineOp
 from posecast.online.protocol.codec import decode, encode
 from posecast.online.protocol.messages import (
+    PROTOCOL_V2,
     PROTOCOL_VERSION,
     Bye,
     Error,
@@ -125,11 +129,15 @@ class Admission:
         """Whether a new connection from ``ip`` may start its handshake."""
         return not self.fatal.exhausted(ip, now)
 
-    def connect(self, ip: str, now: float) -> int:
+    def connect(self, ip: str, now: float, version: int = PROTOCOL_VERSION) -> int:
+        """A new connection speaking protocol ``version`` (the handshake's subprotocol)."""
         conn = self.conns.next_id()
-        session = Session(conn, ip, self.cfg, opened_at=now, wall_offset_s=self.wall_offset_s)
+        session = Session(
+            conn, ip, self.cfg, opened_at=now, wall_offset_s=self.wall_offset_s, version=version
+        )
         budget = TokenBucket(self.cfg.error_rate_hz, self.cfg.error_rate_hz)
-        self.conns.conns[conn] = Conn(session, Outbox(self.cfg.reliable_queue), budget)
+        stream = PoseStream() if version >= PROTOCOL_V2 else None
+        self.conns.conns[conn] = Conn(session, Outbox(self.cfg.reliable_queue, stream), budget)
         self.metrics.connections.labels("pending").inc()
         return conn
 
@@ -147,7 +155,13 @@ class Admission:
             return
         action: Action | None = None
         try:
-            action = c.session.handle(decode(data, limits=self.limits), now)
+            incoming = decode(
+                data,
+                limits=self.limits,
+                max_bytes=self.limits.max_message_bytes,
+                version=c.session.version,
+            )
+            action = c.session.handle(incoming, now)
             if action is not None:
                 self._apply(c, action, now)
         except ProtocolError as exc:
@@ -203,6 +217,13 @@ class Admission:
         elif isinstance(action, SelectorIn):
             self._watched_player(s, action.player)
             self.inbox.setting(EngineOp("selector", action.player, selector=action.selector))
+        elif isinstance(action, PoseRateIn | ResyncIn):
+            stream = c.outbox.stream
+            assert stream is not None  # only v2 sessions decode these
+            if isinstance(action, PoseRateIn):
+                stream.set_rate(action.rate_hz)
+            else:
+                stream.resync = True
         elif isinstance(action, KickIn):
             target = self._watched_player(s, action.player)
             kicked = KickedError(action.reason[: self.limits.max_text_bytes])
@@ -244,6 +265,8 @@ class Admission:
             replaced = Error.from_exception(ReplacedError("the same player joined again"))
             self.end(old, now, final=replaced)
         c.session.joined(join)
+        if c.outbox.stream is not None and join.hello.pose_rate_hz is not None:
+            c.outbox.stream.set_rate(join.hello.pose_rate_hz)
         self.conns.by_player[claims.player] = c.session.conn
         self.metrics.connections.labels("pending").dec()
         self.metrics.connections.labels(claims.role).inc()
@@ -272,8 +295,8 @@ class Admission:
         )  # fmt: skip
 
     def _welcome(self, s: Session, room: str, now: float) -> Welcome:
-        return Welcome(
-            version=PROTOCOL_VERSION,
+        return Welcome(  # the router adds the v2 fields for a v2 client
+            version=s.version,
             player=s.player,
             session=secrets.token_hex(8),
             role=s.role,

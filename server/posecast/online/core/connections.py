@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from posecast.online.core.outbox import Outbox
+from posecast.online.core.posestream import Slot
 from posecast.online.core.ratelimit import TokenBucket
 from posecast.online.core.session import Session
 
@@ -58,6 +59,11 @@ class Connections:
             return 0
         self._dirty.add(conn)
         return self.conns[conn].outbox.put_pose(source, data, now)
+
+    def pose_to_conn(self, c: Conn, source: str, data: bytes | Slot, now: float) -> int:
+        """``source``'s pose (v1 bytes or a v2 record) into ``c``'s latest-wins slot."""
+        self._dirty.add(c.session.conn)
+        return c.outbox.put_pose(source, data, now)
 
     def final(self, c: Conn, data: bytes, now: float, code: int, reason: str) -> None:
         c.outbox.put_final(data, now, code, reason)

@@ -78,8 +78,8 @@ class Hub:
     def admits(self, ip: str, now: float) -> bool:
         return self.admission.admits(ip, now)
 
-    def connect(self, ip: str, now: float) -> int:
-        return self.admission.connect(ip, now)
+    def connect(self, ip: str, now: float, version: int = 1) -> int:
+        return self.admission.connect(ip, now, version)
 
     def receive(self, conn: int, data: bytes | str, now: float) -> None:
         self.admission.receive(conn, data, now)

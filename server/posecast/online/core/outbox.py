@@ -8,6 +8,10 @@ that FIFO overflow, or whose writer makes no progress for too long, is cut off.
 
 Pure: the asyncio writer task in :mod:`posecast.online.shell.app` calls :meth:`take`,
 sends what it got, then calls :meth:`sent`. Times are passed in.
+
+A v2 client's outbox has a :class:`~posecast.online.core.posestream.PoseStream`: its
+slots hold prepared records instead of pose messages, and :meth:`take` turns the
+slots taken into ONE ``poses`` message, moving the client's references on.
 """
 
 from __future__ import annotations
@@ -15,14 +19,17 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass, field
 
+from posecast.online.core.posestream import PoseStream, Slot
+
 
 @dataclass
 class Outbox:
     """Latest-wins slots keyed by source player, and a FIFO of ``reliable_max`` entries."""
 
     reliable_max: int
+    stream: PoseStream | None = None  # v2: records, sent as one poses message
     _reliable: deque[bytes] = field(default_factory=deque)
-    _poses: dict[str, bytes] = field(default_factory=dict)
+    _poses: dict[str, bytes | Slot] = field(default_factory=dict)
     _pending_since: float | None = None  # data waiting (or in flight) since then
     _in_flight: bool = False
     overflowed: bool = False
@@ -31,7 +38,7 @@ class Outbox:
     close_code: int = 1000  # WebSocket close code once the final message is out
     close_reason: str = ""
 
-    def put_pose(self, player: str, data: bytes, now: float) -> bool:
+    def put_pose(self, player: str, data: bytes | Slot, now: float) -> bool:
         """Queue ``player``'s newest pose, replacing any unsent one of the same player;
         ``True`` when one was replaced."""
         if self.closed:
@@ -64,10 +71,21 @@ class Outbox:
         self._mark(now)
         self.closed = True
 
-    def take(self) -> list[bytes]:
-        """Everything to send now: control messages first, then one pose per player."""
+    def held(self, player: str) -> bool:
+        """Whether an unsent pose of ``player`` waits in its slot."""
+        return player in self._poses
+
+    def take(self, now: float = 0.0) -> list[bytes]:
+        """Everything to send now: control messages first, then one pose per player
+        (v2: one ``poses`` message of them all)."""
         out = list(self._reliable)
-        out.extend(self._poses.values())
+        if self.stream is not None:
+            slots = [(p, s) for p, s in self._poses.items() if isinstance(s, Slot)]
+            message = self.stream.message(slots, now) if slots else None
+            if message is not None:
+                out.append(message)
+        else:
+            out.extend(d for d in self._poses.values() if isinstance(d, bytes))
         self._reliable.clear()
         self._poses.clear()
         self._in_flight = bool(out)

@@ -4,19 +4,29 @@ Poses go into each listener's latest-wins slot (:mod:`posecast.online.core.outbo
 ``docs/broadcast.md``); presence and replies are reliable, in order. A room's
 audience is its local players and watchers; players on other nodes are members of
 the room but reached through the bus, one message per room per tick.
+
+The audience may mix protocol versions. A v1 client's slot gets the pose message the
+engine thread encoded once; a v2 client's gets a record prepared against its own
+reference (:mod:`posecast.online.core.posestream`), on the ticks its pose rate
+takes, all the tick's records in one batched encoding. ``welcome`` and ``presence``
+are specialised per client: v2 ones carry each avatar's handle and skeleton, and a
+``skeleton`` message follows a player's calibration to its room's v2 clients.
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from posecast.errors import ProtocolError
 from posecast.online.cluster.bus import Bus
 from posecast.online.core.connections import Conn, Connections
+from posecast.online.core.posestream import Avatars, PoseStream, prepare
 from posecast.online.core.remote import RemoteRooms
 from posecast.online.core.rooms import Rooms
 from posecast.online.core.tick import TickOutput
-from posecast.online.protocol.codec import encode
-from posecast.online.protocol.messages import Member, Message, Presence
+from posecast.online.protocol.codec import decode, encode
+from posecast.online.protocol.messages import Member, Message, Pose, Presence, Welcome
+from posecast.online.protocol.records import PoseState
 
 if TYPE_CHECKING:
     from posecast.online.metrics import Metrics
@@ -36,24 +46,117 @@ class Router:
         self.remote = remote
         self.bus = bus
         self.metrics = metrics
+        self.avatars = Avatars()
+        self.tick = 0  # ticks delivered: a v2 client at 60/k Hz takes every k-th
 
     def send(self, c: Conn, msg: Message, now: float) -> None:
+        stream = c.outbox.stream
+        if stream is not None:
+            msg = self._v2(stream, msg)
         self.conns.send(c, encode(msg), now)
 
+    def _v2(self, stream: PoseStream, msg: Message) -> Message:
+        """``msg`` as a v2 client gets it, and what it tells that client about avatars."""
+        if isinstance(msg, Welcome):
+            members = tuple(self.avatars.member(m) for m in msg.members)
+            for m in members:
+                assert m.handle is not None
+                stream.announce(m.player, m.handle)
+            return Welcome(msg.version, msg.player, msg.session, msg.role, msg.room, msg.t,
+                           msg.rate_hz, msg.lookahead_frames, members, msg.limits,
+                           stream.pose_rate_hz)  # fmt: skip
+        if isinstance(msg, Presence):
+            if msg.event == "join":
+                msg = self.avatars.presence(msg)
+                assert msg.handle is not None
+                stream.announce(msg.player, msg.handle)
+            elif msg.event == "leave":
+                stream.forget(msg.player)
+        return msg
+
     def to_room(self, room: str, msg: Message, now: float, skip: str | None = None) -> None:
-        self.bytes_to_room(room, encode(msg), now, skip)
+        if isinstance(msg, Presence):
+            self.presence_to_room(room, msg, now, skip)
+        else:
+            self.bytes_to_room(room, encode(msg), now, skip)
+
+    def presence_to_room(self, room: str, p: Presence, now: float, skip: str | None) -> None:
+        """``p`` to ``room``'s audience, v1 and v2 each in their form (encoded once)."""
+        v1: bytes | None = None
+        v2: bytes | None = None
+        for member in self.rooms.audience(room):
+            c = self.conns.of_player(member) if member != skip else None
+            if c is None:
+                continue
+            stream = c.outbox.stream
+            if stream is None:
+                v1 = v1 or encode(p.v1())
+                self.conns.send(c, v1, now)
+            else:
+                mine = self._v2(stream, p)  # each client's own view: announce or forget
+                v2 = v2 or encode(mine)
+                self.conns.send(c, v2, now)
+        gone = self.rooms.room_of(p.player) is None and self.remote.get(room, p.player) is None
+        if p.event == "leave" and gone:
+            self.avatars.release(p.player)
 
     def bytes_to_room(self, room: str, data: bytes, now: float, skip: str | None = None) -> None:
         for member in self.rooms.audience(room):
             if member != skip:
                 self.conns.send_to_player(member, data, now)
 
-    def pose_to_room(self, room: str, player: str, data: bytes, now: float) -> int:
+    def pose_to_room(
+        self, room: str, player: str, data: bytes, now: float, state: PoseState | None = None
+    ) -> int:
         """``player``'s pose to ``room``'s audience; how many older ones it superseded."""
-        return sum(
-            self.conns.pose_to_player(member, player, data, now)
-            for member in self.rooms.audience(room)
-        )
+        return self.poses_to_room(room, [(player, data, state)], now)
+
+    def poses_to_room(
+        self, room: str, poses: list[tuple[str, bytes, PoseState | None]], now: float
+    ) -> int:
+        """Poses of ``room`` to its audience (v2 records prepared in one batch)."""
+        requests: list[tuple[Conn, PoseStream, PoseState]] = []
+        superseded = self._route(room, poses, now, requests)
+        return superseded + self._put_v2(requests, now)
+
+    def _route(
+        self,
+        room: str,
+        poses: list[tuple[str, bytes, PoseState | None]],
+        now: float,
+        requests: list[tuple[Conn, PoseStream, PoseState]],
+    ) -> int:
+        superseded = 0
+        audience = [c for m in self.rooms.audience(room) if (c := self.conns.of_player(m))]
+        for player, data, state in poses:
+            decoded = state is not None
+            for c in audience:
+                stream = c.outbox.stream
+                if stream is None:
+                    superseded += self.conns.pose_to_conn(c, player, data, now)
+                elif stream.accepts(self.tick) and player in stream.known:
+                    if not decoded:  # a pose from another node: decode it once
+                        state, decoded = _state_from_v1(data), True
+                    if state is not None:
+                        requests.append((c, stream, state))
+        return superseded
+
+    def _put_v2(self, requests: list[tuple[Conn, PoseStream, PoseState]], now: float) -> int:
+        if not requests:
+            return 0
+        slots = prepare([(s, st) for _, s, st in requests], now)
+        superseded = 0
+        for (c, _, st), slot in zip(requests, slots, strict=True):
+            if slot is not None:
+                superseded += self.conns.pose_to_conn(c, st.player, slot, now)
+        return superseded
+
+    def bytes_to_room_v2(self, room: str, data: bytes, now: float) -> None:
+        """A v2-only message to ``room``'s v2 audience."""
+        for member in self.rooms.audience(room):
+            c = self.conns.of_player(member)
+            if c is not None and c.outbox.stream is not None:
+                self.conns.send(c, data, now)
 
     def members(self, room: str) -> tuple[Member, ...]:
         return self.rooms.members(room) + self.remote.members(room)
@@ -61,13 +164,20 @@ class Router:
     def deliver(self, out: TickOutput, now: float) -> None:
         """Route one tick's poses to their rooms' audiences, and stale/active presence."""
         superseded = 0
+        self.tick += 1
         batches: dict[str, tuple[list[tuple[str, bytes]], list[bytes]]] = {}
+        requests: list[tuple[Conn, PoseStream, PoseState]] = []
         for player, data in out.poses:
             room = self.rooms.room_of(player)
             if room is None:
                 continue  # left while the tick ran
             batches.setdefault(room, ([], []))[0].append((player, data))
-            superseded += self.pose_to_room(room, player, data, now)
+            state = out.states.get(player)
+            if state is not None and self.avatars.rescale(player, state.scale) is not None:
+                # A new calibration: its skeleton reaches v2 clients before this pose.
+                self.bytes_to_room_v2(room, encode(self.avatars.skeleton_message(player)), now)
+            superseded += self._route(room, [(player, data, state)], now, requests)
+        superseded += self._put_v2(requests, now)
         for ev in out.events:
             room = self.rooms.room_of(ev.player)
             if room is not None:
@@ -89,3 +199,16 @@ class Router:
             m.transitions.inc(out.transitions)
         if out.reach_limited:
             m.reach_limited.inc(out.reach_limited)
+
+
+def _state_from_v1(data: bytes) -> PoseState | None:
+    """A v1 pose from another node, for this node's v2 clients (its rotations are
+    snorm16, within 1e-4 rad; the scale is not on the v1 wire, so 1.0 is assumed)."""
+    try:
+        pose = decode(data)
+    except ProtocolError:
+        return None
+    if not isinstance(pose, Pose) or pose.rotations is None:
+        return None
+    return PoseState.batch([pose.player], [pose.seq], pose.t, pose.positions[None],
+                           pose.rotations[None], [1.0], [False])[0]  # fmt: skip

@@ -41,7 +41,10 @@ from posecast.online.engine.selectors import AnomalySelector, ObstacleSelector, 
 from posecast.online.engine.selectors import Selector as EngineSelector
 from posecast.online.engine.types import TrackerFrame
 from posecast.online.protocol.messages import (
+    PROTOCOL_V2,
+    PROTOCOL_VERSION,
     ROLE_MAY_SEND,
+    ROLE_MAY_SEND_V2,
     Bye,
     Calibrate,
     Frame,
@@ -50,6 +53,8 @@ from posecast.online.protocol.messages import (
     Message,
     Ping,
     Pong,
+    PoseRate,
+    Resync,
     Selector,
     seq_delta,
 )
@@ -111,7 +116,19 @@ class Leave:
     reason: str | None
 
 
-Action = Join | FrameIn | CalibrateIn | SelectorIn | KickIn | Reply | Leave
+@dataclass(frozen=True)
+class PoseRateIn:
+    """v2: the client wants ``rate_hz`` poses a second from now on."""
+
+    rate_hz: float
+
+
+@dataclass(frozen=True)
+class ResyncIn:
+    """v2: the client wants a keyframe of every avatar with its next poses."""
+
+
+Action = Join | FrameIn | CalibrateIn | SelectorIn | KickIn | Reply | Leave | PoseRateIn | ResyncIn
 
 
 @dataclass
@@ -123,6 +140,7 @@ class Session:
     cfg: ServerConfig
     opened_at: float
     wall_offset_s: float = 0.0  # Unix time minus server time, for token iat/exp
+    version: int = PROTOCOL_VERSION  # the subprotocol the handshake chose (1 or 2)
     phase: Phase = Phase.AWAIT_HELLO
     claims: Claims | None = None
     name: str = ""
@@ -159,7 +177,8 @@ class Session:
             return self._hello(msg, now)
         if isinstance(msg, Hello):
             raise AlreadyJoinedError("this connection has already joined", field="type")
-        if msg.TYPE not in ROLE_MAY_SEND[self.role]:
+        may_send = ROLE_MAY_SEND_V2 if self.version >= PROTOCOL_V2 else ROLE_MAY_SEND
+        if msg.TYPE not in may_send[self.role]:
             raise ForbiddenError(f"a {self.role} may not send {msg.TYPE}", field="type")
         if isinstance(msg, Frame):
             return self._frame(msg, now)
@@ -177,6 +196,10 @@ class Session:
             return SelectorIn(msg.player, _selector(msg))
         if isinstance(msg, Kick):
             return KickIn(msg.player, msg.reason or "kicked by the game backend")
+        if isinstance(msg, PoseRate):
+            return PoseRateIn(msg.rate_hz)
+        if isinstance(msg, Resync):
+            return ResyncIn()
         raise ForbiddenError(f"{msg.TYPE} is not for a server", field="type")  # pragma: no cover
 
     def _hello(self, hello: Hello, now: float) -> Join:

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 from posecast.online.engine.calibration import Calibration
 from posecast.online.engine.selectors import Selector
 from posecast.online.engine.types import EngineEvent, TrackerFrame
+from posecast.online.protocol.records import PoseState
 from posecast.tracking.layouts import Layout
 
 
@@ -55,8 +56,9 @@ class TickInput:
 
 @dataclass
 class TickOutput:
-    poses: list[tuple[str, bytes]]  # (player, encoded pose message)
+    poses: list[tuple[str, bytes]]  # (player, encoded v1 pose message)
     events: list[EngineEvent] = field(default_factory=list)
+    states: dict[str, PoseState] = field(default_factory=dict)  # the same poses, for v2
     transitions: int = 0
     batch: int = 0  # players in the step
     seconds: float = 0.0  # wall time of the step in the engine thread

@@ -474,6 +474,7 @@ class Engine:
         scale = np.array([p.calibration.scale for p, _, _ in emit], np.float32)
         positions = wp / scale[:, None, None]
         seqs, held = s["ring_seq"][k, slots].tolist(), s["ring_held"][k, slots].tolist()
+        scales = scale.astype(np.float64).tolist()
         return [
             PoseOut(
                 player=p.id,
@@ -485,6 +486,7 @@ class Engine:
                 transitioning=0.0 < w < 1.0,
                 held=held[i],
                 reach_limited=limited[i],
+                scale=scales[i],
             )
             for i, (p, sample, w) in enumerate(emit)
         ]

@@ -248,6 +248,7 @@ class PoseState:
     t: float  # server time of the tick that made it
     root: tuple[int, int, int]  # PELVIS world position, 0.1 mm
     items: F64  # (19, 4) PELVIS world rotation, then the local rotations
+    world: F64  # (19, 4) the world rotations (what deltas aim at)
     scale: float = 1.0  # the calibration the engine used (canonical per user metre)
     reach_limited: bool = False
     _keyframe: tuple[bytes, Recon] | None = None
@@ -271,9 +272,44 @@ class PoseState:
         if not (np.abs(root) <= _ROOT_MAX).all():
             raise OutOfRangeError("the pelvis is beyond +-1000 m", field="root")
         r = root.astype(np.int64).tolist()
-        return cls(
-            player, seq, t, (r[0], r[1], r[2]), world2items(_normalise(q)), scale, reach_limited
-        )
+        w = _normalise(q)
+        return cls(player, seq, t, (r[0], r[1], r[2]), world2items(w), w, scale, reach_limited)
+
+    @classmethod
+    def batch(
+        cls,
+        players: list[str],
+        seqs: list[int],
+        t: float,
+        positions: F64,
+        rotations: F64,
+        scales: list[float],
+        reach_limited: list[bool],
+    ) -> list[PoseState | None]:
+        """:meth:`from_engine` of ``E`` poses at once (``positions (E, 19, 3)``,
+        ``rotations (E, 19, 4)``); ``None`` for a pose whose pelvis is beyond +-1000 m."""
+        q = _normalise(np.asarray(rotations, dtype=np.float64))  # (E, 19, 4)
+        items = q.copy()
+        items[:, 1:] = _qmul(_conj(q[:, _PARENTS]), q[:, 1:])
+        root = np.rint(np.asarray(positions, dtype=np.float64)[:, 0] / ROOT_UNIT_M)  # (E, 3)
+        inside: NDArray[np.bool_] = np.all(np.abs(root) <= _ROOT_MAX, axis=1)
+        ok: list[bool] = inside.tolist()
+        roots: list[list[int]] = np.where(np.isfinite(root), root, 0).astype(np.int64).tolist()
+        return [
+            cls(
+                players[i],
+                seqs[i],
+                t,
+                (r[0], r[1], r[2]),
+                items[i],
+                q[i],
+                scales[i],
+                reach_limited[i],
+            )
+            if ok[i]
+            else None
+            for i, r in enumerate(roots)
+        ]
 
     @property
     def flags(self) -> int:
@@ -299,10 +335,34 @@ class PoseState:
         if hit is not None and hit[0] is ref:
             body, recon = hit[1], hit[2]
         else:
-            got = encode_delta(ref, self.seq, self.root, self.items, self.flags)
+            got = encode_delta(ref, self.seq, self.root, self.world, self.flags)
             body, recon = (None, None) if got is None else got
             self._deltas[id(ref)] = (ref, body, recon)  # holds ref: its id stays unique
         return None if body is None or recon is None else (body, recon)
+
+
+def encode_many(pairs: list[tuple[PoseState, Recon]]) -> list[tuple[bytes, Recon] | None]:
+    """:meth:`PoseState.delta` of many (pose, reference) pairs, the uncached ones in one
+    :func:`encode_deltas` call: how a tick's deltas for every client are made."""
+    todo: list[tuple[PoseState, Recon]] = []
+    seen: set[tuple[int, int]] = set()
+    for state, ref in pairs:
+        hit = state._deltas.get(id(ref))
+        key = (id(state), id(ref))
+        if (hit is None or hit[0] is not ref) and key not in seen:
+            seen.add(key)
+            todo.append((state, ref))
+    if todo:
+        got = encode_deltas(
+            [r for _, r in todo],
+            [s.seq for s, _ in todo],
+            [s.root for s, _ in todo],
+            np.stack([s.world for s, _ in todo]),
+            [s.flags for s, _ in todo],
+        )
+        for (state, ref), res in zip(todo, got, strict=True):
+            state._deltas[id(ref)] = (ref, None, None) if res is None else (ref, *res)
+    return [state.delta(ref) for state, ref in pairs]
 
 
 # --- deltas --------------------------------------------------------------------------------
@@ -313,32 +373,67 @@ _BIT = np.arange(ROOT_WIDTHS[-1], dtype=np.int64)  # bit positions of the widest
 
 
 def encode_delta(
-    ref: Recon, seq: int, root: tuple[int, int, int], items: F64, flags: int = 0
+    ref: Recon, seq: int, root: tuple[int, int, int], world: F64, flags: int = 0
 ) -> tuple[bytes, Recon] | None:
-    """A delta body (flags onwards) taking ``ref`` to the pose, and the new reference;
-    ``None`` when it does not fit."""
-    return encode_deltas([ref], [seq], [root], items[None], [flags])[0]
+    """A delta body (flags onwards) taking ``ref`` to the pose with world rotations
+    ``world (19, 4)``, and the new reference; ``None`` when it does not fit."""
+    return encode_deltas([ref], [seq], [root], world[None], [flags])[0]
+
+
+def _levels() -> list[NDArray[np.intp]]:
+    depth = [0] * NUM_JOINTS
+    for j in range(1, NUM_JOINTS):
+        depth[j] = depth[PARENTS[j]] + 1
+    return [
+        np.array([j for j in range(NUM_JOINTS) if depth[j] == d]) for d in range(max(depth) + 1)
+    ]
+
+
+_LEVELS = _levels()  # joints by depth: [PELVIS], [SPINE, LEFT_THIGH, RIGHT_THIGH], ...
+_PARENT_OF = np.array([max(p, 0) for p in PARENTS])
 
 
 def encode_deltas(
     refs: list[Recon],
     seqs: list[int],
     roots: list[tuple[int, int, int]],
-    items: F64,
+    world: F64,
     flags: list[int],
 ) -> list[tuple[bytes, Recon] | None]:
-    """:func:`encode_delta` of ``M`` poses at once (``items (M, 19, 4)``): one numpy pass
-    for the residuals, the width classes and the bit packing of all of them."""
+    """:func:`encode_delta` of ``M`` poses at once (``world (M, 19, 4)``): one numpy pass
+    for the residuals, the width classes and the bit packing of all of them.
+
+    Each item's residual is taken against the prediction ``q_ref * exp(v * step)`` and
+    aims at the *reconstructed* parent: item ``j`` targets ``conj(W'[parent]) *
+    W[j]``, where ``W'`` are the world rotations the client will rebuild. So a joint's
+    world rotation carries only its own quantisation error, never its ancestors'
+    (the client's FK drifts no further down the chain than one step's error). Joints
+    are encoded level by level down the tree, every joint of a level at once.
+    """
     m = len(refs)
     ref_items = np.stack([r.items for r in refs])  # (M, 19, 4)
-    u = quat2rotvec(_qmul(_conj(ref_items), items))  # (M, 19, 3)
-    d_rot = np.rint(u / ROT_STEP_RAD).astype(np.int64)
-    d_root = np.array(roots, np.int64) - np.array([r.root for r in refs], np.int64)  # (M, 3)
-    steps = np.concatenate([d_root[:, None], d_rot], axis=1)  # (M, 20, 3)
-    prev = np.stack(
-        [np.concatenate([np.array(r.step_root, np.int64)[None], r.step_rot]) for r in refs]
-    )
-    res = steps - prev  # (M, 20, 3) the residuals
+    step_rot = np.stack([r.step_rot for r in refs])  # (M, 19, 3)
+    new_items = np.empty_like(ref_items)
+    new_world = np.empty_like(ref_items)
+    r_rot = np.empty_like(step_rot)
+    for idx in _LEVELS:
+        pred = _qmul(
+            ref_items[:, idx], rotvec2quat(step_rot[:, idx].astype(np.float64) * ROT_STEP_RAD)
+        )
+        if idx[0] == 0:
+            target = world[:, idx]
+        else:
+            target = _qmul(_conj(new_world[:, _PARENT_OF[idx]]), world[:, idx])
+        u = quat2rotvec(_qmul(_conj(pred), target))  # (M, n, 3)
+        r = np.rint(u / ROT_STEP_RAD).astype(np.int64)
+        q = _normalise(_qmul(pred, rotvec2quat(r.astype(np.float64) * ROT_STEP_RAD)))
+        new_items[:, idx], r_rot[:, idx] = q, r
+        new_world[:, idx] = q if idx[0] == 0 else _qmul(new_world[:, _PARENT_OF[idx]], q)
+    d_rot = step_rot + r_rot
+    ref_root = np.array([r.root for r in refs], np.int64)  # (M, 3)
+    d_root = np.array(roots, np.int64) - ref_root
+    r_root = d_root - np.array([r.step_root for r in refs], np.int64)
+    res = np.concatenate([r_root[:, None], r_rot], axis=1)  # (M, 20, 3) the residuals
     lo, hi = res.min(axis=-1), res.max(axis=-1)  # (M, 20)
     half = np.left_shift(1, np.maximum(_ITEM_WIDTHS - 1, 0))  # (20, 4)
     fits = (lo[..., None] >= -half) & (hi[..., None] < half)  # (M, 20, 4)
@@ -363,8 +458,7 @@ def encode_deltas(
     keep = wids[..., None] > _BIT
     packed = np.packbits(bits[keep].astype(np.uint8), bitorder="little").tobytes()
     nbytes = ((total + pad) // 8).tolist()
-    new_items = _normalise(_qmul(ref_items, rotvec2quat(d_rot.astype(np.float64) * ROT_STEP_RAD)))  # (M, 19, 4)
-    new_root = (d_root + np.array([r.root for r in refs], np.int64)).tolist()
+    new_root = (d_root + ref_root).tolist()
     d_root_l = d_root.tolist()
     out: list[tuple[bytes, Recon] | None] = []
     at = 0
@@ -483,9 +577,11 @@ def _read_delta(data: bytes, pos: int, ref: Recon) -> tuple[Recon, int]:
         raise BadFieldError("a delta is cut short", field="data")
     pos += (n + 7) // 8
     d_root = [ref.step_root[i] + steps[0][i] for i in range(3)]
-    d_rot = ref.step_rot + np.array(steps[1:], dtype=np.int64)
+    r_rot = np.array(steps[1:], dtype=np.int64)
+    d_rot = ref.step_rot + r_rot
     root = (ref.root[0] + d_root[0], ref.root[1] + d_root[1], ref.root[2] + d_root[2])
     if max(map(abs, root)) > _ROOT_MAX:
         raise BadFieldError("a delta takes the root beyond +-1000 m", field="data")
-    items = _normalise(_qmul(ref.items, rotvec2quat(d_rot.astype(np.float64) * ROT_STEP_RAD)))
+    pred = _qmul(ref.items, rotvec2quat(ref.step_rot.astype(np.float64) * ROT_STEP_RAD))
+    items = _normalise(_qmul(pred, rotvec2quat(r_rot.astype(np.float64) * ROT_STEP_RAD)))
     return Recon(seq, root, items, (d_root[0], d_root[1], d_root[2]), d_rot), pos

@@ -42,7 +42,7 @@ from posecast.online.engine.multi import MultiEngine
 from posecast.online.engine.ssi import Engine
 from posecast.online.inference.loader import load_multi_engine
 from posecast.online.metrics import Metrics
-from posecast.online.protocol.messages import SUBPROTOCOL
+from posecast.online.protocol.messages import SUBPROTOCOLS
 from posecast.online.shell.http import HttpRoutes, peer_ip
 from posecast.online.shell.ticker import EngineWorker, run_ticks
 
@@ -109,7 +109,9 @@ class PosecastServer:
             self.cfg.host,
             self.cfg.port,
             process_request=self.http,
-            subprotocols=[Subprotocol(SUBPROTOCOL)],  # a client offering none gets HTTP 400
+            # The highest version the client offers (posecast.v2, then posecast.v1); a
+            # client offering neither gets HTTP 400. v1 clients keep working unchanged.
+            subprotocols=[Subprotocol(SUBPROTOCOLS[v]) for v in sorted(SUBPROTOCOLS, reverse=True)],
             compression=None,  # poses are quantised binary; deflate per client costs CPU
             max_size=max(4 * self.cfg.max_message_bytes, 65_536),  # the codec says TOO_LARGE
             max_queue=64,
@@ -172,7 +174,8 @@ class PosecastServer:
             # Bound the kernel's backlog too, or a stalled client would sit on seconds
             # of stale poses there before its outbox ever saw back-pressure.
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, self.cfg.socket_sndbuf_bytes)
-        conn = self.hub.connect(peer_ip(ws), time.monotonic())
+        version = next((v for v, name in SUBPROTOCOLS.items() if name == ws.subprotocol), 1)
+        conn = self.hub.connect(peer_ip(ws), time.monotonic(), version)
         client = _Client(ws, asyncio.Event())
         client.writer = asyncio.create_task(self._write(conn, client))
         self._clients[conn] = client
@@ -212,7 +215,7 @@ class PosecastServer:
         while True:
             await client.wake.wait()
             client.wake.clear()
-            batch = box.take()
+            batch = box.take(time.monotonic())
             if batch:
                 await _send_batch(client.ws, batch)
                 self.metrics.bytes_out.inc(sum(map(len, batch)))

@@ -29,6 +29,7 @@ from posecast.online.core.tick import EngineOp, TickInput, TickOutput
 from posecast.online.engine.multi import MultiEngine
 from posecast.online.protocol.codec import encode
 from posecast.online.protocol.messages import Pose
+from posecast.online.protocol.records import PoseState
 
 log = logging.getLogger("posecast.ticker")
 
@@ -52,9 +53,21 @@ class EngineWorker:
         result = e.tick()
         poses = []
         limited = 0
-        for p in result.poses:
-            if p.held or p.seq < 0:
-                continue  # one pose per source frame: nothing new over a gap or when stale
+        shown = [p for p in result.poses if not p.held and p.seq >= 0]
+        # one pose per source frame: nothing new over a gap or when stale
+        states: dict[str, PoseState] = {}
+        if shown:
+            batch = PoseState.batch(
+                [p.player for p in shown],
+                [p.seq for p in shown],
+                server_t,
+                np.stack([p.positions for p in shown]),
+                np.stack([p.rotations for p in shown]),
+                [p.scale for p in shown],
+                [p.reach_limited for p in shown],
+            )
+            states = {st.player: st for st in batch if st is not None}
+        for p in shown:
             limited += p.reach_limited
             pose = Pose(
                 player=p.player,
@@ -70,6 +83,7 @@ class EngineWorker:
         return TickOutput(
             poses,
             result.events,
+            states,
             result.transitions,
             e.player_count,
             time.perf_counter() - t0,

@@ -1,0 +1,194 @@
+"""Protocol v2 pose streams (pure): handles, skeletons, and each client's references.
+
+A v2 client gets one ``poses`` message per tick holding a record per avatar, each a
+keyframe or a delta against the last record of that avatar **this client was sent**
+(``docs/broadcast.md``, "v2: deltas under latest-wins"). Two objects keep that true:
+
+* :class:`Avatars`, one per node: each player's small integer ``handle`` (the
+  smallest free one, so records name avatars in one LEB128 byte) and its skeleton
+  (the bone offsets at the scale the engine last used for it);
+* :class:`PoseStream`, one per v2 connection: which avatars this client has been
+  told about (a handle is announced by ``welcome``, ``presence`` join or
+  ``skeleton``, all reliable and sent before any pose in the same batch), its pose
+  rate, and per avatar the :class:`~posecast.online.protocol.records.Recon` it holds.
+
+The router prepares each record when it puts a pose into the client's latest-wins
+slot, against the reference the client has *now*; the reference only moves when the
+writer takes the slot (:meth:`PoseStream.message`), and taking consumes the slot, so
+a record never meets a reference other than the one it was made against. A slot that
+is superseded before the writer took it is replaced by a record against the same,
+still current, reference. Clients whose references are the same object (every
+client that got the same records) share one encoding: it is cached on the pose.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from posecast.online.protocol.codec import encode
+from posecast.online.protocol.messages import POSE_RATES_HZ, Member, Poses, Presence, Skeleton
+from posecast.online.protocol.records import (
+    PoseState,
+    Recon,
+    encode_many,
+    skeleton2bytes,
+    skeleton_offsets,
+    write_leb128,
+)
+
+KEYFRAME_EVERY_S = 1.0  # the longest a client goes without a keyframe of an avatar
+_TICK_HZ = 60.0
+
+
+@dataclass
+class Avatars:
+    """Node-wide: every known player's handle and skeleton (local and remote ones)."""
+
+    _handles: dict[str, int] = field(default_factory=dict)
+    _free: list[int] = field(default_factory=list)
+    _next: int = 0
+    _scale: dict[str, float] = field(default_factory=dict)
+    _skeleton: dict[str, bytes] = field(default_factory=dict)
+    _default: bytes = field(default_factory=lambda: skeleton2bytes(skeleton_offsets(1.0)))
+
+    def handle(self, player: str) -> int:
+        """``player``'s handle, assigned on first use (the smallest free one)."""
+        h = self._handles.get(player)
+        if h is None:
+            if self._free:
+                self._free.sort()
+                h = self._free.pop(0)
+            else:
+                h, self._next = self._next, self._next + 1
+            self._handles[player] = h
+        return h
+
+    def release(self, player: str) -> None:
+        """``player`` is gone from this node: its handle may be given to another."""
+        h = self._handles.pop(player, None)
+        if h is not None:
+            self._free.append(h)
+        self._scale.pop(player, None)
+        self._skeleton.pop(player, None)
+
+    def skeleton(self, player: str) -> bytes:
+        return self._skeleton.get(player, self._default)
+
+    def rescale(self, player: str, scale: float) -> bytes | None:
+        """The engine used ``scale`` for ``player``: its new skeleton if that changed it."""
+        if self._scale.get(player, 1.0) == scale:
+            return None
+        self._scale[player] = scale
+        self._skeleton[player] = skeleton2bytes(skeleton_offsets(scale))
+        return self._skeleton[player]
+
+    def member(self, m: Member) -> Member:
+        """``m`` with its v2 fields."""
+        return Member(m.player, m.name, self.handle(m.player), self.skeleton(m.player))
+
+    def presence(self, p: Presence) -> Presence:
+        """A v2 presence: a join carries the handle and the skeleton."""
+        if p.event != "join":
+            return p
+        return Presence(p.event, p.room, p.player, p.name, self.handle(p.player),
+                        self.skeleton(p.player))  # fmt: skip
+
+    def skeleton_message(self, player: str) -> Skeleton:
+        return Skeleton(player, self.handle(player), self.skeleton(player))
+
+
+@dataclass
+class Slot:
+    """What waits in a v2 client's latest-wins slot: the pose and its prepared record."""
+
+    state: PoseState
+    body: bytes  # the record after its handle
+    recon: Recon  # what the client holds once it got the record
+    keyframe: bool
+
+
+@dataclass
+class PoseStream:
+    """One v2 connection's view: announced avatars, pose rate, references."""
+
+    pose_rate_hz: float = 60.0
+    resync: bool = False  # keyframes of every avatar with the next poses
+    known: dict[str, int] = field(default_factory=dict)  # player -> handle announced
+    refs: dict[str, Recon] = field(default_factory=dict)  # what the client holds
+    last_key: dict[str, float] = field(default_factory=dict)  # when each keyframe went
+    records: int = 0
+    keyframes: int = 0
+
+    def set_rate(self, rate_hz: float) -> None:
+        assert rate_hz in POSE_RATES_HZ
+        self.pose_rate_hz = rate_hz
+
+    def accepts(self, tick: int) -> bool:
+        """Whether tick number ``tick`` is one of this client's (every k-th tick)."""
+        return tick % round(_TICK_HZ / self.pose_rate_hz) == 0
+
+    def announce(self, player: str, handle: int) -> None:
+        if self.known.get(player) != handle:
+            self.refs.pop(player, None)  # a new avatar on this handle: keyframe first
+        self.known[player] = handle
+
+    def forget(self, player: str) -> None:
+        self.known.pop(player, None)
+        self.refs.pop(player, None)
+        self.last_key.pop(player, None)
+
+    def needs_keyframe(self, player: str, now: float) -> bool:
+        ref = self.refs.get(player)
+        return (
+            ref is None
+            or self.resync
+            or now - self.last_key.get(player, -1e18) >= KEYFRAME_EVERY_S - 0.5 / _TICK_HZ
+        )
+
+    def message(self, slots: list[tuple[str, Slot]], now: float) -> bytes | None:
+        """The ``poses`` message of what the writer took; the references move on."""
+        parts: list[bytes] = []
+        t = 0.0
+        for player, slot in slots:
+            handle = self.known.get(player)
+            if handle is None:
+                continue  # left (or its handle moved) since the pose was queued
+            body, recon, key = slot.body, slot.recon, slot.keyframe
+            if self.resync and not key:
+                (body, recon), key = slot.state.keyframe(), True
+            parts.append(write_leb128(handle) + body)
+            self.refs[player] = recon
+            if key:
+                self.last_key[player] = now
+                self.keyframes += 1
+            self.records += 1
+            t = max(t, slot.state.t)
+        self.resync = False
+        if not parts:
+            return None
+        return encode(Poses(t, b"".join(parts)))
+
+
+def prepare(requests: list[tuple[PoseStream, PoseState]], now: float) -> list[Slot | None]:
+    """Each client's record of each pose, against that client's current reference:
+    keyframes where due, every delta of the tick in one batched encoding (and once
+    per distinct reference); ``None`` for an avatar the client was not told about."""
+    out: list[Slot | None] = [None] * len(requests)
+    pairs: list[tuple[PoseState, Recon]] = []
+    where: list[int] = []
+    for i, (stream, state) in enumerate(requests):
+        if state.player not in stream.known:
+            continue
+        if stream.needs_keyframe(state.player, now):
+            body, recon = state.keyframe()
+            out[i] = Slot(state, body, recon, True)
+        else:
+            pairs.append((state, stream.refs[state.player]))
+            where.append(i)
+    for i, got, (state, _) in zip(where, encode_many(pairs), pairs, strict=True):
+        if got is None:  # does not fit a delta
+            body, recon = state.keyframe()
+            out[i] = Slot(state, body, recon, True)
+        else:
+            out[i] = Slot(state, got[0], got[1], False)
+    return out
