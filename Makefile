@@ -54,7 +54,16 @@ $(TS_DIR)/node_modules/.installed: $(TS_DIR)/package-lock.json
 ts-test: $(STAMP) $(NATIVE_STAMP) $(TS_DIR)/node_modules/.installed
 	cd $(TS_DIR) && npm run --silent typecheck && npm test --silent
 
-test: lint typecheck ts-test pytest
+# The C# SDK for Unity (client_sdk/csharp): Mono's mcs builds the library and its test
+# runner (C# 7.x, which Unity compiles too), then the proto vectors, unit, end-to-end
+# (a real .venv posecast) and README tests run; the last line reads "N passed, N failed".
+# Mono is installed where possible (root + apt-get); elsewhere one SKIPPED line.
+.PHONY: cs-test
+
+cs-test: $(STAMP) $(NATIVE_STAMP)
+	client_sdk/csharp/Tests~/run.sh
+
+test: lint typecheck ts-test cs-test pytest
 
 run: $(STAMP) $(NATIVE_STAMP)
 	$(PY) -m posecast demo
