@@ -92,9 +92,9 @@ namespace Posecast.Client.Tests
                 }
             }
             if (c == '"') return new Json { Kind = JsonKind.String, Text = Str(s, ref p) };
-            if (s.Substring(p).StartsWith("true")) { p += 4; return new Json { Kind = JsonKind.Bool, Bool = true }; }
-            if (s.Substring(p, Math.Min(5, s.Length - p)) == "false") { p += 5; return new Json { Kind = JsonKind.Bool }; }
-            if (s.Substring(p, Math.Min(4, s.Length - p)) == "null") { p += 4; return new Json { Kind = JsonKind.Null }; }
+            if (string.CompareOrdinal(s, p, "true", 0, 4) == 0) { p += 4; return new Json { Kind = JsonKind.Bool, Bool = true }; }
+            if (string.CompareOrdinal(s, p, "false", 0, 5) == 0) { p += 5; return new Json { Kind = JsonKind.Bool }; }
+            if (string.CompareOrdinal(s, p, "null", 0, 4) == 0) { p += 4; return new Json { Kind = JsonKind.Null }; }
             int start = p;
             while (p < s.Length && "+-0123456789.eE".IndexOf(s[p]) >= 0) p++;
             if (p == start) throw new FormatException("bad JSON at " + p);

@@ -116,6 +116,7 @@ namespace Posecast.Client.Tests
                 new KeyValuePair<string, Action>("errors", ErrorsTests.Register),
                 new KeyValuePair<string, Action>("vectors", VectorTests.Register),
                 new KeyValuePair<string, Action>("codec", CodecTests.Register),
+                new KeyValuePair<string, Action>("interp", InterpTests.Register),
             };
             foreach (var s in suites)
             {
