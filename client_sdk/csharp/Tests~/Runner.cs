@@ -117,6 +117,8 @@ namespace Posecast.Client.Tests
                 new KeyValuePair<string, Action>("vectors", VectorTests.Register),
                 new KeyValuePair<string, Action>("codec", CodecTests.Register),
                 new KeyValuePair<string, Action>("interp", InterpTests.Register),
+                new KeyValuePair<string, Action>("session", SessionTests.Register),
+                new KeyValuePair<string, Action>("e2e", E2ETests.Register),
             };
             foreach (var s in suites)
             {

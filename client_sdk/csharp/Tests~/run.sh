@@ -28,6 +28,6 @@ mcs -langversion:7.3 -target:library -nologo -out:"$OUT/probe.dll" "$OUT/probe.c
 MCS=(mcs -langversion:$LANGV -nologo -warnaserror+ -debug-)
 
 "${MCS[@]}" -target:library -out:"$OUT/Posecast.Client.dll" "$SDK"/Runtime/Core/*.cs
-"${MCS[@]}" -r:"$OUT/Posecast.Client.dll" -r:System.Net.Http.dll -out:"$OUT/PosecastTests.exe" "$SDK"/Tests~/*.cs
+"${MCS[@]}" -r:"$OUT/Posecast.Client.dll" -r:System.Core.dll -out:"$OUT/PosecastTests.exe" "$SDK"/Tests~/*.cs
 echo "cs-test: built with mcs -langversion:$LANGV ($(mcs --version))"
 exec mono "$OUT/PosecastTests.exe" --repo "$PWD" "$@"

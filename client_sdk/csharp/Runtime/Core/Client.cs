@@ -1,0 +1,468 @@
+// PosecastClient: a thin shell that moves bytes between a ClientWebSocket and the
+// Sans-I/O ClientSession. No Unity types: the Unity components call it.
+//
+// Lifecycle:
+//   ConnectAsync --> JoinAsync --> (SendFrameAsync)* + TryGetEvent/NextEventAsync --> CloseAsync
+//                       |
+//                       +-- connection lost / SERVER_SHUTDOWN / TIMED_OUT / SLOW_CONSUMER / INTERNAL:
+//                           Reconnecting(attempt, delay) ... back-off ... rejoin --> Welcome
+//
+// Versions: the client offers posecast.v2 and posecast.v1 and speaks the one the
+// server selects (v2: one poses message per tick, FK from the announced skeletons).
+//
+// Reconnect and resume: when a joined connection ends for a retryable reason the
+// client waits an exponential back-off with jitter (BackoffInitialS doubling up to
+// BackoffMaxS), opens a new connection (the next URL, for a cluster) and sends the
+// same hello again (a fresh token when TokenProvider is set). Frames sent meanwhile
+// are dropped, not queued, but their seq is used up, so seq keeps increasing. Errors
+// a retry cannot fix (a refused token, ROOM_FULL, KICKED, REPLACED...) end the
+// client: the next TryGetEvent/SendFrameAsync throws that typed error.
+//
+// Threads: one receive task per connection and one pinger (clock sync: four pings
+// after each join, then one every PingIntervalS) run on the thread pool. Events wait
+// in a bounded queue; a Unity Update drains it with TryGetEvent.
+
+using System;
+using System.Collections.Generic;
+using System.Diagnostics;
+using System.Net.WebSockets;
+using System.Threading;
+using System.Threading.Tasks;
+
+namespace Posecast.Client
+{
+    /// <summary>The options of a PosecastClient, with their defaults.</summary>
+    public sealed class ClientOptions
+    {
+        /// <summary>Called at every join for a fresh token (else the token given to ConnectAsync).</summary>
+        public Func<string> TokenProvider;
+        /// <summary>Protocol versions offered, best first ({2, 1}); {1} pins posecast.v1.</summary>
+        public int[] Versions = { Protocol.V2, Protocol.V1 };
+        public bool Reconnect = true;
+        public double BackoffInitialS = 0.25;
+        public double BackoffMaxS = 8.0;
+        /// <summary>Give up after this many failed attempts in a row (null: never).</summary>
+        public int? MaxReconnectAttempts;
+        /// <summary>Seconds between clock-sync pings (2; 0 turns pings off).</summary>
+        public double PingIntervalS = 2.0;
+        public double OpenTimeoutS = 5.0;
+        public double JoinTimeoutS = 5.0;
+        /// <summary>Events kept before the oldest are dropped (4096).</summary>
+        public int MaxEvents = 4096;
+        /// <summary>seq of the first frame (0).</summary>
+        public long Seq0;
+        /// <summary>The largest WebSocket message read; beyond it a message is skipped as TOO_LARGE.</summary>
+        public int MaxReceiveBytes = 65536;
+    }
+
+    public sealed class PosecastClient : IDisposable
+    {
+        private static readonly Stopwatch Mono = Stopwatch.StartNew();
+
+        /// <summary>This process's monotonic clock, seconds (what frames' T and the clock use).</summary>
+        public static double Now { get { return Mono.Elapsed.TotalSeconds; } }
+
+        public readonly string[] Urls;
+        public readonly ClientOptions Options;
+        public readonly ClientSession Session;
+        private readonly string _token;
+        private readonly object _lock = new object();
+        private readonly Queue<ClientEvent> _events = new Queue<ClientEvent>();
+        private readonly SemaphoreSlim _sendLock = new SemaphoreSlim(1, 1);
+        private readonly SemaphoreSlim _wake = new SemaphoreSlim(0, int.MaxValue);
+        private readonly Random _rng = new Random();
+        private readonly CancellationTokenSource _closing = new CancellationTokenSource();
+        private ClientWebSocket _ws;
+        private int _urlIndex;
+        private Func<Hello> _hello;
+        private Exception _failure;
+        private volatile bool _joined;
+        private Task _runTask, _pingTask;
+
+        private PosecastClient(string[] urls, string token, ClientOptions options)
+        {
+            Urls = urls;
+            _token = token;
+            Options = options ?? new ClientOptions();
+            Session = new ClientSession(Options.Seq0);
+        }
+
+        /// <summary>
+        /// Open a WebSocket to a posecast server. The token travels in hello, never in the
+        /// URL. Several URLs (one cluster's nodes) are tried in order; reconnects move on.
+        /// </summary>
+        public static async Task<PosecastClient> ConnectAsync(string url, string token, ClientOptions options = null)
+        {
+            return await ConnectAsync(new[] { url }, token, options).ConfigureAwait(false);
+        }
+
+        public static async Task<PosecastClient> ConnectAsync(string[] urls, string token, ClientOptions options = null)
+        {
+            if (urls == null || urls.Length == 0) throw new ArgumentException("no server URL");
+            var c = new PosecastClient(urls, token, options);
+            for (int i = 0; i < urls.Length; i++)
+            {
+                c._urlIndex = i;
+                try { c._ws = await c.OpenAsync().ConfigureAwait(false); break; }
+                catch (Exception) when (i < urls.Length - 1) { }
+            }
+            return c;
+        }
+
+        // --- state -------------------------------------------------------------------
+
+        public string Url { get { return Urls[_urlIndex]; } }
+        public bool Connected { get { return _joined; } }
+        /// <summary>The connection's protocol version (1 or 2).</summary>
+        public int Version { get { return Session.Version; } }
+        public Welcome Welcome { get { return Session.Welcome; } }
+        public string Player { get { var w = Session.Welcome; return w == null ? null : w.Player; } }
+        public ClockSync Clock { get { return Session.Clock; } }
+        public Stats Stats { get { return Session.Stats; } }
+        /// <summary>Server time now, by the clock sync (Now before the first pong).</summary>
+        public double ServerNow { get { lock (_lock) return Session.Clock.ToServer(Now); } }
+
+        // --- connecting and joining ----------------------------------------------------
+
+        private async Task<ClientWebSocket> OpenAsync()
+        {
+            var ws = new ClientWebSocket();
+            foreach (var v in Options.Versions) ws.Options.AddSubProtocol(Protocol.Subprotocol(v));
+            using (var cts = new CancellationTokenSource(TimeSpan.FromSeconds(Options.OpenTimeoutS)))
+                await ws.ConnectAsync(new Uri(Url), cts.Token).ConfigureAwait(false);
+            int version = ws.SubProtocol == Protocol.SubprotocolV2 ? Protocol.V2
+                        : ws.SubProtocol == Protocol.SubprotocolV1 ? Protocol.V1 : 0;
+            if (version == 0 || Array.IndexOf(Options.Versions, version) < 0)
+            {
+                ws.Abort();
+                throw new VersionUnsupportedException("the server selected no posecast subprotocol we offered (" + ws.SubProtocol + ")");
+            }
+            lock (_lock) Session.Connected(version);
+            return ws;
+        }
+
+        private async Task<Welcome> HandshakeAsync(ClientWebSocket ws)
+        {
+            string token = Options.TokenProvider != null ? Options.TokenProvider() : _token;
+            Hello hello;
+            lock (_lock) { hello = _hello(); hello.Token = token; }
+            await SendRawAsync(ws, Codec.Encode(hello)).ConfigureAwait(false);
+            using (var cts = CancellationTokenSource.CreateLinkedTokenSource(_closing.Token))
+            {
+                cts.CancelAfter(TimeSpan.FromSeconds(Options.JoinTimeoutS));
+                while (true)
+                {
+                    byte[] data = await ReceiveMessageAsync(ws, cts.Token).ConfigureAwait(false);
+                    if (data == null) throw new ConnectionLostException("the server closed the connection during the join");
+                    Received r;
+                    lock (_lock) r = Session.Receive(data, Now);
+                    var reply = ClientSession.ClassifyJoinReply(r);
+                    if (reply is Exception) throw (Exception)reply;
+                    if (reply is Welcome)
+                    {
+                        foreach (var e in r.Events) Push(e);
+                        return (Welcome)reply;
+                    }
+                }
+            }
+        }
+
+        /// <summary>
+        /// Join a room as `name` (shown to others) and start receiving.
+        /// layout: "hmd3+waist" (head, hands, waist; the default) or "hmd3" (headset and
+        /// controllers only). rateHz: frames per second this client sends (null: 60).
+        /// poseRateHz (v2): poses per second to receive, 60, 30, 20 or 15 (null: 60).
+        /// Throws the typed refusal (UnauthenticatedException, RoomFullException...).
+        /// </summary>
+        public async Task<Welcome> JoinAsync(string room, string name, string layout = null, double? rateHz = null,
+                                             string[] watch = null, double? poseRateHz = null)
+        {
+            if (_closing.IsCancellationRequested) throw new ClientClosedException("the client is closed");
+            if (_ws == null || _hello != null) throw new InvalidOperationException("JoinAsync once per client, after ConnectAsync");
+            _hello = () => Session.BuildHello("", room, name, layout, rateHz, watch, poseRateHz);
+            Welcome w;
+            try { w = await HandshakeAsync(_ws).ConfigureAwait(false); }
+            catch { _hello = null; throw; }
+            _joined = true;
+            var ws = _ws;
+            _runTask = Task.Run(() => RunAsync(ws));
+            if (Options.PingIntervalS > 0) _pingTask = Task.Run(() => PingerAsync());
+            return w;
+        }
+
+        // --- the connection task ---------------------------------------------------------
+
+        private async Task RunAsync(ClientWebSocket ws)
+        {
+            while (true)
+            {
+                var cause = await ReadAsync(ws).ConfigureAwait(false);
+                _joined = false;
+                try { ws.Dispose(); } catch (Exception) { }
+                if (_closing.IsCancellationRequested) return;
+                if (!(Options.Reconnect && ClientSession.IsRetryable(cause))) { Fail(cause); return; }
+                ws = await ReconnectAsync(cause).ConfigureAwait(false);
+                if (ws == null) return;
+                _ws = ws;
+                _joined = true;
+            }
+        }
+
+        private async Task<Exception> ReadAsync(ClientWebSocket ws)
+        {
+            Exception cause = null;
+            try
+            {
+                while (true)
+                {
+                    byte[] data = await ReceiveMessageAsync(ws, _closing.Token).ConfigureAwait(false);
+                    if (data == null) break;
+                    Received r;
+                    lock (_lock) r = Session.Receive(data, Now);
+                    foreach (var e in r.Events) Push(e);
+                    if (r.Reply != null) await TrySendAsync(ws, r.Reply).ConfigureAwait(false);
+                    if (r.End != null && cause == null) cause = r.End; // the server closes right after
+                }
+            }
+            catch (OperationCanceledException) { }
+            catch (Exception e) when (e is WebSocketException || e is System.IO.IOException || e is ObjectDisposedException)
+            {
+                if (cause == null) cause = new ConnectionLostException("connection lost: " + e.Message, e);
+            }
+            return cause ?? new ConnectionLostException("connection closed");
+        }
+
+        /// <summary>One whole message, or null when the server closed. Oversized ones are skipped.</summary>
+        private async Task<byte[]> ReceiveMessageAsync(ClientWebSocket ws, CancellationToken ct)
+        {
+            var buf = new byte[8192];
+            while (true)
+            {
+                int len = 0;
+                bool tooLarge = false;
+                WebSocketReceiveResult res;
+                do
+                {
+                    if (len == buf.Length)
+                    {
+                        if (buf.Length < Options.MaxReceiveBytes) Array.Resize(ref buf, Math.Min(buf.Length * 2, Options.MaxReceiveBytes));
+                        else { tooLarge = true; len = 0; } // keep reading, keep nothing
+                    }
+                    res = await ws.ReceiveAsync(new ArraySegment<byte>(buf, len, buf.Length - len), ct).ConfigureAwait(false);
+                    if (res.MessageType == WebSocketMessageType.Close) return null;
+                    len += res.Count;
+                } while (!res.EndOfMessage);
+                if (res.MessageType == WebSocketMessageType.Text)
+                {
+                    try { await ws.CloseOutputAsync(WebSocketCloseStatus.InvalidMessageType, "text", CancellationToken.None).ConfigureAwait(false); }
+                    catch (Exception) { }
+                    throw new WebSocketException("the server sent a text message");
+                }
+                if (tooLarge)
+                {
+                    lock (_lock) Session.Stats.BadMessages++;
+                    Push(new ClientEvent { Kind = EventKind.Bad, Cause = new TooLargeException("a message over " + Options.MaxReceiveBytes + " bytes") });
+                    continue;
+                }
+                var data = new byte[len];
+                Buffer.BlockCopy(buf, 0, data, 0, len);
+                return data;
+            }
+        }
+
+        private async Task<ClientWebSocket> ReconnectAsync(Exception cause)
+        {
+            int attempt = 0;
+            while (!_closing.IsCancellationRequested)
+            {
+                attempt++;
+                if (Options.MaxReconnectAttempts.HasValue && attempt > Options.MaxReconnectAttempts.Value) { Fail(cause); return null; }
+                double delay;
+                lock (_lock) delay = ClientSession.BackoffDelay(attempt, Options.BackoffInitialS, Options.BackoffMaxS, _rng);
+                Push(new ClientEvent { Kind = EventKind.Reconnecting, Attempt = attempt, DelayS = delay, Cause = cause });
+                try { await Task.Delay(TimeSpan.FromSeconds(delay), _closing.Token).ConfigureAwait(false); }
+                catch (OperationCanceledException) { return null; }
+                _urlIndex = (_urlIndex + 1) % Urls.Length;
+                ClientWebSocket ws = null;
+                try
+                {
+                    ws = await OpenAsync().ConfigureAwait(false);
+                    await HandshakeAsync(ws).ConfigureAwait(false);
+                    lock (_lock) Session.Stats.Reconnects++;
+                    return ws;
+                }
+                catch (Exception e)
+                {
+                    if (ws != null) { try { ws.Abort(); ws.Dispose(); } catch (Exception) { } }
+                    if (_closing.IsCancellationRequested) return null;
+                    if (e is OperationCanceledException) e = new TimeoutException("no welcome in time");
+                    if (!ClientSession.IsRetryable(e)) { Fail(e); return null; }
+                    cause = e;
+                }
+            }
+            return null;
+        }
+
+        private async Task PingerAsync()
+        {
+            try
+            {
+                while (!_closing.IsCancellationRequested)
+                {
+                    while (!_joined) await Task.Delay(50, _closing.Token).ConfigureAwait(false);
+                    for (int k = 0; k < 4 && _joined; k++)
+                    {
+                        await PingAsync().ConfigureAwait(false);
+                        await Task.Delay(100, _closing.Token).ConfigureAwait(false);
+                    }
+                    while (_joined)
+                    {
+                        await Task.Delay(TimeSpan.FromSeconds(Options.PingIntervalS), _closing.Token).ConfigureAwait(false);
+                        await PingAsync().ConfigureAwait(false);
+                    }
+                }
+            }
+            catch (OperationCanceledException) { }
+        }
+
+        private Task PingAsync()
+        {
+            var ws = _ws;
+            return ws == null ? Task.FromResult(false) : TrySendAsync(ws, new Ping { T0 = Now });
+        }
+
+        private void Push(ClientEvent e)
+        {
+            lock (_events)
+            {
+                if (_events.Count >= Options.MaxEvents) { _events.Dequeue(); Session.Stats.EventsDropped++; }
+                _events.Enqueue(e);
+            }
+            _wake.Release();
+        }
+
+        private void Fail(Exception cause)
+        {
+            _failure = cause;
+            _wake.Release();
+        }
+
+        // --- the application's side -------------------------------------------------------
+
+        private void CheckUsable()
+        {
+            if (_failure != null) throw _failure;
+            if (_closing.IsCancellationRequested) throw new ClientClosedException("the client is closed");
+            if (_hello == null) throw new InvalidOperationException("JoinAsync first");
+        }
+
+        private async Task SendRawAsync(ClientWebSocket ws, byte[] data)
+        {
+            await _sendLock.WaitAsync().ConfigureAwait(false);
+            try { await ws.SendAsync(new ArraySegment<byte>(data), WebSocketMessageType.Binary, true, CancellationToken.None).ConfigureAwait(false); }
+            finally { _sendLock.Release(); }
+        }
+
+        private async Task<bool> TrySendAsync(ClientWebSocket ws, Message msg)
+        {
+            try { await SendRawAsync(ws, Codec.Encode(msg)).ConfigureAwait(false); return true; }
+            catch (Exception e) when (e is WebSocketException || e is ObjectDisposedException || e is InvalidOperationException || e is System.IO.IOException)
+            {
+                return false; // the receive task notices and reconnects
+            }
+        }
+
+        /// <summary>Send any client message (calibrate, selector, kick, pose_rate, resync...);
+        /// false when it was dropped because the client is reconnecting.</summary>
+        public async Task<bool> SendAsync(Message msg)
+        {
+            CheckUsable();
+            var ws = _ws;
+            if (ws == null || !_joined) return false;
+            return await TrySendAsync(ws, msg).ConfigureAwait(false);
+        }
+
+        /// <summary>
+        /// Send one tracker frame (4 world positions and orientations in slot order HEAD,
+        /// LEFT_HAND, RIGHT_HAND, WAIST; valid bit i set: slot i tracked). Returns its seq,
+        /// or null when it was dropped because the client is reconnecting.
+        /// Throws OutOfRangeException / NotNormalisedException for an unusable tracked
+        /// slot (nothing is sent), or the error that ended the session.
+        /// </summary>
+        public async Task<long?> SendFrameAsync(Vec3[] positions, Quat[] orientations, int valid = Protocol.AllTrackersValid)
+        {
+            CheckUsable();
+            double now = Now;
+            Frame f;
+            lock (_lock) f = Session.BuildFrame(positions, orientations, now, valid);
+            var ws = _ws;
+            if (ws != null && _joined && await TrySendAsync(ws, f).ConfigureAwait(false))
+            {
+                lock (_lock) Session.Sent(f, now);
+                return f.Seq;
+            }
+            lock (_lock) Session.Dropped(f);
+            return null;
+        }
+
+        /// <summary>Calibrate the avatar by standing height, metres (0.9 .. 2.5).</summary>
+        public Task<bool> CalibrateAsync(double heightM) { return SendAsync(new Calibrate { HeightM = heightM }); }
+
+        /// <summary>v2: receive poses at 60, 30, 20 or 15 Hz from now on.</summary>
+        public Task<bool> SetPoseRateAsync(double rateHz) { return SendAsync(new PoseRate { RateHz = rateHz }); }
+
+        /// <summary>The next event if one is waiting (for a game loop). Throws the error that ended the session.</summary>
+        public bool TryGetEvent(out ClientEvent e)
+        {
+            lock (_events)
+            {
+                if (_events.Count > 0) { e = _events.Dequeue(); return true; }
+            }
+            e = null;
+            if (_failure != null) throw _failure;
+            return false;
+        }
+
+        /// <summary>The next event, waiting for it; null after CloseAsync or when `ct` is cancelled.</summary>
+        public async Task<ClientEvent> NextEventAsync(CancellationToken ct = default(CancellationToken))
+        {
+            while (true)
+            {
+                ClientEvent e;
+                if (TryGetEvent(out e)) return e;
+                if (_closing.IsCancellationRequested || ct.IsCancellationRequested) return null;
+                try { await _wake.WaitAsync(250, ct).ConfigureAwait(false); }
+                catch (OperationCanceledException) { return null; }
+            }
+        }
+
+        /// <summary>Say bye and close. The server refuses this token afterwards (replay guard).</summary>
+        public async Task CloseAsync(string reason = null)
+        {
+            if (_closing.IsCancellationRequested) return;
+            var ws = _ws;
+            if (ws != null && _hello != null && _joined)
+                await TrySendAsync(ws, new Bye { Reason = reason }).ConfigureAwait(false);
+            _closing.Cancel();
+            _joined = false;
+            if (ws != null)
+            {
+                try
+                {
+                    using (var cts = new CancellationTokenSource(TimeSpan.FromSeconds(2)))
+                        await ws.CloseOutputAsync(WebSocketCloseStatus.NormalClosure, reason ?? "", cts.Token).ConfigureAwait(false);
+                }
+                catch (Exception) { }
+            }
+            foreach (var t in new[] { _runTask, _pingTask })
+            {
+                if (t == null) continue;
+                try { await Task.WhenAny(t, Task.Delay(3000)).ConfigureAwait(false); } catch (Exception) { }
+            }
+            if (ws != null) { try { ws.Abort(); ws.Dispose(); } catch (Exception) { } }
+            _wake.Release();
+        }
+
+        public void Dispose() { CloseAsync().Wait(5000); }
+    }
+}
