@@ -24,6 +24,14 @@ client: :meth:`Client.events` and :meth:`Client.send_frame` raise the typed erro
 Three tasks run per client: the connection task (reads, decodes, reconnects), the
 pinger (clock sync: four pings right after each join, then one every
 ``ping_interval_s``) and whatever the application runs itself.
+
+**Protocol version.** The client offers ``posecast.v2`` then ``posecast.v1`` and
+speaks what the server selects: against a v1-only server everything works as
+before. On v2 the server sends each tick's poses in one message, rotations first
+(keyframes and deltas against what this client holds); the session rebuilds each
+avatar (positions by FK with its announced skeleton, world and local rotations) and
+hands out the same :class:`~posecast_client.protocol.Pose` events, one per avatar.
+``pose_rate_hz`` (60, 30, 20, 15) lowers how many a second it gets.
 """
 
 from __future__ import annotations
@@ -63,12 +71,15 @@ from posecast_client.errors import (
 )
 from posecast_client.protocol import (
     ALL_VALID,
-    SUBPROTOCOL,
+    PROTOCOL_V2,
+    SUBPROTOCOLS,
     Bye,
     Calibrate,
     Layout,
     Message,
     Ping,
+    PoseRate,
+    Resync,
     Welcome,
 )
 from posecast_client.session import (
@@ -109,6 +120,8 @@ class Client:
         keepalive_s: WebSocket ping interval and timeout, to notice a dead link (5 s).
         max_events: events kept for :meth:`events` before the oldest are dropped (4096).
         seq0: ``seq`` of the first frame (0).
+        protocol: the newest protocol version to offer (2: ``posecast.v2``, falling
+            back to ``posecast.v1`` when the server only speaks v1; 1: v1 only).
     """
 
     def __init__(
@@ -126,6 +139,7 @@ class Client:
         keepalive_s: float = 5.0,
         max_events: int = 4096,
         seq0: int = 0,
+        protocol: int = PROTOCOL_V2,
     ) -> None:
         self.urls: tuple[str, ...] = (url,) if isinstance(url, str) else tuple(url)
         if not self.urls:
@@ -138,6 +152,9 @@ class Client:
         self.ping_interval_s = ping_interval_s
         self.open_timeout_s, self.join_timeout_s = open_timeout_s, join_timeout_s
         self.keepalive_s = keepalive_s
+        if protocol not in SUBPROTOCOLS:
+            raise ValueError(f"protocol must be one of {sorted(SUBPROTOCOLS)}")
+        self.protocol = protocol
         self.session = ClientSession(seq0=seq0)
         self._rng = random.Random()
         self._ws: ClientConnection | None = None
@@ -173,6 +190,11 @@ class Client:
         return self._joined.is_set()
 
     @property
+    def version(self) -> int:
+        """The protocol version of the current (or last) connection: 1 or 2."""
+        return self.session.version
+
+    @property
     def clock(self) -> ClockSync:
         """Offset between this client's ``time.monotonic()`` and the server's clock."""
         return self.session.clock
@@ -190,19 +212,26 @@ class Client:
     # --- connecting and joining ----------------------------------------------------------
 
     async def _open(self) -> ClientConnection:
+        offered = [
+            SUBPROTOCOLS[v] for v in sorted(SUBPROTOCOLS, reverse=True) if v <= self.protocol
+        ]
         ws = await ws_connect(
             self.url,
-            subprotocols=[Subprotocol(SUBPROTOCOL)],
+            subprotocols=[Subprotocol(p) for p in offered],
             compression=None,  # poses are quantised binary: deflate costs CPU for little
             open_timeout=self.open_timeout_s,
             ping_interval=self.keepalive_s or None,
             ping_timeout=self.keepalive_s or None,
-            max_size=65_536,  # v1 messages are at most 8192 bytes; the codec says TOO_LARGE
+            max_size=65_536,  # messages are at most 16384 bytes; the codec says TOO_LARGE
         )
-        if ws.subprotocol != SUBPROTOCOL:
+        if ws.subprotocol not in offered:
             await ws.close()
-            raise VersionUnsupportedError(f"the server did not select {SUBPROTOCOL}")
+            raise VersionUnsupportedError(f"the server selected none of {offered}")
         return ws
+
+    @staticmethod
+    def _version_of(ws: ClientConnection) -> int:
+        return next(v for v, p in SUBPROTOCOLS.items() if p == ws.subprotocol)
 
     async def _handshake(self, ws: ClientConnection) -> Welcome:
         """Send ``hello`` on ``ws`` and read up to its ``welcome`` (or refusal)."""
@@ -210,17 +239,18 @@ class Client:
         token = self._token() if callable(self._token) else self._token
         if inspect.isawaitable(token):
             token = await token
+        version = self._version_of(ws)
+        self.session.connected(version)
         await ws.send(encode(self.session.hello(str(token), **self._hello_args)))
         async with asyncio.timeout(self.join_timeout_s):
             while True:
                 data = await ws.recv()
                 if not isinstance(data, bytes):
                     raise ConnectionLostError("the server sent a text message")
-                reply = classify_join_reply(decode(data))
+                reply = classify_join_reply(decode(data, version=version))
                 if isinstance(reply, ProtocolError):
                     raise reply
                 if reply is not None:
-                    self.session.connected()
                     self.session.receive(reply, time.monotonic())
                     return reply
 
@@ -232,6 +262,7 @@ class Client:
         layout: str = Layout.HMD3_WAIST,
         rate_hz: float | None = None,
         watch: tuple[str, ...] = (),
+        pose_rate_hz: float | None = None,
     ) -> Welcome:
         """Join ``room`` as ``name`` (shown to others) and start receiving.
 
@@ -242,6 +273,8 @@ class Client:
                 waist slot of frames is ignored). Servers serve both by default.
             rate_hz: frames per second this client will send (absent: 60).
             watch: further rooms to watch (backend tokens only).
+            pose_rate_hz: v2: poses per second to receive, 60 (absent), 30, 20 or 15
+                (a phone, a spectator); ignored by a v1 server.
 
         Raises:
             ProtocolError: the typed refusal (``UnauthenticatedError``,
@@ -252,7 +285,7 @@ class Client:
         if self._ws is None or self._hello_args is not None:
             raise RuntimeError("join() once per client, after `await connect(...)`")
         self._hello_args = {"room": room, "name": name, "layout": layout, "rate_hz": rate_hz,
-                            "watch": watch}  # fmt: skip
+                            "watch": watch, "pose_rate_hz": pose_rate_hz}  # fmt: skip
         if layout == Layout.HMD3_WAIST:
             self._hello_args["layout"] = None  # the default: canonical hellos leave it out
         try:
@@ -297,14 +330,18 @@ class Client:
                     await ws.close(1003)
                     break
                 try:
-                    msg = decode(data)
+                    msg = decode(data, version=self.session.version)
                 except ProtocolError as exc:
                     self.session.stats.bad_messages += 1
                     log.warning("skipping a server message: %r", exc)
                     continue
-                event, end = self.session.receive(msg, time.monotonic())
-                if event is not None:
+                events, end = self.session.receive_all(msg, time.monotonic(), len(data))
+                for event in events:
                     self._push(event)
+                if self.session.want_resync:  # a record it could not apply: start afresh
+                    self.session.want_resync = False
+                    with contextlib.suppress(ConnectionClosed):
+                        await ws.send(encode(Resync()))
                 if end is not None and cause is None:
                     cause = end  # the server closes right after; keep reading until it does
         except ConnectionClosed as exc:
@@ -444,6 +481,26 @@ class Client:
                 sent += 1
         return sent
 
+    async def set_pose_rate(self, rate_hz: float) -> bool:
+        """v2: receive ``rate_hz`` poses a second from now on (60, 30, 20 or 15).
+
+        Raises:
+            ValueError: another rate, or the server speaks only v1.
+        """
+        if rate_hz not in (60.0, 30.0, 20.0, 15.0):
+            raise ValueError("the pose rate must be 60, 30, 20 or 15 Hz")
+        if self.session.version < PROTOCOL_V2:
+            raise ValueError("the server speaks posecast.v1: no pose rates")
+        if self._hello_args is not None:
+            self._hello_args["pose_rate_hz"] = rate_hz  # and after a reconnect
+        return await self.send(PoseRate(float(rate_hz)))
+
+    async def resync(self) -> bool:
+        """v2: ask for a keyframe of every avatar with the next poses (no-op on v1)."""
+        if self.session.version < PROTOCOL_V2:
+            return False
+        return await self.send(Resync())
+
     async def calibrate(
         self, *, height_m: float | None = None, tpose: TrackerSample | None = None
     ) -> bool:
@@ -557,7 +614,8 @@ class Connecting:
 
 
 def connect(url: str | Sequence[str], token: Token, **options: Any) -> Connecting:
-    """Open a WebSocket to a posecast server (subprotocol ``posecast.v1``).
+    """Open a WebSocket to a posecast server (``posecast.v2``, or ``posecast.v1`` when
+    that is all the server speaks).
 
     ``await connect(url, token)`` gives a :class:`Client`; then :meth:`Client.join`.
     The token travels in ``hello``, never in the URL. ``options`` are the keyword

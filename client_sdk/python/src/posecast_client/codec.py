@@ -1,4 +1,4 @@
-"""Bytes <-> messages for protocol v1. Pure functions: no sockets, no clocks, no state.
+"""Bytes <-> messages for protocols v1 and v2. Pure functions: no sockets, no clocks, no state.
 
 This is an implementation of ``proto/README.md`` written apart from the server's;
 the shared vectors in ``proto/vectors/`` keep the two honest.
@@ -12,6 +12,12 @@ float64 and everything else in its smallest msgpack form, which is what
 spec's order: size (TOO_LARGE), one msgpack value within the structural bounds
 (MALFORMED / TOO_LARGE), a root map, depth and string keys (MALFORMED), ``type``
 (BAD_FIELD / UNKNOWN_TYPE), then the fields of that type.
+
+``version`` is the connection's protocol (the subprotocol the server selected): v2
+knows ``poses``, ``skeleton``, ``pose_rate`` and ``resync`` but no ``pose``, wants
+``version`` 2 in ``hello``, a ``handle`` and ``skeleton`` for every ``welcome``
+member and ``presence`` join, and lets a server message and its bins reach 16384
+bytes. ``poses.data`` is opaque here: :mod:`posecast_client.records` reads it.
 """
 
 from __future__ import annotations
@@ -47,13 +53,17 @@ from posecast_client.protocol import (
     MAX_HEIGHT_M,
     MAX_ID_BYTES,
     MAX_MAP_LEN,
+    MAX_SERVER_MESSAGE_BYTES_V2,
     MAX_STR_BYTES,
     MAX_TIME_S,
     MIN_HEIGHT_M,
     POS_UNIT_M,
+    POSE_RATES_HZ,
     PRESENCE_EVENTS,
+    PROTOCOL_V2,
     PROTOCOL_VERSION,
     QUAT_TOLERANCE,
+    ROLE_MAY_SEND_V2,
     ROLES,
     ROT_SCALE,
     SELECTOR_KINDS,
@@ -70,8 +80,12 @@ from posecast_client.protocol import (
     Ping,
     Pong,
     Pose,
+    PoseRate,
+    Poses,
     Presence,
+    Resync,
     Selector,
+    Skeleton,
     Welcome,
 )
 from posecast_client.skeleton import JOINT_NAMES, NUM_JOINTS
@@ -81,20 +95,27 @@ T = TypeVar("T")
 
 # Canonical key order of every message (after "type"): the spec's field tables.
 FIELDS: dict[str, tuple[str, ...]] = {
-    "hello": ("version", "token", "room", "name", "layout", "rate_hz", "watch"),
+    "hello": ("version", "token", "room", "name", "layout", "rate_hz", "watch", "pose_rate_hz"),
     "welcome": ("version", "player", "session", "role", "room", "t", "rate_hz",
-                "lookahead_frames", "members", "limits"),
+                "lookahead_frames", "members", "limits", "pose_rate_hz"),
     "calibrate": ("height_m", "tpose", "trackers"),
     "frame": ("seq", "t", "trackers", "valid"),
     "pose": ("player", "seq", "t", "root", "pos_mm", "rot"),
-    "presence": ("event", "room", "player", "name"),
+    "presence": ("event", "room", "player", "name", "handle", "skeleton"),
     "selector": ("player", "kind", "joint", "point", "radius_m", "margin_m", "factor"),
     "kick": ("player", "reason"),
     "ping": ("t0",),
     "pong": ("t0", "t1", "t2"),
     "error": ("code", "message", "fatal", "field", "ref_seq"),
     "bye": ("reason",),
+    "poses": ("t", "data"),
+    "skeleton": ("player", "handle", "skeleton"),
+    "pose_rate": ("rate_hz",),
+    "resync": (),
 }  # fmt: skip
+V1_TYPES = frozenset(FIELDS) - {"poses", "skeleton", "pose_rate", "resync"}
+V2_TYPES = frozenset(FIELDS) - {"pose"}
+_V2_CLIENT_TYPES = frozenset().union(*ROLE_MAY_SEND_V2.values())
 _SELECTOR_APPLIES = {
     "anomaly": {"factor"},
     "target": {"joint", "point", "margin_m"},
@@ -105,6 +126,7 @@ _CODE = re.compile(r"[A-Z][A-Z0-9_]{0,31}")
 _CONTROL = re.compile(r"[\x00-\x1f\x7f]")
 _LEAVES = (type(None), bool, int, float, str, bytes)
 _I16 = np.dtype("<i2")
+SKELETON_BYTES = 108  # a v2 skeleton: 18 x 3 int16
 POS_BYTES, ROT_BYTES = (NUM_JOINTS - 1) * 3 * 2, NUM_JOINTS * 4 * 2  # 108, 152
 
 
@@ -112,22 +134,27 @@ POS_BYTES, ROT_BYTES = (NUM_JOINTS - 1) * 3 * 2, NUM_JOINTS * 4 * 2  # 108, 152
 
 
 def decode(
-    data: bytes, *, limits: Limits = DEFAULT_LIMITS, max_bytes: int | None = None
+    data: bytes,
+    *,
+    limits: Limits = DEFAULT_LIMITS,
+    max_bytes: int | None = None,
+    version: int = PROTOCOL_VERSION,
 ) -> Message:
     """Parse and validate one WebSocket message.
 
     Args:
         data: one whole binary WebSocket message.
         limits: the limits in force; the defaults are the v1 maxima.
-        max_bytes: a tighter size cap than ``limits.max_message_bytes``, if given.
+        max_bytes: a tighter size cap than the version's bound, if given.
+        version: the connection's protocol, 1 or 2.
 
     Raises:
         ProtocolError: the subclass of the first rule broken, with ``field`` set where
             the spec names one (and ``ref_seq`` for a frame whose ``seq`` was read).
     """
-    cap = (
-        limits.max_message_bytes if max_bytes is None else min(max_bytes, limits.max_message_bytes)
-    )
+    v2 = version >= PROTOCOL_V2
+    top = MAX_SERVER_MESSAGE_BYTES_V2 if v2 else limits.max_message_bytes
+    cap = top if max_bytes is None else min(max_bytes, top)
     if len(data) > cap:
         raise TooLargeError(f"message of {len(data)} bytes, limit {cap}")
     try:
@@ -136,7 +163,7 @@ def decode(
             raw=False,  # str must be UTF-8
             strict_map_key=True,  # str (or bin, refused below) keys only
             max_str_len=MAX_STR_BYTES,  # the bounds are checked at each header,
-            max_bin_len=MAX_BIN_BYTES,  # before anything is allocated
+            max_bin_len=cap if v2 else MAX_BIN_BYTES,  # before anything is allocated
             max_array_len=MAX_ARRAY_LEN,
             max_map_len=MAX_MAP_LEN,
         )
@@ -151,9 +178,11 @@ def decode(
     if type(kind) is not str:
         raise BadFieldError("type is missing or not a string", field="type")
     read = _DECODERS.get(kind)
-    if read is None:
+    if read is None or kind not in (V2_TYPES if v2 else V1_TYPES):
         raise UnknownTypeError(f"unknown message type {kind[:40]!r}", field="type")
-    return read(_Fields(obj), limits)
+    if v2 and kind in _V2_CLIENT_TYPES and len(data) > limits.max_message_bytes:
+        raise TooLargeError(f"a {kind} message of {len(data)} bytes")
+    return read(_Fields(obj, version=version), limits)
 
 
 def _check_structure(value: object, depth: int) -> None:
@@ -177,8 +206,8 @@ def _check_structure(value: object, depth: int) -> None:
 class _Fields:
     """The fields of one map; ``at`` prefixes paths in nested maps (``limits.``)."""
 
-    def __init__(self, m: Map, at: str = "") -> None:
-        self.m, self.at = m, at
+    def __init__(self, m: Map, at: str = "", version: int = PROTOCOL_VERSION) -> None:
+        self.m, self.at, self.version = m, at, version
 
     def has(self, key: str) -> bool:
         return self.m.get(key) is not None  # nil means absent
@@ -307,14 +336,26 @@ def _trackers(v: Any, path: str, valid: int) -> tuple[F64, F64]:
     return out[:, :3].copy(), out[:, 3:].copy()
 
 
-def _members(v: Any, path: str, lim: Limits) -> tuple[Member, ...]:
+def _members(v: Any, path: str, lim: Limits, version: int) -> tuple[Member, ...]:
     members = []
     for i, item in enumerate(_array(v, path, lim.max_players)):
         if type(item) is not dict:
             raise _bad(f"{path}[{i}]", "a map")
         f = _Fields(item, f"{path}[{i}].")
-        members.append(Member(f.req("player", _id), f.req("name", _name, lim.max_name_bytes)))
+        player, name = f.req("player", _id), f.req("name", _name, lim.max_name_bytes)
+        if version >= PROTOCOL_V2:
+            members.append(Member(player, name, f.req("handle", _int, 0, UINT32_MAX),
+                                  f.req("skeleton", _bin, SKELETON_BYTES)))  # fmt: skip
+        else:
+            members.append(Member(player, name))
     return tuple(members)
+
+
+def _pose_rate(v: Any, path: str) -> float:
+    rate = _float(v, path, 0.0, 1000.0)
+    if rate not in POSE_RATES_HZ:
+        raise OutOfRangeError(f"{path}={rate}: not 60, 30, 20 or 15", field=path)
+    return rate
 
 
 def _limits(v: Any, path: str) -> Limits:
@@ -326,8 +367,10 @@ def _limits(v: Any, path: str) -> Limits:
 
 def _hello(f: _Fields, lim: Limits) -> Hello:
     version = f.req("version", _int, -(2**63), 2**64)
-    if version != PROTOCOL_VERSION:
-        raise VersionUnsupportedError(f"version {version}: this peer speaks 1", field="version")
+    if version != f.version:
+        raise VersionUnsupportedError(
+            f"version {version} on a posecast.v{f.version} connection", field="version"
+        )
     watch = f.opt("watch", _array, lim.max_watch_rooms) or []
     return Hello(
         version=version,
@@ -337,6 +380,7 @@ def _hello(f: _Fields, lim: Limits) -> Hello:
         layout=f.opt("layout", _enum, LAYOUTS),
         rate_hz=f.opt("rate_hz", _float, 1.0, lim.max_rate_hz),
         watch=tuple(_id(r, f"watch[{i}]", lim.max_room_bytes) for i, r in enumerate(watch)),
+        pose_rate_hz=f.opt("pose_rate_hz", _pose_rate) if f.version >= PROTOCOL_V2 else None,
     )
 
 
@@ -350,8 +394,9 @@ def _welcome(f: _Fields, lim: Limits) -> Welcome:
         t=f.req("t", _time),
         rate_hz=f.req("rate_hz", _float, 1.0, 1000.0),
         lookahead_frames=f.req("lookahead_frames", _int, 0, 255),
-        members=f.req("members", _members, lim),
+        members=f.req("members", _members, lim, f.version),
         limits=f.req("limits", _limits),
+        pose_rate_hz=f.req("pose_rate_hz", _pose_rate) if f.version >= PROTOCOL_V2 else None,
     )
 
 
@@ -432,24 +477,46 @@ def _error(f: _Fields, lim: Limits) -> Error:
     )
 
 
+def _presence(f: _Fields, lim: Limits) -> Presence:
+    event = f.req("event", _enum, PRESENCE_EVENTS)
+    join = f.version >= PROTOCOL_V2 and event == "join"
+    return Presence(
+        event,
+        f.req("room", _id, lim.max_room_bytes),
+        f.req("player", _id),
+        f.req("name", _name, lim.max_name_bytes),
+        f.req("handle", _int, 0, UINT32_MAX) if join else None,
+        f.req("skeleton", _bin, SKELETON_BYTES) if join else None,
+    )
+
+
+def _data(v: Any, path: str) -> bytes:
+    if type(v) is not bytes:
+        raise _bad(path, "a bin")
+    return v
+
+
 _DECODERS: dict[str, Callable[[_Fields, Limits], Message]] = {
     "hello": _hello,
     "welcome": _welcome,
     "calibrate": _calibrate,
     "frame": _frame,
     "pose": _pose,
-    "presence": lambda f, lim: Presence(
-        f.req("event", _enum, PRESENCE_EVENTS),
-        f.req("room", _id, lim.max_room_bytes),
-        f.req("player", _id),
-        f.req("name", _name, lim.max_name_bytes),
-    ),
+    "presence": lambda f, lim: _presence(f, lim),
     "selector": _selector,
     "kick": lambda f, lim: Kick(f.req("player", _id), f.opt("reason", _str, 0, lim.max_text_bytes)),
     "ping": lambda f, lim: Ping(f.req("t0", _time)),
     "pong": lambda f, lim: Pong(f.req("t0", _time), f.req("t1", _time), f.req("t2", _time)),
     "error": _error,
     "bye": lambda f, lim: Bye(f.opt("reason", _str, 0, lim.max_text_bytes)),
+    "poses": lambda f, lim: Poses(f.req("t", _time), f.req("data", _data)),
+    "skeleton": lambda f, lim: Skeleton(
+        f.req("player", _id),
+        f.req("handle", _int, 0, UINT32_MAX),
+        f.req("skeleton", _bin, SKELETON_BYTES),
+    ),
+    "pose_rate": lambda f, lim: PoseRate(f.req("rate_hz", _pose_rate)),
+    "resync": lambda f, lim: Resync(),
 }
 
 
@@ -515,13 +582,15 @@ _ENCODERS: dict[str, Callable[[Any], Map]] = {
     "hello": lambda h: {
         "version": h.version, "token": h.token, "room": h.room, "name": h.name,
         "layout": h.layout, "rate_hz": _fl(h.rate_hz), "watch": list(h.watch) or None,
+        "pose_rate_hz": _fl(h.pose_rate_hz),
     },
     "welcome": lambda w: {
         "version": w.version, "player": w.player, "session": w.session, "role": w.role,
         "room": w.room, "t": float(w.t), "rate_hz": float(w.rate_hz),
         "lookahead_frames": w.lookahead_frames,
-        "members": [{"player": m.player, "name": m.name} for m in w.members],
+        "members": [_member(m) for m in w.members],
         "limits": {k: getattr(w.limits, k) for k in LIMIT_RANGES},
+        "pose_rate_hz": _fl(w.pose_rate_hz),
     },
     "calibrate": lambda c: (
         {"height_m": float(c.height_m)} if c.positions is None
@@ -532,7 +601,8 @@ _ENCODERS: dict[str, Callable[[Any], Map]] = {
         "valid": None if f.valid == ALL_VALID else int(f.valid),
     },
     "pose": _enc_pose,
-    "presence": lambda p: {"event": p.event, "room": p.room, "player": p.player, "name": p.name},
+    "presence": lambda p: {"event": p.event, "room": p.room, "player": p.player, "name": p.name,
+                           "handle": p.handle, "skeleton": p.skeleton},
     "selector": lambda s: {
         "player": s.player, "kind": s.kind, "joint": s.joint,
         "point": None if s.point is None else [float(c) for c in s.point],
@@ -544,4 +614,17 @@ _ENCODERS: dict[str, Callable[[Any], Map]] = {
     "error": lambda e: {"code": e.code, "message": e.message, "fatal": e.fatal,
                         "field": e.field, "ref_seq": e.ref_seq},
     "bye": lambda b: {"reason": b.reason},
+    "poses": lambda p: {"t": float(p.t), "data": bytes(p.data)},
+    "skeleton": lambda k: {"player": k.player, "handle": k.handle, "skeleton": k.skeleton},
+    "pose_rate": lambda p: {"rate_hz": float(p.rate_hz)},
+    "resync": lambda r: {},
 }  # fmt: skip
+
+
+def _member(m: Member) -> Map:
+    out: Map = {"player": m.player, "name": m.name}
+    if m.handle is not None:
+        out["handle"] = m.handle
+    if m.skeleton is not None:
+        out["skeleton"] = m.skeleton
+    return out

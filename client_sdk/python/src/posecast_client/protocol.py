@@ -1,4 +1,4 @@
-"""Wire protocol v1 as typed values: constants, limits and one dataclass per message.
+"""Wire protocols v1 and v2 as typed values: constants, limits, one dataclass per message.
 
 The spec is ``proto/README.md``; :mod:`posecast_client.codec` turns these values into
 canonical msgpack bytes and back. Units: metres, seconds, hertz. World frame:
@@ -26,6 +26,10 @@ F64 = NDArray[np.float64]
 
 PROTOCOL_VERSION = 1
 SUBPROTOCOL = "posecast.v1"
+PROTOCOL_V2 = 2
+SUBPROTOCOL_V2 = "posecast.v2"
+SUBPROTOCOLS = {1: SUBPROTOCOL, 2: SUBPROTOCOL_V2}  # this SDK offers v2 first, then v1
+POSE_RATES_HZ = (60.0, 30.0, 20.0, 15.0)  # v2 pose rates (divisors of the 60 Hz tick)
 
 
 class Layout(StrEnum):
@@ -54,6 +58,8 @@ ROT_SCALE = 32767.0  # one int16 step of pose.rot is 1 / ROT_SCALE
 # Structural bounds of every v1 message (not configurable).
 MAX_DEPTH = 8  # maps and arrays, the root map is depth 1; deeper is MALFORMED
 MAX_ARRAY_LEN, MAX_MAP_LEN, MAX_STR_BYTES, MAX_BIN_BYTES = 64, 32, 4096, 256  # TOO_LARGE
+# v2: a server message (and so a bin in it) may be up to 16384 bytes.
+MAX_SERVER_MESSAGE_BYTES_V2 = 16384
 
 # Which messages each role may send (the server answers FORBIDDEN to the rest).
 ROLE_MAY_SEND: dict[str, frozenset[str]] = {
@@ -61,6 +67,7 @@ ROLE_MAY_SEND: dict[str, frozenset[str]] = {
     "spectator": frozenset({"hello", "ping", "bye"}),
     "backend": frozenset({"hello", "selector", "kick", "ping", "bye"}),
 }
+ROLE_MAY_SEND_V2 = {r: t | {"pose_rate", "resync"} for r, t in ROLE_MAY_SEND.items()}
 
 # (floor, v1 maximum) of each limit, in canonical order; the defaults are the maxima.
 LIMIT_RANGES: dict[str, tuple[int, int]] = {
@@ -125,12 +132,18 @@ class Hello:
     rate_hz: float | None = None  # frames per second the client will send; absent: 60
     watch: tuple[str, ...] = ()
     version: int = PROTOCOL_VERSION
+    pose_rate_hz: float | None = None  # v2: poses per second to receive (absent: 60)
 
 
 @dataclass(frozen=True, slots=True)
 class Member:
+    """A player in the room; v2 adds its ``handle`` (how pose records name it) and its
+    ``skeleton`` (108 bytes: 18 x 3 int16 LE bone offsets in 0.1 mm)."""
+
     player: str
     name: str
+    handle: int | None = None
+    skeleton: bytes | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -148,6 +161,7 @@ class Welcome:
     lookahead_frames: int  # a pose lags its source frame by this many frames
     members: tuple[Member, ...]
     limits: Limits
+    pose_rate_hz: float | None = None  # v2: the poses per second this client gets
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -184,19 +198,59 @@ class Pose:
     player: str
     seq: int  # seq of the source frame (lags it by lookahead_frames)
     t: float  # server time of the tick that made it, seconds
-    positions: F64  # (19, 3) world metres, Joint order
-    rotations: F64 | None = None  # (19, 4) world xyzw, not renormalised
+    positions: F64  # (19, 3) world metres, Joint order (v2: rebuilt by FK)
+    rotations: F64 | None = None  # (19, 4) world xyzw (v1: not renormalised)
+    local_rotations: F64 | None = None  # v2: (19, 4) PELVIS world, then each joint's local
+    keyframe: bool = False  # v2: this record was a keyframe
+    reach_limited: bool = False  # v2: the head or a hand could not reach its tracker
 
 
 @dataclass(frozen=True, slots=True)
 class Presence:
-    """Server -> client: ``join``, ``leave``, ``stale`` or ``active``."""
+    """Server -> client: ``join``, ``leave``, ``stale`` or ``active``; a v2 ``join``
+    carries the player's ``handle`` and ``skeleton``."""
 
     TYPE: ClassVar[str] = "presence"
     event: str
     room: str
     player: str
     name: str
+    handle: int | None = None
+    skeleton: bytes | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Poses:
+    """v2 server -> client: one tick's poses as records (see ``records``)."""
+
+    TYPE: ClassVar[str] = "poses"
+    t: float
+    data: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class Skeleton:
+    """v2 server -> client: a player's bone offsets changed (a calibration)."""
+
+    TYPE: ClassVar[str] = "skeleton"
+    player: str
+    handle: int
+    skeleton: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class PoseRate:
+    """v2 client -> server: receive ``rate_hz`` (60, 30, 20 or 15) poses a second."""
+
+    TYPE: ClassVar[str] = "pose_rate"
+    rate_hz: float
+
+
+@dataclass(frozen=True, slots=True)
+class Resync:
+    """v2 client -> server: send keyframes of every avatar with the next poses."""
+
+    TYPE: ClassVar[str] = "resync"
 
 
 @dataclass(frozen=True, slots=True)
@@ -273,4 +327,8 @@ Message = (
     | Pong
     | Error
     | Bye
+    | Poses
+    | Skeleton
+    | PoseRate
+    | Resync
 )

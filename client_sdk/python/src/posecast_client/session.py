@@ -34,6 +34,7 @@ from posecast_client.protocol import (
     ALL_VALID,
     MAX_COORD_M,
     MAX_TIME_S,
+    PROTOCOL_VERSION,
     UINT32_MAX,
     Bye,
     Error,
@@ -42,10 +43,20 @@ from posecast_client.protocol import (
     Message,
     Pong,
     Pose,
+    Poses,
     Presence,
+    Skeleton,
     Welcome,
     seq_delta,
     seq_next,
+)
+from posecast_client.records import (
+    ROOT_UNIT_M,
+    AvatarState,
+    decode_records,
+    fk,
+    items2world,
+    skeleton2offsets,
 )
 
 
@@ -75,6 +86,9 @@ class Stats:
     reconnects: int = 0  # successful rejoins
     events_dropped: int = 0  # the application did not read events fast enough
     bad_messages: int = 0  # server messages this codec refused (logged, skipped)
+    bad_records: int = 0  # v2 poses messages whose records could not be applied
+    pose_messages: int = 0  # messages that carried poses (v1 pose, v2 poses)
+    pose_bytes: int = 0  # their WebSocket payload bytes, all together
 
 
 def backoff_delay(attempt: int, initial_s: float, max_s: float, rng: random.Random) -> float:
@@ -95,6 +109,63 @@ def is_retryable(cause: BaseException) -> bool:
 
 
 @dataclass
+class AvatarTable:
+    """v2: who each handle is, its bone offsets ``(19, 3)``, and the state records apply to."""
+
+    players: dict[int, str] = field(default_factory=dict)
+    offsets: dict[int, np.ndarray] = field(default_factory=dict)
+    states: dict[int, AvatarState | None] = field(default_factory=dict)
+
+    def clear(self) -> None:
+        self.players.clear()
+        self.offsets.clear()
+        self.states.clear()
+
+    def announce(self, player: str, handle: int, skeleton: bytes) -> None:
+        for h, p in list(self.players.items()):
+            if p == player and h != handle:  # the player moved to another handle
+                self.forget(h)
+        if self.players.get(handle) != player:
+            self.states[handle] = None  # a new avatar on this handle: wait for a keyframe
+        self.players[handle] = player
+        self.offsets[handle] = skeleton2offsets(skeleton)
+
+    def forget(self, handle: int) -> None:
+        self.players.pop(handle, None)
+        self.offsets.pop(handle, None)
+        self.states.pop(handle, None)
+
+    def forget_player(self, player: str) -> None:
+        for h, p in list(self.players.items()):
+            if p == player:
+                self.forget(h)
+
+    def poses(self, msg: Poses) -> list[Pose]:
+        """The records of ``msg`` as poses (raises BadFieldError for a bad record; the
+        records before it are applied)."""
+        recs = decode_records(msg.data, self.states)
+        if not recs:
+            return []
+        items = np.stack([r.state.items for r in recs])  # (R, 19, 4)
+        world = items2world(items)
+        roots = np.array([r.state.root for r in recs], dtype=np.float64) * ROOT_UNIT_M
+        positions = fk(world, roots, np.stack([self.offsets[r.handle] for r in recs]))
+        return [
+            Pose(
+                player=self.players[rec.handle],
+                seq=rec.state.seq,
+                t=msg.t,
+                positions=positions[i],
+                rotations=world[i],
+                local_rotations=items[i],
+                keyframe=rec.keyframe,
+                reach_limited=rec.reach_limited,
+            )
+            for i, rec in enumerate(recs)
+        ]
+
+
+@dataclass
 class ClientSession:
     """Seq, time and clock bookkeeping of one client, and what server messages mean.
 
@@ -108,22 +179,28 @@ class ClientSession:
     clock: ClockSync = field(default_factory=ClockSync)
     stats: Stats = field(default_factory=Stats)
     welcome: Welcome | None = None
+    version: int = PROTOCOL_VERSION  # of the current connection
+    avatars: AvatarTable = field(default_factory=AvatarTable)
+    want_resync: bool = False  # a record could not be applied: ask for keyframes
     last_seq: int | None = None
     last_t: float = 0.0
     _sent_at: OrderedDict[int, float] = field(default_factory=OrderedDict)
 
     # --- outgoing ----------------------------------------------------------------------
 
-    @staticmethod
     def hello(
+        self,
         token: str,
         room: str,
         name: str,
         layout: str | None = None,
         rate_hz: float | None = None,
         watch: tuple[str, ...] = (),
+        pose_rate_hz: float | None = None,
     ) -> Hello:
-        return Hello(token, room, name, layout, rate_hz, tuple(watch))
+        """The ``hello`` for this connection's version (v1 drops ``pose_rate_hz``)."""
+        rate = pose_rate_hz if self.version >= 2 else None
+        return Hello(token, room, name, layout, rate_hz, tuple(watch), self.version, rate)
 
     def frame(
         self,
@@ -202,26 +279,63 @@ class ClientSession:
 
     # --- incoming ----------------------------------------------------------------------
 
-    def connected(self) -> None:
-        """A new connection: its server may be another process, with another clock."""
+    def connected(self, version: int = PROTOCOL_VERSION) -> None:
+        """A new connection (of protocol ``version``): its server may be another
+        process, with another clock and other handles."""
         self.clock.reset()
+        self.version = version
+        self.avatars.clear()
+        self.want_resync = False
+
+    def receive_all(
+        self, msg: Message, now: float, size: int = 0
+    ) -> tuple[list[Event], BaseException | None]:
+        """:meth:`receive` for any message: a v2 ``poses`` gives one event per record.
+        ``size``: the message's payload bytes (counted for ``Stats.pose_bytes``)."""
+        if isinstance(msg, Poses):
+            self.stats.pose_messages += 1
+            self.stats.pose_bytes += size
+            try:
+                poses = self.avatars.poses(msg)
+            except ProtocolError:
+                self.stats.bad_records += 1
+                self.want_resync = True
+                return [], None
+            self.stats.poses += len(poses)
+            return list(poses), None
+        if isinstance(msg, Pose):
+            self.stats.pose_messages += 1
+            self.stats.pose_bytes += size
+        event, end = self.receive(msg, now)
+        return ([] if event is None else [event]), end
 
     def receive(self, msg: Message, now: float) -> tuple[Event | None, BaseException | None]:
         """What a server message means: ``(event for the application, end cause)``.
 
         The end cause is set when the message ends the session: a fatal ``error``
-        (its typed exception) or a ``bye``.
+        (its typed exception) or a ``bye``. (A v2 ``poses`` needs :meth:`receive_all`.)
         """
         if isinstance(msg, Pose):
             self.stats.poses += 1
             return msg, None
+        if isinstance(msg, Skeleton):
+            if msg.handle in self.avatars.players:
+                self.avatars.offsets[msg.handle] = skeleton2offsets(msg.skeleton)
+            return None, None
         if isinstance(msg, Pong):
             self.clock.add(msg.t0, msg.t1, msg.t2, now)
             return None, None
         if isinstance(msg, Presence):
+            if msg.event == "join" and msg.handle is not None and msg.skeleton is not None:
+                self.avatars.announce(msg.player, msg.handle, msg.skeleton)
+            elif msg.event == "leave":
+                self.avatars.forget_player(msg.player)
             return msg, None
         if isinstance(msg, Welcome):
             self.welcome = msg
+            for m in msg.members:
+                if m.handle is not None and m.skeleton is not None:
+                    self.avatars.announce(m.player, m.handle, m.skeleton)
             return msg, None
         if isinstance(msg, Error):
             if msg.fatal:

@@ -6,7 +6,11 @@ and tracker dropouts, joins its room (players are dealt round-robin over
 ``--rooms`` rooms) and receives the room's poses. At the end it prints a summary:
 frames sent, poses received per second, and the end-to-end latency from sending a
 frame to receiving the pose made from it (``pose.seq`` echoes the frame's seq; this
-includes the server's look-ahead), p50 and p99.
+includes the server's look-ahead), p50 and p99, and ``bytes_per_pose``: the mean
+WebSocket payload bytes per pose received, counting every message that carried
+poses (a v1 ``pose`` each, or a v2 ``poses`` per tick), so a v2 message's own
+overhead is shared out over the poses in it. ``--protocol 1`` makes the headsets
+v1 clients (for comparison), ``--pose-rate`` asks a v2 server for fewer poses.
 
 For load tests (``benchmarks/load.py``): ``--churn-every S`` makes one player leave
 every S seconds (it says ``bye``) and a new player, with a fresh id and token, join
@@ -70,6 +74,8 @@ class PlayerReport:
     clock_offset_s: float | None = None
     rtt_s: float | None = None
     failure: str | None = None
+    pose_bytes: int = 0  # payload bytes of the messages that carried poses
+    version: int = 0  # the protocol the server chose
 
 
 @dataclass
@@ -103,6 +109,20 @@ def build_parser() -> argparse.ArgumentParser:
         "--progress-every", type=float, default=0.0, metavar="S",
         help="print a 'posecast-sim progress {json}' line every S seconds (0: never)",
     )  # fmt: skip
+    p.add_argument(
+        "--protocol",
+        type=int,
+        choices=(1, 2),
+        default=2,
+        help="newest protocol version to offer (2; falls back to 1)",
+    )
+    p.add_argument(
+        "--pose-rate",
+        type=float,
+        choices=(60.0, 30.0, 20.0, 15.0),
+        default=None,
+        help="v2: poses per second each headset receives (60)",
+    )
     p.add_argument("--json", type=Path, help="also write the summary here as JSON")
     p.add_argument("-q", "--quiet", action="store_true", help="print only the summary")
     return p
@@ -148,10 +168,13 @@ async def run_player(
     or until ``stop`` or ``leave`` is set, then say ``bye``."""
     token = token_for(args, report.room, report.player)
     t_connect = time.monotonic()
-    client = await connect_patiently(args.url, token)
+    client = await connect_patiently(args.url, token, protocol=args.protocol)
     stops = (stop,) if leave is None else (stop, leave)
     try:
-        await client.join(report.room, f"Sim {i}", rate_hz=min(args.rate, 120.0))
+        await client.join(
+            report.room, f"Sim {i}", rate_hz=min(args.rate, 120.0), pose_rate_hz=args.pose_rate
+        )
+        report.version = client.version
         report.active = True
         frames = _for(source, args.duration if seconds is None else seconds, *stops)
         streaming = asyncio.create_task(client.stream(frames))
@@ -177,6 +200,7 @@ async def run_player(
         report.frames_sent = client.stats.frames_sent
         report.frames_dropped = client.stats.frames_dropped
         report.reconnects = client.stats.reconnects
+        report.pose_bytes = client.stats.pose_bytes
         report.clock_offset_s, report.rtt_s = client.clock.offset_s, client.clock.rtt_s
         await client.close()
 
@@ -201,6 +225,11 @@ def summarise(
         "frames_per_s": round(frames / seconds, 1),
         "poses_received": poses,
         "poses_per_s": round(poses / seconds, 1),
+        "protocol": sorted({r.version for r in reports if r.version}),
+        "bytes_per_pose": round(sum(r.pose_bytes for r in reports) / poses, 2) if poses else None,
+        "pose_kbytes_per_s": round(
+            sum(r.pose_bytes for r in reports) / seconds / 1000 / max(1, len(reports)), 2
+        ),
         "latency_ms_p50": round(float(np.percentile(lat, 50)), 2) if lat.size else None,
         "latency_ms_p99": round(float(np.percentile(lat, 99)), 2) if lat.size else None,
         "latency_samples": int(lat.size),
@@ -222,6 +251,9 @@ def print_summary(s: dict[str, Any]) -> None:
     sent, dropped = s["frames_sent"], s["frames_dropped"]
     print(f"  frames sent     {sent:8d}  ({s['frames_per_s']:.1f}/s, {dropped} dropped)")
     print(f"  poses received  {s['poses_received']:8d}  ({s['poses_per_s']:.1f}/s)")
+    if s["bytes_per_pose"] is not None:
+        v = "/".join(f"v{x}" for x in s["protocol"])
+        print(f"  bytes per pose  {s['bytes_per_pose']:8.1f}  ({v}, WebSocket payload)")
     if s["latency_samples"]:
         print(
             f"  latency         p50 {s['latency_ms_p50']:.1f} ms  p99 {s['latency_ms_p99']:.1f} ms"
