@@ -156,6 +156,20 @@ namespace Posecast.Client.Tests
             return cond();
         }
 
+        /// <summary>Run a program to its end: (exit status, stdout + stderr).</summary>
+        private static Tuple<int, string> Exec(string file, string args, Dictionary<string, string> env, int timeoutS)
+        {
+            var psi = new ProcessStartInfo(file, args) { UseShellExecute = false, RedirectStandardOutput = true, RedirectStandardError = true };
+            if (env != null) foreach (var kv in env) psi.EnvironmentVariables[kv.Key] = kv.Value;
+            using (var p = Process.Start(psi))
+            {
+                var err = p.StandardError.ReadToEndAsync();
+                string output = p.StandardOutput.ReadToEnd();
+                if (!p.WaitForExit(timeoutS * 1000)) { p.Kill(); return Tuple.Create(-1, output + err.Result); }
+                return Tuple.Create(p.ExitCode, output + err.Result);
+            }
+        }
+
         public static void Register()
         {
             if (!T.E2E) return;
@@ -233,6 +247,24 @@ namespace Posecast.Client.Tests
                     T.True(WaitFor(() => c.PosesOf("cs-a").Count > 10, 15), "v1 poses of a: " + c.PosesOf("cs-a").Count);
                     T.True(c.PosesOf("cs-a").All(p => !p.Keyframe && p.Rotations != null), "v1 poses carry rotations");
                     c.Stop().Wait();
+                });
+                T.Run("e2e: the README example compiles and runs against the server", () =>
+                {
+                    var readme = File.ReadAllText(Path.Combine(T.Repo, "client_sdk", "csharp", "README.md"));
+                    int start = readme.IndexOf("```csharp\n");
+                    T.True(start >= 0, "a csharp block in the README");
+                    start += "```csharp\n".Length;
+                    string code = readme.Substring(start, readme.IndexOf("```", start) - start);
+                    var dir = Path.Combine(T.Repo, "build", "csharp");
+                    File.WriteAllText(Path.Combine(dir, "ReadmeExample.cs"), code);
+                    var lib = typeof(PosecastClient).Assembly.Location;
+                    T.Equal(0, Exec("mcs", "-langversion:7.2 -nologo -r:" + lib + " -out:" + Path.Combine(dir, "ReadmeExample.exe") + " "
+                                    + Path.Combine(dir, "ReadmeExample.cs"), null, 60).Item1, "compiles");
+                    var env = new Dictionary<string, string> { { "POSECAST_URL", server.Url }, { "POSECAST_SECRET", server.Secret } };
+                    var run = Exec("mono", Path.Combine(dir, "ReadmeExample.exe"), env, 60);
+                    T.Equal(0, run.Item1, "exit status: " + run.Item2);
+                    T.True(run.Item2.Contains("joined as ada on v2"), "joined: " + run.Item2);
+                    T.True(run.Item2.Contains("head at ("), "printed its head: " + run.Item2);
                 });
                 T.Run("e2e: after a server restart the client reconnects, rejoins and seq carries on", () =>
                 {

@@ -109,6 +109,7 @@ namespace Posecast.Client.Tests
                 else if (args[i] == "--only") only = args[++i];
                 else if (args[i] == "--no-e2e") E2E = false;
                 else if (args[i] == "-v") Verbose = true;
+                else if (args[i] == "--bench") return Bench.Run(args[++i]);
             }
             var clock = Stopwatch.StartNew();
             var suites = new List<KeyValuePair<string, Action>>
