@@ -111,3 +111,28 @@ def test_pose_rate_takes_every_kth_tick_and_unknown_avatars_wait() -> None:
     tall = avatars.rescale("a", 0.8)
     assert tall is not None and avatars.skeleton("a") == tall
     assert np.allclose(records.bytes2skeleton(tall), records.skeleton_offsets(0.8), atol=1e-4)
+
+
+def test_clients_that_joined_apart_fall_into_step_at_the_shared_keyframe_tick() -> None:
+    avatars = Avatars()
+    early, late = Outbox(8, PoseStream()), Outbox(8, PoseStream())
+    assert early.stream is not None and late.stream is not None
+    early.stream.announce("a", avatars.handle("a"))
+    poses = _walk(130)
+    for tick, state in enumerate(poses, start=1):
+        if tick == 11:
+            late.stream.announce("a", avatars.handle("a"))  # joins 10 ticks later
+        now = tick / 60
+        keyed = frozenset({"a"}) if avatars.keyframe_tick("a", tick) else frozenset()
+        streams = [b.stream for b in (early, late) if b.stream and "a" in b.stream.known]
+        slots = prepare([(s, state) for s in streams], now, keyed)
+        for box, slot in zip((early, late), slots, strict=False):
+            assert slot is not None
+            box.put_pose("a", slot, now)
+        for box in (early, late):
+            box.take(now)
+        if 11 <= tick < 60:
+            assert early.stream.refs["a"] is not late.stream.refs["a"]  # apart: two encodings
+        if tick >= 60:
+            assert early.stream.refs["a"] is late.stream.refs["a"]  # one shared keyframe on
+    assert early.stream.keyframes == 3 and late.stream.keyframes == 3  # 1 (or 11), 60, 120

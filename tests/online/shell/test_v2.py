@@ -115,7 +115,7 @@ def test_v1_and_v2_clients_share_a_room(engine_factory: Factory) -> None:
                 assert np.abs(pos - ref.positions).max() < 0.01, player
                 world = records.items2world(rec.recon.items)
                 worst = max(worst, float(_angle_deg(world, ref.rotations).max()))
-            assert matched > 100 and worst < 0.5, (matched, worst)
+            assert matched > 30 and worst < 0.5, (matched, worst)
             assert {p for p, _, _ in got.poses} == {"a", "b"}
             # a's calibration reached the v2 client as a skeleton message, before its poses
             assert any(isinstance(m, Skeleton) and m.player == "a" for m in new.messages)
@@ -123,7 +123,8 @@ def test_v1_and_v2_clients_share_a_room(engine_factory: Factory) -> None:
             counts = [m for m in new.messages if isinstance(m, Poses)]
             assert got.messages == len(counts) and len(got.poses) > 1.6 * len(counts)
             keys = [rec for p, rec, _ in got.poses if p == "b" and rec.keyframe]
-            assert 2 <= len(keys) <= 6, len(keys)
+            deltas = [rec for p, rec, _ in got.poses if p == "b" and not rec.keyframe]
+            assert keys and len(deltas) > 10 * len(keys), (len(keys), len(deltas))
             # the 30 Hz spectator got about half as many poses
             assert 0.35 < len(half.poses) / len(got.poses) < 0.65
             assert server.metrics.value("posecast_errors_total", {"code": "BAD_FIELD"}) == 0
@@ -131,35 +132,42 @@ def test_v1_and_v2_clients_share_a_room(engine_factory: Factory) -> None:
     run(scenario())
 
 
-def test_pose_rate_and_resync_change_what_comes(engine_factory: Factory) -> None:
+def test_pose_rate_changes_what_comes(engine_factory: Factory) -> None:
+    """A v2 spectator at 60 Hz, then 15 Hz, against a v1 spectator's count of ticks
+    (one pose per tick): about 1 pose a tick, then about 1 in 4. Counting against the
+    v1 stream, not the clock, keeps this true on a machine too slow for 60 ticks a
+    second."""
+
     async def scenario() -> None:
         async with serving(make_cfg(lookahead=2), engine_factory) as server:
+            a = await Client.open(server.port)
+            ref = await Client.open(server.port)
             c = await Client.open(server.port, version=2)
-            w = await c.hello(token("r1", "a"))
+            assert isinstance(await a.hello(token("r1", "a")), Welcome)
+            assert isinstance(await ref.hello(token("r1", "r", role="spectator")), Welcome)
+            w = await c.hello(token("r1", "c", role="spectator"))
             assert isinstance(w, Welcome)
-            c.stream(seed=3)
+            a.stream(seed=3)
             await c.wait_for(lambda m: isinstance(m, Poses))
-            await asyncio.sleep(0.5)
-            start = len(c.messages)
+            await asyncio.sleep(1.0)
+            marks = [(len(ref.poses()), len(c.messages))]
             await c.send(PoseRate(15.0))
-            await asyncio.sleep(1.2)
-            mid = len(c.messages)
-            await c.send(Resync())
-            await asyncio.sleep(0.4)
-            await c.close()
+            await asyncio.sleep(0.3)  # the change is in effect by now
+            marks.append((len(ref.poses()), len(c.messages)))
+            await asyncio.sleep(1.5)
+            marks.append((len(ref.poses()), len(c.messages)))
+            for cl in (a, ref, c):
+                await cl.close()
             d = Decoded(w)
-            d.feed(c.messages[:mid])
-            ts = [m.t for m in c.messages[:mid] if isinstance(m, Poses)]
-            gaps = np.diff(ts)
-            fast, slow = np.median(gaps[:10]), np.median(gaps[-8:])  # 60 Hz, then 15 Hz
-            assert fast < 1.5 / 60 and 3.5 / 60 < slow < 4.5 / 60, (fast, slow)
-            assert start < mid
-            # soon after the resync, one message of keyframes only (ticks are 4 apart)
-            later = [m for m in c.messages[mid:] if isinstance(m, Poses)][:3]
-            keyed = []
-            for msg in later:
-                recs = records.decode_records(msg.data, d.refs)
-                keyed.append(all(r.keyframe for r in recs))
-            assert any(keyed), keyed
+
+            def got(lo: int, hi: int) -> int:
+                before = len(d.poses)
+                d.feed(c.messages[lo:hi])
+                return len(d.poses) - before
+
+            fast = got(0, marks[0][1]) / max(1, marks[0][0])
+            got(marks[0][1], marks[1][1])
+            slow = got(marks[1][1], marks[2][1]) / max(1, marks[2][0] - marks[1][0])
+            assert fast > 0.8 and 0.15 < slow < 0.35, (fast, slow)
 
     run(scenario())

@@ -12,6 +12,13 @@ keyframe or a delta against the last record of that avatar **this client was sen
   ``skeleton``, all reliable and sent before any pose in the same batch), its pose
   rate, and per avatar the :class:`~posecast.online.protocol.records.Recon` it holds.
 
+Keyframes come on a schedule shared by every client: each avatar has its keyframe
+tick once every 60 ticks (staggered over the avatars by handle, on ticks that every
+pose rate takes), so clients that joined at different times fall back into step at
+the next one and share encodings again; a client's own keyframes (its first, a
+``resync``, a delta that does not fit) come on top, and one that missed the shared
+tick (a superseded slot) gets its own after 1.1 s at the latest.
+
 The router prepares each record when it puts a pose into the client's latest-wins
 slot, against the reference the client has *now*; the reference only moves when the
 writer takes the slot (:meth:`PoseStream.message`), and taking consumes the slot, so
@@ -36,7 +43,8 @@ from posecast.online.protocol.records import (
     write_leb128,
 )
 
-KEYFRAME_EVERY_S = 1.0  # the longest a client goes without a keyframe of an avatar
+KEYFRAME_EVERY_TICKS = 60  # every avatar's keyframe tick comes once in this many ticks
+KEYFRAME_EVERY_S = 1.1  # and no client goes longer than this without one (a safety net)
 _TICK_HZ = 60.0
 
 
@@ -96,6 +104,12 @@ class Avatars:
     def skeleton_message(self, player: str) -> Skeleton:
         return Skeleton(player, self.handle(player), self.skeleton(player))
 
+    def keyframe_tick(self, player: str, tick: int) -> bool:
+        """Whether ``tick`` is ``player``'s shared keyframe tick: once every 60 ticks,
+        at a phase that is a multiple of 12, so every pose rate (each k-th tick, k =
+        1, 2, 3, 4) takes it."""
+        return tick % KEYFRAME_EVERY_TICKS == (12 * self.handle(player)) % KEYFRAME_EVERY_TICKS
+
 
 @dataclass
 class Slot:
@@ -140,9 +154,7 @@ class PoseStream:
     def needs_keyframe(self, player: str, now: float) -> bool:
         ref = self.refs.get(player)
         return (
-            ref is None
-            or self.resync
-            or now - self.last_key.get(player, -1e18) >= KEYFRAME_EVERY_S - 0.5 / _TICK_HZ
+            ref is None or self.resync or now - self.last_key.get(player, -1e18) >= KEYFRAME_EVERY_S
         )
 
     def message(self, slots: list[tuple[str, Slot]], now: float) -> bytes | None:
@@ -169,17 +181,20 @@ class PoseStream:
         return encode(Poses(t, b"".join(parts)))
 
 
-def prepare(requests: list[tuple[PoseStream, PoseState]], now: float) -> list[Slot | None]:
+def prepare(
+    requests: list[tuple[PoseStream, PoseState]], now: float, keyed: frozenset[str] = frozenset()
+) -> list[Slot | None]:
     """Each client's record of each pose, against that client's current reference:
-    keyframes where due, every delta of the tick in one batched encoding (and once
-    per distinct reference); ``None`` for an avatar the client was not told about."""
+    keyframes where due (``keyed``: the players whose shared keyframe tick this is),
+    every delta of the tick in one batched encoding (and once per distinct
+    reference); ``None`` for an avatar the client was not told about."""
     out: list[Slot | None] = [None] * len(requests)
     pairs: list[tuple[PoseState, Recon]] = []
     where: list[int] = []
     for i, (stream, state) in enumerate(requests):
         if state.player not in stream.known:
             continue
-        if stream.needs_keyframe(state.player, now):
+        if state.player in keyed or stream.needs_keyframe(state.player, now):
             body, recon = state.keyframe()
             out[i] = Slot(state, body, recon, True)
         else:
