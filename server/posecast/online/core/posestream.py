@@ -186,24 +186,45 @@ def prepare(
 ) -> list[Slot | None]:
     """Each client's record of each pose, against that client's current reference:
     keyframes where due (``keyed``: the players whose shared keyframe tick this is),
-    every delta of the tick in one batched encoding (and once per distinct
-    reference); ``None`` for an avatar the client was not told about."""
+    every delta of the tick in one batched encoding, once per distinct (pose,
+    reference) pair, and one :class:`Slot` per pair shared by the clients that have
+    it; ``None`` for an avatar the client was not told about."""
     out: list[Slot | None] = [None] * len(requests)
+    keyframes: dict[int, Slot] = {}  # id(state) -> its keyframe slot
+    groups: dict[tuple[int, int], list[int]] = {}  # (id(state), id(ref)) -> requests
     pairs: list[tuple[PoseState, Recon]] = []
-    where: list[int] = []
     for i, (stream, state) in enumerate(requests):
-        if state.player not in stream.known:
+        player = state.player
+        if player not in stream.known:
             continue
-        if state.player in keyed or stream.needs_keyframe(state.player, now):
-            body, recon = state.keyframe()
-            out[i] = Slot(state, body, recon, True)
+        ref = stream.refs.get(player)
+        if (
+            ref is None
+            or player in keyed
+            or stream.resync
+            or now - stream.last_key.get(player, -1e18) >= KEYFRAME_EVERY_S
+        ):
+            slot = keyframes.get(id(state))
+            if slot is None:
+                body, recon = state.keyframe()
+                slot = keyframes[id(state)] = Slot(state, body, recon, True)
+            out[i] = slot
+            continue
+        key = (id(state), id(ref))
+        group = groups.get(key)
+        if group is None:
+            groups[key] = [i]
+            pairs.append((state, ref))
         else:
-            pairs.append((state, stream.refs[state.player]))
-            where.append(i)
-    for i, got, (state, _) in zip(where, encode_many(pairs), pairs, strict=True):
+            group.append(i)
+    for (state, _), got, members in zip(pairs, encode_many(pairs), groups.values(), strict=True):
         if got is None:  # does not fit a delta
-            body, recon = state.keyframe()
-            out[i] = Slot(state, body, recon, True)
+            slot = keyframes.get(id(state))
+            if slot is None:
+                body, recon = state.keyframe()
+                slot = keyframes[id(state)] = Slot(state, body, recon, True)
         else:
-            out[i] = Slot(state, got[0], got[1], False)
+            slot = Slot(state, got[0], got[1], False)
+        for i in members:
+            out[i] = slot
     return out

@@ -144,9 +144,8 @@ class Router:
     def _put_v2(self, requests: list[tuple[Conn, PoseStream, PoseState]], now: float) -> int:
         if not requests:
             return 0
-        keyed = frozenset(
-            st.player for _, _, st in requests if self.avatars.keyframe_tick(st.player, self.tick)
-        )
+        players = {st.player for _, _, st in requests}
+        keyed = frozenset(p for p in players if self.avatars.keyframe_tick(p, self.tick))
         slots = prepare([(s, st) for _, s, st in requests], now, keyed)
         superseded = 0
         for (c, _, st), slot in zip(requests, slots, strict=True):

@@ -416,10 +416,10 @@ def encode_deltas(
     new_items = np.empty_like(ref_items)
     new_world = np.empty_like(ref_items)
     r_rot = np.empty_like(step_rot)
+    # Every item's prediction at once: it depends on the references alone.
+    pred_all = _qmul(ref_items, rotvec2quat(step_rot.astype(np.float64) * ROT_STEP_RAD))
     for idx in _LEVELS:
-        pred = _qmul(
-            ref_items[:, idx], rotvec2quat(step_rot[:, idx].astype(np.float64) * ROT_STEP_RAD)
-        )
+        pred = pred_all[:, idx]
         if idx[0] == 0:
             target = world[:, idx]
         else:
