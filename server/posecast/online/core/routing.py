@@ -169,6 +169,7 @@ class Router:
         self.tick += 1
         batches: dict[str, tuple[list[tuple[str, bytes]], list[bytes]]] = {}
         requests: list[tuple[Conn, PoseStream, PoseState]] = []
+        by_room: dict[str, list[tuple[str, bytes, PoseState | None]]] = {}
         for player, data in out.poses:
             room = self.rooms.room_of(player)
             if room is None:
@@ -178,7 +179,9 @@ class Router:
             if state is not None and self.avatars.rescale(player, state.scale) is not None:
                 # A new calibration: its skeleton reaches v2 clients before this pose.
                 self.bytes_to_room_v2(room, encode(self.avatars.skeleton_message(player)), now)
-            superseded += self._route(room, [(player, data, state)], now, requests)
+            by_room.setdefault(room, []).append((player, data, state))
+        for room, room_poses in by_room.items():
+            superseded += self._route(room, room_poses, now, requests)
         superseded += self._put_v2(requests, now)
         for ev in out.events:
             room = self.rooms.room_of(ev.player)
