@@ -132,14 +132,16 @@ class PoseStream:
     last_key: dict[str, float] = field(default_factory=dict)  # when each keyframe went
     records: int = 0
     keyframes: int = 0
+    every: int = 1  # ticks between this client's poses: 60 / pose_rate_hz
 
     def set_rate(self, rate_hz: float) -> None:
         assert rate_hz in POSE_RATES_HZ
         self.pose_rate_hz = rate_hz
+        self.every = round(_TICK_HZ / rate_hz)
 
     def accepts(self, tick: int) -> bool:
         """Whether tick number ``tick`` is one of this client's (every k-th tick)."""
-        return tick % round(_TICK_HZ / self.pose_rate_hz) == 0
+        return tick % self.every == 0
 
     def announce(self, player: str, handle: int) -> None:
         if self.known.get(player) != handle:

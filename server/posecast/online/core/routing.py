@@ -127,18 +127,24 @@ class Router:
         requests: list[tuple[Conn, PoseStream, PoseState]],
     ) -> int:
         superseded = 0
-        audience = [c for m in self.rooms.audience(room) if (c := self.conns.of_player(m))]
+        v1: list[Conn] = []
+        v2: list[tuple[Conn, PoseStream]] = []  # the v2 clients whose tick this is
+        for member in self.rooms.audience(room):
+            c = self.conns.of_player(member)
+            if c is None:
+                continue
+            stream = c.outbox.stream
+            if stream is None:
+                v1.append(c)
+            elif stream.accepts(self.tick):
+                v2.append((c, stream))
         for player, data, state in poses:
-            decoded = state is not None
-            for c in audience:
-                stream = c.outbox.stream
-                if stream is None:
-                    superseded += self.conns.pose_to_conn(c, player, data, now)
-                elif stream.accepts(self.tick) and player in stream.known:
-                    if not decoded:  # a pose from another node: decode it once
-                        state, decoded = _state_from_v1(data), True
-                    if state is not None:
-                        requests.append((c, stream, state))
+            for c in v1:
+                superseded += self.conns.pose_to_conn(c, player, data, now)
+            if v2 and state is None:  # a pose from another node: decode it once
+                state = _state_from_v1(data)
+            if state is not None:
+                requests.extend((c, s, state) for c, s in v2 if player in s.known)
         return superseded
 
     def _put_v2(self, requests: list[tuple[Conn, PoseStream, PoseState]], now: float) -> int:
