@@ -8,6 +8,8 @@ from __future__ import annotations
 import time
 from typing import Any
 
+import numpy as np
+
 from posecast.online.cluster.memory import MemoryBroker, MemoryBus
 from posecast.online.core.hub import Hub
 from posecast.online.metrics import Metrics
@@ -139,3 +141,37 @@ def test_a_token_burned_on_one_node_is_refused_on_the_others() -> None:
     b.hub.receive(again, encode(Hello(1, tok, "r1", "P")), b.now)
     errors = [m for m in b.inbox(again) if isinstance(m, Error)]
     assert [e.code for e in errors] == ["UNAUTHENTICATED"]
+
+
+def test_a_v2_client_gets_a_remote_players_poses_as_records() -> None:
+    """A v2 client on node B: the player on node A is announced with a handle and
+    skeleton (the snapshot's presence), and its v1 poses from the bus reach the client
+    as v2 records, decoded once on B, within the v1 pose's own rounding."""
+    from posecast.online.protocol import records
+    from posecast.online.protocol.messages import Poses
+
+    broker = MemoryBroker()
+    a, b = Node(broker, "A"), Node(broker, "B")
+    pa = a.join("pa")
+    a.inbox(pa)
+    conn = b.hub.connect("10.0.0.1", b.now, 2)
+    tok = token(room="r1", player="pv")
+    b.hub.receive(conn, encode(Hello(2, tok, "r1", "PV")), b.now)
+    box = b.hub.outbox(conn)
+    assert box is not None
+    got = [decode(d, version=2) for d in box.take(b.now)]
+    joins = [m for m in got if isinstance(m, Presence) and m.player == "pa"]
+    assert joins and joins[0].handle is not None and joins[0].skeleton is not None
+    refs: dict[int, records.Recon | None] = {joins[0].handle: None}
+    for seq in range(1, 4):
+        a.tick("pa", seq=seq)
+        b.tick(seq=seq)  # B's own tick (no local poses): its v2 clients' pose clock
+        msgs = [decode(d, version=2) for d in box.take(b.now)]
+        poses = [m for m in msgs if isinstance(m, Poses)]
+        assert len(poses) == 1, msgs
+        (rec,) = records.decode_records(poses[0].data, refs)
+        assert rec.recon.seq == seq and rec.keyframe == (seq == 1)
+        want = decode(encode(_pose("pa", seq)))
+        assert isinstance(want, Pose) and want.rotations is not None
+        world = records.items2world(rec.recon.items)
+        assert np.abs(np.abs(np.einsum("ij,ij->i", world, want.rotations)) - 1).max() < 1e-4
