@@ -1,5 +1,5 @@
 /**
- * Bytes <-> messages for protocol v1. Pure functions: no sockets, no clocks, no state.
+ * Bytes <-> messages for protocols v1 and v2. Pure functions: no sockets, no clocks, no state.
  *
  * {@link encode} writes the canonical bytes (`proto/README.md`, "Canonical encoding"):
  * a msgpack map, `type` first and then the fields in spec order, absent optionals
@@ -9,11 +9,19 @@
  * (TOO_LARGE), msgpack syntax and structural bounds (MALFORMED / TOO_LARGE), that the
  * root is a map, nesting depth (MALFORMED), `type` (BAD_FIELD / UNKNOWN_TYPE), then
  * the fields of that type. The per-type code mirrors `posecast/online/protocol/wire.py`.
+ *
+ * `version` (in {@link DecodeOptions}) is the connection's protocol, the subprotocol the
+ * server selected: v2 knows `poses`, `skeleton`, `pose_rate` and `resync` but no `pose`,
+ * wants `version` 2 in `hello`, a `handle` and `skeleton` for every `welcome` member and
+ * presence `join`, and lets a server message (and its `poses.data` bin) reach 16384
+ * bytes. `poses.data` is opaque here: `records.ts` reads it against the client's state.
+ * {@link encode} writes whatever fields a message has, so it serves both versions.
  */
 
 import {
   BadFieldError,
   MalformedError,
+  OutOfRangeError,
   ProtocolError,
   TooLargeError,
   UnknownTypeError,
@@ -57,13 +65,20 @@ import {
   MIN_HEIGHT_M,
   type Ping,
   type Pong,
+  MAX_SERVER_MESSAGE_BYTES_V2,
   type Pose,
+  type PoseRate,
+  POSE_RATES_HZ,
+  type Poses,
   PRESENCE_EVENTS,
   type Presence,
+  PROTOCOL_V2,
   PROTOCOL_VERSION,
   ROLES,
   SELECTOR_KINDS,
   type Selector,
+  SKELETON_BYTES,
+  type SkeletonMessage,
   type Trackers,
   UINT32_MAX,
   type Welcome,
@@ -74,9 +89,25 @@ import { mm2pos, POS_BYTES, pos2mm, quat2snorm, ROT_BYTES, snorm2quat } from "./
 export interface DecodeOptions {
   /** The limits in force; before a `welcome`, the v1 defaults. */
   limits?: Limits;
-  /** A tighter size cap than `limits.max_message_bytes`. */
+  /** A tighter size cap than the version's bound. */
   maxBytes?: number;
+  /** The connection's protocol, 1 (the default) or 2. */
+  version?: number;
 }
+
+/** The types a v2 client may send: they stay within `max_message_bytes` in v2 too. */
+const CLIENT_TYPES: ReadonlySet<string> = new Set([
+  "hello",
+  "calibrate",
+  "frame",
+  "selector",
+  "kick",
+  "ping",
+  "bye",
+  "pose_rate",
+  "resync",
+]);
+const V2_ONLY_TYPES: ReadonlySet<string> = new Set(["poses", "skeleton", "pose_rate", "resync"]);
 
 /** The canonical bytes of `msg`. */
 export function encode(msg: Message): Uint8Array {
@@ -91,32 +122,48 @@ export function encode(msg: Message): Uint8Array {
  */
 export function decode(data: Uint8Array, options: DecodeOptions = {}): Message {
   const limits = options.limits ?? DEFAULT_LIMITS;
-  const cap = Math.min(options.maxBytes ?? Infinity, limits.max_message_bytes);
+  const version = options.version ?? PROTOCOL_VERSION;
+  const v2 = version >= PROTOCOL_V2;
+  const top = v2 ? MAX_SERVER_MESSAGE_BYTES_V2 : limits.max_message_bytes;
+  const cap = Math.min(options.maxBytes ?? Infinity, top);
   if (data.length > cap) throw new TooLargeError(`message of ${data.length} bytes, limit ${cap}`);
-  const { value, tooDeep } = unpack(data);
+  const { value, tooDeep } = v2 ? unpack(data, cap) : unpack(data);
   if (!(value instanceof Map)) throw new MalformedError("a message is a msgpack map");
   if (tooDeep) throw new MalformedError("nested deeper than 8 maps and arrays");
-  return fromWire(value, limits);
+  return fromWire(value, limits, version, data.length);
 }
 
-/** Validate an unpacked wire map into a message (the second half of {@link decode}). */
-export function fromWire(m: WireMap, limits: Limits = DEFAULT_LIMITS): Message {
+/**
+ * Validate an unpacked wire map into a message (the second half of {@link decode}).
+ * `size` is the message's length in bytes, for v2's client-message cap.
+ */
+export function fromWire(
+  m: WireMap,
+  limits: Limits = DEFAULT_LIMITS,
+  version: number = PROTOCOL_VERSION,
+  size = 0,
+): Message {
   const kind = m.get("type");
   if (typeof kind !== "string") {
     throw new BadFieldError("missing or non-string field type", { field: "type" });
   }
-  const decoder = Object.hasOwn(DECODERS, kind) ? DECODERS[kind] : undefined;
+  const v2 = version >= PROTOCOL_V2;
+  const known = v2 ? kind !== "pose" : !V2_ONLY_TYPES.has(kind);
+  const decoder = known && Object.hasOwn(DECODERS, kind) ? DECODERS[kind] : undefined;
   if (decoder === undefined) {
     throw new UnknownTypeError(`unknown message type ${JSON.stringify(kind.slice(0, 40))}`, {
       field: "type",
     });
   }
-  return decoder(m, limits);
+  if (v2 && CLIENT_TYPES.has(kind) && size > limits.max_message_bytes) {
+    throw new TooLargeError(`a ${kind} message of ${size} bytes`);
+  }
+  return decoder(m, limits, version);
 }
 
 // --- decoders, one per type -------------------------------------------------------------
 
-type Decoder = (m: WireMap, lim: Limits) => Message;
+type Decoder = (m: WireMap, lim: Limits, version: number) => Message;
 type Mutable<T> = { -readonly [K in keyof T]: T[K] };
 const T_RANGE = [0, MAX_TIME_S] as const;
 const SELECTOR_FIELDS: Readonly<Record<string, readonly string[]>> = {
@@ -140,20 +187,29 @@ function withOptional<T>(base: T, fields: Record<string, unknown>): T {
   return out as T;
 }
 
+/** v2: a pose rate, one of 60, 30, 20, 15 Hz (another number is OUT_OF_RANGE). */
+function asPoseRate(m: WireMap, key: string): number {
+  const rate = asFloat(m, key, 0, 1000);
+  if (!(POSE_RATES_HZ as readonly number[]).includes(rate)) {
+    throw new OutOfRangeError(`${key}=${rate}: not 60, 30, 20 or 15`, { field: key });
+  }
+  return rate;
+}
+
 function withRefSeq(err: unknown, seq: number): unknown {
   if (!(err instanceof ProtocolError)) return err;
   const cls = err.constructor as typeof ProtocolError;
   return new cls(err.message, { field: err.field, refSeq: seq, fatal: err.fatal }, err.code);
 }
 
-function decodeHello(m: WireMap, lim: Limits): Hello {
+function decodeHello(m: WireMap, lim: Limits, connection: number): Hello {
   const version = m.get("version");
   if (typeof version !== "number") {
     throw new BadFieldError("field version must be an integer", { field: "version" });
   }
-  if (version !== PROTOCOL_VERSION) {
+  if (version !== connection) {
     throw new VersionUnsupportedError(
-      `version ${version} is not supported (this peer speaks ${PROTOCOL_VERSION})`,
+      `version ${version} on a posecast.v${connection} connection`,
       { field: "version" },
     );
   }
@@ -175,19 +231,26 @@ function decodeHello(m: WireMap, lim: Limits): Hello {
       layout: has(m, "layout") ? asEnum(m, "layout", LAYOUTS) : undefined,
       rate_hz: optFloat(m, "rate_hz", 1, lim.max_rate_hz),
       watch: watch !== undefined && watch.length > 0 ? watch : undefined,
+      pose_rate_hz:
+        connection >= PROTOCOL_V2 && has(m, "pose_rate_hz") ? asPoseRate(m, "pose_rate_hz") : undefined,
     },
   );
 }
 
-function decodeWelcome(m: WireMap, lim: Limits): Welcome {
+function decodeWelcome(m: WireMap, lim: Limits, connection: number): Welcome {
   const members: Member[] = asList(m, "members", lim.max_players).map((item, i) => {
     if (!(item instanceof Map)) {
       throw new BadFieldError(`members[${i}]: expected a map`, { field: `members[${i}]` });
     }
     const at = `members[${i}].`;
+    const player = asId(item, "player", MAX_ID_BYTES, at);
+    const name = asName(item, "name", lim.max_name_bytes, at);
+    if (connection < PROTOCOL_V2) return { player, name };
     return {
-      player: asId(item, "player", MAX_ID_BYTES, at),
-      name: asName(item, "name", lim.max_name_bytes, at),
+      player,
+      name,
+      handle: asInt(item, "handle", 0, UINT32_MAX, at),
+      skeleton: asBin(item, "skeleton", SKELETON_BYTES, at),
     };
   });
   const lm = asMap(m, "limits");
@@ -195,7 +258,7 @@ function decodeWelcome(m: WireMap, lim: Limits): Welcome {
   for (const [k, [lo, hi]] of Object.entries(LIMIT_RANGES)) {
     limits[k as keyof Limits] = asInt(lm, k, lo, hi, "limits.");
   }
-  return {
+  const welcome: Welcome = {
     type: "welcome",
     version: asInt(m, "version", 1, 255),
     player: asId(m, "player", MAX_ID_BYTES),
@@ -208,6 +271,8 @@ function decodeWelcome(m: WireMap, lim: Limits): Welcome {
     members,
     limits: limits as Limits,
   };
+  if (connection < PROTOCOL_V2) return welcome;
+  return { ...welcome, pose_rate_hz: asPoseRate(m, "pose_rate_hz") };
 }
 
 function decodeCalibrate(m: WireMap): Calibrate {
@@ -258,14 +323,30 @@ function decodePose(m: WireMap): Pose {
   );
 }
 
-function decodePresence(m: WireMap, lim: Limits): Presence {
-  return {
+function decodePresence(m: WireMap, lim: Limits, connection: number): Presence {
+  const presence: Presence = {
     type: "presence",
     event: asEnum(m, "event", PRESENCE_EVENTS),
     room: asId(m, "room", lim.max_room_bytes),
     player: asId(m, "player", MAX_ID_BYTES),
     name: asName(m, "name", lim.max_name_bytes),
   };
+  if (connection < PROTOCOL_V2 || presence.event !== "join") return presence;
+  return {
+    ...presence,
+    handle: asInt(m, "handle", 0, UINT32_MAX),
+    skeleton: asBin(m, "skeleton", SKELETON_BYTES),
+  };
+}
+
+function decodePoses(m: WireMap): Poses {
+  const t = asFloat(m, "t", ...T_RANGE);
+  if (!has(m, "data")) throw new BadFieldError("missing field data", { field: "data" });
+  const data = m.get("data");
+  if (!(data instanceof Uint8Array)) {
+    throw new BadFieldError("data: expected a bin", { field: "data" });
+  }
+  return { type: "poses", t, data };
 }
 
 function decodeSelector(m: WireMap): Selector {
@@ -330,10 +411,23 @@ const DECODERS: Readonly<Record<string, Decoder>> = {
   }),
   error: decodeError,
   bye: (m, lim): Bye => withOptional<Bye>({ type: "bye" }, { reason: text(m, "reason", lim) }),
+  poses: decodePoses,
+  skeleton: (m): SkeletonMessage => ({
+    type: "skeleton",
+    player: asId(m, "player", MAX_ID_BYTES),
+    handle: asInt(m, "handle", 0, UINT32_MAX),
+    skeleton: asBin(m, "skeleton", SKELETON_BYTES),
+  }),
+  pose_rate: (m): PoseRate => ({ type: "pose_rate", rate_hz: asPoseRate(m, "rate_hz") }),
+  resync: () => ({ type: "resync" }),
 };
 
+/** Every message type of v1 and v2, in spec order. */
+export const ALL_MESSAGE_TYPES: readonly string[] = Object.keys(DECODERS);
 /** The v1 message types, in spec order. */
-export const MESSAGE_TYPES: readonly string[] = Object.keys(DECODERS);
+export const MESSAGE_TYPES: readonly string[] = ALL_MESSAGE_TYPES.filter((k) => !V2_ONLY_TYPES.has(k));
+/** The v2 message types (no `pose`), in spec order. */
+export const MESSAGE_TYPES_V2: readonly string[] = ALL_MESSAGE_TYPES.filter((k) => k !== "pose");
 
 // --- encoders -----------------------------------------------------------------------------
 
@@ -362,6 +456,7 @@ function toWireOf(msg: Message): Map<string, Wire> {
         ["layout", msg.layout],
         ["rate_hz", msg.rate_hz === undefined ? undefined : f(msg.rate_hz)],
         ["watch", msg.watch !== undefined && msg.watch.length > 0 ? [...msg.watch] : undefined],
+        ["pose_rate_hz", msg.pose_rate_hz === undefined ? undefined : f(msg.pose_rate_hz)],
       ]);
     case "welcome":
       return wireMap([
@@ -380,10 +475,13 @@ function toWireOf(msg: Message): Map<string, Wire> {
             wireMap([
               ["player", p.player],
               ["name", p.name],
+              ["handle", p.handle],
+              ["skeleton", p.skeleton],
             ]),
           ),
         ],
         ["limits", wireMap(Object.keys(LIMIT_RANGES).map((k) => [k, msg.limits[k as keyof Limits]]))],
+        ["pose_rate_hz", msg.pose_rate_hz === undefined ? undefined : f(msg.pose_rate_hz)],
       ]);
     case "calibrate":
       return "height_m" in msg
@@ -423,6 +521,8 @@ function toWireOf(msg: Message): Map<string, Wire> {
         ["room", msg.room],
         ["player", msg.player],
         ["name", msg.name],
+        ["handle", msg.handle],
+        ["skeleton", msg.skeleton],
       ]);
     case "selector":
       return wireMap([
@@ -467,6 +567,26 @@ function toWireOf(msg: Message): Map<string, Wire> {
         ["type", "bye"],
         ["reason", msg.reason],
       ]);
+    case "poses":
+      return wireMap([
+        ["type", "poses"],
+        ["t", f(msg.t)],
+        ["data", msg.data],
+      ]);
+    case "skeleton":
+      return wireMap([
+        ["type", "skeleton"],
+        ["player", msg.player],
+        ["handle", msg.handle],
+        ["skeleton", msg.skeleton],
+      ]);
+    case "pose_rate":
+      return wireMap([
+        ["type", "pose_rate"],
+        ["rate_hz", f(msg.rate_hz)],
+      ]);
+    case "resync":
+      return wireMap([["type", "resync"]]);
   }
 }
 

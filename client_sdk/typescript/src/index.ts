@@ -1,10 +1,12 @@
 /**
  * `@posecast/client`: stream VR tracker frames to a posecast server and receive every
- * player's full-body pose (wire protocol v1, `proto/README.md`). Browser and Node.
+ * player's full-body pose (wire protocol v2, falling back to v1; `proto/README.md`).
+ * Browser and Node.
  *
  * - {@link connect} / {@link PosecastClient}: join, send frames, read events, reconnect.
  * - {@link fromXRFrame}: a WebXR frame as posecast trackers.
  * - {@link encode} / {@link decode}: the canonical codec, for tools and tests.
+ * - {@link decodeRecords}, {@link fk}: v2 pose records against an avatar's state; FK.
  * - Errors: one class per wire code ({@link ProtocolError} and subclasses).
  * - {@link Interpolator} / {@link PoseBuffer}: a jitter buffer, poses at any display rate.
  * - {@link poseToEngine}, {@link BONES}: Unity, Unreal and three.js frames; bone names.
@@ -22,7 +24,25 @@ export {
   type WebSocketLike,
 } from "./client.js";
 export { ClockSync, type ClockSample } from "./clock.js";
-export { decode, encode, fromWire, toWire, MESSAGE_TYPES, type DecodeOptions } from "./codec.js";
+export {
+  ALL_MESSAGE_TYPES,
+  decode,
+  encode,
+  fromWire,
+  MESSAGE_TYPES,
+  MESSAGE_TYPES_V2,
+  toWire,
+  type DecodeOptions,
+} from "./codec.js";
+export {
+  decodeRecords,
+  fk,
+  items2world,
+  rootMetres,
+  skeleton2offsets,
+  type AvatarState,
+  type DecodedRecord,
+} from "./records.js";
 export * from "./errors.js";
 export type { ClientEvent, ErrorEvent, ReconnectingEvent, WelcomeEvent } from "./events.js";
 export * from "./messages.js";

@@ -1,17 +1,33 @@
 /**
- * The v1 wire messages as typed values, with the protocol's constants and limits.
+ * The v1 and v2 wire messages as typed values, with the protocol's constants and limits.
  *
  * One interface per message `type`. Field names are the wire names (`rate_hz`,
  * `ref_seq`, ...), so this file reads side by side with `proto/README.md`, which is
  * the spec; the client API around it (`PosecastClient`) uses camelCase.
  *
+ * v2 (`posecast.v2`) adds `poses`, `skeleton`, `pose_rate` and `resync`, a `handle` and
+ * `skeleton` on welcome members and presence joins, and `pose_rate_hz` in hello and
+ * welcome; it has no `pose` on the wire (the client rebuilds {@link Pose}s from records).
+ *
  * Units everywhere: metres, seconds, a right-handed world with +Y up, a character
  * facing +Z, quaternions xyzw (scalar last).
  */
 
+/** The default version of {@link decode}'s `version` option (v1). */
 export const PROTOCOL_VERSION = 1;
+export const PROTOCOL_V1 = 1;
+export const PROTOCOL_V2 = 2;
 /** The WebSocket subprotocol a v1 client offers. */
 export const SUBPROTOCOL = "posecast.v1";
+export const SUBPROTOCOL_V2 = "posecast.v2";
+/** The subprotocol of each version. */
+export const SUBPROTOCOLS: Readonly<Record<number, string>> = { 1: SUBPROTOCOL, 2: SUBPROTOCOL_V2 };
+/** v2: the pose rates a client may ask for (divisors of the 60 Hz tick), Hz. */
+export const POSE_RATES_HZ = [60, 30, 20, 15] as const;
+/** v2: a server message (and so `poses.data`) may be up to this many bytes. */
+export const MAX_SERVER_MESSAGE_BYTES_V2 = 16384;
+/** v2: a skeleton bin, 18 x 3 int16 LE in 0.1 mm (bone offsets SPINE ... RIGHT_TOE). */
+export const SKELETON_BYTES = 108;
 
 export const LAYOUTS = ["hmd3+waist", "hmd3"] as const;
 /**
@@ -130,11 +146,17 @@ export interface Hello {
   readonly rate_hz?: number;
   /** Backends only: further rooms to watch. Empty is written as absent. */
   readonly watch?: readonly string[];
+  /** v2: poses per second wanted (60, 30, 20 or 15); absent: 60. */
+  readonly pose_rate_hz?: number;
 }
 
 export interface Member {
   readonly player: string;
   readonly name: string;
+  /** v2 (required there): how pose records name this player on this connection. */
+  readonly handle?: number;
+  /** v2 (required there): the player's bone offsets, {@link SKELETON_BYTES} bytes. */
+  readonly skeleton?: Uint8Array;
 }
 
 export interface Welcome {
@@ -153,6 +175,8 @@ export interface Welcome {
   readonly lookahead_frames: number;
   readonly members: readonly Member[];
   readonly limits: Limits;
+  /** v2 (required there): the poses per second this client gets. */
+  readonly pose_rate_hz?: number;
 }
 
 export type Calibrate =
@@ -179,8 +203,17 @@ export interface Pose {
   readonly t: number;
   /** World positions, metres: 19 joints x xyz, joint order (length 57). */
   readonly positions: Float64Array;
-  /** World rotations, xyzw: 19 joints x 4 (length 76), when the server sends them. */
+  /** World rotations, xyzw: 19 joints x 4 (length 76), when the server sends them (always in v2). */
   readonly rotations?: Float64Array;
+  /**
+   * v2: the record's items, xyzw, 19 x 4: PELVIS's world rotation, then each joint's
+   * rotation relative to its parent (`world[j] = world[parent[j]] * local[j]`).
+   */
+  readonly localRotations?: Float64Array;
+  /** v2: the record was a keyframe (a clean snap point for interpolation). */
+  readonly keyframe?: boolean;
+  /** v2: the upper-body pass left the head or a hand more than 1 mm from its tracker. */
+  readonly reachLimited?: boolean;
 }
 
 export interface Presence {
@@ -189,6 +222,38 @@ export interface Presence {
   readonly room: string;
   readonly player: string;
   readonly name: string;
+  /** v2 `join` (required there): the player's handle on this connection. */
+  readonly handle?: number;
+  /** v2 `join` (required there): its bone offsets, {@link SKELETON_BYTES} bytes. */
+  readonly skeleton?: Uint8Array;
+}
+
+/** v2, server to client: all of a tick's pose records for this client. */
+export interface Poses {
+  readonly type: "poses";
+  /** Server time of the newest tick whose poses it carries, seconds. */
+  readonly t: number;
+  /** The pose records (`records.ts` reads them). */
+  readonly data: Uint8Array;
+}
+
+/** v2, server to client: a player's calibration changed its bone offsets. */
+export interface SkeletonMessage {
+  readonly type: "skeleton";
+  readonly player: string;
+  readonly handle: number;
+  readonly skeleton: Uint8Array;
+}
+
+/** v2, client to server: poses at this rate from now on (60, 30, 20 or 15 Hz). */
+export interface PoseRate {
+  readonly type: "pose_rate";
+  readonly rate_hz: number;
+}
+
+/** v2, client to server: a keyframe of every avatar with the next `poses`. */
+export interface Resync {
+  readonly type: "resync";
 }
 
 export interface Selector {
@@ -248,7 +313,11 @@ export type Message =
   | Ping
   | Pong
   | ErrorMessage
-  | Bye;
+  | Bye
+  | Poses
+  | SkeletonMessage
+  | PoseRate
+  | Resync;
 
 export type MessageType = Message["type"];
 

@@ -1,5 +1,5 @@
 /**
- * A small, strict msgpack reader and writer for protocol v1 (pure: bytes in, values out).
+ * A small, strict msgpack reader and writer for protocols v1 and v2 (pure: bytes in, values out).
  *
  * Why not a general msgpack library: the spec needs three things they do not give.
  *
@@ -92,10 +92,11 @@ export interface Unpacked {
  * non-string map key or invalid UTF-8, and TOO_LARGE for a str, bin, array or map
  * over its structural bound (at its header), whichever comes first in the bytes.
  * Nesting deeper than {@link MAX_DEPTH} is reported in `tooDeep`, not thrown, so the
- * caller can apply the spec's order of checks.
+ * caller can apply the spec's order of checks. `maxBinBytes` is the bin bound: 256 in
+ * v1, the message cap (16384) for a v2 server message (`poses.data`).
  */
-export function unpack(bytes: Uint8Array): Unpacked {
-  const r = new Reader(bytes);
+export function unpack(bytes: Uint8Array, maxBinBytes = MAX_BIN_BYTES): Unpacked {
+  const r = new Reader(bytes, maxBinBytes);
   const value = r.value(1);
   if (r.pos !== bytes.length) {
     throw new MalformedError(`trailing bytes after the msgpack value (${bytes.length - r.pos})`);
@@ -108,7 +109,10 @@ class Reader {
   tooDeep = false;
   private readonly view: DataView;
 
-  constructor(private readonly bytes: Uint8Array) {
+  constructor(
+    private readonly bytes: Uint8Array,
+    private readonly maxBin: number,
+  ) {
     this.view = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
   }
 
@@ -245,7 +249,7 @@ class Reader {
   }
 
   private bin(n: number): Uint8Array {
-    if (n > MAX_BIN_BYTES) throw new TooLargeError(`bin of ${n} bytes, limit ${MAX_BIN_BYTES}`);
+    if (n > this.maxBin) throw new TooLargeError(`bin of ${n} bytes, limit ${this.maxBin}`);
     this.need(n);
     const out = this.bytes.slice(this.pos, this.pos + n);
     this.pos += n;
