@@ -46,7 +46,8 @@ from posecast.online.protocol import decode, encode
 from posecast.online.protocol.messages import (
     DEFAULT_LIMITS,
     ROLE_MAY_SEND,
-    SUBPROTOCOL,
+    ROLE_MAY_SEND_V2,
+    SUBPROTOCOLS,
     Bye,
     Calibrate,
     Error,
@@ -57,6 +58,7 @@ from posecast.online.protocol.messages import (
     Ping,
     Pong,
     Pose,
+    Poses,
     Welcome,
     seq_delta,
 )
@@ -149,6 +151,7 @@ class Peer:
     role: str
     last_seq: int | None = None
     limits: Limits = DEFAULT_LIMITS
+    version: int = 1  # the connection's protocol
 
 
 def verdict(data: bytes | str, peer: Peer) -> Verdict:
@@ -156,12 +159,14 @@ def verdict(data: bytes | str, peer: Peer) -> Verdict:
     if isinstance(data, str):
         return Verdict("MALFORMED", True, close_code=1003)  # text: 1003 (Transport)
     try:
-        msg = decode(data, limits=peer.limits)
+        cap = peer.limits.max_message_bytes  # a server decodes within it (v2 too)
+        msg = decode(data, limits=peer.limits, max_bytes=cap, version=peer.version)
     except ProtocolError as exc:
         return Verdict(exc.code, exc.fatal, exc.field)
     if isinstance(msg, Hello):
         return Verdict("ALREADY_JOINED", False, "type")
-    if msg.TYPE not in ROLE_MAY_SEND[peer.role]:
+    may_send = ROLE_MAY_SEND_V2 if peer.version >= 2 else ROLE_MAY_SEND
+    if msg.TYPE not in may_send[peer.role]:
         return Verdict("FORBIDDEN", False, "type")
     if isinstance(msg, Frame):
         if peer.last_seq is not None:
@@ -213,13 +218,14 @@ def open_socket(port: int, source_ip: str = "127.0.0.1") -> socket.socket:
 class Attacker:
     """One blocking client connection; :meth:`probe` sends a message and reports."""
 
-    def __init__(self, port: int, *, source_ip: str = "127.0.0.1") -> None:
+    def __init__(self, port: int, *, source_ip: str = "127.0.0.1", version: int = 1) -> None:
         self.port = port
         self.source_ip = source_ip
+        self.version = version
         self.ws: ClientConnection = connect(
             f"ws://127.0.0.1:{port}/",
             sock=open_socket(port, source_ip),
-            subprotocols=[SUBPROTOCOL],  # type: ignore[list-item]
+            subprotocols=[SUBPROTOCOLS[version]],  # type: ignore[list-item]
             compression=None,
             max_size=None,
             open_timeout=5,
@@ -229,7 +235,7 @@ class Attacker:
         self.received: list[Message] = []
 
     def hello(self, tok: str, room: str = "r1", name: str = "Mallory", **kw: Any) -> Message:
-        self.ws.send(encode(Hello(1, tok, room, name, **kw)))
+        self.ws.send(encode(Hello(self.version, tok, room, name, **kw)))
         return self.next(lambda m: isinstance(m, Welcome | Error))
 
     def next(self, pred: Callable[[Message], bool], timeout_s: float = 5.0) -> Message:
@@ -240,8 +246,8 @@ class Attacker:
                 raise AssertionError(f"no matching message in {timeout_s} s")
             data = self.ws.recv(timeout=left)
             assert isinstance(data, bytes)
-            msg = decode(data)
-            if not isinstance(msg, Pose):
+            msg = decode(data, version=self.version)
+            if not isinstance(msg, Pose | Poses):
                 self.received.append(msg)
             if pred(msg):
                 return msg
@@ -262,7 +268,7 @@ class Attacker:
                     raise AssertionError(f"neither a pong nor a close in {timeout_s} s")
                 raw = self.ws.recv(timeout=left)
                 assert isinstance(raw, bytes)
-                msg = decode(raw)
+                msg = decode(raw, version=self.version)
                 if isinstance(msg, Error):
                     ans.errors.append(msg)
                 elif isinstance(msg, Bye):
