@@ -7,7 +7,7 @@ The server's own pure core runs here in one process and in simulated time: a ``H
 shipped models, ticked at 60 Hz as fast as the machine allows. ``P`` players join
 one room (over v2; ``--player-protocol 1``: v1) and stream BVH replays (the SDK's
 ``BvhReplaySource``, one clip per player in turn: ``--bvh`` files, else 8 CMU clips
-from ``../shared``), and three spectators watch: a v1 client, a v2 client at 60 Hz
+from ``../shared``; ``--walk``: the SDK's procedural walk, a seed per player), and three spectators watch: a v1 client, a v2 client at 60 Hz
 and a v2 client at 20 Hz. Every client's writer takes its outbox every tick (a
 client that keeps up, nothing superseded), so what is counted is exactly what the
 server would write to it:
@@ -44,7 +44,7 @@ import numpy as np
 from posecast_client.codec import decode as sdk_decode
 from posecast_client.protocol import Pose
 from posecast_client.session import ClientSession
-from posecast_client.sources import BvhReplaySource
+from posecast_client.sources import BvhReplaySource, WalkSource
 
 from posecast.online.auth.tokens import mint
 from posecast.online.config import ServerConfig
@@ -124,6 +124,8 @@ def states_ms(players: int, repeat: int = 50) -> float:
 def run_room(
     engine: Any, players: int, seconds: float, clips: list[Path], player_version: int = 2
 ) -> dict[str, Any]:
+    """One room of ``players`` for ``seconds`` (simulated); ``clips`` empty: the SDK's
+    procedural walk, a different seed per player."""
     cfg = ServerConfig(token_secret=SECRET, port=0, samples=1, max_watchers_per_room=8,
                        conn_per_ip_per_min=10_000, fatal_per_ip_per_min=10_000)  # fmt: skip
     now = 1000.0
@@ -147,11 +149,14 @@ def run_room(
         watchers.append(Watcher(hub, c, version))
     for c in conns:
         hub.outbox(c).take(now)  # type: ignore[union-attr]
-    sources = [
-        BvhReplaySource(clips[i % len(clips)], loop=True,
-                        offset_m=((i % 6) * 1.2, 0.0, (i // 6) * 1.2)).samples()
-        for i in range(players)
-    ]  # fmt: skip
+
+    def source(i: int) -> Any:
+        at = ((i % 6) * 1.2, 0.0, (i // 6) * 1.2)
+        if clips:
+            return BvhReplaySource(clips[i % len(clips)], loop=True, offset_m=at)
+        return WalkSource(seconds=10.0, seed=i, loop=True, offset_m=at)
+
+    sources = [source(i).samples() for i in range(players)]
     worker = EngineWorker(engine)
     ticks = int(seconds * 60)
     route = 0.0
@@ -214,6 +219,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seconds", type=float, default=10.0, help="measured seconds per room")
     p.add_argument("--samples", type=int, default=10, help="engine samples per player (10)")
     p.add_argument("--bvh", type=Path, action="append", help="clips to replay (repeatable)")
+    p.add_argument("--walk", action="store_true", help="the SDK's procedural walk, not BVH")
     p.add_argument(
         "--player-protocol",
         type=int,
@@ -225,9 +231,10 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     # Default: every 7th CMU clip (8 different motions); without ../shared, the SDK's
     # two 12-frame fixtures, whose loops teleport every 0.2 s (far more than real motion).
-    clips = (
-        args.bvh or sorted(SHARED.glob("*/*/*.bvh.gz"))[::7][:8] or sorted(FIXTURES.glob("*.bvh"))
-    )
+    clips: list[Path] = []
+    if not args.walk:
+        clips = args.bvh or sorted(SHARED.glob("*/*/*.bvh.gz"))[::7][:8]
+        clips = clips or sorted(FIXTURES.glob("*.bvh"))
     ecfg = EngineConfig(samples=args.samples)
     results = []
     for players in (int(x) for x in args.rooms.split(",")):

@@ -9,7 +9,11 @@ the yardstick: same seq, positions within 1 cm, rotations within 0.5 degrees.
 from __future__ import annotations
 
 import asyncio
+import json
+import subprocess
+import sys
 from collections.abc import Coroutine
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -30,6 +34,7 @@ from tests.online.conftest import make_cfg, token
 from tests.online.wsclient import Client, Factory, serving
 
 pytestmark = pytest.mark.timeout(40)
+REPO = Path(__file__).resolve().parents[3]
 
 
 def run(coro: Coroutine[Any, Any, None]) -> None:
@@ -171,3 +176,21 @@ def test_pose_rate_changes_what_comes(engine_factory: Factory) -> None:
             assert fast > 0.8 and 0.15 < slow < 0.35, (fast, slow)
 
     run(scenario())
+
+
+@pytest.mark.timeout(300)
+def test_an_8_player_room_gets_at_most_64_bytes_a_pose(tmp_path: Path) -> None:
+    """``benchmarks/bandwidth.py`` (the server's core and engine in simulated time, the
+    SDK decoding): an 8-player room at 60 Hz of the SDK's procedural walks, v2 within
+    64 bytes a pose (v1: 347), every rebuilt pose within 1 cm and 0.5 degrees."""
+    out = tmp_path / "bw.json"
+    cmd = [sys.executable, str(REPO / "benchmarks" / "bandwidth.py"), "--rooms", "8",
+           "--seconds", "2", "--samples", "8", "--walk", "--json", str(out)]  # fmt: skip
+    subprocess.run(cmd, check=True, cwd=REPO, capture_output=True, timeout=280)
+    (room,) = json.loads(out.read_text())["rooms"]
+    assert room["v2_60"]["poses_per_s"] == room["v1_60"]["poses_per_s"] == 480.0
+    assert room["v2_60"]["bytes_per_pose"] <= 64.0, room
+    assert 340 < room["v1_60"]["bytes_per_pose"] < 350
+    assert room["v2_20"]["poses_per_s"] == 160.0
+    assert room["v2_compared_poses"] > 500
+    assert room["v2_max_position_error_m"] < 0.01 and room["v2_max_rotation_error_deg"] < 0.5
