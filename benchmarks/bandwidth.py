@@ -7,10 +7,10 @@ The server's own pure core runs here in one process and in simulated time: a ``H
 shipped models, ticked at 60 Hz as fast as the machine allows. ``P`` players join
 one room (over v2; ``--player-protocol 1``: v1) and stream BVH replays (the SDK's
 ``BvhReplaySource``, one clip per player in turn: ``--bvh`` files, else 8 CMU clips
-from ``../shared``; ``--walk``: the SDK's procedural walk, a seed per player), and three spectators watch: a v1 client, a v2 client at 60 Hz
-and a v2 client at 20 Hz. Every client's writer takes its outbox every tick (a
-client that keeps up, nothing superseded), so what is counted is exactly what the
-server would write to it:
+from ``../shared``; ``--walk``: the SDK's procedural walk, a seed per player), and
+three spectators watch: a v1 client, a v2 client at 60 Hz and a v2 client at 20 Hz.
+Every client's writer takes its outbox every tick (a client that keeps up, nothing
+superseded), so what is counted is exactly what the server would write to it:
 
 * ``payload_kB_s``: WebSocket payload bytes of the messages that carry poses (v1
   ``pose``, one per avatar per tick; v2 ``poses``, one per tick), per second;
