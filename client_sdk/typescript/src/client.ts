@@ -19,14 +19,23 @@
  * connections (as in the Python SDK), so a pose's `seq` names one frame sent.
  * Errors that retrying cannot fix (KICKED, REPLACED, UNAUTHENTICATED, FORBIDDEN,
  * ROOM_FULL, ...) end the event stream by throwing that error.
+ *
+ * Versions: the client offers `posecast.v2, posecast.v1` (or only v1 with
+ * `{ protocol: 1 }`) and speaks what the server selects. On v2 it keeps each avatar's
+ * skeleton and reference state ({@link AvatarTable}), turns each `poses` message into
+ * `pose` events (positions by FK, world and local rotations), sends `resync` when a
+ * record cannot be applied, and offers {@link PosecastClient.setPoseRate}. On v1 the
+ * same `pose` events come from the server's `pose` messages.
  */
 
+import { AvatarTable } from "./avatars.js";
 import { ClockSync } from "./clock.js";
 import { decode, encode } from "./codec.js";
 import {
   ConnectionClosedError,
   errorFromMessage,
   ForbiddenError,
+  OutOfRangeError,
   PosecastError,
   ProtocolError,
   ServerShutdownError,
@@ -41,10 +50,13 @@ import {
   type Member,
   type Message,
   type Pose,
-  PROTOCOL_VERSION,
+  POSE_RATES_HZ,
+  PROTOCOL_V1,
+  PROTOCOL_V2,
   type Role,
   seqNext,
   SUBPROTOCOL,
+  SUBPROTOCOL_V2,
   type Welcome,
 } from "./messages.js";
 import { type FrameInput, toTrackers } from "./trackers.js";
@@ -94,6 +106,8 @@ export interface ConnectOptions {
   readonly clock?: () => number;
   /** Random numbers in [0, 1) for the back-off jitter. Default `Math.random`. */
   readonly random?: () => number;
+  /** The highest protocol to offer: 2 (default: `posecast.v2, posecast.v1`) or 1 (v1 only). */
+  readonly protocol?: 1 | 2;
 }
 
 export interface JoinOptions {
@@ -101,6 +115,8 @@ export interface JoinOptions {
   readonly rateHz?: number;
   /** Backends only: further rooms to watch. */
   readonly watch?: readonly string[];
+  /** v2: poses per second wanted, 60, 30, 20 or 15 (ignored by a v1 server). Absent: 60. */
+  readonly poseRateHz?: number;
 }
 
 export type ClientState = "open" | "joining" | "joined" | "reconnecting" | "closed";
@@ -115,11 +131,12 @@ const RETRYABLE_CODES: ReadonlySet<string> = new Set([
 ]);
 const PING_BURST = 4; // pings right after each welcome, so the clock converges at once
 const PING_BURST_GAP_S = 0.05;
+const RESYNC_GAP_S = 0.25; // at most one automatic resync this often (the server rate-limits them)
 const WS_OPEN = 1;
 
 /**
- * Open a WebSocket to a posecast server (subprotocol `posecast.v1`). Resolves once
- * the socket is open; call {@link PosecastClient.join} next.
+ * Open a WebSocket to a posecast server (offering `posecast.v2, posecast.v1`). Resolves
+ * once the socket is open; call {@link PosecastClient.join} next.
  *
  * @param url e.g. `wss://host/v1` (the path is up to the deployment)
  * @param token the join token, or a function returning a fresh one
@@ -149,6 +166,11 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
   private limitsNow: Limits = DEFAULT_LIMITS;
   private readonly membersNow = new Map<string, Member>();
   private readonly posesNow = new Map<string, Pose>();
+  private readonly avatars = new AvatarTable();
+  private versionNow: number = PROTOCOL_V2;
+  private poseRateHz: number | undefined;
+  private lastResyncT = -Infinity;
+  private badRecordsNow = 0;
   private seq = 0;
   private lastFrameT = 0;
   private pending:
@@ -221,6 +243,21 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
   /** The newest pose of each player, by id, whether or not the events are read. */
   get poses(): ReadonlyMap<string, Pose> {
     return this.posesNow;
+  }
+
+  /** The protocol this connection speaks: 2, or 1 when the server selected `posecast.v1`. */
+  get version(): number {
+    return this.versionNow;
+  }
+
+  /** v2: the bone offsets of `player`, metres, 19 x 3 (PELVIS zero), as last announced. */
+  skeletonOf(player: string): Float64Array | undefined {
+    return this.avatars.offsetsOf(player);
+  }
+
+  /** v2: `poses` messages cut short by a record that could not be applied (each sent a resync). */
+  get badRecords(): number {
+    return this.badRecordsNow;
   }
 
   /** Events dropped because the reader fell behind (never poses: those coalesce). */
@@ -300,7 +337,30 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
     return this.send({ type: "calibrate", tpose: true, trackers: toTrackers(how.tpose).trackers });
   }
 
-  /** Send any v1 message as is (backends: `selector`, `kick`). False when not connected. */
+  /**
+   * v2: receive `rateHz` poses a second from now on (60, 30, 20 or 15), and after a
+   * reconnect too. False when not connected, or when the server speaks only v1 (the
+   * rate is kept for a later v2 connection).
+   *
+   * @throws OutOfRangeError another rate; nothing is sent.
+   */
+  setPoseRate(rateHz: number): boolean {
+    if (!(POSE_RATES_HZ as readonly number[]).includes(rateHz)) {
+      throw new OutOfRangeError(`pose rate ${rateHz} Hz: not 60, 30, 20 or 15`, { field: "rate_hz" });
+    }
+    this.poseRateHz = rateHz;
+    if (this.versionNow < PROTOCOL_V2 || this.stateNow !== "joined") return false;
+    return this.send({ type: "pose_rate", rate_hz: rateHz });
+  }
+
+  /** v2: ask for a keyframe of every avatar with the next poses. False on v1 or when not connected. */
+  resync(): boolean {
+    if (this.versionNow < PROTOCOL_V2 || this.stateNow !== "joined") return false;
+    this.lastResyncT = this.now();
+    return this.send({ type: "resync" });
+  }
+
+  /** Send any message as is (backends: `selector`, `kick`). False when not connected. */
   send(msg: Message): boolean {
     const ws = this.ws;
     if (ws === undefined || ws.readyState !== WS_OPEN) return false;
@@ -359,7 +419,8 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
 
   private openSocket(): Promise<WebSocketLike> {
     const gen = ++this.generation;
-    const ws = new this.WebSocketClass(this.url, [SUBPROTOCOL]);
+    const offered = this.options.protocol === PROTOCOL_V1 ? [SUBPROTOCOL] : [SUBPROTOCOL_V2, SUBPROTOCOL];
+    const ws = new this.WebSocketClass(this.url, offered);
     ws.binaryType = "arraybuffer";
     this.ws = ws;
     this.fatal = undefined;
@@ -383,11 +444,12 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
         clearTimer(timer);
         ws.onmessage = (ev) => this.onData(gen, ev.data);
         ws.onclose = (ev) => this.onClose(gen, ev.code, ev.reason);
-        if (ws.protocol !== SUBPROTOCOL) {
+        if (!offered.includes(ws.protocol)) {
           ws.close(1002, "subprotocol");
-          reject(new ConnectionClosedError(`server did not select ${SUBPROTOCOL}`, 1002));
+          reject(new ConnectionClosedError(`server did not select ${offered.join(" or ")}`, 1002));
           return;
         }
+        this.versionNow = ws.protocol === SUBPROTOCOL_V2 ? PROTOCOL_V2 : PROTOCOL_V1;
         resolve(ws);
       };
     });
@@ -403,15 +465,17 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
         reject(new ConnectionClosedError("no welcome in time"));
       }, this.options.timeoutS ?? 10);
       this.pending = { resolve, reject, timer };
+      const poseRate = args.options.poseRateHz ?? this.poseRateHz;
       const hello = {
         type: "hello",
-        version: PROTOCOL_VERSION,
+        version: this.versionNow,
         token,
         room: args.room,
         name: args.name,
         ...(args.layout === undefined ? {} : { layout: args.layout }),
         ...(args.options.rateHz === undefined ? {} : { rate_hz: args.options.rateHz }),
         ...(args.options.watch === undefined ? {} : { watch: args.options.watch }),
+        ...(poseRate === undefined || this.versionNow < PROTOCOL_V2 ? {} : { pose_rate_hz: poseRate }),
       } as const;
       if (!this.send(hello)) {
         clearTimer(timer);
@@ -427,10 +491,10 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
     if (data instanceof ArrayBuffer) bytes = new Uint8Array(data);
     else if (ArrayBuffer.isView(data)) {
       bytes = new Uint8Array(data.buffer, data.byteOffset, data.byteLength);
-    } else return; // v1 servers send binary messages only
+    } else return; // posecast servers send binary messages only
     let msg: Message;
     try {
-      msg = decode(bytes, { limits: this.limitsNow });
+      msg = decode(bytes, { limits: this.limitsNow, version: this.versionNow });
     } catch (err) {
       if (err instanceof ProtocolError) this.queue.push({ type: "error", error: err });
       return;
@@ -443,6 +507,8 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
       case "welcome": {
         const pending = this.pending;
         this.pending = undefined;
+        // Synchronously, before the next message: poses may follow at once.
+        this.avatars.reset(this.versionNow >= PROTOCOL_V2 ? msg.members : []);
         if (pending !== undefined) {
           clearTimer(pending.timer);
           pending.resolve(msg);
@@ -450,15 +516,36 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
         return;
       }
       case "pose":
-        this.posesNow.set(msg.player, msg);
-        this.queue.push(msg);
+        this.onPose(msg);
+        return;
+      case "poses": {
+        const { poses, error } = this.avatars.poses(msg);
+        for (const pose of poses) this.onPose(pose);
+        if (error !== undefined) {
+          this.badRecordsNow++;
+          this.queue.push({ type: "error", error });
+          if (this.now() - this.lastResyncT >= RESYNC_GAP_S) this.resync();
+        }
+        return;
+      }
+      case "skeleton":
+        this.avatars.skeleton(msg);
         return;
       case "presence":
+        this.avatars.presence(msg);
         if (msg.room === this.welcomeNow?.room) {
           if (msg.event === "leave") {
             this.membersNow.delete(msg.player);
             this.posesNow.delete(msg.player);
-          } else this.membersNow.set(msg.player, { player: msg.player, name: msg.name });
+          } else {
+            const known = this.membersNow.get(msg.player);
+            this.membersNow.set(
+              msg.player,
+              msg.handle !== undefined && msg.skeleton !== undefined
+                ? { player: msg.player, name: msg.name, handle: msg.handle, skeleton: msg.skeleton }
+                : { ...known, player: msg.player, name: msg.name },
+            );
+          }
         }
         this.queue.push(msg);
         return;
@@ -482,8 +569,13 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
         }
         return;
       default:
-        return; // client-bound v1 messages only; anything else is ignored
+        return; // client-bound messages only; anything else is ignored
     }
+  }
+
+  private onPose(pose: Pose): void {
+    this.posesNow.set(pose.player, pose);
+    this.queue.push(pose);
   }
 
   private onClose(gen: number, code: number, reason: string): void {

@@ -115,6 +115,62 @@ describe("against posecast serve", { skip }, () => {
     }
   });
 
+  test("v2 and a v1-pinned client see the same body: joints within 1 cm, rotations within 0.5 deg", async () => {
+    const ada = await connect(server.url, token("ada3"), OPTS);
+    await ada.join("arena", "Ada");
+    const v2 = await connect(server.url, token("cam2", "arena", "spectator"), OPTS);
+    await v2.join("arena", "Cam v2");
+    const v1 = await connect(server.url, token("cam1", "arena", "spectator"), { ...OPTS, protocol: 1 });
+    await v1.join("arena", "Cam v1");
+    assert.deepEqual([ada.version, v2.version, v1.version], [2, 2, 1]);
+    const slow = await connect(server.url, token("cam3", "arena", "spectator"), OPTS);
+    await slow.join("arena", "Cam 20 Hz", undefined, { poseRateHz: 20 });
+    const seen = { v2: new Map<number, Pose>(), v1: new Map<number, Pose>(), slow: new Map<number, Pose>() };
+    const collect = async (client: PosecastClient, into: Map<number, Pose>): Promise<void> => {
+      for await (const ev of client) {
+        if (ev.type === "pose" && ev.player === "ada3") into.set(ev.seq, ev);
+        if (into.size >= 60) return;
+      }
+    };
+    const stop = stream(ada, 0.3);
+    try {
+      await Promise.race([
+        Promise.all([collect(v2, seen.v2), collect(v1, seen.v1), collect(slow, seen.slow)]),
+        new Promise((_, reject) => setTimeout(() => reject(new Error("too few poses")), 20_000).unref()),
+      ]);
+    } finally {
+      stop();
+    }
+    let worstMm = 0;
+    let worstDeg = 0;
+    let common = 0;
+    for (const [seq, a] of seen.v2) {
+      const b = seen.v1.get(seq);
+      if (b === undefined) continue;
+      common++;
+      assert.ok(a.rotations !== undefined && a.localRotations !== undefined && b.rotations !== undefined);
+      for (let j = 0; j < 19; j++) {
+        const d = Math.hypot(...[0, 1, 2].map((c) => a.positions[3 * j + c]! - b.positions[3 * j + c]!));
+        worstMm = Math.max(worstMm, d * 1000);
+        // v1 rotations are within 3.1e-5 of unit length, not renormalised: compare directions.
+        const qa = a.rotations.subarray(4 * j, 4 * j + 4);
+        const qb = b.rotations.subarray(4 * j, 4 * j + 4);
+        const dot = Math.abs(qa.reduce((acc, v, c) => acc + v * qb[c]!, 0)) / (Math.hypot(...qa) * Math.hypot(...qb));
+        const deg = (2 * Math.acos(Math.min(1, dot)) * 180) / Math.PI;
+        worstDeg = Math.max(worstDeg, deg);
+      }
+    }
+    console.log(`v2 vs v1 over ${common} poses: largest joint ${worstMm.toFixed(2)} mm, rotation ${worstDeg.toFixed(3)} deg`);
+    assert.ok(common >= 30, `only ${common} poses in common`);
+    assert.ok(worstMm < 10, `joints ${worstMm} mm apart`);
+    assert.ok(worstDeg < 0.5, `rotations ${worstDeg} deg apart`);
+    // A 20 Hz client gets every third tick's poses.
+    const seqs = [...seen.slow.keys()].sort((x, y) => x - y);
+    const steps = seqs.slice(1).map((s, i) => s - seqs[i]!);
+    assert.ok(steps.filter((d) => d >= 3).length >= steps.length * 0.8, `20 Hz steps ${steps.slice(0, 20)}`);
+    await Promise.all([ada.close(), v2.close(), v1.close(), slow.close()]);
+  });
+
   test("refusals are typed errors: forged, expired, wrong room, bad frame", async () => {
     const forged = token("eve").slice(0, -4) + "AAAA";
     await assert.rejects((await connect(server.url, forged, OPTS)).join("arena", "Eve"), UnauthenticatedError);

@@ -1,0 +1,125 @@
+/**
+ * v2 session state for the avatars a connection receives (pure: messages in, poses out).
+ *
+ * Who each handle is, its bone offsets (from `welcome` members, presence `join` and
+ * `skeleton`), and the reference state its next record applies to (closed loop:
+ * `records.ts`). A `poses` message comes out as one {@link Pose} per record, with the
+ * positions rebuilt by FK, the world rotations and the local ones (the record's items).
+ *
+ * A record that cannot be applied (a delta before its keyframe, an unknown handle, a
+ * record cut short: BAD_FIELD, field `data`) ends that message: the poses before it
+ * are kept, the rest is skipped, and {@link AvatarTable.poses} says so, so the client
+ * sends `resync` (the server answers with a keyframe of every avatar).
+ */
+
+import { BadFieldError } from "./errors.js";
+import type { Member, Pose, Poses, Presence, SkeletonMessage } from "./messages.js";
+import { type AvatarState, decodeRecords, type DecodedRecord, fk, items2world, rootMetres, skeleton2offsets } from "./records.js";
+
+interface Avatar {
+  readonly player: string;
+  offsets: Float64Array;
+}
+
+/** What one `poses` message gave: its poses, and the error that cut it short, if any. */
+export interface PosesResult {
+  readonly poses: Pose[];
+  readonly error?: BadFieldError;
+}
+
+export class AvatarTable {
+  private readonly avatars = new Map<number, Avatar>();
+  private readonly states = new Map<number, AvatarState | null>();
+  private readonly handles = new Map<string, number>();
+
+  /** Forget everything and announce the welcome's members (a new connection). */
+  reset(members: readonly Member[]): void {
+    this.avatars.clear();
+    this.states.clear();
+    this.handles.clear();
+    for (const m of members) {
+      if (m.handle !== undefined && m.skeleton !== undefined) this.announce(m.player, m.handle, m.skeleton);
+    }
+  }
+
+  /** Presence: a v2 `join` announces a handle (with no reference yet); `leave` drops it. */
+  presence(msg: Presence): void {
+    if (msg.event === "join" && msg.handle !== undefined && msg.skeleton !== undefined) {
+      this.announce(msg.player, msg.handle, msg.skeleton);
+    } else if (msg.event === "leave") {
+      const handle = this.handles.get(msg.player);
+      if (handle === undefined) return;
+      this.handles.delete(msg.player);
+      this.avatars.delete(handle);
+      this.states.delete(handle);
+    }
+  }
+
+  /** A player's calibration changed: rebuild its joints with these offsets from now on. */
+  skeleton(msg: SkeletonMessage): void {
+    const avatar = this.avatars.get(msg.handle);
+    if (avatar !== undefined) avatar.offsets = skeleton2offsets(msg.skeleton);
+    else this.announce(msg.player, msg.handle, msg.skeleton);
+  }
+
+  /** Drop every reference (the next record of each avatar must be a keyframe). */
+  dropState(): void {
+    for (const handle of this.states.keys()) this.states.set(handle, null);
+  }
+
+  /** The handle of `player` on this connection. */
+  handleOf(player: string): number | undefined {
+    return this.handles.get(player);
+  }
+
+  /** The bone offsets of `player`, metres, 19 x 3 (PELVIS zero), as last announced. */
+  offsetsOf(player: string): Float64Array | undefined {
+    const handle = this.handles.get(player);
+    return handle === undefined ? undefined : this.avatars.get(handle)?.offsets;
+  }
+
+  get size(): number {
+    return this.avatars.size;
+  }
+
+  /** The records of `msg`, applied in order, as poses. Never throws on bad data. */
+  poses(msg: Poses): PosesResult {
+    const records: DecodedRecord[] = [];
+    let error: BadFieldError | undefined;
+    try {
+      decodeRecords(msg.data, this.states, records);
+    } catch (err) {
+      if (!(err instanceof BadFieldError)) throw err; // a bug, not bad input
+      error = err;
+    }
+    const poses = records.map((rec) => this.pose(rec, msg.t));
+    return error === undefined ? { poses } : { poses, error };
+  }
+
+  private announce(player: string, handle: number, skeleton: Uint8Array): void {
+    const old = this.handles.get(player);
+    if (old !== undefined && old !== handle) {
+      this.avatars.delete(old);
+      this.states.delete(old);
+    }
+    this.handles.set(player, handle);
+    this.avatars.set(handle, { player, offsets: skeleton2offsets(skeleton) });
+    this.states.set(handle, null);
+  }
+
+  private pose(rec: DecodedRecord, t: number): Pose {
+    const avatar = this.avatars.get(rec.handle)!;
+    const world = items2world(rec.state.items);
+    return {
+      type: "pose",
+      player: avatar.player,
+      seq: rec.state.seq,
+      t,
+      positions: fk(world, rootMetres(rec.state), avatar.offsets),
+      rotations: world,
+      localRotations: Float64Array.from(rec.state.items),
+      keyframe: rec.keyframe,
+      reachLimited: rec.reachLimited,
+    };
+  }
+}
