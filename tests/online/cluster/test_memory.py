@@ -175,3 +175,43 @@ def test_a_v2_client_gets_a_remote_players_poses_as_records() -> None:
         assert isinstance(want, Pose) and want.rotations is not None
         world = records.items2world(rec.recon.items)
         assert np.abs(np.abs(np.einsum("ij,ij->i", world, want.rotations)) - 1).max() < 1e-4
+
+
+def test_a_remote_players_calibration_reaches_v2_clients_as_its_skeleton() -> None:
+    """The v1 bus pose carries no scale: B reads it off the bone lengths and sends its
+    v2 client the skeleton before the records, so FK gives the remote positions."""
+    from posecast.online.protocol import records
+    from posecast.online.protocol.messages import Poses, Skeleton
+
+    broker = MemoryBroker()
+    a, b = Node(broker, "A"), Node(broker, "B")
+    a.inbox(a.join("pa"))
+    conn = b.hub.connect("10.0.0.1", b.now, 2)
+    b.hub.receive(conn, encode(Hello(2, token(room="r1", player="pv"), "r1", "PV")), b.now)
+    box = b.hub.outbox(conn)
+    assert box is not None
+    (join,) = [m for m in map(lambda d: decode(d, version=2), box.take(b.now))
+               if isinstance(m, Presence) and m.player == "pa"]  # fmt: skip
+    assert join.handle is not None
+    refs: dict[int, records.Recon | None] = {join.handle: None}
+    bones = records.bytes2skeleton(join.skeleton or b"")
+    short = records.skeleton_offsets(1.25)  # a short user: every bone / 1.25
+    q = np.tile([0.0, 0.0, 0.0, 1.0], (19, 1))
+    pos = np.zeros((19, 3))
+    pos[0] = (1.0, 0.8, 2.0)
+    for j in range(1, 19):
+        pos[j] = pos[records.PARENTS[j]] + short[j - 1]
+    pose = Pose("pa", 5, 1.0, pos, q)
+    broker_bytes = encode(pose)
+    a.hub.deliver(TickOutput([("pa", broker_bytes)]), a.now)
+    msgs = [decode(d, version=2) for d in box.take(b.now)]
+    kinds = [m.TYPE for m in msgs]
+    assert kinds == ["skeleton", "poses"], kinds  # the skeleton first
+    skel = msgs[0]
+    assert isinstance(skel, Skeleton) and skel.player == "pa"
+    bones = records.bytes2skeleton(skel.skeleton)
+    assert np.abs(bones - short).max() < 5e-4
+    poses = msgs[1]
+    assert isinstance(poses, Poses)
+    (rec,) = records.decode_records(poses.data, refs)
+    assert np.abs(rec.recon.positions(bones) - pos).max() < 0.002

@@ -82,6 +82,9 @@ class Avatars:
     def skeleton(self, player: str) -> bytes:
         return self._skeleton.get(player, self._default)
 
+    def scale_of(self, player: str) -> float:
+        return self._scale.get(player, 1.0)
+
     def rescale(self, player: str, scale: float) -> bytes | None:
         """The engine used ``scale`` for ``player``: its new skeleton if that changed it."""
         if self._scale.get(player, 1.0) == scale:

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from posecast.errors import ProtocolError
 from posecast.online.cluster.bus import Bus
 from posecast.online.core.connections import Conn, Connections
@@ -27,6 +29,7 @@ from posecast.online.core.tick import TickOutput
 from posecast.online.protocol.codec import decode, encode
 from posecast.online.protocol.messages import Member, Message, Pose, Presence, Welcome
 from posecast.online.protocol.records import PoseState
+from posecast.skeleton import PARENTS, reference_offsets
 
 if TYPE_CHECKING:
     from posecast.online.metrics import Metrics
@@ -143,6 +146,8 @@ class Router:
                 superseded += self.conns.pose_to_conn(c, player, data, now)
             if v2 and state is None:  # a pose from another node: decode it once
                 state = _state_from_v1(data)
+                if state is not None:
+                    self._remote_scale(room, state, now)
             if state is not None:
                 requests.extend((c, s, state) for c, s in v2 if player in s.known)
         return superseded
@@ -158,6 +163,15 @@ class Router:
             if slot is not None:
                 superseded += self.conns.pose_to_conn(c, st.player, slot, now)
         return superseded
+
+    def _remote_scale(self, room: str, state: PoseState, now: float) -> None:
+        """A remote player's scale, read off its v1 pose's bone lengths: when it moved
+        by more than 0.2 % (2 mm on a metre of bones), its new skeleton goes to the
+        room's v2 clients before the pose."""
+        current = self.avatars.scale_of(state.player)
+        if abs(state.scale / current - 1.0) > 0.002:
+            self.avatars.rescale(state.player, round(state.scale, 4))
+            self.bytes_to_room_v2(room, encode(self.avatars.skeleton_message(state.player)), now)
 
     def bytes_to_room_v2(self, room: str, data: bytes, now: float) -> None:
         """A v2-only message to ``room``'s v2 audience."""
@@ -212,14 +226,22 @@ class Router:
             m.reach_limited.inc(out.reach_limited)
 
 
+_REF_BONES_M = float(np.linalg.norm(reference_offsets()[1:], axis=1).sum())
+
+
 def _state_from_v1(data: bytes) -> PoseState | None:
-    """A v1 pose from another node, for this node's v2 clients (its rotations are
-    snorm16, within 1e-4 rad; the scale is not on the v1 wire, so 1.0 is assumed)."""
+    """A v1 pose from another node, for this node's v2 clients. Its rotations are
+    snorm16 (within 1e-4 rad); the calibration scale is not on the v1 wire, so it is
+    read off the pose's bone lengths (its positions are FK of the reference bones
+    divided by the scale; 1 mm rounding leaves about 1e-4 of error)."""
     try:
         pose = decode(data)
     except ProtocolError:
         return None
     if not isinstance(pose, Pose) or pose.rotations is None:
         return None
-    return PoseState.batch([pose.player], [pose.seq], pose.t, pose.positions[None],
-                           pose.rotations[None], [1.0], [False])[0]  # fmt: skip
+    p = pose.positions
+    bones = float(np.linalg.norm(p[1:] - p[list(PARENTS[1:])], axis=1).sum())
+    scale = _REF_BONES_M / bones if bones > 0.2 * _REF_BONES_M else 1.0  # else: no body
+    return PoseState.batch([pose.player], [pose.seq], pose.t, p[None], pose.rotations[None],
+                           [scale], [False])[0]  # fmt: skip
