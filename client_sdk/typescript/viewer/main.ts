@@ -3,7 +3,9 @@
  * player in 3D (three.js) as a skinned humanoid mesh driven by the streamed joint
  * rotations (`avatar.ts`), or as a stick figure from the joint positions (`sticks.ts`;
  * the button in the panel, the `s` key or `?avatar=sticks` switch), with name labels,
- * a player list and a room picker. `scripts/build-viewer.mjs` bundles it into the one file the server
+ * a player list and a room picker. It speaks protocol v2 (the SDK's default: poses
+ * rebuilt by FK from rotation records, about 53 bytes a pose) and falls back to v1 on a
+ * server that only has v1; the status line names the version. `scripts/build-viewer.mjs` bundles it into the one file the server
  * serves at `/viewer/viewer.js` (`server/posecast/online/shell/http.py`).
  *
  * Token: `#token=` (preferred: a fragment never reaches the server or its logs) or
@@ -440,7 +442,7 @@ function describeStatus(c: PosecastClient): void {
   const n = c.members.size;
   const rtt = c.clock.rttS;
   setStatus(
-    `room ${room} · ${n} player${n === 1 ? "" : "s"}` +
+    `room ${room} · ${n} player${n === 1 ? "" : "s"} · posecast.v${c.version}` +
       (rtt === undefined ? "" : ` · rtt ${(rtt * 1000).toFixed(0)} ms`),
   );
 }

@@ -196,6 +196,7 @@ def test_viewer_draws_moving_avatars_with_names(
     assert {"Alice", "Bob"} <= set(result["list_names"]), result
     assert {"Alice", "Bob"} <= set(result["label_names"]), result
     assert result["status"].startswith("room demo · 2 players"), result["status"]
+    assert "· posecast.v2" in result["status"], result["status"]  # the SDK's default
     assert len(result["screenshots"]) == 6
     for path in result["screenshots"]:
         assert Path(path).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
