@@ -31,7 +31,7 @@ export type Wire = null | boolean | number | Float64 | string | Uint8Array | Wir
 export type WireArray = readonly Wire[];
 export type WireMap = ReadonlyMap<string, Wire>;
 
-/** Structural bounds of every v1 message (`proto/README.md`, "Structural bounds"). */
+/** Structural bounds of every message (v2 raises the bin bound for server messages; see `unpack`) (`proto/README.md`, "Structural bounds"). */
 export const MAX_STR_BYTES = 4096;
 export const MAX_BIN_BYTES = 256;
 export const MAX_ARRAY_LEN = 64;
@@ -230,7 +230,7 @@ class Reader {
       case 0xd6:
       case 0xd7:
       case 0xd8:
-        throw new MalformedError("msgpack ext types are not used by posecast v1");
+        throw new MalformedError("msgpack ext types are not used by posecast");
       default: // 0xc1: never used
         throw new MalformedError(`invalid msgpack byte 0x${b.toString(16)}`);
     }
