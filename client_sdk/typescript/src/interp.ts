@@ -400,11 +400,12 @@ export class Interpolator {
   }
 
   /**
-   * Take any client event: a pose is pushed, a `leave` forgets its player, a `welcome`
-   * (a join or a resume, maybe on another server clock) clears every buffer.
+   * Take any client event: a pose is pushed (a v2 keyframe as a resync point), a
+   * `leave` forgets its player, a `welcome` (a join or a resume, maybe on another
+   * server clock) clears every buffer.
    */
   feed(ev: ClientEvent): void {
-    if (ev.type === "pose") this.push(ev);
+    if (ev.type === "pose") this.push(ev, ev.keyframe === true);
     else if (ev.type === "presence" && ev.event === "leave") this.forget(ev.player);
     else if (ev.type === "welcome") this.clear();
   }

@@ -276,3 +276,18 @@ test("a lossy link (20 % dropped, 0-40 ms hold) jumps at most 1.5x the clean one
     assert.ok(maxJump(poses, lossy, false) > 1.5 * cleanJump, `seed ${seed}: raw`);
   }
 });
+
+test("feed: a v2 keyframe after a seq gap snaps, a delta pose after the same gap blends", () => {
+  const shownX = (keyframe: boolean): number => {
+    const buffers = new Interpolator({ delayS: 0 });
+    const at = (seq: number, t: number, x: number): Pose => ({
+      type: "pose", player: "p", seq, t, keyframe: seq === 5 && keyframe,
+      positions: Float64Array.from({ length: 57 }, (_, i) => (i % 3 === 0 ? x : 1)),
+    });
+    buffers.feed(at(1, 0, 0));
+    buffers.feed(at(5, 4 / 60, 1)); // seqs 2..4 never came
+    return buffers.poseAt("p", 2 / 60)!.positions[0]!;
+  };
+  assert.equal(shownX(true), 0); // held until the keyframe's time, then snapped to
+  assert.ok(Math.abs(shownX(false) - 0.5) < 1e-9, `${shownX(false)}`);
+});
