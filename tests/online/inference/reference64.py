@@ -82,7 +82,9 @@ class Decoder64:
 
 
 def rot_head(a: F, w: dict[str, F]) -> F:
-    out: F = a @ w["decoder.pose.weight_t"] + w["decoder.pose.bias"]
+    # The exporter names the pose head plainly or by the slice its graph takes (_0_108).
+    sfx = "" if "decoder.pose.weight_t" in w else "_0_108"
+    out: F = a @ w["decoder.pose.weight_t" + sfx] + w["decoder.pose.bias" + sfx]
     return out
 
 

@@ -107,8 +107,11 @@ class NativeDecoder:
                 ]
             )
         else:
-            pose = _need(w, "decoder.pose.weight_t", (H, 108), path)
-            pose_b = _need(w, "decoder.pose.bias", (108,), path)
+            # torch.onnx names the pose head's initializers by the slice the graph takes
+            # of them (``_0_108``) or, when it folds the slice away, plainly.
+            sliced = "decoder.pose.weight_t" not in w
+            pose = _need(w, "decoder.pose.weight_t" + ("_0_108" if sliced else ""), (H, 108), path)
+            pose_b = _need(w, "decoder.pose.bias" + ("_0_108" if sliced else ""), (108,), path)
         head = np.ascontiguousarray(
             np.concatenate([pose, _need(w, "decoder.contact.weight_t", (H, 2), path)], axis=1)
         )
