@@ -88,7 +88,7 @@ def _float_arg(option: str, text: str) -> float:
     except ValueError:
         value = math.nan
     if not math.isfinite(value) or value < 0:
-        raise _config(f"{option} {text!r} must be a finite number >= 0", "or `off`")
+        raise _config(f"{option} {text!r} must be a finite number >= 0", "e.g. 1.0, or `off`")
     return value
 
 

@@ -31,9 +31,10 @@ class EngineConfig:
             research evaluation of the network's own upper body).
         latent_scale: the pool's latents are ``latent_scale * eps``, ``eps ~ N(0, I)``
             (1.0: the prior; below 1 a truncated pool, nearer the mean).
-        home_factor: ``None`` (the paper) or the threshold at which a player returns
-            to sample 0, the prior's mean (:class:`~posecast.online.engine.selectors.
-            AnomalySelector`'s ``home``).
+        home_factor: the threshold at which a player returns to sample 0, the prior's
+            mean (:class:`~posecast.online.engine.selectors.AnomalySelector`'s ``home``,
+            capped at ``outlier_factor``); 1.0, chosen on the validation split
+            (docs/evaluation.md); ``None`` for the paper's selector.
     """
 
     samples: int = 100
@@ -48,7 +49,7 @@ class EngineConfig:
     fps: float = 60.0
     upper_body_ik: bool = True
     latent_scale: float = 1.0
-    home_factor: float | None = None
+    home_factor: float | None = 1.0
 
     def __post_init__(self) -> None:
         if self.samples < 1:
@@ -61,7 +62,7 @@ class EngineConfig:
             raise ConfigError("outlier_baseline must be 'min' or 'zero'")
         if not self.latent_scale > 0:
             raise ConfigError("latent_scale must be positive")
-        if self.home_factor is not None and not 0.0 <= self.home_factor <= self.outlier_factor:
-            raise ConfigError("home_factor must be within [0, outlier_factor]")
+        if self.home_factor is not None and not 0.0 <= self.home_factor < float("inf"):
+            raise ConfigError("home_factor must be a finite number >= 0")
         if self.waist_filter_hz is not None and not self.waist_filter_hz > 0:
             raise ConfigError("waist_filter_hz must be positive")

@@ -173,7 +173,11 @@ class Engine:
             slot,
             selector
             or AnomalySelector(
-                self.cfg.outlier_factor, self.cfg.outlier_baseline, self.cfg.home_factor
+                self.cfg.outlier_factor,
+                self.cfg.outlier_baseline,
+                None
+                if self.cfg.home_factor is None
+                else min(self.cfg.home_factor, self.cfg.outlier_factor),
             ),
             calibration or Calibration(),
             wf,
