@@ -3,6 +3,7 @@ parts the table does not reach (slerp itself, config checks, the per-player rout
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from dataclasses import fields
@@ -161,3 +162,28 @@ def test_arrival_jitter_under_the_delay_does_not_show() -> None:
         a, b = jittery.pose_at(now), clean.pose_at(now)
         assert a is not None and b is not None
         np.testing.assert_allclose(a.positions, b.positions, atol=1e-12)
+
+
+def test_feed_takes_a_v2_keyframe_as_a_resync_point() -> None:
+    """A keyframe after a seq gap starts a new segment (no blend across the gap) when it
+    arrives through ``feed``, exactly as ``push(..., keyframe=True)``."""
+    shown = {}
+    for how in ("feed", "push", "plain"):
+        interp = Interpolator()
+        first, after_gap = walk_pose("p", 0, 10.0), walk_pose("p", 5, 10.0 + 1 / 60)
+        keyed = dataclasses.replace(after_gap, keyframe=True)
+        if how == "feed":
+            interp.feed(first)
+            interp.feed(keyed)
+        elif how == "push":
+            interp.push(first)
+            interp.push(after_gap, keyframe=True)
+        else:
+            interp.push(first)
+            interp.push(after_gap)
+        got = interp.pose_at("p", 10.0 + 0.5 / 60 + interp.config.delay_s)
+        assert got is not None
+        shown[how] = got
+    assert shown["plain"].mode == "interpolate"
+    assert shown["feed"].mode == shown["push"].mode != "interpolate"
+    np.testing.assert_array_equal(shown["feed"].positions, shown["push"].positions)

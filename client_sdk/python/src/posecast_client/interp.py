@@ -349,10 +349,11 @@ class Interpolator:
         return buf.push(pose, keyframe=keyframe)
 
     def feed(self, event: object) -> None:
-        """Take any client event: a pose is pushed, a ``leave`` forgets its player, a
-        ``welcome`` (a join or a resume, maybe on another server clock) clears all."""
+        """Take any client event: a pose is pushed (a v2 keyframe as a resync point), a
+        ``leave`` forgets its player, a ``welcome`` (a join or a resume, maybe on another
+        server clock) clears all."""
         if isinstance(event, Pose):
-            self.push(event)
+            self.push(event, keyframe=event.keyframe)
         elif isinstance(event, Presence) and event.event == "leave":
             self.forget(event.player)
         elif isinstance(event, Welcome):
