@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from posecast.offline.evaluation.metrics import local_rotations
 from posecast.skeleton import Joint
 
 F64 = NDArray[np.float64]
@@ -118,16 +119,14 @@ def joint_angles(world_mat: F64) -> dict[str, F64]:
       − extension);
     * ``hip_abd``: the thigh outward from it (+ abduction, − adduction).
     """
-    w = np.asarray(world_mat, np.float64)
+    local = np.asarray(local_rotations(np.asarray(world_mat, np.float64)), np.float64)
     out: dict[str, list[F64]] = {"knee_flex": [], "knee_side": [], "hip_flex": [], "hip_abd": []}
     for side, (thigh, shin) in enumerate(((_L[0], _L[1]), (_R[0], _R[1]))):
         outward = 1.0 if side == 0 else -1.0  # +X is the character's left
-        knee = np.swapaxes(w[:, int(thigh)], -1, -2) @ w[:, int(shin)]
-        hip = np.swapaxes(w[:, int(Joint.PELVIS)], -1, -2) @ w[:, int(thigh)]
-        fwd, lat = _bone_angles(knee)
+        fwd, lat = _bone_angles(local[:, int(shin)])  # the knee: shin in the thigh's frame
         out["knee_flex"].append(-fwd)  # flexion takes the shin backwards (-Z)
         out["knee_side"].append(lat * outward)
-        fwd, lat = _bone_angles(hip)
+        fwd, lat = _bone_angles(local[:, int(thigh)])  # the hip: thigh in the pelvis's
         out["hip_flex"].append(fwd)
         out["hip_abd"].append(lat * outward)
     return {k: np.stack(v, axis=1) for k, v in out.items()}

@@ -250,18 +250,17 @@ def run_ssi(
 
 
 def format_table(report: dict[str, Any]) -> str:
+    def row(name: str, res: dict[str, Any]) -> str:
+        return f"{name:26s}" + "".join(f"{res.get(k, float('nan')):22.3f}" for k in TABLE_KEYS)
+
     head = f"{'variant':26s}" + "".join(f"{k:>22s}" for k in TABLE_KEYS) + f"{'seconds':>9s}"
     title = f"layout {report.get('layout', Layout.HMD3_WAIST)}"
     if report.get("backend"):
         title += f", SSI on backend {report['backend']}"
     lines = [title, head]
     for name, res in report["variants"].items():
-        row = f"{name:26s}" + "".join(f"{res.get(k, float('nan')):22.3f}" for k in TABLE_KEYS)
-        lines.append(row + f"{res.get('seconds', 0):9.1f}")
+        lines.append(row(name, res) + f"{res.get('seconds', 0):9.1f}")
     gt = report.get("ground_truth") or {}
     if gt:
-        row = f"{'ground_truth':26s}" + "".join(
-            f"{gt.get(k, float('nan')):22.3f}" for k in TABLE_KEYS
-        )
-        lines.append(row)
+        lines.append(row("ground_truth", gt))
     return "\n".join(lines)
