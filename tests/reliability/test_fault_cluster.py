@@ -15,6 +15,7 @@ import posecast_client as pc
 import pytest
 
 from posecast.online.protocol.messages import Pose, Presence, Welcome
+from posecast.testing.serve import metric_sum
 from tests.online.conftest import token
 from tests.online.wsclient import Client
 from tests.reliability.fault_helpers import (
@@ -68,6 +69,18 @@ async def player(srv: ServerProc, name: str, seed: int) -> Client:
     assert isinstance(await cl.hello(token("r1", name), room="r1", name=name.upper()), Welcome)
     cl.stream(seed=seed)
     return cl
+
+
+def bus_counters(a: ServerProc, b: ServerProc) -> dict[str, float]:
+    """Each node's own account of its Redis connection (``/metrics``)."""
+    ma, mb = a.metrics(), b.metrics()
+    return {
+        "a_reconnects": metric_sum(ma, "posecast_bus_reconnects_total"),
+        "b_reconnects": metric_sum(mb, "posecast_bus_reconnects_total"),
+        "b_dropped_disconnected": metric_sum(
+            mb, "posecast_bus_dropped_total", reason="disconnected"
+        ),
+    }
 
 
 def none_lost(a: Client, b: Client, t0: float, t1: float) -> int:
@@ -187,6 +200,7 @@ def test_a_redis_blip_costs_cross_node_poses_only_for_the_outage(
         await asyncio.sleep(0.5)
         start = len(pa.messages)
         t0 = pa.poses()[-1].t
+        before = await asyncio.to_thread(bus_counters, a, b)
         await asyncio.to_thread(redis_server.stop)  # blocking calls off the senders' loop
         t_down = time.monotonic()
         await asyncio.sleep(outage_s)
@@ -207,6 +221,8 @@ def test_a_redis_blip_costs_cross_node_poses_only_for_the_outage(
         cross_gap = max_gap_s(cross)
         churn = [m for m in pa.messages[start:] if isinstance(m, Presence)]
         compared = none_lost(pa, mate, t0, t1 - 0.1)
+        after = await asyncio.to_thread(bus_counters, a, b)
+        fault = {k: after[k] - before[k] for k in before}
         rates = rates_hz(local, t0, t1)
         for cl in (pa, mate, pb):
             await cl.close()
@@ -215,6 +231,7 @@ def test_a_redis_blip_costs_cross_node_poses_only_for_the_outage(
             outage_s=f"{t_up - t_down:.2f}",
             cross_node_resumed_after_restart_s=f"{resumed_s:.2f}",
             cross_node_gap_s=f"{cross_gap:.2f}",
+            bus_counters_during=fault,
             node_a_ready_after_restart_s=f"{ready_s:.2f}",
             local_rate_hz=fmt(rates, 0),
             local_max_gap_s=f"{max_gap_s(local):.3f}",
@@ -230,7 +247,12 @@ def test_a_redis_blip_costs_cross_node_poses_only_for_the_outage(
         # Reconnect back-off starts small (it is capped at redis_backoff_max_s, 5 s, only
         # after many failures); then one heartbeat re-asserts the node's players.
         assert resumed_s < 5.0 + HEARTBEAT_S, resumed_s
-        assert cross_gap > 0.5  # the outage did cut cross-node traffic (the fault was real)
+        # The fault was real, as each node saw it: both lost their Redis connection and
+        # made a new one, and B dropped the ticks it could not publish meanwhile. (The
+        # server-time gap in the cross-node poses is reported, not bounded: it depends
+        # on when each node noticed, and a CI run once saw 0.04 s with 0.3 s to resume.)
+        assert fault["a_reconnects"] >= 1 and fault["b_reconnects"] >= 1, fault
+        assert fault["b_dropped_disconnected"] > 0, fault
 
         # A blip shorter than the node TTL flaps no presence: for one TTL after a
         # reconnect, reads (of a Redis that came back empty) add members, never remove.
