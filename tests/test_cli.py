@@ -254,6 +254,8 @@ def test_a_bug_keeps_its_traceback(monkeypatch) -> None:
         ("cvae", ["--steps", "-3"], "CONFIG_INVALID"),
         ("cvae", ["--rot-weight", "-1"], "CONFIG_INVALID"),
         ("cvae", ["--rot-weight", "nan"], "CONFIG_INVALID"),
+        ("cvae", ["--vel-weight", "-1"], "CONFIG_INVALID"),
+        ("anomaly", ["--vel-weight", "1"], "CONFIG_INVALID"),
         ("cvae", ["--threads", "0"], "CONFIG_INVALID"),
         ("cvae", ["--seed", "-1"], "CONFIG_INVALID"),
         ("cvae", ["--no-orientation"], "CONFIG_INVALID"),  # the 4-point layout has none

@@ -317,11 +317,13 @@ def _cmd_train(args: argparse.Namespace) -> int:
     _at_least("--threads", args.threads, 1, cmd)
     _at_least("--seed", args.seed, 0, cmd)
     _finite("--rot-weight", args.rot_weight, cmd)
+    _finite("--vel-weight", args.vel_weight, cmd)
     layout = Layout(args.layout)
     if args.network == "anomaly":
-        if layout != Layout.HMD3_WAIST or args.rot_weight or args.no_orientation:
+        if layout != Layout.HMD3_WAIST or args.rot_weight or args.vel_weight or args.no_orientation:
             raise _config(
-                "--layout, --rot-weight and --no-orientation apply to cvae and ae only",
+                "--layout, --rot-weight, --vel-weight and --no-orientation apply to cvae and "
+                "ae only",
                 "the anomaly AE reads poses, not trackers: drop those options",
             )
     elif args.network == "ae" and layout != Layout.HMD3_WAIST:
@@ -356,6 +358,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
             threads=args.threads,
             seed=args.seed,
             rot_weight=args.rot_weight,
+            vel_weight=args.vel_weight,
             no_orientation=args.no_orientation,
         )
         if args.steps is not None:
@@ -454,6 +457,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         outlier_baseline=args.outlier_baseline,
         outlier_factor=args.outlier_factor,
         upper_body_ik=not args.no_upper_ik,
+        floor_ik=not args.no_floor_ik,
         latent_scale=latent_scale,
         home_factor=home,
     )
@@ -768,6 +772,13 @@ def build_parser() -> argparse.ArgumentParser:
         "model; the headset-only model uses 10)",
     )
     train.add_argument(
+        "--vel-weight",
+        type=float,
+        default=0.0,
+        help="weight of the joint-velocity loss, cm^2 per frame (0: none, as the earlier "
+        "weights; docs/model-card.md)",
+    )
+    train.add_argument(
         "--layout",
         default=Layout.HMD3_WAIST.value,
         choices=[layout.value for layout in Layout],
@@ -834,6 +845,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="cvae_ik and cvae_ik_ssi without the upper-body pass (head and hands on their "
         "trackers): the network's own upper body",
+    )
+    ev.add_argument(
+        "--no-floor-ik",
+        action="store_true",
+        help="cvae_ik, ae_ik and cvae_ik_ssi without the floor pass (feet below y = 0 "
+        "lifted onto it): the network's and the contact IK's own feet",
     )
     ev.set_defaults(func=_cmd_eval)
 

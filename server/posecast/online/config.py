@@ -50,6 +50,11 @@ class ServerConfig:
         "stream the poses without the upper-body pass (head on the headset, hands on the "
         "controllers): about twice the players per node, hands where the network puts them",
     )
+    no_floor_ik: bool = _opt(
+        False,
+        "stream the feet where the network and the contact IK put them, below the floor "
+        "(y = 0) included, instead of lifting them onto it",
+    )
     engine_threads: int = _opt(
         2,
         "threads of the engine's inference backend (the native kernels' pool, or ONNX "

@@ -93,3 +93,27 @@ def test_the_orientation_ablation_zeroes_only_orientation_inputs(
     assert np.all(std[~ori] > 1e-3)
     with pytest.raises(ValueError, match="no orientation"):
         train_cvae(prepared_dir, tmp_path / "four", CVAEConfig(), train_cfg, log=lambda _: None)
+
+
+def test_the_velocity_term_scores_frame_to_frame_motion_only() -> None:
+    import torch
+
+    from posecast.offline.train.losses import velocity_mse_cm2
+
+    g = torch.Generator().manual_seed(0)
+    truth = torch.randn(2, 10, 19, 3, generator=g, dtype=torch.float64) * 0.1
+    offset = truth + torch.tensor([0.05, -0.02, 0.01], dtype=torch.float64)  # 5 cm off, steady
+    assert float(velocity_mse_cm2(offset, truth)) == pytest.approx(0.0, abs=1e-9)
+    jitter = truth.clone()
+    jitter[:, 1::2, :, 1] += 0.01  # every other frame 1 cm up: each displacement is 1 cm off in y
+    assert float(velocity_mse_cm2(jitter, truth)) == pytest.approx(1.0 / 3.0)
+
+
+def test_the_velocity_term_is_logged_and_falls(prepared_dir: Path, tmp_path: Path) -> None:
+    import dataclasses
+
+    cfg = dataclasses.replace(SMALL, vel_weight=30.0)
+    ckpt = train_cvae(prepared_dir, tmp_path, CVAEConfig(), cfg, log=lambda _: None)
+    vel = _losses(ckpt, "vel_mse_cm2")
+    assert len(vel) == 40 and vel[-5:].mean() < vel[:5].mean()
+    assert load_checkpoint(ckpt)["train_config"]["vel_weight"] == 30.0

@@ -7,7 +7,14 @@ import pytest
 
 from posecast.geometry.fk import fk_mat
 from posecast.geometry.rotations import axis_mat, normalize
-from posecast.online.engine.ik import ContactIK, apply_leg_ik, two_bone_ik
+from posecast.online.engine.ik import (
+    FLOOR_MAX_LIFT_M,
+    ContactIK,
+    apply_leg_ik,
+    floor_ik,
+    floor_lift,
+    two_bone_ik,
+)
 from posecast.skeleton import NUM_JOINTS, Joint, reference_offsets
 
 L_THIGH, L_SHIN, L_FOOT, L_TOE = Joint.LEFT_THIGH, Joint.LEFT_SHIN, Joint.LEFT_FOOT, Joint.LEFT_TOE
@@ -233,3 +240,56 @@ def test_a_lock_the_network_drifted_far_from_is_released_early() -> None:
     wm, wp = crouch(30)
     ik.step(wm, wp, contact(0.9))  # ... and a new one locks again
     assert ik.locked[0, 0]
+
+
+# --- floor_ik -------------------------------------------------------------------------
+
+
+def lowest(wp: np.ndarray, foot: Joint, toe: Joint) -> float:
+    return float(min(wp[0, foot, 1], wp[0, toe, 1]))
+
+
+@pytest.mark.parametrize("depth_m", [0.005, 0.05, 0.12])
+def test_floor_ik_puts_a_sunken_foot_on_the_floor_and_keeps_the_leg_rigid(depth_m: float) -> None:
+    wm, wp = crouch()
+    wm, wp = wm.copy(), wp.copy()
+    wp[..., 1] -= lowest(wp, L_FOOT, L_TOE) + depth_m  # the whole body sunk below y = 0
+    wp[0, Joint.RIGHT_THIGH :, 1] += 0.5  # the right leg well above it
+    right_before = wp[0, Joint.RIGHT_THIGH :].copy()
+    pelvis_before, foot_rot = wp[0, Joint.PELVIS].copy(), wm[0, L_FOOT].copy()
+    assert lowest(wp, L_FOOT, L_TOE) == pytest.approx(-depth_m)
+    lifted = floor_ik(wm, wp)
+    assert lifted.tolist() == [[True, False]]
+    assert lowest(wp, L_FOOT, L_TOE) == pytest.approx(0.0, abs=1e-6)
+    np.testing.assert_allclose(wm[0, L_FOOT], foot_rot)  # the foot keeps its rotation
+    np.testing.assert_array_equal(wp[0, Joint.PELVIS], pelvis_before)
+    np.testing.assert_array_equal(wp[0, Joint.RIGHT_THIGH :], right_before)
+    # Only the sunken leg moved, its bones still rigid: move the right leg back to its
+    # FK place and check both legs against the rotations.
+    wp[0, Joint.RIGHT_THIGH :, 1] -= 0.5
+    assert_leg_is_rigid(wm, wp)
+
+
+def test_floor_ik_leaves_feet_on_or_above_the_floor_and_far_below_it_alone() -> None:
+    wm, wp = crouch()
+    wp = wp - np.array([0.0, lowest(wp, L_FOOT, L_TOE), 0.0])  # the lower foot exactly on y = 0
+    for shift in (0.0, 0.3, -(FLOOR_MAX_LIFT_M + 0.01), -1.5):  # -1.5: an eye-level origin
+        m, p = wm.copy(), wp + np.array([0.0, shift, 0.0])
+        before = p.copy()
+        assert not floor_ik(m, p).any(), shift
+        np.testing.assert_array_equal(p, before)
+        np.testing.assert_array_equal(m, wm)
+    assert floor_lift(wp - np.array([0.0, 0.01, 0.0])) == pytest.approx(np.array([[0.01, 0.01]]))
+
+
+def test_floor_ik_bends_a_straight_leg_to_lift_its_foot() -> None:
+    """A straight leg whose pelvis is too low for the floor: the knee bends (forward, as
+    two_bone_ik bends a straight leg) and the foot ends on the floor, bones kept."""
+    straight = np.broadcast_to(np.eye(3), (NUM_JOINTS, 3, 3))
+    wm, wp = fk_mat(straight, np.array([0.0, 1.0, 0.0]), reference_offsets())
+    wm, wp = wm[None].copy(), wp[None].copy()
+    wp[..., 1] -= lowest(wp, L_FOOT, L_TOE) + 0.08
+    floor_ik(wm, wp)
+    assert lowest(wp, L_FOOT, L_TOE) == pytest.approx(0.0, abs=1e-6)
+    assert wp[0, Joint.LEFT_SHIN, 2] > wp[0, Joint.LEFT_THIGH, 2]  # the knee went forward
+    assert_leg_is_rigid(wm, wp)

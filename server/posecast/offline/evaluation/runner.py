@@ -21,6 +21,7 @@ from posecast.offline.evaluation.reconstruct import (
 )
 from posecast.online.engine.anomaly import AnomalyScorer
 from posecast.online.engine.config import EngineConfig
+from posecast.online.engine.ik import floor_ik
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
 from posecast.online.engine.upper_ik import solve_upper_body
@@ -84,8 +85,9 @@ def evaluate(
     layout, so only its lower-body numbers are a floor to beat.
 
     ``cvae_ik`` and ``ae_ik`` are what the server would stream without SSI: contact
-    IK, then (when ``engine_cfg.upper_body_ik``, the default) the engine's upper-body
-    pass, so that ``cvae_ik_ssi`` against ``cvae_ik`` measures SSI alone.
+    IK, the floor pass (``engine_cfg.floor_ik``) and (when ``engine_cfg.upper_body_ik``,
+    the default) the engine's upper-body pass, so that ``cvae_ik_ssi`` against
+    ``cvae_ik`` measures SSI alone.
     ``cvae_1sample`` is the network's raw pose.
     """
     ls = spec(layout)
@@ -148,6 +150,8 @@ def evaluate(
                 wm, wp = pose_from_rotations(rot, root_mat, root_pos)
                 if name.endswith("_ik"):
                     contact_ik(wm, wp, con)
+                    if engine_cfg.floor_ik:
+                        floor_ik(wm, wp)
                     if engine_cfg.upper_body_ik:
                         wm, wp = _upper_body(wm, wp, fr)
             gt_mat, gt = truth[ci]

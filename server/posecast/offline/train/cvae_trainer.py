@@ -23,7 +23,7 @@ from posecast.offline.dataset.augment import Augmentation
 from posecast.offline.nets.cvae import CVAE, CVAEConfig
 from posecast.offline.train.checkpoint import load_checkpoint, save_checkpoint
 from posecast.offline.train.data import Normalisation, TrainArrays, load_train_val
-from posecast.offline.train.losses import PoseFK, position_mse_cm2, split_root
+from posecast.offline.train.losses import PoseFK, position_mse_cm2, split_root, velocity_mse_cm2
 from posecast.tracking.layouts import spec
 
 
@@ -42,6 +42,10 @@ class CVAETrainConfig:
     # the rotations are right only where they move a joint. 0 for the shipped 4-point
     # model (trained before it existed), 10 for the headset-only one (docs/model-card.md).
     rot_weight: float = 0.0
+    # Squared error of the joints' frame-to-frame displacement, cm^2 per frame: the
+    # network's own frame-to-frame noise (jitter) costs here and nowhere else, since
+    # every other term scores each frame alone. 0 for the weights trained before it.
+    vel_weight: float = 0.0
     # Ablation (docs/evaluation.md): zero the headset-only model's orientation inputs,
     # leaving it the positions and velocities a 4-point model reads.
     no_orientation: bool = False
@@ -96,6 +100,10 @@ def _losses(
         rot_err = (pred_m - true_m).pow(2).sum(dim=(-2, -1)).mean()
         total = total + cfg.rot_weight * rot_err
         parts["rot_frob2"] = rot_err
+    if cfg.vel_weight > 0:
+        vel = velocity_mse_cm2(pred, b["pos"])
+        total = total + cfg.vel_weight * vel
+        parts["vel_mse_cm2"] = vel
     mpjpe = ((pred - b["pos"]).norm(dim=-1).mean() * 100.0).detach()
     return {"loss": total, **parts, "mpjpe_cm": mpjpe}
 

@@ -43,3 +43,10 @@ def split_root(
 def position_mse_cm2(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     """Mean squared joint position error in cm^2 (positions given in metres)."""
     return ((pred - target) * 100.0).pow(2).mean()
+
+
+def velocity_mse_cm2(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Mean squared error of the joints' frame-to-frame displacement, cm^2 (positions
+    ``(B, T, J, 3)`` in metres; the difference is taken along ``T``)."""
+    dp, dt = pred[:, 1:] - pred[:, :-1], target[:, 1:] - target[:, :-1]
+    return ((dp - dt) * 100.0).pow(2).mean()

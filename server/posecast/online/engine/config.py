@@ -29,6 +29,9 @@ class EngineConfig:
         upper_body_ik: put the shown pose's head on the headset and hands on the
             controllers (:mod:`posecast.online.engine.upper_ik`; default on, off for
             research evaluation of the network's own upper body).
+        floor_ik: lift a shown foot that is below the floor (``y = 0``) onto it
+            (:func:`posecast.online.engine.ik.floor_ik`; default on, off for research
+            evaluation of the network's own legs).
         latent_scale: the pool's latents are ``latent_scale * eps``, ``eps ~ N(0, I)``
             (1.0: the prior; below 1 a truncated pool, nearer the mean).
         home_factor: the threshold at which a player returns to sample 0, the prior's
@@ -48,6 +51,7 @@ class EngineConfig:
     waist_filter_hz: float | None = None
     fps: float = 60.0
     upper_body_ik: bool = True
+    floor_ik: bool = True
     latent_scale: float = 1.0
     home_factor: float | None = 1.0
 

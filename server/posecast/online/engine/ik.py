@@ -1,10 +1,13 @@
-"""Foot-contact IK (paper Sec. 3.1, post-processing), batched over samples.
+"""Foot-contact IK (paper Sec. 3.1, post-processing) and the floor, batched over samples.
 
 While a foot's predicted contact exceeds 0.5 the ankle is locked where the contact
 began, and a two-bone solve on thigh and shin puts it there. When contact ends, the
 ankle target slides linearly from the lock back to the network's own ankle over
 ``release_frames``, so lifting a foot never pops. The foot keeps its world
 orientation, so the toe follows the ankle.
+
+:func:`floor_ik` then lifts a foot whose ankle or toe is below the floor (``y = 0``)
+back onto it with the same two-bone solve, for the shown pose only.
 
 Everything works on world positions and rotations ``(B, 19, ...)``; the state is a
 few arrays per foot, so thousands of samples step in one vectorised call.
@@ -27,6 +30,11 @@ LEGS: tuple[tuple[Joint, Joint, Joint, Joint], ...] = (
     (Joint.RIGHT_THIGH, Joint.RIGHT_SHIN, Joint.RIGHT_FOOT, Joint.RIGHT_TOE),
 )
 CONTACT_THRESHOLD = 0.5
+FLOOR_Y = 0.0  # the world floor (proto/README.md, "Conventions")
+# A foot further below the floor than this is not lifted: the client's tracking space
+# is not floor-level (an eye-level origin puts the feet 1.5 m down), or the body is
+# too far off to fix with the legs alone.
+FLOOR_MAX_LIFT_M = 0.15
 
 
 def two_bone_ik(hip: F64, knee: F64, ankle: F64, target: F64) -> tuple[F64, F64]:
@@ -173,3 +181,39 @@ class ContactIK:
         targets = np.where(contact[..., None], self.lock_pos, w * self.lock_pos + (1 - w) * feet)
         apply_leg_ik(world_mat, world_pos, targets, contact | releasing)
         self.release_left[releasing] -= 1
+
+
+def floor_lift(
+    world_pos: F64, floor_y: float = FLOOR_Y, max_lift_m: float = FLOOR_MAX_LIFT_M
+) -> F64:
+    """How far each foot ``(B, 2)`` must rise for the lower of its ankle and toe to
+    reach ``floor_y``: 0 for a foot on or above it, or more than ``max_lift_m`` below."""
+    feet = [int(leg[2]) for leg in LEGS]
+    toes = [int(leg[3]) for leg in LEGS]
+    low = np.minimum(world_pos[:, feet, 1], world_pos[:, toes, 1])  # (B, 2)
+    lift = floor_y - np.asarray(low, np.float64)
+    out: F64 = np.where((lift > 0.0) & (lift <= max_lift_m), lift, 0.0)
+    return out
+
+
+def floor_ik(
+    world_mat: F64 | None,
+    world_pos: F64,
+    floor_y: float = FLOOR_Y,
+    max_lift_m: float = FLOOR_MAX_LIFT_M,
+) -> NDArray[np.bool_]:
+    """Lift each foot whose ankle or toe is below ``floor_y`` onto it, in place.
+
+    The ankle target is the ankle raised by :func:`floor_lift`, so with the foot's
+    world rotation kept the lower of ankle and toe ends on the floor; thigh and shin
+    swing as in :func:`apply_leg_ik`, bone lengths kept (lifting brings the ankle
+    nearer the hip, so the knee bends; a straight leg bends forward). Feet more than
+    ``max_lift_m`` down are left alone. Returns which feet ``(B, 2)`` were lifted.
+    """
+    lift = floor_lift(world_pos, floor_y, max_lift_m)
+    active: NDArray[np.bool_] = lift > 0.0
+    if np.any(active):
+        targets = np.asarray(world_pos[:, [int(leg[2]) for leg in LEGS]], np.float64).copy()
+        targets[..., 1] += lift
+        apply_leg_ik(world_mat, world_pos, targets, active)
+    return active

@@ -41,11 +41,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from posecast.geometry.fk import fk_positions
-from posecast.geometry.rotations import quat2mat
+from posecast.geometry.rotations import mat2quat, quat2mat
 from posecast.online.engine.backend import Decoder, Pool, PoolIK
 from posecast.online.engine.batch_fk import pelvis_from_head32
 from posecast.online.engine.calibration import Calibration, WaistFilter, apply_all, orient_all
 from posecast.online.engine.config import EngineConfig
+from posecast.online.engine.ik import LEGS, floor_ik, floor_lift
 from posecast.online.engine.selectors import AnomalySelector, Selector, choose_anomaly_rows
 from posecast.online.engine.slots import SlotArrays
 from posecast.online.engine.types import EngineEvent, PoseOut, TickResult, TrackerFrame
@@ -470,6 +471,8 @@ class Engine:
         wp, rotations = self.pool.emit(rot, con, root_mat, root_pos, ik)
         for n in _DISPLAY_IK:
             s[n][slots] = state[n]
+        if self.cfg.floor_ik:
+            _floor(wp, rotations)
         reach_limited = np.zeros(E, np.bool_)
         if self.cfg.upper_body_ik:
             # Head and hands onto their (calibrated) trackers, before the user's scale.
@@ -494,6 +497,20 @@ class Engine:
             )
             for i, (p, sample, w) in enumerate(emit)
         ]
+
+
+def _floor(wp: F32, rotations: F32) -> None:
+    """:func:`~posecast.online.engine.ik.floor_ik` on shown poses, in place: positions
+    ``(E, 19, 3)`` and world rotations ``(E, 19, 4)`` (the thighs' and shins' change)."""
+    rows = np.flatnonzero(floor_lift(wp).any(axis=1))
+    if not len(rows):
+        return
+    pos = wp[rows].astype(np.float64)
+    mat = quat2mat(rotations[rows].astype(np.float64))
+    floor_ik(mat, pos)
+    wp[rows] = pos
+    legs = np.array([int(j) for leg in LEGS for j in leg[:2]])
+    rotations[np.ix_(rows, legs)] = mat2quat(mat[:, legs])
 
 
 _DISPLAY_IK = ("disp_locked", "disp_lock_pos", "disp_release", "disp_suppressed")
