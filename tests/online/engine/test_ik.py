@@ -242,6 +242,32 @@ def test_a_lock_the_network_drifted_far_from_is_released_early() -> None:
     assert ik.locked[0, 0]
 
 
+def test_a_hint_bends_a_straight_leg_its_way_whatever_the_rounding(
+    rng: np.random.Generator,
+) -> None:
+    """A leg straight up to rounding (knee off the line by a micrometre-scale excess,
+    pointing anywhere) bends toward the hint; a leg bent by more than ``hint_m`` keeps
+    its own plane."""
+    hip, target = np.array([[0.0, 0.9, 0.0]]), np.array([[0.0, 0.2, 0.0]])
+    hint = np.array([[0.0, 0.0, 1.0]])
+    knees = []
+    for _ in range(20):
+        side = normalize(np.array([[rng.normal(), 0.0, rng.normal()]]))
+        knee = hip + [0.0, -0.43, 0.0] + 7e-4 * side  # 0.7 mm off: rounding, any way
+        ankle = knee + 0.42 * normalize(np.array([[0.0, -0.85, 0.0]]) + hip - knee)
+        k2, a2 = two_bone_ik(hip, knee, ankle, target, hint, 0.05)
+        np.testing.assert_allclose(a2, target, atol=1e-9)
+        knees.append(k2[0])
+    spread = np.ptp(np.array(knees), axis=0)
+    assert spread.max() < 1e-3, spread  # the same knee, to a millimetre, every time
+    assert knees[0][2] > 0.1  # forward, along the hint
+    bent_knee = np.array([[0.1, 0.5, 0.0]])  # 10 cm to the side: its own plane wins
+    bent_ankle = bent_knee + 0.42 * normalize(np.array([[0.0, 0.1, 0.0]]) - bent_knee)
+    k2, _ = two_bone_ik(hip, bent_knee, bent_ankle, target, hint, 0.05)
+    k_ref, _ = two_bone_ik(hip, bent_knee, bent_ankle, target)
+    np.testing.assert_allclose(k2, k_ref, atol=1e-12)
+
+
 # --- floor_ik -------------------------------------------------------------------------
 
 

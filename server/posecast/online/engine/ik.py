@@ -20,29 +20,54 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from posecast.geometry.rotations import quat2mat, vecs2quat
 from posecast.skeleton import Joint
 
 F64 = NDArray[np.floating]
+D64 = NDArray[np.float64]
 
 LEGS: tuple[tuple[Joint, Joint, Joint, Joint], ...] = (
     (Joint.LEFT_THIGH, Joint.LEFT_SHIN, Joint.LEFT_FOOT, Joint.LEFT_TOE),
     (Joint.RIGHT_THIGH, Joint.RIGHT_SHIN, Joint.RIGHT_FOOT, Joint.RIGHT_TOE),
 )
 CONTACT_THRESHOLD = 0.5
+EPS = 1e-9  # below this a length counts as zero
 FLOOR_Y = 0.0  # the world floor (proto/README.md, "Conventions")
 # A foot further below the floor than this is not lifted: the client's tracking space
 # is not floor-level (an eye-level origin puts the feet 1.5 m down), or the body is
 # too far off to fix with the legs alone.
 FLOOR_MAX_LIFT_M = 0.15
+# A foot less than this below the floor is left as it is: a foot resting on the floor
+# sits at y = 0 up to rounding, and a two-bone solve of a straight leg moves its knee
+# by about a millimetre (the reach is clamped 1 um short of full extension), so lifting
+# for rounding's sake would make backends that round differently show different knees.
+FLOOR_TOLERANCE_M = 1e-3
+# A lifted leg whose knee is less than this off the hip-ankle line bends (partly)
+# toward the thigh's forward axis (two_bone_ik's hint): a straight leg's own bend plane
+# is rounding.
+FLOOR_BEND_HINT_M = 0.05
 
 
-def two_bone_ik(hip: F64, knee: F64, ankle: F64, target: F64) -> tuple[F64, F64]:
+def two_bone_ik(
+    hip: F64,
+    knee: F64,
+    ankle: F64,
+    target: F64,
+    hint: F64 | None = None,
+    hint_m: float = 0.0,
+) -> tuple[F64, F64]:
     """New knee and ankle positions ``(B, 3)`` that bring the ankle to ``target``.
 
     Bone lengths are kept; the knee stays in the plane spanned by the hip-target line
     and the old knee, so the leg bends the way it bent. Unreachable targets are
     approached along the hip-target line with the leg straight.
+
+    A nearly straight leg defines that plane poorly: its knee is off the line by
+    ``sqrt(2 l (l1 + l2 - d))``, a millimetre for a micrometre short of full reach,
+    in a direction rounding decides, and the new knee would go there. With ``hint``
+    (directions ``(B, 3)``, e.g. the thigh's forward axis) the plane's direction is the
+    blend ``w v + (1 - w) hint`` of the unit directions, ``w = (offset / hint_m)^2``
+    capped at 1: a straight leg bends toward the hint, a leg bent by ``hint_m`` or more
+    as it bent, and nothing jumps in between.
     """
     l1 = np.linalg.norm(knee - hip, axis=-1, keepdims=True)
     l2 = np.linalg.norm(ankle - knee, axis=-1, keepdims=True)
@@ -53,6 +78,12 @@ def two_bone_ik(hip: F64, knee: F64, ankle: F64, target: F64) -> tuple[F64, F64]
     bend = knee - hip
     v = bend - np.sum(bend * u, axis=-1, keepdims=True) * u
     v_n = np.linalg.norm(v, axis=-1, keepdims=True)
+    if hint is not None and hint_m > 0.0:
+        h = hint - np.sum(hint * u, axis=-1, keepdims=True) * u
+        h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-9)
+        w = np.clip(v_n / hint_m, 0.0, 1.0) ** 2  # the old knee's say in the plane
+        v = w * v / np.maximum(v_n, 1e-9) + (1.0 - w) * h
+        v_n = np.linalg.norm(v, axis=-1, keepdims=True)
     # A straight leg has no bend plane: bend the knee forward (+Z of the world).
     fallback = np.broadcast_to(np.array([0.0, 0.0, 1.0]), v.shape)
     fallback = fallback - np.sum(fallback * u, axis=-1, keepdims=True) * u
@@ -68,42 +99,76 @@ def two_bone_ik(hip: F64, knee: F64, ankle: F64, target: F64) -> tuple[F64, F64]
     return new_knee, new_ankle
 
 
-def swing_mat(a: F64, b: F64) -> F64:
-    """Smallest rotation matrices ``(B, 3, 3)`` turning directions ``a`` onto ``b``.
-
-    Rodrigues' form ``I + [v]x + [v]x^2 / (1 + c)`` with ``v = a x b``, ``c = a . b``
-    for unit vectors. Legs never fold back on themselves, but a near-opposite pair
-    falls back to the quaternion construction, which handles it.
-    """
-    ua = a / np.maximum(np.linalg.norm(a, axis=-1, keepdims=True), 1e-9)
-    ub = b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-9)
-    v = np.cross(ua, ub)
-    c = np.sum(ua * ub, axis=-1)
-    if np.any(c < -0.999):
-        return quat2mat(vecs2quat(a, b))
-    vx = np.zeros((*v.shape[:-1], 3, 3), dtype=v.dtype)
-    vx[..., 0, 1], vx[..., 0, 2] = -v[..., 2], v[..., 1]
-    vx[..., 1, 0], vx[..., 1, 2] = v[..., 2], -v[..., 0]
-    vx[..., 2, 0], vx[..., 2, 1] = -v[..., 1], v[..., 0]
-    out: F64 = np.eye(3, dtype=v.dtype) + vx + (vx @ vx) / (1.0 + c)[..., None, None]
+# Small-array helpers written out by component: numpy's ``cross`` and ``linalg.norm``
+# cost more in call overhead than in arithmetic at a tick's few rows.
+def norm3(v: D64) -> D64:
+    """Lengths ``(...,)`` of vectors ``(..., 3)``."""
+    out: D64 = np.sqrt(np.einsum("...i,...i->...", v, v))
     return out
 
 
+def cross3(a: D64, b: D64) -> D64:
+    """Cross products of ``(..., 3)`` vectors."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def unit3(v: D64) -> tuple[D64, D64]:
+    """``v (..., 3)`` -> (direction, length ``(...,)``); a zero vector keeps direction 0."""
+    n = norm3(v)
+    return v / np.maximum(n, EPS)[..., None], n
+
+
+def swing_mat(a: D64, b: D64) -> D64:
+    """The smallest rotation ``(..., 3, 3)`` taking direction ``a (..., 3)`` onto ``b``
+    (Rodrigues' formula, ``R = c I + [v]x + v v^T / (1 + c)`` with ``v = a x b``,
+    ``c = a . b``; opposite directions turn half a turn about a perpendicular)."""
+    ua, _ = unit3(a)
+    ub, _ = unit3(b)
+    x, y, z = np.moveaxis(cross3(ua, ub), -1, 0)  # the axis times sin
+    c = np.einsum("...i,...i->...", ua, ub)  # cos
+    opposite = c < -1.0 + 1e-9
+    h = 1.0 / np.where(opposite, 1.0, 1.0 + c)
+    xh, yh, zh = x * h, y * h, z * h
+    R = np.stack(
+        [
+            c + x * xh, y * xh - z, z * xh + y,
+            y * xh + z, c + y * yh, z * yh - x,
+            z * xh - y, z * yh + x, c + z * zh,
+        ],
+        axis=-1,
+    ).reshape(*c.shape, 3, 3)  # fmt: skip
+    if opposite.any():
+        helper = np.where(np.abs(ua[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+        p, _ = unit3(cross3(ua, helper))
+        half = 2.0 * p[..., :, None] * p[..., None, :] - np.eye(3)
+        R = np.where(opposite[..., None, None], half, R)
+    return R
+
+
 def apply_leg_ik(
-    world_mat: F64 | None, world_pos: F64, targets: F64, active: NDArray[np.bool_]
+    world_mat: F64 | None,
+    world_pos: F64,
+    targets: F64,
+    active: NDArray[np.bool_],
+    bend_hint_m: float = 0.0,
 ) -> None:
     """Move each leg's ankle to ``targets (B, 2, 3)`` where ``active (B, 2)``, in place.
 
     Thigh and shin world rotations get the smallest swing that points their bones at
     the new knee and ankle; the foot keeps its world rotation, and the toe follows.
     With ``world_mat=None`` only positions move (the candidate pool needs no more).
+    ``bend_hint_m`` (with ``world_mat``): :func:`two_bone_ik`'s ``hint_m``, the hint
+    being the thigh's forward (+Z) axis, where a knee bends.
     """
     for side, (thigh, shin, foot, toe) in enumerate(LEGS):
         on = active[:, side]
         if not np.any(on):
             continue
         hip, knee, ankle = world_pos[on, thigh], world_pos[on, shin], world_pos[on, foot]
-        k2, a2 = two_bone_ik(hip, knee, ankle, targets[on, side])
+        hint = world_mat[on, thigh][:, :, 2] if world_mat is not None else None
+        k2, a2 = two_bone_ik(hip, knee, ankle, targets[on, side], hint, bend_hint_m)
         toe_off = world_pos[on, toe] - ankle
         if world_mat is not None:
             swing_thigh = swing_mat(knee - hip, k2 - hip)  # (b, 3, 3)
@@ -187,12 +252,13 @@ def floor_lift(
     world_pos: F64, floor_y: float = FLOOR_Y, max_lift_m: float = FLOOR_MAX_LIFT_M
 ) -> F64:
     """How far each foot ``(B, 2)`` must rise for the lower of its ankle and toe to
-    reach ``floor_y``: 0 for a foot on or above it, or more than ``max_lift_m`` below."""
+    reach ``floor_y``: 0 for a foot on or above it (within :data:`FLOOR_TOLERANCE_M`),
+    or more than ``max_lift_m`` below."""
     feet = [int(leg[2]) for leg in LEGS]
     toes = [int(leg[3]) for leg in LEGS]
     low = np.minimum(world_pos[:, feet, 1], world_pos[:, toes, 1])  # (B, 2)
     lift = floor_y - np.asarray(low, np.float64)
-    out: F64 = np.where((lift > 0.0) & (lift <= max_lift_m), lift, 0.0)
+    out: F64 = np.where((lift > FLOOR_TOLERANCE_M) & (lift <= max_lift_m), lift, 0.0)
     return out
 
 
@@ -215,5 +281,5 @@ def floor_ik(
     if np.any(active):
         targets = np.asarray(world_pos[:, [int(leg[2]) for leg in LEGS]], np.float64).copy()
         targets[..., 1] += lift
-        apply_leg_ik(world_mat, world_pos, targets, active)
+        apply_leg_ik(world_mat, world_pos, targets, active, FLOOR_BEND_HINT_M)
     return active

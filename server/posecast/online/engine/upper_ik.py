@@ -34,6 +34,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from posecast.geometry.rotations import mat2quat, quat2mat
+from posecast.online.engine.ik import EPS as _EPS
+from posecast.online.engine.ik import norm3 as _norm
+from posecast.online.engine.ik import swing_mat
+from posecast.online.engine.ik import unit3 as _unit
 from posecast.skeleton import NUM_JOINTS, PARENTS, Joint, reference_offsets
 from posecast.tracking.features import TRACKER_JOINT_INDEX, TrackerSlot
 
@@ -42,7 +46,6 @@ F64 = NDArray[np.float64]
 
 REACH_TOLERANCE_M = 1e-3  # an effector further than this from its tracker is "not reached"
 FABRIK_SWEEPS = 1  # shaping only: two exact solves finish (solve_upper_body)
-_EPS = 1e-9
 
 _SPINE_CHAIN = (Joint.SPINE, Joint.CHEST, Joint.NECK, Joint.HEAD)
 # Both arms at once, left then right: upper arm, forearm, hand, and the hand's tracker.
@@ -66,52 +69,6 @@ def _descendants() -> dict[int, list[int]]:
 
 
 _DESCENDANTS = _descendants()
-
-
-# Small-array helpers written out by component: numpy's ``cross`` and ``linalg.norm``
-# cost more in call overhead than in arithmetic at a tick's few rows.
-def _norm(v: F64) -> F64:
-    out: F64 = np.sqrt(np.einsum("...i,...i->...", v, v))
-    return out
-
-
-def _cross(a: F64, b: F64) -> F64:
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
-
-
-def _unit(v: F64) -> tuple[F64, F64]:
-    """``v (..., 3)`` -> (direction, length ``(...,)``); a zero vector keeps direction 0."""
-    n = _norm(v)
-    return v / np.maximum(n, _EPS)[..., None], n
-
-
-def swing_mat(a: F64, b: F64) -> F64:
-    """The smallest rotation ``(..., 3, 3)`` taking direction ``a (..., 3)`` onto ``b``
-    (Rodrigues' formula, ``R = c I + [v]x + v v^T / (1 + c)`` with ``v = a x b``,
-    ``c = a . b``; opposite directions turn half a turn about a perpendicular)."""
-    ua, _ = _unit(a)
-    ub, _ = _unit(b)
-    x, y, z = np.moveaxis(_cross(ua, ub), -1, 0)  # the axis times sin
-    c = np.einsum("...i,...i->...", ua, ub)  # cos
-    opposite = c < -1.0 + 1e-9
-    h = 1.0 / np.where(opposite, 1.0, 1.0 + c)
-    xh, yh, zh = x * h, y * h, z * h
-    R = np.stack(
-        [
-            c + x * xh, y * xh - z, z * xh + y,
-            y * xh + z, c + y * yh, z * yh - x,
-            z * xh - y, z * yh + x, c + z * zh,
-        ],
-        axis=-1,
-    ).reshape(*c.shape, 3, 3)  # fmt: skip
-    if opposite.any():
-        helper = np.where(np.abs(ua[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-        p, _ = _unit(_cross(ua, helper))
-        half = 2.0 * p[..., :, None] * p[..., None, :] - np.eye(3)
-        R = np.where(opposite[..., None, None], half, R)
-    return R
 
 
 def _turn(pos: F64, mat: F64, joint: int, R: F64) -> None:
