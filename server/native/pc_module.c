@@ -492,6 +492,62 @@ static void emit_fn(void *ctx, int64_t r0, int64_t r1, float *scratch) {
     c->k->emit(c->p, &c->a, r0, r1, scratch);
 }
 
+/* The buffers pool and emit share, o[1..9] into b[1..9] (b[0], the rotations, is read
+ * first, for R): contacts, the G pelvis poses, the four contact-IK state arrays, the
+ * world positions out, and the last output (emit: world rotations, pool: scores).
+ * Returns the call's PcPoolArgs in *a, or -1 with the error set. */
+static int get_pool_bufs(PyObject **o, Buf *b, Py_ssize_t R, Py_ssize_t group, int release_frames,
+                         double max_drift, int emit, PcPoolArgs *a) {
+    Py_ssize_t G = R / group;
+    if (get_buf(o[1], &b[1], "contacts", F32, R * 2, 0) || get_buf(o[2], &b[2], "root_mat", F32, G * 9, 0) ||
+        get_buf(o[3], &b[3], "root_pos", F32, G * 3, 0) || get_buf(o[4], &b[4], "locked", BOOL, R * 2, 1) ||
+        get_buf(o[5], &b[5], "lock_pos", F64, R * 6, 1) || get_buf(o[6], &b[6], "release", I64, R * 2, 1) ||
+        get_buf(o[7], &b[7], "suppressed", BOOL, R * 2, 1) ||
+        get_buf(o[8], &b[8], emit ? "positions" : "world_out", F32, R * 57, 1) ||
+        (emit ? get_buf(o[9], &b[9], "rotations_out", F32, R * 76, 1)
+              : get_buf(o[9], &b[9], "scores", F64, R, 1)))
+        return -1;
+    PcPoolArgs args = {b[0].view.buf, b[1].view.buf, b[2].view.buf, b[3].view.buf, group, b[4].view.buf,
+                       b[7].view.buf, b[5].view.buf, b[6].view.buf, release_frames, max_drift, b[8].view.buf,
+                       emit ? NULL : b[9].view.buf, emit ? b[9].view.buf : NULL};
+    *a = args;
+    return 0;
+}
+
+/* The rotations (R, 108) in b[0]; R, or -1 with the error set. */
+static Py_ssize_t get_rotations(PyObject *o, Buf *b, Py_ssize_t group) {
+    if (get_buf(o, b, "rotations", F32, -1, 0)) return -1;
+    Py_ssize_t R = b->view.len / 4 / 108;
+    if (R * 108 * 4 != b->view.len || R % group) {
+        PyErr_SetString(PyExc_ValueError, "rotations: not (R, 108) with R a multiple of group");
+        return -1;
+    }
+    return R;
+}
+
+static PyObject *run_pool(PyObject *cap, PyObject **o, Py_ssize_t group, int release_frames, double max_drift,
+                          int emit) {
+    PoolBox *box = PyCapsule_GetPointer(cap, "posecast.pool");
+    if (!box) return NULL;
+    if (group < 1) {
+        PyErr_SetString(PyExc_ValueError, "group must be >= 1");
+        return NULL;
+    }
+    Buf b[10];
+    memset(b, 0, sizeof(b));
+    PoolCtx c = {LEVELS[g_level].k, &box->p, {0}};
+    Py_ssize_t R = get_rotations(o[0], &b[0], group);
+    if (R < 0 || get_pool_bufs(o, b, R, group, release_frames, max_drift, emit, &c.a)) {
+        release(b, 10);
+        return NULL;
+    }
+    Py_BEGIN_ALLOW_THREADS;
+    if (R > 0) parallel_rows(emit ? emit_fn : pool_fn, &c, R);
+    Py_END_ALLOW_THREADS;
+    release(b, 10);
+    Py_RETURN_NONE;
+}
+
 static PyObject *py_emit(PyObject *self, PyObject *args) {
     PyObject *cap, *o[10];
     int release_frames;
@@ -499,76 +555,18 @@ static PyObject *py_emit(PyObject *self, PyObject *args) {
     if (!PyArg_ParseTuple(args, "OOOOOOOOOidOO", &cap, &o[0], &o[1], &o[2], &o[3], &o[4], &o[5], &o[6],
                           &o[7], &release_frames, &max_drift, &o[8], &o[9]))
         return NULL;
-    PoolBox *box = PyCapsule_GetPointer(cap, "posecast.pool");
-    if (!box) return NULL;
-    Buf b[10];
-    memset(b, 0, sizeof(b));
-    if (get_buf(o[0], &b[0], "rotations", F32, -1, 0)) goto fail;
-    Py_ssize_t R = b[0].view.len / 4 / 108;
-    if (R * 108 * 4 != b[0].view.len) {
-        PyErr_SetString(PyExc_ValueError, "rotations: not (R, 108)");
-        goto fail;
-    }
-    if (get_buf(o[1], &b[1], "contacts", F32, R * 2, 0) || get_buf(o[2], &b[2], "root_mat", F32, R * 9, 0) ||
-        get_buf(o[3], &b[3], "root_pos", F32, R * 3, 0) || get_buf(o[4], &b[4], "locked", BOOL, R * 2, 1) ||
-        get_buf(o[5], &b[5], "lock_pos", F64, R * 6, 1) || get_buf(o[6], &b[6], "release", I64, R * 2, 1) ||
-        get_buf(o[7], &b[7], "suppressed", BOOL, R * 2, 1) || get_buf(o[8], &b[8], "positions", F32, R * 57, 1) ||
-        get_buf(o[9], &b[9], "rotations_out", F32, R * 76, 1))
-        goto fail;
-    PoolCtx c = {LEVELS[g_level].k, &box->p,
-                 {b[0].view.buf, b[1].view.buf, b[2].view.buf, b[3].view.buf, 1, b[4].view.buf, b[7].view.buf,
-                  b[5].view.buf, b[6].view.buf, release_frames, max_drift, b[8].view.buf, NULL, b[9].view.buf}};
-    Py_BEGIN_ALLOW_THREADS;
-    if (R > 0) parallel_rows(emit_fn, &c, R);
-    Py_END_ALLOW_THREADS;
-    release(b, 10);
-    Py_RETURN_NONE;
-fail:
-    release(b, 10);
-    return NULL;
+    return run_pool(cap, o, 1, release_frames, max_drift, 1);
 }
 
 static PyObject *py_pool(PyObject *self, PyObject *args) {
-    PyObject *cap, *o[11];
+    PyObject *cap, *o[10];
     Py_ssize_t group;
     int release_frames;
     double max_drift;
     if (!PyArg_ParseTuple(args, "OOOOOnOOOOidOO", &cap, &o[0], &o[1], &o[2], &o[3], &group, &o[4], &o[5],
                           &o[6], &o[7], &release_frames, &max_drift, &o[8], &o[9]))
         return NULL;
-    PoolBox *box = PyCapsule_GetPointer(cap, "posecast.pool");
-    if (!box) return NULL;
-    Buf b[10];
-    memset(b, 0, sizeof(b));
-    if (group < 1) {
-        PyErr_SetString(PyExc_ValueError, "group must be >= 1");
-        return NULL;
-    }
-    if (get_buf(o[0], &b[0], "rotations", F32, -1, 0)) goto fail;
-    Py_ssize_t R = b[0].view.len / 4 / 108;
-    if (R * 108 * 4 != b[0].view.len || R % group) {
-        PyErr_SetString(PyExc_ValueError, "rotations: not (R, 108) with R a multiple of group");
-        goto fail;
-    }
-    Py_ssize_t G = R / group;
-    if (get_buf(o[1], &b[1], "contacts", F32, R * 2, 0) || get_buf(o[2], &b[2], "root_mat", F32, G * 9, 0) ||
-        get_buf(o[3], &b[3], "root_pos", F32, G * 3, 0) || get_buf(o[4], &b[4], "locked", BOOL, R * 2, 1) ||
-        get_buf(o[5], &b[5], "lock_pos", F64, R * 6, 1) || get_buf(o[6], &b[6], "release", I64, R * 2, 1) ||
-        get_buf(o[7], &b[7], "suppressed", BOOL, R * 2, 1) || get_buf(o[8], &b[8], "world_out", F32, R * 57, 1) ||
-        get_buf(o[9], &b[9], "scores", F64, R, 1))
-        goto fail;
-    PoolCtx c = {LEVELS[g_level].k, &box->p,
-                 {b[0].view.buf, b[1].view.buf, b[2].view.buf, b[3].view.buf, group, b[4].view.buf,
-                  b[7].view.buf, b[5].view.buf, b[6].view.buf, release_frames, max_drift, b[8].view.buf,
-                  b[9].view.buf, NULL}};
-    Py_BEGIN_ALLOW_THREADS;
-    if (R > 0) parallel_rows(pool_fn, &c, R);
-    Py_END_ALLOW_THREADS;
-    release(b, 10);
-    Py_RETURN_NONE;
-fail:
-    release(b, 10);
-    return NULL;
+    return run_pool(cap, o, group, release_frames, max_drift, 0);
 }
 
 /* --- control ---------------------------------------------------------------------- */
