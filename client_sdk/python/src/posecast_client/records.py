@@ -45,15 +45,28 @@ def skeleton2offsets(blob: bytes) -> F64:
     return out
 
 
+def _hamilton_table() -> F64:
+    """``T (4, 16)`` with ``(a @ T).reshape(4, 4)[j, k]`` the ``k`` part of ``a * e_j``."""
+    t = np.zeros((4, 4, 4))
+    # a * b, written out for xyzw, as (i of a, j of b, k of the product, sign)
+    for i, j, k, sign in (
+        (3, 0, 0, 1), (0, 3, 0, 1), (1, 2, 0, 1), (2, 1, 0, -1),
+        (3, 1, 1, 1), (0, 2, 1, -1), (1, 3, 1, 1), (2, 0, 1, 1),
+        (3, 2, 2, 1), (0, 1, 2, 1), (1, 0, 2, -1), (2, 3, 2, 1),
+        (3, 3, 3, 1), (0, 0, 3, -1), (1, 1, 3, -1), (2, 2, 3, -1),
+    ):  # fmt: skip
+        t[i, j, k] = sign
+    return t.reshape(4, 16)
+
+
+_HAMILTON = _hamilton_table()
+
+
 def _mul(a: F64, b: F64) -> F64:
-    """Hamilton product of xyzw quaternions ``(..., 4)``."""
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
-    bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
-    out[..., 0] = aw * bx + ax * bw + ay * bz - az * by
-    out[..., 1] = aw * by - ax * bz + ay * bw + az * bx
-    out[..., 2] = aw * bz + ax * by - ay * bx + az * bw
-    out[..., 3] = aw * bw - ax * bx - ay * by - az * bz
+    """Hamilton product of xyzw quaternions ``(..., 4)`` (broadcasting): two matrix
+    products, which at a message's few records cost far less than 16 elementwise ones."""
+    m = (a @ _HAMILTON).reshape(*a.shape[:-1], 4, 4)  # (..., j, k): a * e_j
+    out: F64 = (b[..., None, :] @ m)[..., 0, :]
     return out
 
 
@@ -76,30 +89,40 @@ def items2world(items: F64) -> F64:
     return w
 
 
+def _mat_table() -> F64:
+    """``Q (16, 9)`` with ``(q q^T).reshape(16) @ Q`` the rotation matrix of unit ``q``."""
+    q = np.zeros((4, 4, 3, 3))
+    x, y, z, w = range(4)
+
+    def put(r: int, c: int, terms: list[tuple[int, int, float]]) -> None:
+        for i, j, v in terms:
+            q[i, j, r, c] += v
+
+    put(0, 0, [(w, w, 1), (x, x, 1), (y, y, -1), (z, z, -1)])
+    put(1, 1, [(w, w, 1), (x, x, -1), (y, y, 1), (z, z, -1)])
+    put(2, 2, [(w, w, 1), (x, x, -1), (y, y, -1), (z, z, 1)])
+    put(0, 1, [(x, y, 2), (z, w, -2)])
+    put(0, 2, [(x, z, 2), (y, w, 2)])
+    put(1, 0, [(x, y, 2), (z, w, 2)])
+    put(1, 2, [(y, z, 2), (x, w, -2)])
+    put(2, 0, [(x, z, 2), (y, w, -2)])
+    put(2, 1, [(y, z, 2), (x, w, 2)])
+    return q.reshape(16, 9)
+
+
+_MAT = _mat_table()
+
+
 def fk(world: F64, root_m: F64, offsets: F64) -> F64:
     """Joint positions ``(..., 19, 3)`` metres from world rotations ``(..., 19, 4)``, the
     root ``(..., 3)`` and bone offsets ``(..., 19, 3)``, down the tree a level at a time."""
-    x, y, z, s = world[..., 0], world[..., 1], world[..., 2], world[..., 3]
-    mats = np.empty((*world.shape[:-1], 3, 3))
-    mats[..., 0, 0], mats[..., 0, 1], mats[..., 0, 2] = (
-        1 - 2 * (y * y + z * z),
-        2 * (x * y - z * s),
-        2 * (x * z + y * s),
-    )
-    mats[..., 1, 0], mats[..., 1, 1], mats[..., 1, 2] = (
-        2 * (x * y + z * s),
-        1 - 2 * (x * x + z * z),
-        2 * (y * z - x * s),
-    )
-    mats[..., 2, 0], mats[..., 2, 1], mats[..., 2, 2] = (
-        2 * (x * z - y * s),
-        2 * (y * z + x * s),
-        1 - 2 * (x * x + y * y),
-    )
+    outer = world[..., :, None] * world[..., None, :]  # (..., 19, 4, 4)
+    mats = (outer.reshape(*world.shape[:-1], 16) @ _MAT).reshape(*world.shape[:-1], 3, 3)
+    off = np.broadcast_to(offsets, (*world.shape[:-1], 3))[..., None]  # (..., 19, 3, 1)
     pos = np.empty((*world.shape[:-1], 3))
     pos[..., 0, :] = root_m
     for joints, parents in _LEVELS:
-        bones = np.einsum("...jab,...jb->...ja", mats[..., parents, :, :], offsets[..., joints, :])
+        bones = (mats[..., parents, :, :] @ off[..., joints, :, :])[..., 0]
         pos[..., joints, :] = pos[..., parents, :] + bones
     return pos
 
