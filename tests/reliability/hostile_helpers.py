@@ -30,6 +30,7 @@ import threading
 import time
 import urllib.error
 import urllib.request
+from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -65,7 +66,7 @@ from posecast.online.protocol.messages import (
 from posecast.testing.serve import Series, ServeProcess, parse_series
 from posecast.testing.serve import http_get as serve_http_get
 from posecast.tracking.layouts import Layout
-from tests.online.conftest import walk_frame
+from tests.online.conftest import make_cfg, token, walk_frame
 from tests.reliability.healthy_players import HEALTHY, WATCHED
 
 PROTO = Path(__file__).resolve().parents[2] / "proto"
@@ -308,6 +309,64 @@ def check_answer(v: Verdict, ans: Answer, table: dict[str, bool]) -> list[str]:
     elif not ans.pong:
         problems.append(f"non-fatal {v.code} lost the connection: {ans}")
     return problems
+
+
+class AttackPair:
+    """The fuzzers' two attacker connections, a player in ``r1`` and a backend in a room
+    of its own (its selectors and kicks reach no healthy player), each reconnected with
+    a fresh token when the server closes it. :meth:`send` is one probe: what the spec
+    says the server must answer (:func:`verdict`), what it did, and the codes counted.
+    """
+
+    def __init__(self, port: int, version: int = 1) -> None:
+        self.port, self.version = port, version
+        self.table = error_table()
+        self.att: dict[str, Attacker] = {}
+        self.peer: dict[str, Peer] = {}
+        self.expected: Counter[str] = Counter()  # error codes the answers must carry
+        self.sent: Counter[str] = Counter()  # messages, by the caller's label
+        self.joins = 0
+        self.reconnects = 0  # joins after the server closed an attacker
+        for role in ("player", "backend"):
+            self._join(role)
+
+    def _join(self, role: str) -> None:
+        self.joins += 1
+        tag = f"v{self.version}-{self.joins}"
+        att = Attacker(self.port, version=self.version)
+        if role == "player":
+            welcome = att.hello(token("r1", f"atk-player-{tag}"))
+        else:
+            welcome = att.hello(token("rb", f"atk-backend-{tag}", role="backend"), room="rb")
+        assert isinstance(welcome, Welcome) and welcome.version == self.version, welcome
+        self.att[role], self.peer[role] = att, Peer(role, version=self.version)
+
+    def send(self, role: str, data: bytes, label: str = "") -> None:
+        v = verdict(data, self.peer[role])
+        ans = self.att[role].probe(data)
+        self.sent[label] += 1
+        if v.code is not None:
+            self.expected[v.code] += 1
+        if ans.closed:
+            self.reconnects += 1
+            self._join(role)
+        problems = check_answer(v, ans, self.table)
+        assert not problems, f"{label} ({role}) {data[:64]!r}...: {problems}"
+
+    def close(self) -> None:
+        for att in self.att.values():
+            att.close()
+
+
+def fuzz_arena_cfg() -> ServerConfig:
+    """The fuzzers' server: every non-fatal error answered and no frame rate-limited,
+    so each message's answer is exact (test_hostile_floods covers the limits), and the
+    per-IP and node-wide connection budgets (test_hostile_churn) opened up, since a
+    fuzzer reconnects after every fatal error as fast as it can."""
+    return make_cfg(
+        lookahead=1, error_rate_hz=1e6, control_rate_hz=1e6, rate_burst=10**9, max_rooms=16,
+        fatal_per_ip_per_min=10**6, accepts_per_s=1e6,
+    )  # fmt: skip
 
 
 # --- metrics ----------------------------------------------------------------------------

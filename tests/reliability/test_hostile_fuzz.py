@@ -27,7 +27,6 @@ from __future__ import annotations
 import math
 import os
 import time
-from collections import Counter
 from collections.abc import Callable, Iterator
 from typing import Any
 
@@ -39,24 +38,22 @@ from hypothesis import strategies as st
 from posecast.errors import ProtocolError
 from posecast.online.protocol import decode
 from posecast.online.protocol.messages import DEFAULT_LIMITS, MAX_DEPTH, Welcome
-from tests.online.conftest import make_cfg, token
+from tests.online.conftest import token
 from tests.reliability.hostile_helpers import (
     Arena,
     Attacker,
-    Peer,
+    AttackPair,
     as_attacker,
     assert_rates_kept,
     base_maps,
-    check_answer,
     delta,
-    error_table,
     errors_by_code,
+    fuzz_arena_cfg,
     http_get,
     invalid_vectors,
     schema,
     scrape,
     valid_encodings,
-    verdict,
 )
 
 EXAMPLES = int(os.environ.get("POSECAST_FUZZ_EXAMPLES", "150"))
@@ -333,61 +330,20 @@ def _decoder_code(data: bytes | str) -> str | None:
     return None
 
 
-class Fuzzer:
-    """The two attacker connections, reconnected (with a fresh token) when closed."""
-
-    def __init__(self, port: int) -> None:
-        self.port = port
-        self.table = error_table()
-        self.att: dict[str, Attacker] = {}
-        self.peer: dict[str, Peer] = {}
-        self.expected: Counter[str] = Counter()
-        self.sent: Counter[str] = Counter()
-        self.reconnects = 0
-        for role in ("player", "backend"):
-            self._join(role)
-
-    def _join(self, role: str) -> None:
-        att = Attacker(self.port)
-        if role == "player":
-            welcome = att.hello(token("r1", "atk-player"))
-        else:  # a room of its own: its selectors and kicks reach no healthy player
-            welcome = att.hello(token("rb", "atk-backend", role="backend"), room="rb")
-        assert isinstance(welcome, Welcome), welcome
-        self.att[role], self.peer[role] = att, Peer(role)
+class Fuzzer(AttackPair):
+    """The two attacker connections, each case checked against its decoder code first."""
 
     def run(self, case: Case) -> None:
         category, role, data, want = case
         if want != ANY:  # what the decoder says, before any session rule
             got = _decoder_code(data)
             assert got in want, f"{category}: the decoder says {got}, built as {want}"
-        v = verdict(data, self.peer[role])
-        ans = self.att[role].probe(data)
-        self.sent[category] += 1
-        if v.code is not None:
-            self.expected[v.code] += 1
-        if ans.closed:
-            self.reconnects += 1
-            self._join(role)
-        problems = check_answer(v, ans, self.table)
-        assert not problems, f"{category} ({role}) {data[:64]!r}...: {problems}"
-
-    def close(self) -> None:
-        for att in self.att.values():
-            att.close()
+        self.send(role, data, category)
 
 
 @pytest.fixture(scope="module")
 def arena() -> Iterator[Arena]:
-    # Every non-fatal error is answered and no frame is rate-limited, so each
-    # message's answer is exact; test_hostile_floods covers the limits themselves.
-    # ... and the fuzzer reconnects after every fatal error, as fast as it can: the
-    # per-IP and node-wide connection budgets (test_hostile_churn) are opened up.
-    cfg = make_cfg(
-        lookahead=1, error_rate_hz=1e6, control_rate_hz=1e6, rate_burst=10**9, max_rooms=16,
-        fatal_per_ip_per_min=10**6, accepts_per_s=1e6,
-    )  # fmt: skip
-    with Arena(cfg) as a:
+    with Arena(fuzz_arena_cfg()) as a:
         yield a
 
 

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections import Counter
 from collections.abc import Iterator
 from typing import Any
 
@@ -26,21 +25,16 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from posecast.online.protocol.messages import Welcome
-from tests.online.conftest import make_cfg, token
 from tests.reliability.hostile_helpers import (
     Arena,
-    Attacker,
-    Peer,
+    AttackPair,
     as_attacker,
-    check_answer,
     delta,
-    error_table,
     errors_by_code,
+    fuzz_arena_cfg,
     http_get,
     scrape,
     vectors,
-    verdict,
 )
 
 pytestmark = pytest.mark.timeout(600)
@@ -77,51 +71,9 @@ def v2_client_message(draw: st.DrawFn) -> bytes:
     return data
 
 
-class V2Fuzzer:
-    def __init__(self, port: int) -> None:
-        self.port = port
-        self.table = error_table()
-        self.att: dict[str, Attacker] = {}
-        self.peer: dict[str, Peer] = {}
-        self.expected: Counter[str] = Counter()
-        self.sent = 0
-        self.joins = 0
-        for role in ("player", "backend"):
-            self._join(role)
-
-    def _join(self, role: str) -> None:
-        self.joins += 1
-        att = Attacker(self.port, version=2)
-        if role == "player":
-            welcome = att.hello(token("r1", f"v2-atk-{self.joins}"))
-        else:
-            welcome = att.hello(token("rv", f"v2-bk-{self.joins}", role="backend"), room="rv")
-        assert isinstance(welcome, Welcome) and welcome.version == 2, welcome
-        self.att[role], self.peer[role] = att, Peer(role, version=2)
-
-    def run(self, role: str, data: bytes) -> None:
-        v = verdict(data, self.peer[role])
-        ans = self.att[role].probe(data)
-        self.sent += 1
-        if v.code is not None:
-            self.expected[v.code] += 1
-        if ans.closed:
-            self._join(role)
-        problems = check_answer(v, ans, self.table)
-        assert not problems, f"({role}) {data[:64]!r}...: {problems}"
-
-    def close(self) -> None:
-        for att in self.att.values():
-            att.close()
-
-
 @pytest.fixture(scope="module")
 def arena() -> Iterator[Arena]:
-    cfg = make_cfg(
-        lookahead=1, error_rate_hz=1e6, control_rate_hz=1e6, rate_burst=10**9, max_rooms=16,
-        fatal_per_ip_per_min=10**6, accepts_per_s=1e6,
-    )  # fmt: skip
-    with Arena(cfg) as a:
+    with Arena(fuzz_arena_cfg()) as a:
         yield a
 
 
@@ -129,12 +81,12 @@ def test_v2_vectors_and_fuzz_get_their_codes_and_nobody_else_notices(arena: Aren
     assert len(INVALID) >= 30 and len(VALID) >= 10
     before = errors_by_code(scrape(arena.port))
 
-    def attack() -> V2Fuzzer:
-        fz = V2Fuzzer(arena.port)
+    def attack() -> AttackPair:
+        fz = AttackPair(arena.port, version=2)
         try:
             for data in INVALID + VALID:
                 for role in ("player", "backend"):
-                    fz.run(role, data)
+                    fz.send(role, data)
 
             checks = [HealthCheck.too_slow, HealthCheck.data_too_large]
 
@@ -142,7 +94,7 @@ def test_v2_vectors_and_fuzz_get_their_codes_and_nobody_else_notices(arena: Aren
                       suppress_health_check=checks)  # fmt: skip
             @given(st.sampled_from(["player", "backend"]), v2_client_message())
             def fuzz(role: str, data: bytes) -> None:
-                fz.run(role, data)
+                fz.send(role, data)
 
             fuzz()
             return fz
@@ -152,7 +104,7 @@ def test_v2_vectors_and_fuzz_get_their_codes_and_nobody_else_notices(arena: Aren
     fz = as_attacker(attack)
     time.sleep(0.2)  # the last errors are counted before the scrape
     counted = delta(errors_by_code(scrape(arena.port)), before)
-    print(f"v2 hostile: {fz.sent} messages, errors {dict(fz.expected)}, {fz.joins} joins")
+    print(f"v2 hostile: {fz.sent.total()} messages, errors {dict(fz.expected)}, {fz.joins} joins")
     assert counted == dict(fz.expected)  # every bad message counted, by its code
     assert {"BAD_FIELD", "OUT_OF_RANGE", "TOO_LARGE", "MALFORMED", "FORBIDDEN"} <= set(counted)
     assert http_get(arena.port, "/healthz")[0] == 200
