@@ -312,7 +312,7 @@ static int ik_row(const PcPoolArgs *a, int64_t row, float *wp) {
         double *lock = a->lock_pos + i * 3;
         double feet[3] = {wp[3 * foot], wp[3 * foot + 1], wp[3 * foot + 2]};
         int pred = a->con[i] > 0.5f;
-        int sup = a->suppressed[i] && pred;
+        int sup = a->suppressed[i] && pred && a->release[i] > 0; /* re-lock once blended back */
         int locked = a->locked[i];
         if (a->max_drift >= 0.0) {
             double dx = feet[0] - lock[0], dy = feet[1] - lock[1], dz = feet[2] - lock[2];

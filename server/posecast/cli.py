@@ -452,12 +452,22 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     if args.home_factor is not None:
         home = None if args.home_factor == "off" else _float_arg("--home-factor", args.home_factor)
     (backend,) = _backends("--backend", args.backend, "eval")
+    drift: float | None = ssi_defaults.ik_max_drift_m
+    if args.ik_max_drift is not None:
+        off = args.ik_max_drift == "off"
+        drift = None if off else _float_arg("--ik-max-drift", args.ik_max_drift)
+    release = ssi_defaults.ik_release_frames
+    if args.ik_release_frames is not None:
+        _at_least("--ik-release-frames", args.ik_release_frames, 1, "eval")
+        release = args.ik_release_frames
     engine_cfg = EngineConfig(  # a ConfigError for a bad --samples or --home-factor
         samples=args.samples,
         outlier_baseline=args.outlier_baseline,
         outlier_factor=args.outlier_factor,
         upper_body_ik=not args.no_upper_ik,
         floor_ik=not args.no_floor_ik,
+        ik_max_drift_m=drift,
+        ik_release_frames=release,
         latent_scale=latent_scale,
         home_factor=home,
     )
@@ -822,6 +832,19 @@ def build_parser() -> argparse.ArgumentParser:
         "where the extension does not load), onnx or torch",
     )
     ev.add_argument("--outlier-factor", type=float, default=2.0, help="SSI outlier factor (2)")
+    ev.add_argument(
+        "--ik-max-drift",
+        default=None,
+        metavar="M|off",
+        help="contact IK: release a lock once the network's ankle is M metres from it, or "
+        "`off` to hold it for the whole predicted contact (default: the engine's)",
+    )
+    ev.add_argument(
+        "--ik-release-frames",
+        type=int,
+        default=None,
+        help="contact IK: frames a released foot blends back over (default: the engine's)",
+    )
     ev.add_argument(
         "--outlier-baseline",
         default="zero",

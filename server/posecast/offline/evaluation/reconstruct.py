@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 
 from posecast.geometry.fk import fk_mat
 from posecast.geometry.rotations import r6d2mat
-from posecast.online.engine.ik import ContactIK
+from posecast.online.engine.ik import MAX_DRIFT_M, RELEASE_FRAMES, ContactIK
 from posecast.online.inference.artifact import Artifact
 from posecast.skeleton import NUM_ROTATIONS, reference_offsets
 
@@ -60,8 +60,15 @@ def pose_from_rotations(rot6d: F64, root_mat: F64, root_pos: F64) -> tuple[F64, 
     return fk_mat(local, root_pos, reference_offsets())
 
 
-def contact_ik(world_mat: F64, world_pos: F64, contacts: F64) -> None:
-    """Run the contact IK over a clip in place (one sample, frame by frame)."""
-    ik = ContactIK.zeros(1)
+def contact_ik(
+    world_mat: F64,
+    world_pos: F64,
+    contacts: F64,
+    release_frames: int = RELEASE_FRAMES,
+    max_drift_m: float | None = MAX_DRIFT_M,
+) -> None:
+    """Run the contact IK over a clip in place (one sample, frame by frame), with the
+    engine's release and drift settings (``EngineConfig.ik_*``)."""
+    ik = ContactIK.zeros(1, release_frames, max_drift_m)
     for t in range(len(world_pos)):
         ik.step(world_mat[t : t + 1], world_pos[t : t + 1], contacts[t : t + 1])

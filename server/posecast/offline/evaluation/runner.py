@@ -149,7 +149,7 @@ def evaluate(
             if name != "cvae_ik_ssi":
                 wm, wp = pose_from_rotations(rot, root_mat, root_pos)
                 if name.endswith("_ik"):
-                    contact_ik(wm, wp, con)
+                    contact_ik(wm, wp, con, engine_cfg.ik_release_frames, engine_cfg.ik_max_drift_m)
                     if engine_cfg.floor_ik:
                         floor_ik(wm, wp)
                     if engine_cfg.upper_body_ik:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from posecast.errors import ConfigError
+from posecast.online.engine.ik import MAX_DRIFT_M, RELEASE_FRAMES
 
 
 @dataclass(frozen=True)
@@ -19,10 +20,11 @@ class EngineConfig:
             ``r = median(R) - min(R)`` (2.0, the paper's trimmed estimator).
         outlier_baseline: ``"zero"`` for that rule, ``"min"`` to measure from the best
             sample, ``R_c - min(R) > factor * r`` (see :mod:`posecast.online.engine.selectors`).
-        ik_release_frames: frames to blend a released foot back to the network (10).
+        ik_release_frames: frames to blend a released foot back to the network (20).
         ik_max_drift_m: release a foot lock early once the network's ankle is this far
-            from it (0.2 m, chosen on the validation split, see docs/evaluation.md;
-            ``None`` keeps every lock for the whole predicted contact, as the paper).
+            from it, then lock again where the foot is (0.1 m; both chosen on the
+            validation split, see docs/evaluation.md; ``None`` keeps every lock for the
+            whole predicted contact, as the paper).
         stale_after_frames: frames without input before a player is marked stale (30).
         waist_filter_hz: cutoff of the waist-orientation low-pass, ``None`` for off.
         fps: tick rate the model was trained at (60).
@@ -45,8 +47,8 @@ class EngineConfig:
     transition_frames: int = 10
     outlier_factor: float = 2.0
     outlier_baseline: str = "zero"
-    ik_release_frames: int = 10
-    ik_max_drift_m: float | None = 0.2
+    ik_release_frames: int = RELEASE_FRAMES
+    ik_max_drift_m: float | None = MAX_DRIFT_M
     stale_after_frames: int = 30
     waist_filter_hz: float | None = None
     fps: float = 60.0

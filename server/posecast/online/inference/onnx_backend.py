@@ -20,7 +20,7 @@ from posecast.geometry.rotations import mat2quat
 from posecast.online.engine.anomaly import AnomalyScorer
 from posecast.online.engine.backend import F32, F64, PoolIK
 from posecast.online.engine.batch_fk import fk32
-from posecast.online.engine.ik import ContactIK
+from posecast.online.engine.ik import MAX_DRIFT_M, RELEASE_FRAMES, ContactIK
 from posecast.online.inference.artifact import Artifact, load_artifact
 
 
@@ -52,7 +52,10 @@ class NumpyPool:
     """
 
     def __init__(
-        self, anomaly: Artifact, release_frames: int = 10, max_drift_m: float | None = 0.2
+        self,
+        anomaly: Artifact,
+        release_frames: int = RELEASE_FRAMES,
+        max_drift_m: float | None = MAX_DRIFT_M,
     ) -> None:
         self.scorer = AnomalyScorer(anomaly)
         self.threshold_m = self.scorer.threshold_m
@@ -99,8 +102,8 @@ def load_onnx(
     anomaly: str,
     models_dir: str | Path | None = None,
     threads: int = 1,
-    release_frames: int = 10,
-    max_drift_m: float | None = 0.2,
+    release_frames: int = RELEASE_FRAMES,
+    max_drift_m: float | None = MAX_DRIFT_M,
 ) -> tuple[OnnxDecoder, NumpyPool]:
     """The ``onnx`` backend on the artifacts ``decoder`` and ``anomaly``."""
     dec = OnnxDecoder(load_artifact(decoder, models_dir, threads=threads))

@@ -21,6 +21,7 @@ from onnx import numpy_helper
 from posecast.errors import ModelError
 from posecast.offline.nets.cvae import CVAEConfig, Decoder
 from posecast.online.engine.backend import F32
+from posecast.online.engine.ik import MAX_DRIFT_M, RELEASE_FRAMES
 from posecast.online.inference.artifact import load_artifact, read_sidecar
 from posecast.online.inference.onnx_backend import NumpyPool
 
@@ -128,8 +129,8 @@ def load_torch(
     anomaly: str,
     models_dir: str | Path | None = None,
     threads: int = 1,
-    release_frames: int = 10,
-    max_drift_m: float | None = 0.2,
+    release_frames: int = RELEASE_FRAMES,
+    max_drift_m: float | None = MAX_DRIFT_M,
 ) -> tuple[TorchDecoder, NumpyPool]:
     """The ``torch`` backend on the artifacts ``decoder`` and ``anomaly`` (``threads``: of
     the anomaly network's ONNX Runtime session; the decoder runs on one)."""
