@@ -321,6 +321,8 @@ def test_eval_apps_user_error(bvh_dir: Path, tmp_path: Path, capsys) -> None:
     data = tmp_path / "prepared"
     user_error(capsys, main(["eval-apps", "--data", str(data)]), "DATASET_INVALID")
     user_error(capsys, main(["eval-apps", "--data", str(data), "--runs", "0"]), "CONFIG_INVALID")
+    rc = main(["eval-apps", "--data", str(data), "--latent-scale", "0"])
+    user_error(capsys, rc, "CONFIG_INVALID")
     rc = main(["eval-apps", "--data", str(data), "--samples", "1,x"])
     user_error(capsys, rc, "CONFIG_INVALID")
     rc = main(["eval-apps", "--data", str(data), "--backend", "cuda"])

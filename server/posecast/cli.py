@@ -533,6 +533,7 @@ def _cmd_eval_apps(args: argparse.Namespace) -> int:
     counts = _int_list("--samples", args.samples, "eval-apps")
     _at_least("--runs", args.runs, 1, "eval-apps")
     _at_least("--threads", args.threads, 1, "eval-apps")
+    _finite("--latent-scale", args.latent_scale, "eval-apps", positive=True)
     (backend,) = _backends("--backend", args.backend, "eval-apps")
     _json_out(args.json)
     _models_dir(args.models)
@@ -556,7 +557,9 @@ def _cmd_eval_apps(args: argparse.Namespace) -> int:
             f"pass the name of a clip of the dataset ({shown or 'it has none'})",
         )
     loaded = load_backend(backend, Layout.HMD3_WAIST, args.models, args.threads)
-    report = table3(loaded, kick, sample_counts=counts, runs=args.runs)
+    report = table3(
+        loaded, kick, sample_counts=counts, runs=args.runs, latent_scale=args.latent_scale
+    )
     report["clip"] = args.clip
     print(json.dumps(report, indent=1))
     if args.json is not None:
@@ -884,6 +887,12 @@ def build_parser() -> argparse.ArgumentParser:
     apps.add_argument("--runs", type=int, default=100, help="runs (seeds) per setting")
     apps.add_argument("--models", type=Path, help="models directory (default: shipped)")
     apps.add_argument("--threads", type=int, default=2)
+    apps.add_argument(
+        "--latent-scale",
+        type=float,
+        default=1.0,
+        help="the pool's latents are SCALE x eps (1: the prior, as streaming uses)",
+    )
     apps.add_argument(
         "--backend", default="native", help="inference backend: native (default), onnx or torch"
     )
