@@ -92,6 +92,13 @@ def _float_arg(option: str, text: str) -> float:
     return value
 
 
+def _float_or_off(option: str, text: str | None, default: float | None) -> float | None:
+    """An option given as a number >= 0 or `off` (``None``); ``default`` when absent."""
+    if text is None:
+        return default
+    return None if text == "off" else _float_arg(option, text)
+
+
 def _int_list(option: str, text: str, command: str) -> list[int]:
     """A comma-separated list of integers >= 1 (``"1,10,100"``)."""
     try:
@@ -448,14 +455,9 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     ssi_defaults = EngineConfig()
     latent_scale = ssi_defaults.latent_scale if args.latent_scale is None else args.latent_scale
     _finite("--latent-scale", latent_scale, "eval", positive=True)
-    home: float | None = ssi_defaults.home_factor
-    if args.home_factor is not None:
-        home = None if args.home_factor == "off" else _float_arg("--home-factor", args.home_factor)
+    home = _float_or_off("--home-factor", args.home_factor, ssi_defaults.home_factor)
     (backend,) = _backends("--backend", args.backend, "eval")
-    drift: float | None = ssi_defaults.ik_max_drift_m
-    if args.ik_max_drift is not None:
-        off = args.ik_max_drift == "off"
-        drift = None if off else _float_arg("--ik-max-drift", args.ik_max_drift)
+    drift = _float_or_off("--ik-max-drift", args.ik_max_drift, ssi_defaults.ik_max_drift_m)
     release = ssi_defaults.ik_release_frames
     if args.ik_release_frames is not None:
         _at_least("--ik-release-frames", args.ik_release_frames, 1, "eval")

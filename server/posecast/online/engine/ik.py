@@ -280,6 +280,7 @@ def floor_ik(
     world_pos: F64,
     floor_y: float = FLOOR_Y,
     max_lift_m: float = FLOOR_MAX_LIFT_M,
+    lift: F64 | None = None,
 ) -> NDArray[np.bool_]:
     """Lift each foot whose ankle or toe is below ``floor_y`` onto it, in place.
 
@@ -288,8 +289,10 @@ def floor_ik(
     swing as in :func:`apply_leg_ik`, bone lengths kept (lifting brings the ankle
     nearer the hip, so the knee bends; a straight leg bends forward). Feet more than
     ``max_lift_m`` down are left alone. Returns which feet ``(B, 2)`` were lifted.
+    ``lift``: :func:`floor_lift` of ``world_pos``, when the caller has it already.
     """
-    lift = floor_lift(world_pos, floor_y, max_lift_m)
+    if lift is None:
+        lift = floor_lift(world_pos, floor_y, max_lift_m)
     active: NDArray[np.bool_] = lift > 0.0
     if np.any(active):
         targets = np.asarray(world_pos[:, [int(leg[2]) for leg in LEGS]], np.float64).copy()

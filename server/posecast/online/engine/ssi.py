@@ -502,15 +502,18 @@ class Engine:
 def _floor(wp: F32, rotations: F32) -> None:
     """:func:`~posecast.online.engine.ik.floor_ik` on shown poses, in place: positions
     ``(E, 19, 3)`` and world rotations ``(E, 19, 4)`` (the thighs' and shins' change)."""
-    rows = np.flatnonzero(floor_lift(wp).any(axis=1))
+    lift = floor_lift(wp)
+    rows = np.flatnonzero(lift.any(axis=1))
     if not len(rows):
         return
     pos = wp[rows].astype(np.float64)
     mat = quat2mat(rotations[rows].astype(np.float64))
-    floor_ik(mat, pos)
+    floor_ik(mat, pos, lift=lift[rows])
     wp[rows] = pos
-    legs = np.array([int(j) for leg in LEGS for j in leg[:2]])
-    rotations[np.ix_(rows, legs)] = mat2quat(mat[:, legs])
+    rotations[np.ix_(rows, _THIGHS_SHINS)] = mat2quat(mat[:, _THIGHS_SHINS])
+
+
+_THIGHS_SHINS = np.array([int(j) for leg in LEGS for j in leg[:2]])  # what floor_ik turns
 
 
 _DISPLAY_IK = ("disp_locked", "disp_lock_pos", "disp_release", "disp_suppressed")
