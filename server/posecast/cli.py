@@ -8,8 +8,8 @@ Subcommands (each a thin edge over the module named):
 * ``posecast train cvae|ae|anomaly --data DIR --out DIR`` - train a network
   (:mod:`posecast.offline.train.cvae_trainer`, :mod:`posecast.offline.train.anomaly_trainer`;
   needs ``posecast[train]``)
-* ``posecast export --out DIR [--cvae|--cvae-hmd3|--ae|--anomaly CKPT]`` - checkpoints ->
-  ONNX models and JSON sidecars (:mod:`posecast.offline.train.export`)
+* ``posecast export --out DIR [--cvae|--cvae-hmd3|--cvae-sites|--ae|--anomaly CKPT]`` -
+  checkpoints -> ONNX models and JSON sidecars (:mod:`posecast.offline.train.export`)
 * ``posecast eval --data DIR | --bvh DIR`` - evaluate the models
   (:mod:`posecast.offline.evaluation.runner`, ``docs/evaluation.md``)
 * ``posecast eval-apps --data DIR`` - Table 3: target hitting and collision avoidance
@@ -210,7 +210,9 @@ def _checkpoint(
 
     from posecast.offline.train.checkpoint import load_checkpoint
 
-    how = f"posecast train {kind}" + (f" --layout {layout}" if layout == Layout.HMD3 else "")
+    how = f"posecast train {kind}" + (
+        f" --layout {layout}" if layout in (Layout.HMD3, Layout.SITES) else ""
+    )
     hint = hint or f"pass a checkpoint.pt written by `{how}` to {option}"
     if not path.is_file():
         raise _hinted(ModelError("no such checkpoint file", path=path), hint)
@@ -392,13 +394,15 @@ def _cmd_export(args: argparse.Namespace) -> int:
     jobs: list[tuple[str, Path | None, str, str | None]] = [
         ("--cvae", args.cvae, "cvae", Layout.HMD3_WAIST.value),
         ("--cvae-hmd3", args.cvae_hmd3, "cvae", Layout.HMD3.value),
+        ("--cvae-sites", args.cvae_sites, "cvae", Layout.SITES.value),
         ("--ae", args.ae, "ae", Layout.HMD3_WAIST.value),
         ("--anomaly", args.anomaly, "anomaly", None),
     ]
     given = [(opt, path, kind, lay) for opt, path, kind, lay in jobs if path is not None]
     if not given:
         raise _config(
-            "nothing to export", "pass one or more of --cvae, --cvae-hmd3, --ae, --anomaly"
+            "nothing to export",
+            "pass one or more of --cvae, --cvae-hmd3, --cvae-sites, --ae, --anomaly",
         )
     _out_dir("--out", args.out)
     for option, path, _, _ in given:
@@ -418,7 +422,13 @@ def _cmd_export(args: argparse.Namespace) -> int:
     if args.data is not None:
         extra["cvae_decoder"] = {"mean_pose_rot6d": mean_pose_rot6d(args.data)}
     for path in export_all(
-        args.out, args.cvae, args.ae, args.anomaly, extra, cvae_hmd3=args.cvae_hmd3
+        args.out,
+        args.cvae,
+        args.ae,
+        args.anomaly,
+        extra,
+        cvae_hmd3=args.cvae_hmd3,
+        cvae_sites=args.cvae_sites,
     ):
         print(f"wrote {path}")
     return 0
@@ -810,6 +820,9 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--out", type=Path, required=True, help="models directory")
     export.add_argument("--cvae", type=Path, help="CVAE checkpoint")
     export.add_argument("--cvae-hmd3", type=Path, help="headset-only (hmd3) CVAE checkpoint")
+    export.add_argument(
+        "--cvae-sites", type=Path, help="tracker-set (sites) CVAE checkpoint, any set"
+    )
     export.add_argument("--ae", type=Path, help="deterministic AE checkpoint")
     export.add_argument("--anomaly", type=Path, help="anomaly AE checkpoint")
     export.add_argument("--data", type=Path, help="prepared dataset (for the mean pose)")

@@ -68,7 +68,9 @@ class ServerConfig:
     models_dir: str | None = _opt(None, "directory of ONNX models (default: shipped)")
     frame_queue: int = _opt(2, "frames kept per player between ticks; 1: only the newest")
     layouts: str = _opt(
-        "hmd3+waist,hmd3", "tracker layouts served, comma-separated; each loads its model"
+        "hmd3+waist,hmd3",
+        "tracker layouts served, comma-separated; each loads its model (sites: every "
+        "tracker set, on one model)",
     )
     max_message_bytes: int = _opt(8192, "largest WebSocket message accepted, bytes")
     max_rate_hz: int = _opt(120, "frames per second one player may send (token bucket)")

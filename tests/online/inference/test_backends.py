@@ -73,7 +73,7 @@ def _run(engine: Engine, ticks: int, players: int) -> list[list[PoseOut]]:
     return out
 
 
-@pytest.mark.parametrize("layout", list(Layout))
+@pytest.mark.parametrize("layout", [Layout.HMD3_WAIST, Layout.HMD3])  # sites: test_sites_engine
 def test_an_engine_on_torch_emits_what_it_emits_on_onnx(layout: Layout) -> None:
     """120 ticks, 3 players, 16 samples each with the default selector: the same samples
     and transitions, poses within 1e-4 m."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 from posecast.online.engine.config import EngineConfig
 from posecast.online.inference.loader import load_engine, load_multi_engine
 from posecast.tracking.layouts import Layout, spec
+from posecast.tracking.sites import TrackerSet
 
 
 def test_load_engine_serves_the_layout_it_was_asked_for() -> None:
@@ -24,4 +25,5 @@ def test_load_multi_engine_builds_one_engine_per_layout_and_batches_each() -> No
     assert set(multi.layouts) == set(Layout)
     multi.add_player("a", 1, Layout.HMD3)
     multi.add_player("b", 2, Layout.HMD3_WAIST)
-    assert multi.counts() == {Layout.HMD3_WAIST: 1, Layout.HMD3: 1}
+    multi.add_player("c", 3, TrackerSet.parse("head,left_hand,right_hand,left_foot:imu"))
+    assert multi.counts() == {Layout.HMD3_WAIST: 1, Layout.HMD3: 1, Layout.SITES: 1}

@@ -315,3 +315,53 @@ def test_garbage_only_ever_raises_protocol_errors(rng: np.random.Generator) -> N
                 "NOT_NORMALISED",
                 "VERSION_UNSUPPORTED",
             }
+
+
+def test_tracker_set_hello_and_sites_frames_round_trip() -> None:
+    from posecast.online.protocol.messages import Frame as FrameMsg
+    from posecast.online.protocol.messages import Hello as HelloMsg
+    from posecast.tracking.sites import TrackerSet
+
+    text = "head,left_hand,right_hand,left_foot:imu,right_foot:imu"
+    h = decode(encode(HelloMsg(1, "t", "lobby", "Ada", layout=TrackerSet.parse(text))))
+    assert isinstance(h, HelloMsg) and str(h.layout) == text
+    pos = np.zeros((5, 3))
+    pos[3] = [0.5, -9.0, 2.0]  # an acceleration, m/s^2
+    quat = np.tile([0.0, 0.0, 0.0, 1.0], (5, 1))
+    f = decode(encode(FrameMsg(7, 1.0, pos, quat, 0b11011, sites=True)))
+    assert isinstance(f, FrameMsg) and f.sites and f.valid == 0b11011 and f.pos.shape == (5, 3)
+    assert f.pos[3].tolist() == [0.5, -9.0, 2.0]
+    assert f.pos[2].tolist() == [0.0, 0.0, 0.0]  # an untracked row reads as the origin
+
+
+@pytest.mark.parametrize(
+    ("wire", "code", "field"),
+    [
+        ({"layout": "head,left_hand,right_hand,tail"}, "BAD_FIELD", "layout"),
+        ({"layout": "head,head,left_hand,right_hand"}, "BAD_FIELD", "layout"),
+        ({"layout": "left_hand,right_hand"}, "BAD_FIELD", "layout"),
+        ({"layout": "sites"}, "BAD_FIELD", "layout"),
+    ],
+)
+def test_bad_tracker_sets_are_bad_fields(wire: dict[str, object], code: str, field: str) -> None:
+    msg = {"type": "hello", "version": 1, "token": "t", "room": "r", "name": "n", **wire}
+    with pytest.raises(ProtocolError) as err:
+        decode(msgpack.packb(msg))
+    assert err.value.code == code and err.value.field == field
+
+
+@pytest.mark.parametrize(
+    ("frame", "code", "field"),
+    [
+        ({"sites": [[0, 1, 0, 0, 0, 0, 1]] * 11}, "BAD_FIELD", "sites"),
+        ({"sites": []}, "BAD_FIELD", "sites"),
+        ({"sites": [[0, 1, 0, 0, 0, 0, 1]] * 3, "valid": 8}, "OUT_OF_RANGE", "valid"),
+        ({"sites": [[0, 1, 0, 0, 0, 0, 1]] * 3, "trackers": [[0] * 7] * 4}, "BAD_FIELD", "sites"),
+        ({"sites": [[0, 1, 0, 0, 0, 0, 2]] * 3}, "NOT_NORMALISED", "sites[0]"),
+        ({"sites": [[2000, 1, 0, 0, 0, 0, 1]] * 3}, "OUT_OF_RANGE", "sites[0]"),
+    ],
+)
+def test_bad_sites_frames(frame: dict[str, object], code: str, field: str) -> None:
+    with pytest.raises(ProtocolError) as err:
+        decode(msgpack.packb({"type": "frame", "seq": 1, "t": 0.5, **frame}))
+    assert err.value.code == code and err.value.field == field

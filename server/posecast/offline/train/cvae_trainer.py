@@ -22,9 +22,11 @@ from posecast.geometry.torch_ops import r6d2mat
 from posecast.offline.dataset.augment import Augmentation
 from posecast.offline.nets.cvae import CVAE, CVAEConfig
 from posecast.offline.train.checkpoint import load_checkpoint, save_checkpoint
-from posecast.offline.train.data import Normalisation, TrainArrays, load_train_val
+from posecast.offline.train.data import Normalisation, TrainArrays, compose_sites, load_train_val
 from posecast.offline.train.losses import PoseFK, position_mse_cm2, split_root, velocity_mse_cm2
+from posecast.offline.train.masks import add_inertial_noise, cycle_table_kinds, sample_kinds
 from posecast.tracking.layouts import spec
+from posecast.tracking.sites import SITE_ROW, Kind, Site
 
 
 @dataclass(frozen=True)
@@ -49,6 +51,12 @@ class CVAETrainConfig:
     # Ablation (docs/evaluation.md): zero the headset-only model's orientation inputs,
     # leaving it the positions and velocities a 4-point model reads.
     no_orientation: bool = False
+    # The one model of every tracker set (layout ``sites``): sensor noise on the
+    # synthetic IMU accelerations, m/s^2 (docs/model-card.md), and the share of windows
+    # that take one of the evaluation table's sets (posecast.offline.train.masks).
+    imu_acc_noise: float = 0.5
+    imu_acc_bias: float = 0.2
+    table_share: float = 0.25
     seed: int = 0
     log_every: int = 100
     val_every: int = 1000
@@ -64,13 +72,30 @@ class CVAETrainConfig:
 
 
 def _batch(
-    arr: TrainArrays, starts: np.ndarray, norm: Normalisation, T: int
+    arr: TrainArrays,
+    starts: np.ndarray,
+    norm: Normalisation,
+    T: int,
+    kinds: np.ndarray | None = None,
+    noise: tuple[np.random.Generator, float, float] | None = None,
 ) -> dict[str, torch.Tensor]:
+    """One batch of windows; ``kinds (B, 10)``: each window's tracker set (layout
+    ``sites``), ``noise``: the generator and IMU noise levels to add."""
     idx = starts[:, None] + np.arange(T)[None, :]  # (B, T)
-    feats = (arr.features[idx] - norm.feat_mean) / norm.feat_std
+    raw = arr.features[idx]
+    extra: dict[str, torch.Tensor] = {}
+    if arr.features_imu is not None:
+        if kinds is None:
+            raise ValueError("a tracker-set batch needs each window's kinds")
+        raw = compose_sites(raw, arr.features_imu[idx], kinds)
+        if noise is not None:
+            add_inertial_noise(raw, kinds, *noise)
+        extra["waist_tracked"] = torch.from_numpy(kinds[:, SITE_ROW[Site.WAIST]] == Kind.POSITIONAL)
+    feats = (raw - norm.feat_mean) / norm.feat_std
     pos = arr.local_pos[idx]  # (B, T, 19, 3)
     pose_in = (pos.reshape(*idx.shape, 57) - norm.pose_mean) / norm.pose_std
     return {
+        **extra,
         "x": torch.from_numpy(np.ascontiguousarray(feats, dtype=np.float32)),
         "pose_in": torch.from_numpy(np.ascontiguousarray(pose_in, dtype=np.float32)),
         "pos": torch.from_numpy(pos),
@@ -84,7 +109,7 @@ def _losses(
     model: CVAE, fk: PoseFK, b: dict[str, torch.Tensor], cfg: CVAETrainConfig, sample: bool = True
 ) -> dict[str, torch.Tensor]:
     out, logits, kl = model(b["x"], b["pose_in"], sample=sample)
-    rot, root_mat, root_pos = split_root(out, b["root_mat"], b["pos"][..., 0, :])
+    rot, root_mat, root_pos = _roots(out, b)
     pred = fk(rot, root_mat, root_pos)  # (B, T, 19, 3)
     mse = position_mse_cm2(pred, b["pos"])
     bce = torch.nn.functional.binary_cross_entropy_with_logits(logits, b["contacts"])
@@ -106,6 +131,19 @@ def _losses(
         parts["vel_mse_cm2"] = vel
     mpjpe = ((pred - b["pos"]).norm(dim=-1).mean() * 100.0).detach()
     return {"loss": total, **parts, "mpjpe_cm": mpjpe}
+
+
+def _roots(
+    out: torch.Tensor, b: dict[str, torch.Tensor]
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """:func:`split_root`, and for a tracker-set batch the true pelvis (the waist
+    tracker's, as served) in the windows whose set tracks the waist's position."""
+    rot, root_mat, root_pos = split_root(out, b["root_mat"], b["pos"][..., 0, :])
+    if "waist_tracked" in b:
+        w = b["waist_tracked"][:, None]  # (B, 1)
+        root_mat = torch.where(w[..., None, None], b["root_mat"], root_mat)
+        root_pos = torch.where(w[..., None], b["pos"][..., 0, :], root_pos)
+    return rot, root_mat, root_pos
 
 
 def train_cvae(
@@ -152,6 +190,7 @@ def train_cvae(
     rng = np.random.default_rng(cfg.seed + step)
     starts = train.window_starts(cfg.window)
     val_starts = val.window_starts(cfg.window)[:: max(1, cfg.window // 2)]
+    sites = train.features_imu is not None
 
     def save() -> None:
         save_checkpoint(
@@ -178,7 +217,9 @@ def train_cvae(
     while step < cfg.steps:
         for group in opt.param_groups:
             group["lr"] = learning_rate(cfg, step)
-        b = _batch(train, rng.choice(starts, cfg.batch), norm, cfg.window)
+        kinds = sample_kinds(rng, cfg.batch, cfg.table_share) if sites else None
+        noise = (rng, cfg.imu_acc_noise, cfg.imu_acc_bias)
+        b = _batch(train, rng.choice(starts, cfg.batch), norm, cfg.window, kinds, noise)
         parts = _losses(model, fk, b, cfg)
         opt.zero_grad(set_to_none=True)
         parts["loss"].backward()  # type: ignore[no-untyped-call]
@@ -227,15 +268,18 @@ def evaluate_val(
     norm: Normalisation,
     cfg: CVAETrainConfig,
 ) -> float:
-    """Validation MPJPE (cm) over windows, decoding with z = 0 (the prior's mean)."""
+    """Validation MPJPE (cm) over windows, decoding with z = 0 (the prior's mean); a
+    tracker-set model's windows take the evaluation table's sets in turn."""
     model.eval()
     errs = []
+    kinds = cycle_table_kinds(len(starts)) if val.features_imu is not None else None
     for i in range(0, len(starts), 256):
-        b = _batch(val, starts[i : i + 256], norm, cfg.window)
+        k = None if kinds is None else kinds[i : i + 256]
+        b = _batch(val, starts[i : i + 256], norm, cfg.window, k)
         z = torch.zeros(*b["x"].shape[:2], model.cfg.latent)
         if model.cfg.deterministic:
             z, _, _ = model.encoder(b["x"])
         out, _, _ = model.decoder(b["x"], z)
-        pred = fk(*split_root(out, b["root_mat"], b["pos"][..., 0, :]))
+        pred = fk(*_roots(out, b))
         errs.append((pred - b["pos"]).norm(dim=-1).mean(dim=(1, 2)) * 100.0)
     return float(torch.cat(errs).mean()) if errs else float("nan")

@@ -13,6 +13,10 @@ local_pos       (N, 19, 3)    canonical-body joint positions in the layout's fra
 rot6d           (N, 18, 6)    target local rotations
 root_mat        (N, 3, 3)     pelvis rotation in that frame
 contacts        (N, 2)        foot contact labels
+features_imu    (N, F)        ``sites`` only: the features with every optional site
+                              inertial (``features`` has every site positional); a
+                              training batch takes each site's columns from one, the
+                              other or neither, per window (:func:`compose_sites`)
 ==============  ============  =======================================================
 """
 
@@ -31,6 +35,14 @@ from posecast.offline.dataset.store import SplitData, load_split, read_manifest
 from posecast.offline.motion.clip import CanonicalClip
 from posecast.tracking.features import character_frame, to_character_frame
 from posecast.tracking.layouts import Layout, LayoutSpec, spec
+from posecast.tracking.sites import (
+    FEATURES_PER_SITE,
+    NUM_SITES,
+    REQUIRED,
+    Kind,
+    clip_site_features,
+    site_tracks,
+)
 
 F32 = NDArray[np.float32]
 
@@ -43,6 +55,7 @@ class TrainArrays:
     root_mat: F32
     contacts: F32
     clip_start: NDArray[np.int64]
+    features_imu: F32 | None = None
 
     @property
     def n_frames(self) -> int:
@@ -83,11 +96,17 @@ def _views(
     frame_quat = target["tracker_quat"][:, ls.frame_slot].astype(np.float64)
     _, inv_yaw = character_frame(frame_pos, frame_quat)
     features: NDArray[np.floating]
+    extra: dict[str, NDArray[np.floating]] = {}
     if ls.layout is Layout.HMD3_WAIST:
         features = sensed["features"]  # derived once, at prepare time
+    elif ls.layout is Layout.SITES:
+        pos, quat, acc = site_tracks(*body.fk(), clip.fps)
+        features = clip_site_features(pos, quat, acc, ALL_POSITIONAL, clip.fps)
+        extra["features_imu"] = clip_site_features(pos, quat, acc, ALL_INERTIAL, clip.fps)
     else:
         features = ls.clip_features(sensed["tracker_pos"], sensed["tracker_quat"], clip.fps)
     return {
+        **extra,
         "features": features,
         "local_pos": to_character_frame(target["positions"], frame_pos, frame_quat),
         "rot6d": target["rot6d"],
@@ -126,7 +145,27 @@ def build_arrays(
         root_mat=cat("root_mat"),
         contacts=cat("contacts"),
         clip_start=starts,
+        features_imu=cat("features_imu") if parts and "features_imu" in parts[0] else None,
     )
+
+
+# Every optional site positional, or inertial (the head and hands always positional).
+ALL_POSITIONAL = np.full(NUM_SITES, Kind.POSITIONAL, np.int8)
+ALL_INERTIAL = np.where(np.arange(NUM_SITES) < len(REQUIRED), Kind.POSITIONAL, Kind.INERTIAL)
+
+
+def compose_sites(
+    positional: NDArray[np.floating], inertial: NDArray[np.floating], kinds: NDArray[np.integer]
+) -> F32:
+    """Features of tracker sets from the two full views: ``positional`` and
+    ``inertial`` ``(B, T, 170)``, ``kinds (B, 10)`` per window -> ``(B, T, 170)``, each
+    site's 17 columns from the view its kind names, zeros where it is absent."""
+    B, T = positional.shape[:2]
+    p = positional.reshape(B, T, NUM_SITES, FEATURES_PER_SITE)
+    i = inertial.reshape(B, T, NUM_SITES, FEATURES_PER_SITE)
+    k = np.asarray(kinds)[:, None, :, None]
+    out = np.where(k == Kind.POSITIONAL, p, np.where(k == Kind.INERTIAL, i, 0.0))
+    return np.ascontiguousarray(out.reshape(B, T, -1), dtype=np.float32)
 
 
 @dataclass(frozen=True)
@@ -141,10 +180,22 @@ class Normalisation:
     @classmethod
     def fit(cls, arr: TrainArrays) -> Normalisation:
         pos = arr.local_pos.reshape(len(arr.local_pos), -1)
+        if arr.features_imu is not None:
+            # Tracker sets: a scale only (mean 0, the root mean square of each column
+            # in the view where it is present), so that an absent site's zeros stay 0.
+            msq = np.maximum(
+                np.square(arr.features, dtype=np.float64).mean(0),
+                np.square(arr.features_imu, dtype=np.float64).mean(0),
+            )
+            feat_mean = np.zeros(arr.features.shape[1], np.float32)
+            feat_std = np.maximum(np.sqrt(msq), 1e-3).astype(np.float32)
+        else:
+            feat_mean = arr.features.mean(0).astype(np.float32)
+            feat_std = np.maximum(arr.features.std(0), 1e-3).astype(np.float32)
         # A floor on the std keeps constant inputs (the waist's own X/Z) finite.
         return cls(
-            feat_mean=arr.features.mean(0).astype(np.float32),
-            feat_std=np.maximum(arr.features.std(0), 1e-3).astype(np.float32),
+            feat_mean=feat_mean,
+            feat_std=feat_std,
             pose_mean=pos.mean(0).astype(np.float32),
             pose_std=np.maximum(pos.std(0), 1e-3).astype(np.float32),
         )

@@ -14,6 +14,9 @@ Artifacts (in ``posecast/artifacts``):
 * ``cvae_decoder_hmd3.onnx`` (headset only): ``features (B,36), z, h`` ->
   ``rotations (B,108), root (B,9), contacts, h_out``; ``root`` is the pelvis rotation
   (6D) and position (metres) in the head's yaw frame
+* ``cvae_decoder_sites.onnx`` (every tracker set, :mod:`posecast.tracking.sites`):
+  ``features (B,170), z, h`` -> ``rotations, root (B,9), contacts, h_out``, as the
+  headset-only decoder; its normalisation is a scale only (absent sites read 0)
 * ``ae_step.onnx`` (the deterministic ablation, encoder included):
   ``features (B,24), h_enc (B,128), h_dec (B,128)`` ->
   ``rotations, contacts, h_enc_out, h_dec_out``
@@ -37,6 +40,7 @@ from posecast.offline.train.checkpoint import load_checkpoint
 from posecast.skeleton import JOINT_NAMES, PARENTS, reference_offsets
 from posecast.tracking.features import FEATURE_NAMES, TRACKER_JOINT
 from posecast.tracking.layouts import Layout, spec
+from posecast.tracking.sites import SITE_JOINT, SITES
 
 OPSET = 17
 ARTIFACT_FORMAT = "posecast-model"
@@ -243,7 +247,11 @@ def sidecar(
         "parents": list(PARENTS),
         "skeleton_offsets_m": reference_offsets().round(6).tolist(),
         "layout": str(ls.layout),
-        "tracker_slots": {s.name: TRACKER_JOINT[s].name for s in ls.slots},
+        "tracker_slots": (
+            {s.value: SITE_JOINT[s].name for s in SITES}
+            if ls.layout is Layout.SITES
+            else {s.name: TRACKER_JOINT[s].name for s in ls.slots}
+        ),
         "feature_layout": list(ls.feature_names),
         "normalisation": ckpt["norm"],
         "model_config": ckpt["config"],
@@ -286,6 +294,7 @@ def export_all(
     anomaly: str | Path | None = None,
     extra: dict[str, dict[str, Any]] | None = None,
     cvae_hmd3: str | Path | None = None,
+    cvae_sites: str | Path | None = None,
 ) -> list[Path]:
     """Write the ONNX files and sidecars for whichever checkpoints are given."""
     out = Path(out_dir)
@@ -294,6 +303,7 @@ def export_all(
     jobs = [
         ("cvae_decoder", cvae, build_decoder),
         ("cvae_decoder_hmd3", cvae_hmd3, build_decoder),
+        ("cvae_decoder_sites", cvae_sites, build_decoder),
         ("ae_step", ae, build_ae_step),
         ("anomaly", anomaly, build_anomaly),
     ]

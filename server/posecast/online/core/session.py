@@ -23,6 +23,7 @@ import numpy as np
 
 from posecast.errors import (
     AlreadyJoinedError,
+    BadFieldError,
     CalibrationFailedError,
     ConfigError,
     DuplicateError,
@@ -59,7 +60,8 @@ from posecast.online.protocol.messages import (
     seq_delta,
 )
 from posecast.skeleton import Joint
-from posecast.tracking.layouts import Layout
+from posecast.tracking.layouts import Layout, PlayerLayout, model_layout
+from posecast.tracking.sites import Kind, TrackerSet
 
 
 class Phase(enum.Enum):
@@ -68,8 +70,8 @@ class Phase(enum.Enum):
     CLOSED = "closed"
 
 
-def requested_layout(hello: Hello) -> Layout:
-    """The tracker layout a ``hello`` asks for (absent: the 4-point layout)."""
+def requested_layout(hello: Hello) -> PlayerLayout:
+    """The tracker layout or set a ``hello`` asks for (absent: the 4-point layout)."""
     return hello.layout or Layout.HMD3_WAIST
 
 
@@ -80,7 +82,7 @@ class Join:
     rooms: tuple[str, ...]  # hello.room first, then the rooms a backend watches
 
     @property
-    def layout(self) -> Layout:
+    def layout(self) -> PlayerLayout:
         return requested_layout(self.hello)
 
 
@@ -145,7 +147,7 @@ class Session:
     claims: Claims | None = None
     name: str = ""
     rooms: tuple[str, ...] = ()
-    layout: Layout = Layout.HMD3_WAIST  # the hello's tracker layout, once joined
+    layout: PlayerLayout = Layout.HMD3_WAIST  # the hello's tracker layout or set, once joined
     last_seq: int | None = None
     last_message_at: float = 0.0
     clock: ClockEstimator = field(default_factory=ClockEstimator)
@@ -204,8 +206,9 @@ class Session:
 
     def _hello(self, hello: Hello, now: float) -> Join:
         layout = requested_layout(hello)
-        if layout not in self.cfg.served_layouts:
-            raise LayoutUnsupportedError(f"layout {layout!r} is not served", field="layout")
+        if model_layout(layout) not in self.cfg.served_layouts:
+            what = "tracker sets are" if isinstance(layout, TrackerSet) else f"{layout!r} is"
+            raise LayoutUnsupportedError(f"layout {what} not served", field="layout")
         claims = verify(
             self.cfg.secret_bytes,
             hello.token,
@@ -247,26 +250,69 @@ class Session:
         self.last_seq = msg.seq
         self.frames += 1
         self.clock.add(now, msg.t)
+        tracker_set = self.layout if isinstance(self.layout, TrackerSet) else None
+        _check_rows(msg.sites, len(msg.pos), tracker_set, msg.seq)
         pos, quat = msg.pos, msg.quat
-        if msg.valid != 0b1111 and self._held is not None:
-            # A lost tracker holds its last pose rather than jumping to the origin.
+        if msg.valid != (1 << len(pos)) - 1 and self._held is not None:
+            # A lost tracker holds its last pose rather than jumping to the origin (a
+            # lost IMU its orientation, with no acceleration).
             pos, quat = pos.copy(), quat.copy()
-            for i in range(4):
+            for i in range(len(pos)):
                 if not msg.valid >> i & 1:
                     pos[i], quat[i] = self._held[0][i], self._held[1][i]
+                    if tracker_set is not None and tracker_set.entries[i][1] is Kind.INERTIAL:
+                        pos[i] = 0.0
         self._held = (pos, quat)
+        if tracker_set is not None:
+            pos, quat = tracker_set.to_rows(pos, _ORIGIN), tracker_set.to_rows(quat, _IDENT)
         return FrameIn(TrackerFrame(msg.seq, pos, quat))
 
     def close(self) -> None:
         self.phase = Phase.CLOSED
 
 
-def _calibration(msg: Calibrate, layout: Layout) -> Calibration:
-    where = "height_m" if msg.height_m is not None else "trackers"
+_ORIGIN = np.zeros(3)
+_IDENT = np.array([0.0, 0.0, 0.0, 1.0])
+
+
+def _check_rows(sites: bool, n: int, tracker_set: TrackerSet | None, seq: int | None) -> None:
+    """A frame's (or T-pose's) rows must be what the layout sends: 4 ``trackers`` for
+    a named layout, one ``sites`` row per site of a tracker set."""
+    if tracker_set is None:
+        if sites:
+            raise BadFieldError(
+                "this layout sends trackers, not sites (sites are for a tracker set)",
+                field="sites",
+                ref_seq=seq,
+            )
+        return
+    if not sites:
+        raise BadFieldError(
+            f"a tracker set sends sites, not trackers: {len(tracker_set)} rows for "
+            f"{tracker_set.name}",
+            field="trackers",
+            ref_seq=seq,
+        )
+    if n != len(tracker_set):
+        raise BadFieldError(
+            f"sites has {n} rows; the set {tracker_set.name} has {len(tracker_set)}",
+            field="sites",
+            ref_seq=seq,
+        )
+
+
+def _calibration(msg: Calibrate, layout: PlayerLayout) -> Calibration:
+    where = "height_m" if msg.height_m is not None else ("sites" if msg.sites else "trackers")
     try:
         if msg.height_m is not None:
             return Calibration.from_height(msg.height_m)
         assert msg.pos is not None and msg.quat is not None
+        if isinstance(layout, TrackerSet):
+            _check_rows(msg.sites, len(msg.pos), layout, None)
+            return Calibration.from_tpose_sites(
+                layout.to_rows(msg.pos, _ORIGIN), layout.to_rows(msg.quat, _IDENT), layout.kinds()
+            )
+        _check_rows(msg.sites, len(msg.pos), None, None)
         return Calibration.from_tpose(msg.pos, msg.quat, waist=layout != Layout.HMD3)
     except ConfigError as exc:
         raise CalibrationFailedError(exc.message, field=where) from None

@@ -33,7 +33,7 @@ from posecast.online.engine.calibration import Calibration
 from posecast.online.engine.selectors import Selector
 from posecast.online.engine.types import EngineEvent, TrackerFrame
 from posecast.online.protocol.records import PoseState
-from posecast.tracking.layouts import Layout
+from posecast.tracking.layouts import Layout, PlayerLayout
 
 
 @dataclass(frozen=True)
@@ -43,7 +43,7 @@ class EngineOp:
     kind: str  # add | remove | selector | calibration
     player: str
     seed: int = 0
-    layout: Layout = Layout.HMD3_WAIST  # add: which model's batch the player joins
+    layout: PlayerLayout = Layout.HMD3_WAIST  # add: the player's layout (picks the batch)
     selector: Selector | None = None
     calibration: Calibration | None = None
 
@@ -73,10 +73,12 @@ class EngineInbox:
         self._ops: list[EngineOp] = []
         self._frames: dict[str, deque[TrackerFrame]] = {}
         self._depth: dict[str, int] = {}  # per player, when it differs from ``depth``
-        self._waiting: dict[str, tuple[int, Layout]] = {}  # joined, not in the engine yet
+        self._waiting: dict[str, tuple[int, PlayerLayout]] = {}  # joined, not in the engine yet
         self._in_engine: set[str] = set()
 
-    def joined(self, player: str, seed: int, layout: Layout, queue: int | None = None) -> None:
+    def joined(
+        self, player: str, seed: int, layout: PlayerLayout, queue: int | None = None
+    ) -> None:
         """``player`` joined; it enters the engine with its first frame or setting.
         ``queue``: its frame queue's depth (default: the inbox's)."""
         self._waiting[player] = (seed, layout)

@@ -83,6 +83,21 @@ class Calibration:
         offset = quat_apply(quat_conj(quat[TrackerSlot.WAIST]), waist_pos - expected)
         return cls(scale=scale, waist_offset_m=tuple(float(v) for v in offset))  # type: ignore[arg-type]
 
+    @classmethod
+    def from_tpose_sites(cls, pos: F64, quat: F64, kinds: NDArray[np.int8]) -> Calibration:
+        """A tracker set's T-pose, one row per site (``(10, 3)`` / ``(10, 4)``, kinds
+        ``(10,)``): the scale, and a rotation offset for every present site (positional
+        or inertial) that turns its device's orientation into its joint's, as
+        :meth:`from_tpose` does for a headset-only player's three. No waist position
+        offset: a set's waist tracker is worn on the pelvis."""
+        base = cls.from_tpose(pos[:4], quat[:4], waist=False)
+        heading = quat_mul(quat[TrackerSlot.HEAD], np.asarray(base.rot_offsets[0]))
+        offsets = [
+            quat_mul(quat_conj(quat[i]), heading) if kinds[i] else np.array([0.0, 0.0, 0.0, 1.0])
+            for i in range(len(pos))
+        ]
+        return cls(scale=base.scale, rot_offsets=tuple(tuple(map(float, q)) for q in offsets))  # type: ignore[misc]
+
     def orient(self, quat: F64) -> F64:
         """Tracker orientations ``(4, 4)`` with the device offsets removed."""
         if not self.rot_offsets:

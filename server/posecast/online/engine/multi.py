@@ -4,7 +4,8 @@ A server that serves 4-point and headset-only players keeps an :class:`Engine` p
 layout. Each player lives in the engine of the layout it declared in ``hello``; a tick
 steps every engine that has players (each one decoder call for all of its players'
 samples) and merges the results. Rooms do not matter here: a room may mix layouts,
-and poses of both engines go to the same broadcast.
+and poses of every engine go to the same broadcast. A player that declared a tracker
+set joins the ``sites`` engine, whatever its set: one batch for them all.
 """
 
 from __future__ import annotations
@@ -15,7 +16,8 @@ from posecast.online.engine.calibration import Calibration
 from posecast.online.engine.selectors import Selector
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TickResult, TrackerFrame
-from posecast.tracking.layouts import Layout
+from posecast.tracking.layouts import Layout, PlayerLayout, model_layout
+from posecast.tracking.sites import TrackerSet
 
 
 class MultiEngine:
@@ -50,13 +52,19 @@ class MultiEngine:
     def _engine(self, player: str) -> Engine:
         return self.engines[self.players[player]]
 
-    def add_player(self, player: str, seed: int, layout: str = Layout.HMD3_WAIST) -> None:
-        key = Layout(layout)
+    def add_player(
+        self, player: str, seed: int, layout: PlayerLayout | str = Layout.HMD3_WAIST
+    ) -> None:
+        """Join ``player`` to the engine of its ``layout`` (a named layout, or a
+        :class:`TrackerSet`: the ``sites`` engine)."""
+        given = layout if isinstance(layout, TrackerSet) else Layout(layout)
+        key = model_layout(given)
         if key not in self.engines:
-            raise ValueError(f"layout {layout!r} is not served")
+            raise ValueError(f"layout {str(layout)!r} is not served")
         if player in self.players:
             raise ValueError(f"player {player!r} is already in the engine")
-        self.engines[key].add_player(player, seed)
+        tracker_set = given if isinstance(given, TrackerSet) else None
+        self.engines[key].add_player(player, seed, tracker_set=tracker_set)
         self.players[player] = key
 
     def remove_player(self, player: str) -> None:

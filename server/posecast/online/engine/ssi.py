@@ -23,7 +23,10 @@ and :class:`~posecast.online.engine.backend.Pool`, which arrive built
 (:func:`posecast.online.inference.loader.load_engine` loads the shipped models on the backend
 named). One engine serves one model (one layout);
 :class:`posecast.online.engine.multi.MultiEngine` batches each model's players together
-when a server serves both.
+when a server serves several. The ``sites`` model serves every tracker set
+(:mod:`posecast.tracking.sites`) in one batch: a player's frame has one row per site
+(absent ones ignored), its features carry which sites it tracks and how, and its
+pelvis is its waist tracker's when the set has a positional waist, else the decoder's.
 
 Look-ahead (paper Sec. 3.2.4): each player keeps a ring of ``tau + 1`` frames of
 inputs, pre-step hidden states and raw outputs for all samples. An outlier found at
@@ -54,6 +57,7 @@ from posecast.online.engine.upper_ik import solve_upper_body
 from posecast.skeleton import NUM_JOINTS, REST_PELVIS_HEIGHT_M, reference_offsets
 from posecast.tracking.features import TRACKER_JOINT_INDEX, TrackerSlot
 from posecast.tracking.layouts import Layout, spec
+from posecast.tracking.sites import SITE_JOINT_INDEX, Kind, TrackerSet
 
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
@@ -111,7 +115,9 @@ class Engine:
         mc = decoder.meta["model_config"]
         self.latent, self.hidden = int(mc["latent"]), int(mc["hidden"])
         self.layout = spec(decoder.meta.get("layout", Layout.HMD3_WAIST))
+        self._sites = self.layout.layout is Layout.SITES
         n_root = self.layout.root_outputs
+        rows = self.layout.rows
         N = self.cfg.samples
         # Ring rows: tau + 1 frames of history, plus the row the decoder writes the next
         # hidden states into while frame n - tau is still being emitted.
@@ -134,8 +140,9 @@ class Engine:
                 "ring_con": ((N, 2), np.float32, L),
                 "ring_x": ((self.layout.n_features,), np.float32, L),
                 "ring_root": ((N, max(1, n_root)), np.float32, L),  # hmd3: pelvis outputs
-                "ring_pos": ((4, 3), np.float64, L),  # calibrated tracker positions
-                "ring_quat": ((4, 4), np.float64, L),
+                "ring_pos": ((rows, 3), np.float64, L),  # calibrated tracker positions
+                "ring_quat": ((rows, 4), np.float64, L),
+                "kinds": ((rows,), np.int8),  # sites: each row's Kind (0 elsewhere)
                 "ring_rootm": ((3, 3), np.float32, L),  # the waist's rotation (waist layouts)
                 "ring_seq": ((), np.int64, L),
                 "ring_held": ((), np.bool_, L),
@@ -145,6 +152,7 @@ class Engine:
         self.players: dict[str, _Player] = {}
         self._order: list[str] = []  # player id per slot
         self._world = np.empty((0, NUM_JOINTS, 3), np.float32)  # the pool's output, grown
+        self._rest = _rest_frame(rows)
 
     # --- membership -----------------------------------------------------------------
 
@@ -154,12 +162,22 @@ class Engine:
         seed: int,
         selector: Selector | None = None,
         calibration: Calibration | None = None,
+        tracker_set: TrackerSet | None = None,
     ) -> None:
         """Join ``player``. Its ``N`` latent samples are drawn from ``seed``; sample 0 is
-        the prior's mean (``eps = 0``) and starts as the current sample."""
+        the prior's mean (``eps = 0``) and starts as the current sample. A ``sites``
+        engine needs the player's ``tracker_set`` (its frames' rows are model rows,
+        :meth:`TrackerSet.to_rows`)."""
         if player in self.players:
             raise ValueError(f"player {player!r} is already in the engine")
+        if (tracker_set is not None) != self._sites:
+            raise ValueError(
+                "a sites engine needs each player's tracker set"
+                if self._sites
+                else f"a {self.layout.layout} engine takes no tracker set"
+            )
         slot = self.slots.add()
+        self.slots["kinds"][slot] = 0 if tracker_set is None else tracker_set.kinds()
         eps = np.random.default_rng(seed).standard_normal((self.cfg.samples, self.latent))
         eps *= self.cfg.latent_scale
         eps[0] = 0.0
@@ -254,7 +272,7 @@ class Engine:
         )
         # One pool step: FK, contact IK and anomaly error of every sample.
         root_mat, root_pos, group = self._roots(
-            pos, quat, s.row("ring_rootm", k), outputs.get("root"), N
+            pos, quat, s.row("ring_rootm", k), outputs.get("root"), N, self._waist_rows()
         )
         if len(self._world) < R:
             self._world = np.empty((R, NUM_JOINTS, 3), np.float32)
@@ -272,8 +290,23 @@ class Engine:
         self._tick += 1
         return TickResult(poses, events, started)
 
+    def _waist_rows(self, slots: Any = None) -> NDArray[np.bool_] | None:
+        """Sites: per player slot (all, or ``slots``), whether its pelvis is its waist
+        tracker's; ``None`` for the other layouts."""
+        if not self._sites:
+            return None
+        kinds = self.slots.view("kinds")[:, TrackerSlot.WAIST]
+        tracked: NDArray[np.bool_] = kinds == Kind.POSITIONAL
+        return tracked if slots is None else tracked[slots]
+
     def _roots(
-        self, pos: F64, quat: F64, rootm: F32, root_out: F32 | None, repeat: int
+        self,
+        pos: F64,
+        quat: F64,
+        rootm: F32,
+        root_out: F32 | None,
+        repeat: int,
+        waist: NDArray[np.bool_] | None = None,
     ) -> tuple[F32, F32, int]:
         """World pelvis rotations ``(G, 3, 3)`` and positions ``(G, 3)`` (float32) for
         ``R = len(pos) * repeat`` decoded rows, and how many rows share each: ``R / G``.
@@ -282,12 +315,22 @@ class Engine:
         it), one per player (``G = len(pos)``), shared by its ``repeat`` rows.
         ``hmd3``: each row's own pelvis output (6D rotation, position), moved out of
         the player's head frame into the world (``G = R``).
+        ``sites``: as ``hmd3``, except that the rows of a player whose set tracks the
+        waist's position (``waist``, per player) take the waist tracker's pose.
         """
         if root_out is None:
             return rootm, pos[:, TrackerSlot.WAIST].astype(np.float32), repeat
         mats, places = pelvis_from_head32(
             root_out, pos[:, TrackerSlot.HEAD], quat[:, TrackerSlot.HEAD]
         )
+        if waist is not None and waist.any():
+            rows = np.repeat(waist, repeat)
+            players = np.flatnonzero(waist)
+            wm = quat2mat(quat[players, TrackerSlot.WAIST]).astype(np.float32)
+            mats[rows] = np.repeat(wm, repeat, axis=0)
+            places[rows] = np.repeat(
+                pos[players, TrackerSlot.WAIST].astype(np.float32), repeat, axis=0
+            )
         return mats, places, 1
 
     def hidden_state(self, player: str) -> NDArray[np.float32]:
@@ -321,7 +364,7 @@ class Engine:
                     events.append(EngineEvent("stale", pid))
                 if p.last is None:
                     # Nothing ever arrived: stand still at the origin in the rest pose.
-                    fresh.append((p, _REST_FRAME))
+                    fresh.append((p, self._rest))
                 else:
                     kept.append(p.slot)
                 continue
@@ -339,14 +382,14 @@ class Engine:
             return events
         players = [p for p, _ in fresh]
         idx = [p.slot for p in players]
-        q = np.array([f.quat for _, f in fresh], dtype=np.float64)  # (M, 4, 4)
+        q = np.array([f.quat for _, f in fresh], dtype=np.float64)  # (M, rows, 4)
         for i, p in enumerate(players):
             if p.waist_filter is not None:
                 q[i, TrackerSlot.WAIST] = p.waist_filter(q[i, TrackerSlot.WAIST])
         calibrations = [p.calibration for p in players]
         q = orient_all(calibrations, q)
-        raw = np.array([f.pos for _, f in fresh], dtype=np.float64)  # (M, 4, 3)
-        if self.layout.predicts_root:
+        raw = np.array([f.pos for _, f in fresh], dtype=np.float64)  # (M, rows, 3)
+        if self.layout.layout is Layout.HMD3:
             # No waist: keep the unused slot finite whatever the client sent.
             raw[:, TrackerSlot.WAIST], q[:, TrackerSlot.WAIST] = raw[:, TrackerSlot.HEAD], _IDENT
         cal = apply_all(calibrations, raw, q)
@@ -359,7 +402,8 @@ class Engine:
         if not self.layout.predicts_root:  # the pelvis is the waist tracker's, per frame
             s["ring_rootm"][k, idx] = quat2mat(q[:, TrackerSlot.WAIST])
         s["ring_seq"][k, idx] = [f.seq for _, f in fresh]
-        s["ring_x"][k, idx] = self.layout.features(cal, prev, q, self.cfg.fps)
+        kinds = s["kinds"][idx] if self._sites else None
+        s["ring_x"][k, idx] = self.layout.features(cal, prev, q, self.cfg.fps, kinds)
         for p, f in fresh:
             if f.seq >= 0:
                 p.last = f
@@ -457,7 +501,9 @@ class Engine:
             if p.plan is not None and w >= 1.0:
                 p.plan = None
         pos, quat = s["ring_pos"][k, slots], s["ring_quat"][k, slots]
-        root_mat, root_pos, _ = self._roots(pos, quat, s["ring_rootm"][k, slots], root, 1)
+        root_mat, root_pos, _ = self._roots(
+            pos, quat, s["ring_rootm"][k, slots], root, 1, self._waist_rows(slots)
+        )
         # FK and the players' own display IK, batched: gather their states, step,
         # scatter back.
         E = len(emit)
@@ -526,21 +572,16 @@ _IK_SHAPES: dict[str, tuple[int, ...]] = {
 }
 
 
-def _rest_trackers() -> F64:
-    """Tracker positions of the reference body standing in its rest pose at the origin."""
+def _rest_frame(rows: int) -> TrackerFrame:
+    """What a player that never sent a frame stands on (seq -1: never kept as its
+    last): the reference body in its rest pose at the origin, tracked on ``rows`` rows
+    (4 tracker slots, or every site; an inertial site reads no acceleration)."""
     eye = np.broadcast_to(np.eye(3), (NUM_JOINTS, 3, 3))
     pos = fk_positions(eye, np.array([0.0, REST_PELVIS_HEIGHT_M, 0.0]), reference_offsets())
-    return pos[list(TRACKER_JOINT_INDEX)]
+    joints = TRACKER_JOINT_INDEX if rows == len(TRACKER_JOINT_INDEX) else SITE_JOINT_INDEX
+    q = np.zeros((rows, 4))
+    q[:, 3] = 1.0
+    return TrackerFrame(-1, pos[list(joints)], q)
 
 
 _IDENT = np.array([0.0, 0.0, 0.0, 1.0])
-
-
-def _identity_quats() -> F64:
-    q = np.zeros((4, 4))
-    q[:, 3] = 1.0
-    return q
-
-
-# What a player that never sent a frame stands on (seq -1: never kept as its last).
-_REST_FRAME = TrackerFrame(-1, _rest_trackers(), _identity_quats())

@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 from posecast.errors import BadFieldError, NotNormalisedError, OutOfRangeError
 from posecast.online.protocol.messages import ALL_TRACKERS_VALID, MAX_COORD_M, QUAT_TOLERANCE
 from posecast.tracking.features import NUM_TRACKERS
+from posecast.tracking.sites import NUM_SITES
 
 F64 = NDArray[np.float64]
 Map = dict[str, Any]
@@ -158,6 +159,13 @@ def as_trackers(m: Map, key: str, valid: int = ALL_TRACKERS_VALID) -> tuple[F64,
     rows = _get(m, key, "")
     if type(rows) is not list or len(rows) != NUM_TRACKERS:
         raise _bad(key, f"an array of {NUM_TRACKERS} trackers")
+    return _tracker_rows(rows, key, valid)
+
+
+def _tracker_rows(rows: list[Any], key: str, valid: int) -> tuple[F64, F64]:
+    """Checked rows ``[x, y, z, qx, qy, qz, qw]`` -> ``(xyz (n, 3), quat (n, 4))``;
+    see :func:`as_trackers`. A site row's ``xyz`` is a position or an acceleration:
+    the same bounds hold for both."""
     out: list[tuple[float, ...]] = []
     for i, row in enumerate(rows):
         if (
@@ -183,5 +191,21 @@ def as_trackers(m: Map, key: str, valid: int = ALL_TRACKERS_VALID) -> tuple[F64,
             )
         n = math.sqrt(n2)
         out.append((px, py, pz, qx / n, qy / n, qz / n, qw / n))
-    a = np.array(out, dtype=np.float64)  # (4, 7)
+    a = np.array(out, dtype=np.float64)  # (n, 7)
     return a[:, :3].copy(), a[:, 3:].copy()
+
+
+def as_sites(m: Map, key: str, valid: int | None) -> tuple[F64, F64, int]:
+    """A tracker set's rows (:func:`site_rows`), checked as :func:`as_trackers` checks
+    trackers, with ``valid`` (``None``: all) a bit mask over them. Returns
+    ``(xyz (n, 3), quat (n, 4), valid)``."""
+    rows = _get(m, key, "")
+    if type(rows) is not list or not 1 <= len(rows) <= NUM_SITES:
+        raise _bad(key, f"an array of 1 to {NUM_SITES} sites")
+    full = (1 << len(rows)) - 1
+    if valid is None:
+        valid = full
+    elif valid > full:
+        raise OutOfRangeError(f"valid {valid} has bits beyond the {len(rows)} sites", field="valid")
+    pos, quat = _tracker_rows(rows, key, valid)
+    return pos, quat, valid

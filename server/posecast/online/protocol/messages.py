@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from posecast.errors import ConfigError, ProtocolError
-from posecast.tracking.layouts import Layout
+from posecast.tracking.layouts import PlayerLayout
 
 F64 = NDArray[np.float64]
 
@@ -43,6 +43,7 @@ ALL_TRACKERS_VALID = 0b1111
 UINT32_MAX = 2**32 - 1
 MAX_TIME_S = 1e12  # client and server times are seconds in [0, MAX_TIME_S]
 MAX_ID_BYTES = 64  # player and session ids (server-made)
+MAX_LAYOUT_BYTES = 128  # a hello's layout: the longest tracker set's name is 124
 MAX_LOOKAHEAD_FRAMES = 255
 
 # Structural bounds on any v1 message (not configurable): exceeding a size one is
@@ -142,7 +143,8 @@ class Hello:
     token: str
     room: str
     name: str
-    layout: Layout | None = None  # absent: the server takes Layout.HMD3_WAIST
+    # A named layout or a tracker set; absent: the server takes Layout.HMD3_WAIST
+    layout: PlayerLayout | None = None
     rate_hz: float | None = None  # frames per second the client will send; absent: 60
     watch: tuple[str, ...] = ()  # further rooms a backend watches
     pose_rate_hz: float | None = None  # v2: poses per second to receive; absent: 60
@@ -185,8 +187,9 @@ class Calibrate:
 
     TYPE: ClassVar[str] = "calibrate"
     height_m: float | None = None
-    pos: F64 | None = None  # (4, 3) the T-pose frame, metres
+    pos: F64 | None = None  # (4, 3) the T-pose frame, metres (sites: (n, 3), set order)
     quat: F64 | None = None  # (4, 4) xyzw
+    sites: bool = False  # the T-pose came as a tracker set's ``sites``, not ``trackers``
 
     @property
     def tpose(self) -> bool:
@@ -200,9 +203,10 @@ class Frame:
     TYPE: ClassVar[str] = "frame"
     seq: int
     t: float  # client time, seconds
-    pos: F64  # (4, 3) metres, TrackerSlot order
+    pos: F64  # (4, 3) metres, TrackerSlot order (sites: (n, 3) in set order, m or m/s^2)
     quat: F64  # (4, 4) xyzw, unit length
     valid: int = ALL_TRACKERS_VALID  # bit i set: slot i is tracked
+    sites: bool = False  # a tracker set's frame (``sites`` on the wire, not ``trackers``)
 
 
 @dataclass(frozen=True, slots=True, eq=False)

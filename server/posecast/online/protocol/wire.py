@@ -38,6 +38,7 @@ from posecast.online.protocol.fields import (
     as_map,
     as_name,
     as_point,
+    as_sites,
     as_str,
     as_trackers,
 )
@@ -47,6 +48,7 @@ from posecast.online.protocol.messages import (
     MAX_BIN_BYTES_V2,
     MAX_HEIGHT_M,
     MAX_ID_BYTES,
+    MAX_LAYOUT_BYTES,
     MAX_LOOKAHEAD_FRAMES,
     MAX_TIME_S,
     MIN_HEIGHT_M,
@@ -80,7 +82,11 @@ from posecast.online.protocol.messages import (
     Welcome,
 )
 from posecast.skeleton import JOINT_NAMES
-from posecast.tracking.layouts import Layout
+from posecast.tracking.layouts import Layout, PlayerLayout, parse_layout
+from posecast.tracking.sites import NUM_SITES, TrackerSetError
+
+NAMED_LAYOUTS = (Layout.HMD3_WAIST.value, Layout.HMD3.value)
+ALL_SITES_VALID = (1 << NUM_SITES) - 1
 
 _T = (0.0, MAX_TIME_S)
 _SELECTOR_FIELDS = {
@@ -136,11 +142,23 @@ def _hello(m: Map, lim: Limits, v: int = PROTOCOL_VERSION) -> Hello:
         token=as_str(m, "token", lim.max_token_bytes, min_bytes=0),
         room=as_id(m, "room", lim.max_room_bytes),
         name=as_name(m, "name", lim.max_name_bytes),
-        layout=Layout(as_enum(m, "layout", tuple(Layout))) if _has(m, "layout") else None,
+        layout=_layout(m) if _has(m, "layout") else None,
         rate_hz=as_float(m, "rate_hz", 1.0, lim.max_rate_hz) if _has(m, "rate_hz") else None,
         watch=_ids(m, "watch", lim.max_watch_rooms, lim.max_room_bytes),
         pose_rate_hz=rate,
     )
+
+
+def _layout(m: Map) -> PlayerLayout:
+    text = as_str(m, "layout", MAX_LAYOUT_BYTES)
+    try:
+        return parse_layout(text)
+    except TrackerSetError as exc:
+        raise BadFieldError(
+            f"layout {text!r}: {exc} (a named layout: {', '.join(NAMED_LAYOUTS)}, or a "
+            "tracker set such as head,left_hand,right_hand,waist)",
+            field="layout",
+        ) from None
 
 
 def _welcome(m: Map, lim: Limits, v: int = PROTOCOL_VERSION) -> Welcome:
@@ -185,6 +203,11 @@ def _calibrate(m: Map, lim: Limits) -> Calibrate:
         return Calibrate(height_m=as_float(m, "height_m", MIN_HEIGHT_M, MAX_HEIGHT_M))
     if not has_tpose:
         raise BadFieldError("calibrate needs height_m or tpose: true", field="height_m")
+    if _has(m, "sites"):
+        if _has(m, "trackers"):
+            raise BadFieldError("give trackers or sites, not both", field="sites")
+        pos, quat, _ = as_sites(m, "sites", None)
+        return Calibrate(pos=pos, quat=quat, sites=True)
     pos, quat = as_trackers(m, "trackers")
     return Calibrate(pos=pos, quat=quat)
 
@@ -193,6 +216,12 @@ def _frame(m: Map, lim: Limits) -> Frame:
     seq = as_int(m, "seq", 0, UINT32_MAX)
     try:
         t = as_float(m, "t", *_T)
+        if _has(m, "sites"):
+            if _has(m, "trackers"):
+                raise BadFieldError("give trackers or sites, not both", field="sites")
+            mask = as_int(m, "valid", 0, ALL_SITES_VALID) if _has(m, "valid") else None
+            pos, quat, valid = as_sites(m, "sites", mask)
+            return Frame(seq, t, pos, quat, valid, sites=True)
         valid = (
             as_int(m, "valid", 0, ALL_TRACKERS_VALID) if _has(m, "valid") else ALL_TRACKERS_VALID
         )
@@ -306,7 +335,7 @@ def _enc_pose(p: Pose) -> Map:
 _ENC: dict[type[Any], Callable[[Any], Map]] = {
     Hello: lambda h: _opt(
         {"type": "hello", "version": h.version, "token": h.token, "room": h.room, "name": h.name},
-        layout=h.layout,
+        layout=None if h.layout is None else str(h.layout),
         rate_hz=_fl(h.rate_hz),
         watch=list(h.watch) or None,
         pose_rate_hz=_fl(h.pose_rate_hz),
@@ -315,11 +344,20 @@ _ENC: dict[type[Any], Callable[[Any], Map]] = {
     Calibrate: lambda c: (
         {"type": "calibrate", "height_m": float(c.height_m)}
         if c.pos is None
-        else {"type": "calibrate", "tpose": True, "trackers": _trackers(c.pos, c.quat)}
+        else {
+            "type": "calibrate",
+            "tpose": True,
+            ("sites" if c.sites else "trackers"): _trackers(c.pos, c.quat),
+        }
     ),
     Frame: lambda f: _opt(
-        {"type": "frame", "seq": f.seq, "t": float(f.t), "trackers": _trackers(f.pos, f.quat)},
-        valid=None if f.valid == ALL_TRACKERS_VALID else f.valid,
+        {
+            "type": "frame",
+            "seq": f.seq,
+            "t": float(f.t),
+            ("sites" if f.sites else "trackers"): _trackers(f.pos, f.quat),
+        },
+        valid=None if f.valid == (1 << len(f.pos)) - 1 else f.valid,
     ),
     Pose: _enc_pose,
     Presence: lambda p: _opt(
@@ -378,8 +416,8 @@ _DEC: dict[type[Message], tuple[tuple[str, ...], _Dec]] = {
         ),
         _welcome,
     ),
-    Calibrate: (("height_m", "tpose", "trackers"), lambda m, lim, v: _calibrate(m, lim)),
-    Frame: (("seq", "t", "trackers", "valid"), lambda m, lim, v: _frame(m, lim)),
+    Calibrate: (("height_m", "tpose", "trackers", "sites"), lambda m, lim, v: _calibrate(m, lim)),
+    Frame: (("seq", "t", "trackers", "sites", "valid"), lambda m, lim, v: _frame(m, lim)),
     Pose: (("player", "seq", "t", "root", "pos_mm", "rot"), lambda m, lim, v: _pose(m, lim)),
     Presence: (("event", "room", "player", "name", "handle", "skeleton"), _presence),
     Selector: (

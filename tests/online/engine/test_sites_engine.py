@@ -1,0 +1,75 @@
+"""The one model of every tracker set in the SSI engine: mixed sets in one batch."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from posecast.offline.train.masks import TABLE_SETS
+from posecast.online.engine.config import EngineConfig
+from posecast.online.engine.multi import MultiEngine
+from posecast.online.engine.ssi import _rest_frame
+from posecast.online.engine.types import TrackerFrame
+from posecast.online.inference.loader import load_engine
+from posecast.tracking.sites import SITE_JOINT_INDEX, Site, TrackerSet
+
+
+def _walk(t: int, dx: float) -> TrackerFrame:
+    """The rest frame of every site walking forward along +Z."""
+    rest = _rest_frame(10)
+    pos = rest.pos.copy()
+    pos[:, 0] += dx
+    pos[:, 2] += 0.01 * t
+    return TrackerFrame(t, pos, rest.quat)
+
+
+def _run(backend: str) -> dict[str, list[np.ndarray]]:
+    e = load_engine(EngineConfig(samples=8), None, 1, "sites", backend)
+    names = ("3p", "4p", "6p", "3p+2i")
+    for i, n in enumerate(names):
+        e.add_player(n, seed=i, tracker_set=TrackerSet.parse(TABLE_SETS[n]))
+    out: dict[str, list[np.ndarray]] = {n: [] for n in names}
+    for t in range(40):
+        for i, n in enumerate(names):
+            e.push(n, _walk(t, i * 2.0))
+        for p in e.tick().poses:
+            out[p.player].append(p.positions)
+    return out
+
+
+def test_mixed_sets_share_one_batch_and_stand_on_their_trackers() -> None:
+    out = _run("onnx")
+    for i, (name, poses) in enumerate(out.items()):
+        assert len(poses) == 40 - EngineConfig().lookahead, name
+        last = poses[-1]
+        assert np.isfinite(last).all()
+        # Head near its tracker (within reach of the upper-body pass), each player where
+        # its own trackers are: 2 m apart along x.
+        rest = _walk(len(poses) - 1, i * 2.0).pos
+        head = SITE_JOINT_INDEX[0]
+        assert np.linalg.norm(last[head] - rest[0]) < 0.1, name
+    # A positional waist gives the pelvis: the 4- and 6-point players' sits on it.
+    for name in ("4p", "6p"):
+        pelvis = out[name][-1][0]
+        waist = _walk(len(out[name]) - 1, 2.0 * list(out).index(name)).pos[3]
+        assert np.linalg.norm(pelvis - waist) < 1e-4, name
+
+
+@pytest.mark.parametrize("backend", ["native", "torch"])
+def test_backends_agree_on_mixed_sets(backend: str) -> None:
+    ref, got = _run("onnx"), _run(backend)
+    for name in ref:
+        diff = np.abs(np.array(ref[name]) - np.array(got[name])).max()
+        assert diff < 1e-3, (name, diff)
+
+
+def test_a_sites_engine_needs_the_set_and_the_multi_engine_routes_sets() -> None:
+    e = load_engine(EngineConfig(samples=4), None, 1, "sites", "onnx")
+    with pytest.raises(ValueError, match="tracker set"):
+        e.add_player("a", 0)
+    four = load_engine(EngineConfig(samples=4), None, 1, "hmd3+waist", "onnx")
+    multi = MultiEngine({"sites": e, "hmd3+waist": four})
+    multi.add_player("s", 0, TrackerSet.parse(TABLE_SETS["8p"]))
+    multi.add_player("w", 1, "hmd3+waist")
+    assert multi.counts() == {"sites": 1, "hmd3+waist": 1}
+    assert TrackerSet.parse(TABLE_SETS["8p"]).kind(Site.LEFT_KNEE) == 1
