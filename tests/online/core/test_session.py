@@ -213,3 +213,84 @@ def test_control_messages_are_rate_limited_too() -> None:
         s.handle(Ping(1.0), now)
     with pytest.raises(RateLimitedError):
         s.handle(Ping(1.0), now)
+
+
+# --- tracker sets ------------------------------------------------------------------------
+
+_SET = "head,left_hand,right_hand,left_foot:imu,waist"
+
+
+def _set_player() -> Session:
+    from posecast.tracking.sites import TrackerSet
+
+    s = _session(layouts="hmd3+waist,hmd3,sites")
+    join = s.handle(Hello(1, token(), "r1", "Ann", layout=TrackerSet.parse(_SET)), time.time())
+    assert isinstance(join, Join)
+    s.joined(join)
+    return s
+
+
+def _sites_frame(seq: int, valid: int = 0b11111, rows: int = 5) -> object:
+    from posecast.online.protocol.messages import Frame
+
+    pos = np.array([[0, 1.6, 0], [0.3, 1.2, 0.2], [-0.3, 1.2, 0.2], [0.5, -9.0, 2.0], [0, 1, 0]])
+    quat = np.tile([0.0, 0.0, 0.0, 1.0], (rows, 1))
+    return Frame(seq, 0.1 * seq, pos[:rows].astype(float), quat, valid, sites=True)
+
+
+def test_a_tracker_set_joins_only_where_sets_are_served() -> None:
+    from posecast.tracking.sites import TrackerSet
+
+    with pytest.raises(LayoutUnsupportedError, match="tracker sets are not served"):
+        _session().handle(Hello(1, token(), "r1", "A", layout=TrackerSet.parse(_SET)), time.time())
+    assert str(_set_player().layout) == _SET
+
+
+def test_a_sets_frames_land_on_model_rows_and_a_lost_imu_keeps_no_acceleration() -> None:
+    s = _set_player()
+    out = s.handle(_sites_frame(1), time.time())
+    assert isinstance(out, FrameIn)
+    f = out.frame
+    assert f.pos.shape == (10, 3) and f.quat.shape == (10, 4)
+    assert f.pos[3].tolist() == [0, 1, 0]  # the waist's row (wire entry 4)
+    assert f.pos[4].tolist() == [0.5, -9.0, 2.0]  # the left foot's acceleration
+    assert not f.pos[5:].any() and (f.quat[5:, 3] == 1).all()  # absent sites
+    lost = s.handle(_sites_frame(2, valid=0b10111), time.time())  # the IMU dropped out
+    assert isinstance(lost, FrameIn)
+    assert lost.frame.pos[4].tolist() == [0.0, 0.0, 0.0]
+
+
+@pytest.mark.parametrize(
+    ("frame", "field"),
+    [(lambda: _sites_frame(1, rows=4, valid=0b1111), "sites"), (lambda: walk_frame(1), "trackers")],
+)
+def test_a_sets_rows_must_match_it(frame: object, field: str) -> None:
+    from posecast.errors import BadFieldError
+
+    with pytest.raises(BadFieldError) as e:
+        _set_player().handle(frame(), time.time())  # type: ignore[operator]
+    assert e.value.field == field and not e.value.fatal
+
+
+def test_a_named_layout_may_not_send_sites() -> None:
+    from posecast.errors import BadFieldError
+
+    with pytest.raises(BadFieldError) as e:
+        _joined().handle(_sites_frame(1), time.time())
+    assert e.value.field == "sites"
+
+
+def test_a_sets_tpose_calibrates_every_present_site() -> None:
+    s = _set_player()
+    pos = np.array([[0, 1.6, 0], [0.8, 1.4, 0], [-0.8, 1.4, 0], [0, 0.1, 0], [0, 1, 0]], float)
+    quat = np.tile([0.0, 0.0, 0.0, 1.0], (5, 1))
+    out = s.handle(Calibrate(pos=pos, quat=quat, sites=True), time.time())
+    assert isinstance(out, CalibrateIn)
+    offsets = np.array(out.calibration.rot_offsets)
+    assert offsets.shape == (10, 4) and np.allclose(offsets[:, 3], 1.0)  # facing +Z already
+    with pytest.raises(CalibrationFailedError):
+        s.handle(Calibrate(pos=pos * 3.0, quat=quat, sites=True), time.time())
+    from posecast.errors import BadFieldError
+
+    with pytest.raises(BadFieldError):
+        s.handle(Calibrate(pos=pos[:4], quat=quat[:4]), time.time())  # trackers, not sites

@@ -33,6 +33,7 @@ from posecast.errors import (
     OutOfOrderError,
     RateLimitedError,
 )
+from posecast.geometry.rotations import quat_identity
 from posecast.online.auth.tokens import Claims, verify
 from posecast.online.config import ServerConfig
 from posecast.online.core.clock import ClockEstimator
@@ -272,7 +273,7 @@ class Session:
 
 
 _ORIGIN = np.zeros(3)
-_IDENT = np.array([0.0, 0.0, 0.0, 1.0])
+_IDENT = quat_identity()
 
 
 def _check_rows(sites: bool, n: int, tracker_set: TrackerSet | None, seq: int | None) -> None:

@@ -20,6 +20,7 @@ from posecast.errors import ConfigError
 from posecast.geometry.rotations import (
     quat_apply,
     quat_conj,
+    quat_identity,
     quat_mul,
     quat_normalize,
     quat_slerp,
@@ -63,19 +64,11 @@ class Calibration:
         reported orientation into its joint's. In a T-pose every joint's world rotation
         is the body's heading alone, and the heading is square to the line from the
         right hand to the left."""
-        head_y = float(pos[TrackerSlot.HEAD, 1])
-        if not MIN_HEIGHT_M - HEAD_TOP_ABOVE_JOINT_M < head_y < MAX_HEIGHT_M:
-            raise ConfigError(f"T-pose head height {head_y:.2f} m is implausible")
-        scale = REFERENCE_HEAD_HEIGHT_M / head_y
+        scale = _tpose_scale(pos)
         if not waist:
-            across = pos[TrackerSlot.LEFT_HAND] - pos[TrackerSlot.RIGHT_HAND]
-            forward = np.cross(across, [0.0, 1.0, 0.0])  # left x up = forward (+Z)
-            if np.hypot(forward[0], forward[2]) < 0.5:
-                raise ConfigError("T-pose hands are not spread apart level with the body")
-            heading = yaw2quat(np.arctan2(forward[0], forward[2]))
-            offsets = [quat_mul(quat_conj(quat[i]), heading) for i in range(3)]
-            offsets.append(np.array([0.0, 0.0, 0.0, 1.0]))  # no waist
-            return cls(scale=scale, rot_offsets=tuple(tuple(map(float, q)) for q in offsets))  # type: ignore[misc]
+            present = np.arange(len(pos)) < TrackerSlot.WAIST  # head and hands, no waist
+            offsets = _rot_offsets(quat, _tpose_heading(pos), present)
+            return cls(scale=scale, rot_offsets=offsets)
         waist_pos = pos[TrackerSlot.WAIST] * scale
         head = pos[TrackerSlot.HEAD] * scale
         # In a T-pose the pelvis stands under the head, at the reference pelvis height.
@@ -90,13 +83,9 @@ class Calibration:
         or inertial) that turns its device's orientation into its joint's, as
         :meth:`from_tpose` does for a headset-only player's three. No waist position
         offset: a set's waist tracker is worn on the pelvis."""
-        base = cls.from_tpose(pos[:4], quat[:4], waist=False)
-        heading = quat_mul(quat[TrackerSlot.HEAD], np.asarray(base.rot_offsets[0]))
-        offsets = [
-            quat_mul(quat_conj(quat[i]), heading) if kinds[i] else np.array([0.0, 0.0, 0.0, 1.0])
-            for i in range(len(pos))
-        ]
-        return cls(scale=base.scale, rot_offsets=tuple(tuple(map(float, q)) for q in offsets))  # type: ignore[misc]
+        scale = _tpose_scale(pos)
+        offsets = _rot_offsets(quat, _tpose_heading(pos), np.asarray(kinds) != 0)
+        return cls(scale=scale, rot_offsets=offsets)
 
     def orient(self, quat: F64) -> F64:
         """Tracker orientations ``(4, 4)`` with the device offsets removed."""
@@ -112,6 +101,36 @@ class Calibration:
                 quat[TrackerSlot.WAIST], np.asarray(self.waist_offset_m)
             )
         return out
+
+
+def _tpose_scale(pos: F64) -> float:
+    """The scale a T-pose frame's head height gives (``ConfigError`` if implausible)."""
+    head_y = float(pos[TrackerSlot.HEAD, 1])
+    if not MIN_HEIGHT_M - HEAD_TOP_ABOVE_JOINT_M < head_y < MAX_HEIGHT_M:
+        raise ConfigError(f"T-pose head height {head_y:.2f} m is implausible")
+    return REFERENCE_HEAD_HEIGHT_M / head_y
+
+
+def _tpose_heading(pos: F64) -> F64:
+    """The body's heading (a yaw quaternion) in a T-pose: square to the line from the
+    right hand to the left."""
+    across = pos[TrackerSlot.LEFT_HAND] - pos[TrackerSlot.RIGHT_HAND]
+    forward = np.cross(across, [0.0, 1.0, 0.0])  # left x up = forward (+Z)
+    if np.hypot(forward[0], forward[2]) < 0.5:
+        raise ConfigError("T-pose hands are not spread apart level with the body")
+    return yaw2quat(np.arctan2(forward[0], forward[2]))
+
+
+def _rot_offsets(
+    quat: F64, heading: F64, present: NDArray[np.bool_]
+) -> tuple[tuple[float, float, float, float], ...]:
+    """Per row, the offset that turns a T-pose's reported orientation into its joint's
+    (in a T-pose every joint's world rotation is the heading); identity where absent."""
+    ident = quat_identity()
+    rows = [
+        quat_mul(quat_conj(quat[i]), heading) if present[i] else ident for i in range(len(quat))
+    ]
+    return tuple(tuple(map(float, q)) for q in rows)  # type: ignore[misc]
 
 
 def orient_all(calibrations: Sequence[Calibration], quat: F64) -> F64:
