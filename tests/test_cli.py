@@ -296,6 +296,7 @@ def test_export_user_error(tmp_path: Path, capsys) -> None:
         (["--variants", "foo"], "CONFIG_INVALID"),
         (["--variants", "cvae_ik,"], "CONFIG_INVALID"),
         (["--variants", "ae_ik", "--layout", "hmd3"], "CONFIG_INVALID"),
+        (["--layout", "sites"], "CONFIG_INVALID"),
         (["--split", "holdout"], "CONFIG_INVALID"),
         (["--samples", "0"], "CONFIG_INVALID"),
         (["--outlier-factor", "-1"], "CONFIG_INVALID"),

@@ -441,6 +441,11 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     from posecast.offline.evaluation.runner import VARIANTS, evaluate, format_table
     from posecast.online.engine.config import EngineConfig
 
+    if args.layout == Layout.SITES:
+        raise _config(
+            "--layout sites: the evaluation of tracker sets is not built yet",
+            f"evaluate --layout {Layout.HMD3_WAIST} or --layout {Layout.HMD3}",
+        )
     if args.variants is not None:
         variants = [v.strip() for v in args.variants.split(",")]
         unknown = [v for v in variants if v not in VARIANTS]
