@@ -29,6 +29,26 @@ def _frame(
     return m.Frame(seq, t, a[:, :3].copy(), a[:, 3:].copy(), valid)
 
 
+# Six sites (a set such as head, hands, waist, both feet; the last two could as well be
+# IMUs' accelerations), values exact in float32 and unit quaternions.
+SITES = [
+    *TRACKERS,
+    [0.125, 0.0625, 0.375, *ID_Q],
+    [-0.125, 9.75, -0.5, *HALF_Q],
+]
+
+
+def _sites(
+    seq: int = 9, t: float = 3.25, valid: int = 63, rows: list[list[float]] = SITES
+) -> m.Frame:
+    a = np.array(rows, dtype=np.float64)
+    return m.Frame(seq, t, a[:, :3].copy(), a[:, 3:].copy(), valid, sites=True)
+
+
+def _sites_wire(**changes: Any) -> dict[str, Any]:
+    return {**codec.to_wire(_sites()), **changes}
+
+
 def _frame_wire(**changes: Any) -> dict[str, Any]:
     return {**codec.to_wire(_frame()), **changes}
 
@@ -60,6 +80,18 @@ def calibrate_cases() -> list[dict[str, Any]]:
     return [
         valid("calibrate_height", m.Calibrate(height_m=1.75), "by standing height"),
         valid("calibrate_tpose", m.Calibrate(pos=tpose.pos, quat=tpose.quat), "by a T-pose frame"),
+        valid(
+            "calibrate_tpose_sites",
+            m.Calibrate(pos=_sites().pos, quat=_sites().quat, sites=True),
+            "a tracker set's T-pose: every site, in the set's order",
+        ),
+        invalid(
+            "calibrate_sites_and_trackers",
+            {"type": "calibrate", "tpose": True, "trackers": TRACKERS, "sites": SITES},
+            "BAD_FIELD",
+            "both row fields",
+            "sites",
+        ),
         invalid("calibrate_empty", {"type": "calibrate"}, "BAD_FIELD", "neither way", "height_m"),
         invalid(
             "calibrate_both",
@@ -153,6 +185,41 @@ def frame_cases() -> list[dict[str, Any]]:
             _frame(rows=lost, valid=0b0111),
             "waist untracked: its values are ignored (NaN allowed), read as origin + identity",
             (pack(_frame_wire(trackers=nan_lost, valid=7)),),
+        ),
+        valid("frame_sites", _sites(), "a tracker set's six rows, all tracked"),
+        valid(
+            "frame_sites_partial",
+            _sites(valid=0b101111, rows=[*SITES[:4], [0.0, 0.0, 0.0, *ID_Q], SITES[5]]),
+            "a tracker set's frame with row 4 lost: read as origin + identity",
+        ),
+        invalid(
+            "frame_sites_valid_beyond",
+            _sites_wire(sites=SITES[:3], valid=8),
+            "OUT_OF_RANGE",
+            "valid names a fourth row of three",
+            "valid",
+        ),
+        invalid(
+            "frame_sites_and_trackers",
+            _sites_wire(trackers=TRACKERS),
+            "BAD_FIELD",
+            "both row fields",
+            "sites",
+        ),
+        invalid("frame_sites_empty", _sites_wire(sites=[]), "BAD_FIELD", "no rows", "sites"),
+        invalid(
+            "frame_sites_eleven",
+            _sites_wire(sites=[*SITES, *SITES[:5]]),
+            "BAD_FIELD",
+            "eleven rows (at most 10)",
+            "sites",
+        ),
+        invalid(
+            "frame_sites_quat_zero",
+            _sites_wire(sites=[*SITES[:5], [0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0]]),
+            "NOT_NORMALISED",
+            "a zero quaternion in row 5",
+            "sites[5]",
         ),
         invalid(
             "frame_missing_seq",

@@ -9,6 +9,7 @@ from _writer import Raw, invalid, pack, valid
 
 from posecast.online.protocol import codec
 from posecast.online.protocol import messages as m
+from posecast.tracking.sites import TrackerSet
 
 
 def _padded_ping(size: int) -> bytes:
@@ -125,6 +126,9 @@ def envelope_cases() -> list[dict[str, Any]]:
     ]
 
 
+SET_IMU = "head,left_hand,right_hand,waist,left_foot:imu,right_foot:imu"
+
+
 def hello_cases() -> list[dict[str, Any]]:
     base = {"type": "hello", "version": 1, "token": "tok", "room": "lobby", "name": "Ada"}
     hello = m.Hello(1, "tok", "lobby", "Ada")
@@ -200,6 +204,46 @@ def hello_cases() -> list[dict[str, Any]]:
             {**base, "layout": "hmd4"},
             "BAD_FIELD",
             "no such layout",
+            "layout",
+        ),
+        valid(
+            "hello_tracker_set",
+            m.Hello(1, "t", "lobby", "Ada", TrackerSet.parse(SET_IMU)),
+            "a tracker set: sites in wire order, an inertial one suffixed :imu",
+        ),
+        invalid(
+            "hello_set_no_right_hand",
+            {**base, "layout": "head,left_hand"},
+            "BAD_FIELD",
+            "a set without its right hand",
+            "layout",
+        ),
+        invalid(
+            "hello_set_unknown_site",
+            {**base, "layout": "head,left_hand,right_hand,tail"},
+            "BAD_FIELD",
+            "no such site",
+            "layout",
+        ),
+        invalid(
+            "hello_set_duplicate",
+            {**base, "layout": "head,left_hand,right_hand,waist,waist"},
+            "BAD_FIELD",
+            "a site listed twice",
+            "layout",
+        ),
+        invalid(
+            "hello_set_inertial_head",
+            {**base, "layout": "head:imu,left_hand,right_hand"},
+            "BAD_FIELD",
+            "the head as an IMU",
+            "layout",
+        ),
+        invalid(
+            "hello_layout_too_long",
+            {**base, "layout": "head," * 30 + "left_hand"},
+            "OUT_OF_RANGE",
+            "a 159-byte layout (at most 128)",
             "layout",
         ),
         invalid("hello_rate_zero", {**base, "rate_hz": 0.0}, "OUT_OF_RANGE", "0 Hz", "rate_hz"),

@@ -440,12 +440,17 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     from posecast.offline.dataset.split import SPLITS
     from posecast.offline.evaluation.runner import VARIANTS, evaluate, format_table
     from posecast.online.engine.config import EngineConfig
+    from posecast.tracking.layouts import parse_layout
+    from posecast.tracking.sites import TrackerSetError
 
-    if args.layout == Layout.SITES:
+    try:
+        layout = parse_layout(args.layout)
+    except TrackerSetError as exc:
         raise _config(
-            "--layout sites: the evaluation of tracker sets is not built yet",
-            f"evaluate --layout {Layout.HMD3_WAIST} or --layout {Layout.HMD3}",
-        )
+            f"--layout {args.layout!r}: {exc}",
+            f"use {Layout.HMD3_WAIST}, {Layout.HMD3} or a tracker set such as "
+            "head,left_hand,right_hand,waist,left_foot,right_foot",
+        ) from None
     if args.variants is not None:
         variants = [v.strip() for v in args.variants.split(",")]
         unknown = [v for v in variants if v not in VARIANTS]
@@ -534,7 +539,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         args.models,
         log=lambda m: print(m, file=sys.stderr),
         engine_cfg=engine_cfg,
-        layout=args.layout,
+        layout=layout,
         backend=backend,
     )
     print(format_table(report))
@@ -613,6 +618,7 @@ def _cmd_bench_engine(args: argparse.Namespace) -> int:
         args.ticks,
         args.naive_players,
         args.hmd3_share,
+        args.sets,
     )
     for report in reports:
         _print_bench(report, args.samples)
@@ -667,6 +673,19 @@ def _print_bench(report: dict[str, Any], samples: int) -> None:
                 f"{both['tick_p99_ms'][i]:8.2f} {both['rss_mb_per_player'][i]:10.2f}"
             )
         print(f"max players at 60 Hz, both models: {both['max_realtime_players']}")
+    sets = report.get("mixed_sets")
+    if sets:
+        print(
+            f"mixed tracker sets on the sites model (backend {sets['backend']}), players on "
+            f"{', '.join(sets['sets'])} in turn, beside hmd3+waist (p50 ratio):"
+        )
+        print(f"{'players':>8s} {'p50 ms':>8s} {'p99 ms':>8s} {'ratio':>6s} {'MB/player':>10s}")
+        for i, p in enumerate(report["players"]):
+            print(
+                f"{p:8d} {sets['tick_p50_ms'][i]:8.2f} {sets['tick_p99_ms'][i]:8.2f} "
+                f"{sets['p50_ratio'][i]:6.2f} {sets['rss_mb_per_player'][i]:10.2f}"
+            )
+        print(f"max players at 60 Hz, mixed sets: {sets['max_realtime_players']}")
 
 
 def _cmd_serve(args: argparse.Namespace) -> int:
@@ -844,8 +863,9 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument(
         "--layout",
         default=Layout.HMD3_WAIST.value,
-        choices=[layout.value for layout in Layout],
-        help="tracker layout, i.e. which model (default hmd3+waist)",
+        help="tracker layout: hmd3+waist (default) or hmd3 (their dedicated models), or a "
+        "tracker set for the one model of every set, sites in wire order, inertial ones "
+        "suffixed :imu (head,left_hand,right_hand,left_foot:imu,right_foot:imu)",
     )
     ev.add_argument("--samples", type=int, default=100, help="SSI latent samples N (100)")
     ev.add_argument(
@@ -940,6 +960,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=0.5,
         help="also load the headset-only model and run this share of players on it "
         "(default 0.5; 0: the 4-point model only)",
+    )
+    be.add_argument(
+        "--sets",
+        action="store_true",
+        help="also run every player on the one model of every tracker set, the six sets of "
+        "the evaluation table in turn, beside the 4-point figure count by count",
     )
     be.add_argument("--json", type=Path, help="write the report here")
     be.set_defaults(func=_cmd_bench_engine)

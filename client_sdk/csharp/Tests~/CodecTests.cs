@@ -85,6 +85,25 @@ namespace Posecast.Client.Tests
                 }
                 T.True(bad > 1000, bad + " refused, " + ok + " decoded");
             });
+            T.Run("tracker sets: the server's parsing rule; a set's frames carry its sites", () =>
+            {
+                var set = TrackerSet.Parse("head,left_hand,right_hand,left_foot:imu,right_foot:imu");
+                T.Equal(5, set.Count, "sites");
+                T.True(set.Inertial[3] && !set.Inertial[2], "inertial flags");
+                T.True(TrackerSet.Of("hmd3") == null, "a named layout is no set");
+                foreach (var bad in new[] { "head,left_hand", "head,left_hand,right_hand,tail", "head:imu,left_hand,right_hand", "head,left_hand,right_hand,waist,waist" })
+                    T.Throws<ArgumentException>(() => TrackerSet.Parse(bad), bad);
+                var session = new ClientSession { Set = set };
+                var pos = new Vec3[5];
+                var quat = new Quat[5];
+                for (int i = 0; i < 5; i++) { pos[i] = new Vec3(0.1 * i, 1.0, 0.0); quat[i] = Quat.Identity; }
+                var f = session.BuildFrame(pos, quat, 1.0);
+                T.True(f.Sites && f.Valid == 31, "a sites frame, all valid");
+                var back = (Frame)Codec.Decode(Codec.Encode(f), Protocol.V2);
+                T.True(back.Sites && back.Positions.Length == 5, "round trip");
+                T.Equal(0.4, back.Positions[4].X, "row 4");
+                T.Throws<ArgumentException>(() => session.BuildFrame(new Vec3[4], new Quat[4], 2.0), "four rows for five sites");
+            });
         }
 
         private static System.Collections.Generic.IEnumerable<Json> ValidCases()

@@ -64,8 +64,11 @@ class DevServer:
             self.proc.stdout.close()
 
 
-def start_server(log: Path, *, port: int = 0, secret: str | None = None) -> DevServer:
-    """Start ``posecast serve --dev --port PORT --samples 8`` and wait until it listens."""
+def start_server(
+    log: Path, *, port: int = 0, secret: str | None = None, layouts: str | None = None
+) -> DevServer:
+    """Start ``posecast serve --dev --port PORT --samples 8`` (``--layouts LAYOUTS``
+    when given) and wait until it listens."""
     exe = posecast_bin()
     if exe is None:
         pytest.skip("the posecast server is not installed here")
@@ -74,6 +77,8 @@ def start_server(log: Path, *, port: int = 0, secret: str | None = None) -> DevS
     if secret is not None:
         env["POSECAST_TOKEN_SECRET"] = secret
     cmd = [exe, "serve", "--dev", "--port", str(port), "--samples", "8"]
+    if layouts is not None:
+        cmd += ["--layouts", layouts]
     with log.open("a") as err:
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, text=True, env=env)
     lines: queue.Queue[str] = queue.Queue()

@@ -104,4 +104,6 @@ def test_looping_and_offsets() -> None:
     np.testing.assert_allclose(first[0].positions, first[60].positions)
     assert first[0].positions[3, 0] == pytest.approx(2.0 + walk_trackers(1.0, 60.0, 0)[0][0, 3, 0])
     with pytest.raises(ValueError):
-        ReplaySource(np.zeros((5, 3, 3)), np.zeros((5, 3, 4)), 60.0)
+        ReplaySource(np.zeros((5, 11, 3)), np.zeros((5, 11, 4)), 60.0)  # beyond 10 sites
+    with pytest.raises(ValueError):
+        ReplaySource(np.zeros((5, 3, 3)), np.zeros((5, 4, 4)), 60.0)  # rows disagree

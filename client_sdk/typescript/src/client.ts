@@ -59,6 +59,7 @@ import {
   SUBPROTOCOL_V2,
   type Welcome,
 } from "./messages.js";
+import { type SitesInput, toSites, type TrackerSet, trackerSetOf } from "./sites.js";
 import { type FrameInput, toTrackers } from "./trackers.js";
 
 /** The members of a WebSocket the client uses (browser `WebSocket`, `ws`, undici). */
@@ -161,7 +162,9 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
   private ws: WebSocketLike | undefined;
   private generation = 0;
   private stateNow: ClientState = "open";
-  private joinArgs: { room: string; name: string; layout?: Layout; options: JoinOptions } | undefined;
+  private joinArgs: { room: string; name: string; layout?: string; options: JoinOptions } | undefined;
+  /** The player's tracker set, when it joined with one: frames then carry `sites`. */
+  private trackerSet: TrackerSet | undefined;
   private welcomeNow: Welcome | undefined;
   private limitsNow: Limits = DEFAULT_LIMITS;
   private readonly membersNow = new Map<string, Member>();
@@ -277,13 +280,23 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
    *
    * @param room the room to join (the token must allow it)
    * @param name display name shown to the others (1 to 64 UTF-8 bytes)
-   * @param layout tracked points; absent, the server takes `hmd3+waist`
+   * @param layout tracked points; absent, the server takes `hmd3+waist`. A tracker set
+   *   (`sites.ts`, e.g. `"head,left_hand,right_hand,waist,left_foot,right_foot"`) is
+   *   served where the server runs the `sites` model; {@link sendFrame} then takes a
+   *   {@link SitesInput} and sends one row per site of the set.
    * @throws ProtocolError the server's answer (e.g. UnauthenticatedError, RoomFullError)
    * @throws ConnectionClosedError the socket closed or no welcome came in `timeoutS`
+   * @throws RangeError `layout` names no layout or tracker set (nothing is sent)
    */
-  async join(room: string, name: string, layout?: Layout, options: JoinOptions = {}): Promise<Welcome> {
+  async join(
+    room: string,
+    name: string,
+    layout?: Layout | string,
+    options: JoinOptions = {},
+  ): Promise<Welcome> {
     if (this.joinArgs !== undefined) throw new Error("join() was already called on this client");
     if (this.stateNow !== "open") throw new ConnectionClosedError("the client is closed");
+    this.trackerSet = trackerSetOf(layout);
     // hmd3+waist is what an absent layout means: leave it out, as the Python SDK does.
     this.joinArgs =
       layout === undefined || layout === "hmd3+waist"
@@ -307,15 +320,20 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
    * `seq` is used up all the same). `seq` keeps counting across reconnects, so a
    * pose's `seq` always names one frame this client sent.
    *
+   * @param input the four slots by name, or (a player that joined with a tracker
+   *   set) every site of the set by name, in any order ({@link SitesInput}).
    * @throws OutOfRangeError, NotNormalisedError a tracked slot is unusable (see
-   *   `toTrackers`); nothing is sent.
-   * @throws RangeError `t` outside [0, 1e12] s or before the previous frame's.
+   *   `toTrackers`, `toSites`); nothing is sent.
+   * @throws RangeError `t` outside [0, 1e12] s or before the previous frame's; an
+   *   inertial site given a position or a positional one an acceleration.
    */
-  sendFrame(input: FrameInput): number | undefined {
+  sendFrame(input: FrameInput | SitesInput): number | undefined {
     if (this.welcomeNow !== undefined && this.welcomeNow.role !== "player") {
       throw new ForbiddenError(`a ${this.welcomeNow.role} may not send frames`);
     }
-    const { trackers, valid } = toTrackers(input);
+    const set = this.trackerSet;
+    const rows = set ? toSites(set, input) : undefined;
+    const { trackers, valid } = rows ? { trackers: undefined, valid: rows.valid } : toTrackers(input as FrameInput);
     const t = input.t ?? this.now();
     if (!(t >= this.lastFrameT && t <= MAX_TIME_S)) {
       throw new RangeError(`frame time ${t} s is outside [${this.lastFrameT}, ${MAX_TIME_S}]`);
@@ -324,17 +342,22 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
     this.seq = seqNext(seq);
     if (this.stateNow !== "joined") return undefined;
     this.lastFrameT = t;
-    return this.send({ type: "frame", seq, t, trackers, valid }) ? seq : undefined;
+    const frame: Message = rows
+      ? { type: "frame", seq, t, sites: rows.sites, valid }
+      : { type: "frame", seq, t, trackers: trackers!, valid };
+    return this.send(frame) ? seq : undefined;
   }
 
   /**
    * Calibrate the avatar: by standing height in metres (floor to the top of the head,
-   * 0.9 to 2.5), or by a frame of the user standing in a T-pose (all four trackers).
-   * False when not connected.
+   * 0.9 to 2.5), or by a frame of the user standing in a T-pose (all four trackers,
+   * or every site of the player's tracker set). False when not connected.
    */
-  calibrate(how: { readonly heightM: number } | { readonly tpose: FrameInput }): boolean {
+  calibrate(how: { readonly heightM: number } | { readonly tpose: FrameInput | SitesInput }): boolean {
     if ("heightM" in how) return this.send({ type: "calibrate", height_m: how.heightM });
-    return this.send({ type: "calibrate", tpose: true, trackers: toTrackers(how.tpose).trackers });
+    const set = this.trackerSet;
+    if (set) return this.send({ type: "calibrate", tpose: true, sites: toSites(set, how.tpose).sites });
+    return this.send({ type: "calibrate", tpose: true, trackers: toTrackers(how.tpose as FrameInput).trackers });
   }
 
   /**

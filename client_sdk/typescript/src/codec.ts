@@ -39,6 +39,7 @@ import {
   asName,
   asPoint,
   asStr,
+  asSites,
   asTrackers,
   CODE_PATTERN,
   has,
@@ -79,11 +80,12 @@ import {
   type Selector,
   SKELETON_BYTES,
   type SkeletonMessage,
-  type Trackers,
+  type Tracker,
   UINT32_MAX,
   type Welcome,
 } from "./messages.js";
 import { Float64, pack, unpack, type Wire, type WireMap } from "./msgpack.js";
+import { MAX_LAYOUT_BYTES, MAX_SITES, parseTrackerSet } from "./sites.js";
 import { mm2pos, POS_BYTES, pos2mm, quat2snorm, ROT_BYTES, snorm2quat } from "./quantize.js";
 
 export interface DecodeOptions {
@@ -228,13 +230,29 @@ function decodeHello(m: WireMap, lim: Limits, connection: number): Hello {
       name: asName(m, "name", lim.max_name_bytes),
     },
     {
-      layout: has(m, "layout") ? asEnum(m, "layout", LAYOUTS) : undefined,
+      layout: has(m, "layout") ? asLayout(m) : undefined,
       rate_hz: optFloat(m, "rate_hz", 1, lim.max_rate_hz),
       watch: watch !== undefined && watch.length > 0 ? watch : undefined,
       pose_rate_hz:
         connection >= PROTOCOL_V2 && has(m, "pose_rate_hz") ? asPoseRate(m, "pose_rate_hz") : undefined,
     },
   );
+}
+
+/** hello.layout: a named layout or a tracker set (BAD_FIELD saying why not). */
+function asLayout(m: WireMap): string {
+  const text = asStr(m, "layout", MAX_LAYOUT_BYTES);
+  if ((LAYOUTS as readonly string[]).includes(text)) return text;
+  try {
+    parseTrackerSet(text);
+  } catch (err) {
+    const why = err instanceof Error ? err.message : String(err);
+    throw new BadFieldError(
+      `layout '${text}': ${why} (a named layout: ${LAYOUTS.join(", ")}, or a tracker set)`,
+      { field: "layout" },
+    );
+  }
+  return text;
 }
 
 function decodeWelcome(m: WireMap, lim: Limits, connection: number): Welcome {
@@ -290,6 +308,10 @@ function decodeCalibrate(m: WireMap): Calibrate {
   if (!hasTpose) {
     throw new BadFieldError("calibrate needs height_m or tpose: true", { field: "height_m" });
   }
+  if (has(m, "sites")) {
+    if (has(m, "trackers")) throw new BadFieldError("give trackers or sites, not both", { field: "sites" });
+    return { type: "calibrate", tpose: true, sites: asSites(m, "sites", MAX_SITES).rows };
+  }
   return { type: "calibrate", tpose: true, trackers: asTrackers(m, "trackers") };
 }
 
@@ -297,6 +319,15 @@ function decodeFrame(m: WireMap): Frame {
   const seq = asInt(m, "seq", 0, UINT32_MAX);
   try {
     const t = asFloat(m, "t", ...T_RANGE);
+    if (has(m, "sites")) {
+      if (has(m, "trackers")) throw new BadFieldError("give trackers or sites, not both", { field: "sites" });
+      const mask = has(m, "valid") ? asInt(m, "valid", 0, 2 ** MAX_SITES - 1) : undefined;
+      const { rows, valid } = asSites(m, "sites", MAX_SITES, mask);
+      return withOptional<Frame>(
+        { type: "frame", seq, t, sites: rows },
+        { valid: valid === 2 ** rows.length - 1 ? undefined : valid },
+      );
+    }
     const valid = has(m, "valid") ? asInt(m, "valid", 0, ALL_TRACKERS_VALID) : ALL_TRACKERS_VALID;
     const trackers = asTrackers(m, "trackers", valid);
     return withOptional<Frame>(
@@ -440,7 +471,7 @@ function wireMap(entries: readonly (readonly [string, Wire | undefined])[]): Map
   return out;
 }
 
-function trackersWire(trackers: Trackers): Wire[] {
+function trackersWire(trackers: readonly Tracker[]): Wire[] {
   return trackers.map((row) => row.map(f));
 }
 
@@ -492,16 +523,19 @@ function toWireOf(msg: Message): Map<string, Wire> {
         : wireMap([
             ["type", "calibrate"],
             ["tpose", true],
-            ["trackers", trackersWire(msg.trackers)],
+            "sites" in msg ? ["sites", trackersWire(msg.sites)] : ["trackers", trackersWire(msg.trackers)],
           ]);
-    case "frame":
+    case "frame": {
+      const rows = "sites" in msg ? msg.sites : msg.trackers;
+      const full = 2 ** rows.length - 1;
       return wireMap([
         ["type", "frame"],
         ["seq", msg.seq],
         ["t", f(msg.t)],
-        ["trackers", trackersWire(msg.trackers)],
-        ["valid", msg.valid === undefined || msg.valid === ALL_TRACKERS_VALID ? undefined : msg.valid],
+        "sites" in msg ? ["sites", trackersWire(msg.sites)] : ["trackers", trackersWire(msg.trackers)],
+        ["valid", msg.valid === undefined || msg.valid === full ? undefined : msg.valid],
       ]);
+    }
     case "pose": {
       const [root, posMm] = pos2mm(msg.positions);
       return wireMap([

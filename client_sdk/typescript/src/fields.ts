@@ -169,6 +169,34 @@ export function asTrackers(m: WireMap, key: string, valid = ALL_TRACKERS_VALID):
   if (!Array.isArray(rows) || rows.length !== NUM_TRACKERS) {
     throw bad(key, `an array of ${NUM_TRACKERS} trackers`);
   }
+  return asRows(rows as readonly Wire[], key, valid) as unknown as Trackers;
+}
+
+/**
+ * A tracker set's 1 to `maxSites` rows, checked as {@link asTrackers} checks trackers,
+ * with `valid` (absent: all) a bit mask over them (bits beyond the rows: OUT_OF_RANGE).
+ */
+export function asSites(
+  m: WireMap,
+  key: string,
+  maxSites: number,
+  valid?: number,
+): { rows: Tracker[]; valid: number } {
+  const rows = get(m, key, "");
+  if (!Array.isArray(rows) || rows.length < 1 || rows.length > maxSites) {
+    throw bad(key, `an array of 1 to ${maxSites} sites`);
+  }
+  const full = 2 ** rows.length - 1;
+  if (valid !== undefined && valid > full) {
+    throw new OutOfRangeError(`valid ${valid} has bits beyond the ${rows.length} sites`, {
+      field: "valid",
+    });
+  }
+  const mask = valid ?? full;
+  return { rows: asRows(rows as readonly Wire[], key, mask), valid: mask };
+}
+
+function asRows(rows: readonly Wire[], key: string, valid: number): Tracker[] {
   const out: Tracker[] = [];
   (rows as readonly Wire[]).forEach((row, i) => {
     const path = `${key}[${i}]`;
@@ -199,5 +227,5 @@ export function asTrackers(m: WireMap, key: string, valid = ALL_TRACKERS_VALID):
     const n = Math.sqrt(n2);
     out.push([px, py, pz, qx / n, qy / n, qz / n, qw / n]);
   });
-  return out as unknown as Trackers;
+  return out;
 }

@@ -5,6 +5,7 @@
  *
  * - {@link connect} / {@link PosecastClient}: join, send frames, read events, reconnect.
  * - {@link fromXRFrame}: a WebXR frame as posecast trackers.
+ * - {@link parseTrackerSet}, {@link toSites}: tracker sets (3 to 10 sites, positional or IMU).
  * - {@link encode} / {@link decode}: the canonical codec, for tools and tests.
  * - {@link decodeRecords}, {@link fk}: v2 pose records against an avatar's state; FK.
  * - Errors: one class per wire code ({@link ProtocolError} and subclasses).
@@ -55,12 +56,29 @@ export {
   type TrackerPose,
 } from "./trackers.js";
 export {
+  INERTIAL_SUFFIX,
+  MAX_LAYOUT_BYTES,
+  MAX_SITES,
+  parseTrackerSet,
+  SITE_JOINTS,
+  SITE_KEYS,
+  SITES,
+  toSites,
+  trackerSetOf,
+  type ImuReading,
+  type Site,
+  type SitesInput,
+  type TrackerSet,
+} from "./sites.js";
+export {
   fromXRFrame,
   xrToPosecast,
+  type BodySiteKey,
   type FromXRFrameOptions,
   type XRFrameLike,
   type XRInputSourceLike,
   type XRPoseLike,
+  type XRFrameInput,
   type XRRigidTransformLike,
 } from "./webxr.js";
 export {

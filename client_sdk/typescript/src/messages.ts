@@ -140,8 +140,8 @@ export interface Hello {
   readonly token: string;
   readonly room: string;
   readonly name: string;
-  /** Absent: the server takes `hmd3+waist`. */
-  readonly layout?: Layout;
+  /** A {@link Layout} or a tracker set (`sites.ts`). Absent: the server takes `hmd3+waist`. */
+  readonly layout?: Layout | string;
   /** Frames per second the client will send; absent: 60. */
   readonly rate_hz?: number;
   /** Backends only: further rooms to watch. Empty is written as absent. */
@@ -181,18 +181,25 @@ export interface Welcome {
 
 export type Calibrate =
   | { readonly type: "calibrate"; readonly height_m: number }
-  | { readonly type: "calibrate"; readonly tpose: true; readonly trackers: Trackers };
+  | { readonly type: "calibrate"; readonly tpose: true; readonly trackers: Trackers }
+  /** A tracker set's T-pose: one row per site, in the set's order. */
+  | { readonly type: "calibrate"; readonly tpose: true; readonly sites: readonly Tracker[] };
 
-export interface Frame {
+interface FrameBase {
   readonly type: "frame";
   /** uint32, +1 per frame, wraps. */
   readonly seq: number;
   /** Client monotonic time when the trackers were sampled, seconds. */
   readonly t: number;
-  readonly trackers: Trackers;
-  /** Bit i set: slot i is tracked. Absent means 15 (all). */
+  /** Bit i set: slot (site row) i is tracked. Absent means all. */
   readonly valid?: number;
 }
+
+/** A frame of the four tracker slots, or of a tracker set's 1 to 10 `sites` rows (a
+ * positional site's position in metres, an inertial one's acceleration in m/s^2). */
+export type Frame =
+  | (FrameBase & { readonly trackers: Trackers })
+  | (FrameBase & { readonly sites: readonly Tracker[] });
 
 export interface Pose {
   readonly type: "pose";

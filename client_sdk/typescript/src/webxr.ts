@@ -27,6 +27,11 @@
  *   the head's and hands' orientations, so send one `calibrate` with a T-pose first
  *   (the server then learns each device's rotation offset, e.g. grip vs. hand).
  *
+ * - Other body sites of a tracker set (feet, knees, elbows): the caller's trackers,
+ *   given like the waist (`options.sites`); join with the set they make, e.g.
+ *   `head,left_hand,right_hand,waist,left_foot,right_foot`. Headset and controllers
+ *   alone are the set `head,left_hand,right_hand` (or the layout `hmd3`).
+ *
  * A slot the frame cannot locate is left out (its `valid` bit is cleared when the
  * client sends the frame). Use a **floor-level** reference space (`local-floor` or
  * `bounded-floor`): the model reads Y as height above the floor.
@@ -74,7 +79,27 @@ export interface FromXRFrameOptions {
    * pose already in `refSpace` (WebXR convention, -Z forward). Absent: no waist slot.
    */
   readonly waist?: object | XRRigidTransformLike | null;
+  /**
+   * Further positional trackers of a tracker set (`sites.ts`), each given like
+   * `waist`: feet, knees, elbows (and the waist) by camelCase site name. Send the
+   * result with a client that joined with the matching set.
+   */
+  readonly sites?: { readonly [K in BodySiteKey]?: object | XRRigidTransformLike | null };
 }
+
+/** The sites WebXR does not locate itself: a tracker set's body trackers. */
+export type BodySiteKey =
+  | "waist"
+  | "leftFoot"
+  | "rightFoot"
+  | "leftKnee"
+  | "rightKnee"
+  | "leftElbow"
+  | "rightElbow";
+
+/** What {@link fromXRFrame} returns: the four slots' {@link FrameInput}, and any body
+ * site it was given (a {@link SitesInput} too). */
+export type XRFrameInput = FrameInput & { readonly [K in BodySiteKey]?: TrackerPose };
 
 /**
  * The posecast trackers of one WebXR frame (see the module comment for conventions).
@@ -88,8 +113,8 @@ export function fromXRFrame(
   frame: XRFrameLike,
   refSpace: object,
   options: FromXRFrameOptions = {},
-): FrameInput {
-  const out: { -readonly [K in keyof FrameInput]: FrameInput[K] } = {};
+): XRFrameInput {
+  const out: { -readonly [K in keyof XRFrameInput]: XRFrameInput[K] } = {};
   const viewer = frame.getViewerPose(refSpace);
   if (viewer) out.head = xrToPosecast(viewer.transform);
   for (const source of frame.session.inputSources) {
@@ -101,12 +126,16 @@ export function fromXRFrame(
     if (source.handedness === "left") out.leftHand = xrToPosecast(grip.transform);
     else out.rightHand = xrToPosecast(grip.transform);
   }
-  const waist = options.waist;
-  if (waist) {
-    if (isTransform(waist)) out.waist = xrToPosecast(waist);
+  const body: [BodySiteKey, object | XRRigidTransformLike | null | undefined][] = [
+    ["waist", options.waist],
+    ...(Object.entries(options.sites ?? {}) as [BodySiteKey, object | null][]),
+  ];
+  for (const [key, space] of body) {
+    if (!space) continue;
+    if (isTransform(space)) out[key] = xrToPosecast(space);
     else {
-      const pose = frame.getPose(waist, refSpace);
-      if (pose) out.waist = xrToPosecast(pose.transform);
+      const pose = frame.getPose(space, refSpace);
+      if (pose) out[key] = xrToPosecast(pose.transform);
     }
   }
   if (typeof frame.predictedDisplayTime === "number") out.t = frame.predictedDisplayTime / 1000;

@@ -166,7 +166,9 @@ test("join, frames out, poses and presence in, clock synced, bye on close", asyn
     await sleep(0.05);
     const frames = peer.received.filter((m) => m.type === "frame");
     assert.deepEqual(frames.map((f) => [f.seq, f.t, f.valid]), [[0, 5, 0b1001], [1, 7.5, 0b1001], [2, 9, 0b0100]]);
-    assert.deepEqual(frames[2]!.trackers[2], [0, 1, 0, 0, 0, 0, 1]);
+    const third = frames[2]!;
+    assert.ok("trackers" in third);
+    assert.deepEqual(third.trackers[2], [0, 1, 0, 0, 0, 0, 1]);
     assert.ok(peer.received.some((m) => m.type === "calibrate" && "height_m" in m && m.height_m === 1.8));
     // The first pings go out at once; the fake server's clock runs 100 s ahead.
     for (let i = 0; i < 50 && client.clock.offsetS === undefined; i++) await sleep(0.01);

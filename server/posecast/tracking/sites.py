@@ -95,6 +95,10 @@ REQUIRED: tuple[Site, ...] = (Site.HEAD, Site.LEFT_HAND, Site.RIGHT_HAND)
 assert all(SITE_ROW[s] == int(TrackerSlot[s.name]) for s in (*REQUIRED, Site.WAIST))
 
 INERTIAL_SUFFIX = ":imu"
+# Sensor noise on synthetic IMU accelerations (m/s^2, per axis), in training and in
+# evaluation: white noise per frame, and a bias held over a window or clip.
+IMU_ACC_NOISE = 0.5
+IMU_ACC_BIAS = 0.2
 FEATURES_PER_SITE = 17
 NUM_FEATURES_SITES = NUM_SITES * FEATURES_PER_SITE  # 170
 FEATURE_NAMES_SITES: tuple[str, ...] = tuple(
@@ -251,3 +255,12 @@ def clip_site_features(
     values = np.where((k == Kind.INERTIAL)[..., None], np.asarray(acc, dtype=np.float64), p)
     prev = np.concatenate([values[:1], values[:-1]], axis=0)
     return site_features(values, prev, quat, k, fps)
+
+
+def imu_noise(
+    rng: np.random.Generator, frames: int, noise: float = IMU_ACC_NOISE, bias: float = IMU_ACC_BIAS
+) -> F:
+    """``(frames, 10, 3)`` sensor noise for a clip's synthetic accelerations: white
+    noise of ``noise`` per axis and frame plus a bias of ``bias`` per axis held over
+    the clip (m/s^2), on every row (only inertial rows read it)."""
+    return rng.normal(0.0, noise, (frames, NUM_SITES, 3)) + rng.normal(0.0, bias, (1, NUM_SITES, 3))

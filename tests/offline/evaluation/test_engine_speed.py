@@ -29,3 +29,12 @@ def test_the_report_names_the_backend_that_ran() -> None:
     assert (r["backend"], r["backend_asked"]) == ("onnx", "onnx")
     default = run([1], samples=2, threads=1, ticks=2, naive_players=1)
     assert default["backend_asked"] == "native" and default["backend"] in ("native", "onnx")
+
+
+def test_mixed_tracker_sets_run_beside_the_single_layout() -> None:
+    r = run([3, 6], samples=4, threads=1, ticks=3, naive_players=1, hmd3_share=0.0, sets=True)
+    sets = r["mixed_sets"]
+    assert sets["sets"] == ["3p", "4p", "6p", "8p", "3p+2i", "3p+4i"]
+    assert len(sets["tick_p50_ms"]) == len(sets["p50_ratio"]) == 2
+    assert all(t > 0 for t in sets["tick_p50_ms"]) and all(x > 0 for x in sets["p50_ratio"])
+    assert "mixed_sets" not in run([2], samples=4, threads=1, ticks=3, naive_players=1)

@@ -6,9 +6,17 @@ import numpy as np
 import pytest
 
 from posecast.offline.dataset.frames import derive_frames
-from posecast.offline.evaluation.runner import METRIC_KEYS, VARIANTS, evaluate, format_table
+from posecast.offline.evaluation.runner import (
+    METRIC_KEYS,
+    VARIANTS,
+    clip_tracks,
+    evaluate,
+    format_table,
+)
 from posecast.offline.motion.synthetic import walk_clip
+from posecast.offline.train.masks import TABLE_SETS
 from posecast.online.engine.config import EngineConfig
+from posecast.tracking.sites import SITE_JOINT_INDEX, TrackerSet
 
 
 @pytest.fixture(scope="module")
@@ -66,3 +74,45 @@ def test_ground_truth_reports_its_own_flags_and_jitter(report: dict[str, object]
     rates = [gt[k] for k in gt if k.startswith("flagged_") and k != "flagged_rate"]
     assert len(rates) == 4 and all(0.0 <= r <= gt["flagged_rate"] <= 1.0 for r in rates)
     assert "ground_truth" in format_table(report)  # type: ignore[arg-type]
+
+
+@pytest.fixture(scope="module")
+def set_reports() -> dict[str, dict[str, object]]:
+    """The one model of every set on the same clips, as three sets."""
+    clips = [derive_frames(walk_clip(3.0, 60.0, seed=s)) for s in (0, 1)]
+    variants = ("cvae_1sample", "cvae_ik", "cvae_ik_ssi")
+    return {
+        name: evaluate(
+            clips, 60.0, variants, engine_cfg=EngineConfig(samples=8), layout=TrackerSet.parse(s)
+        )
+        for name, s in TABLE_SETS.items()
+        if name in ("4p", "6p", "3p+2i")
+    }
+
+
+def test_tracker_sets_evaluate_with_the_one_model(set_reports: dict[str, dict]) -> None:
+    for name, report in set_reports.items():
+        assert report["layout"] == TABLE_SETS[name]
+        for res in report["variants"].values():
+            assert all(np.isfinite(res[k]) for k in ("mpjpe_cm", "lower_mpjpe_cm", "jitter"))
+    four, six = set_reports["4p"]["variants"], set_reports["6p"]["variants"]
+    # A positional waist gives the pelvis; positional feet hold the ankles, so the legs
+    # of the streamed pose are far nearer the truth with them.
+    assert four["cvae_ik_ssi"]["root_pe_cm"] < 1e-3
+    assert six["cvae_ik_ssi"]["lower_mpjpe_cm"] < 0.7 * four["cvae_ik_ssi"]["lower_mpjpe_cm"]
+    # Without a waist the pelvis is the decoder's own (an error to report).
+    assert set_reports["3p+2i"]["variants"]["cvae_ik"]["root_pe_cm"] > 0.0
+
+
+def test_inertial_sites_read_accelerations_with_seeded_noise() -> None:
+    fr = derive_frames(walk_clip(1.0, 60.0, seed=3))
+    ts = TrackerSet.parse(TABLE_SETS["3p+2i"])
+    a, b = clip_tracks(fr, 60.0, ts, seed=1), clip_tracks(fr, 60.0, ts, seed=1)
+    np.testing.assert_array_equal(a.values, b.values)
+    clean = clip_tracks(fr, 60.0, ts, seed=1, acc_noise=0.0, acc_bias=0.0)
+    foot = 4  # left_foot, inertial: a second difference, not a position
+    pos = fr["positions"].astype(np.float64)[:, SITE_JOINT_INDEX[foot]]
+    second = (pos[2:] - 2 * pos[1:-1] + pos[:-2]) * 3600.0
+    np.testing.assert_allclose(clean.values[1:-1, foot], second, atol=1e-3)
+    assert 0.2 < np.std(a.values[:, foot] - clean.values[:, foot]) < 1.0
+    np.testing.assert_array_equal(a.values[:, 0], clean.values[:, 0])  # positional head

@@ -53,6 +53,15 @@ def test_mixed_sets_share_one_batch_and_stand_on_their_trackers() -> None:
         pelvis = out[name][-1][0]
         waist = _walk(len(out[name]) - 1, 2.0 * list(out).index(name)).pos[3]
         assert np.linalg.norm(pelvis - waist) < 1e-4, name
+    # Positional foot trackers hold the ankles (the lower-body pass); other sets' feet
+    # are the network's.
+    for name in ("6p", "4p"):
+        t = len(out[name]) - 1
+        sites = _walk(t, 2.0 * list(out).index(name)).pos
+        for row in (4, 5):  # left_foot, right_foot
+            ankle = out[name][-1][SITE_JOINT_INDEX[row]]
+            miss = np.linalg.norm(ankle - sites[row])
+            assert (miss < 1e-4) if name == "6p" else (miss > 1e-3), (name, row, miss)
 
 
 @pytest.mark.parametrize("backend", ["native", "torch"])

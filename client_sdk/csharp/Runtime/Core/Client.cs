@@ -170,7 +170,10 @@ namespace Posecast.Client
         /// <summary>
         /// Join a room as `name` (shown to others) and start receiving.
         /// layout: "hmd3+waist" (head, hands, waist; the default) or "hmd3" (headset and
-        /// controllers only). rateHz: frames per second this client sends (null: 60).
+        /// controllers only), or a tracker set (TrackerSet, e.g.
+        /// "head,left_hand,right_hand,waist,left_foot,right_foot"): SendFrameAsync then
+        /// takes one row per site of the set (ArgumentException for a bad set).
+        /// rateHz: frames per second this client sends (null: 60).
         /// poseRateHz (v2): poses per second to receive, 60, 30, 20 or 15 (null: 60).
         /// Throws the typed refusal (UnauthenticatedException, RoomFullException...).
         /// </summary>
@@ -179,6 +182,8 @@ namespace Posecast.Client
         {
             if (_closing.IsCancellationRequested) throw new ClientClosedException("the client is closed");
             if (_ws == null || _hello != null) throw new InvalidOperationException("JoinAsync once per client, after ConnectAsync");
+            var set = TrackerSet.Of(layout);
+            lock (_lock) Session.Set = set;
             _hello = () => Session.BuildHello("", room, name, layout, rateHz, watch, poseRateHz);
             Welcome w;
             try { w = await HandshakeAsync(_ws).ConfigureAwait(false); }
@@ -384,12 +389,14 @@ namespace Posecast.Client
 
         /// <summary>
         /// Send one tracker frame (4 world positions and orientations in slot order HEAD,
-        /// LEFT_HAND, RIGHT_HAND, WAIST; valid bit i set: slot i tracked). Returns its seq,
+        /// LEFT_HAND, RIGHT_HAND, WAIST, or one row per site of the player's tracker set,
+        /// an IMU's world acceleration in m/s^2 for its position; valid bit i set: row i
+        /// tracked, null: all). Returns its seq,
         /// or null when it was dropped because the client is reconnecting.
         /// Throws OutOfRangeException / NotNormalisedException for an unusable tracked
         /// slot (nothing is sent), or the error that ended the session.
         /// </summary>
-        public async Task<long?> SendFrameAsync(Vec3[] positions, Quat[] orientations, int valid = Protocol.AllTrackersValid)
+        public async Task<long?> SendFrameAsync(Vec3[] positions, Quat[] orientations, int? valid = null)
         {
             CheckUsable();
             double now = Now;

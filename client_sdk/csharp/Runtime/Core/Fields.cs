@@ -162,9 +162,33 @@ namespace Posecast.Client
             var rows = Need(m, key, "");
             if (rows.Kind != MsgKind.Array || rows.Items.Count != Protocol.NumTrackers)
                 throw Bad(key, "an array of 4 trackers");
-            pos = new Vec3[Protocol.NumTrackers];
-            quat = new Quat[Protocol.NumTrackers];
-            for (int i = 0; i < Protocol.NumTrackers; i++)
+            Rows(rows, key, valid, out pos, out quat);
+        }
+
+        /// <summary>
+        /// A tracker set's 1 to 10 rows, checked as Trackers checks trackers, with `valid`
+        /// (null: all) a bit mask over them (bits beyond the rows: OUT_OF_RANGE, field valid).
+        /// Returns the mask in force.
+        /// </summary>
+        public static int Sites(MsgValue m, string key, int? valid, out Vec3[] pos, out Quat[] quat)
+        {
+            var rows = Need(m, key, "");
+            if (rows.Kind != MsgKind.Array || rows.Items.Count < 1 || rows.Items.Count > TrackerSet.MaxSites)
+                throw Bad(key, "an array of 1 to " + TrackerSet.MaxSites + " sites");
+            int full = (1 << rows.Items.Count) - 1;
+            if (valid.HasValue && valid.Value > full)
+                throw ErrorCodes.OutOfRange("valid", "valid " + valid.Value + " has bits beyond the " + rows.Items.Count + " sites");
+            int mask = valid ?? full;
+            Rows(rows, key, mask, out pos, out quat);
+            return mask;
+        }
+
+        private static void Rows(MsgValue rows, string key, int valid, out Vec3[] pos, out Quat[] quat)
+        {
+            int count = rows.Items.Count;
+            pos = new Vec3[count];
+            quat = new Quat[count];
+            for (int i = 0; i < count; i++)
             {
                 var row = rows.Items[i];
                 string path = key + "[" + i + "]";

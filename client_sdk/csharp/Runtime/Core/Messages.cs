@@ -58,8 +58,9 @@ namespace Posecast.Client
     {
         public override string Type { get { return "calibrate"; } }
         public double? HeightM;
-        public Vec3[] Positions;       // the T-pose frame (4 slots), when by T-pose
+        public Vec3[] Positions;       // the T-pose frame (4 slots, or a set's sites), when by T-pose
         public Quat[] Orientations;
+        public bool Sites;             // the T-pose is a tracker set's (`sites` on the wire)
         public bool TPose { get { return Positions != null; } }
     }
 
@@ -69,9 +70,10 @@ namespace Posecast.Client
         public override string Type { get { return "frame"; } }
         public long Seq;
         public double T;               // client time, seconds
-        public Vec3[] Positions = new Vec3[Protocol.NumTrackers];
+        public Vec3[] Positions = new Vec3[Protocol.NumTrackers];  // a set's: one per site (m, or m/s^2 for an IMU)
         public Quat[] Orientations = new Quat[Protocol.NumTrackers];
         public int Valid = Protocol.AllTrackersValid;
+        public bool Sites;             // a tracker set's frame (`sites` on the wire, not `trackers`)
     }
 
     /// <summary>v1 server to client: one reconstructed avatar (quantised on the wire).</summary>

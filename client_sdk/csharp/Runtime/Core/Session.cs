@@ -118,6 +118,10 @@ namespace Posecast.Client
 
         // --- outgoing ----------------------------------------------------------------
 
+        /// <summary>The player's tracker set when it joined with one (frames then carry its
+        /// sites' rows), else null (the four slots).</summary>
+        public TrackerSet Set;
+
         /// <summary>The hello of this connection's version (pose_rate_hz is sent on v2 only).</summary>
         public Hello BuildHello(string token, string room, string name, string layout = null, double? rateHz = null,
                                 string[] watch = null, double? poseRateHz = null)
@@ -135,23 +139,29 @@ namespace Posecast.Client
         /// positions finite within +-1000 m (OutOfRange), orientations finite and not zero
         /// (NotNormalised), then normalised. Untracked slots go as origin + identity.
         /// </summary>
-        public Frame BuildFrame(Vec3[] positions, Quat[] orientations, double now, int valid = Protocol.AllTrackersValid,
+        public Frame BuildFrame(Vec3[] positions, Quat[] orientations, double now, int? valid = null,
                                 long? seq = null, double? t = null)
         {
-            if (positions == null || orientations == null || positions.Length != 4 || orientations.Length != 4)
-                throw new ArgumentException("need 4 positions and 4 orientations (HEAD, LEFT_HAND, RIGHT_HAND, WAIST)");
-            if (valid < 0 || valid > Protocol.AllTrackersValid) throw new ArgumentException("valid must be in 0..15");
-            var pos = new Vec3[4];
-            var quat = new Quat[4];
-            for (int i = 0; i < 4; i++)
+            int rows = Set == null ? Protocol.NumTrackers : Set.Count;
+            int full = Set == null ? Protocol.AllTrackersValid : Set.AllValid;
+            string key = Set == null ? "trackers" : "sites";
+            if (positions == null || orientations == null || positions.Length != rows || orientations.Length != rows)
+                throw new ArgumentException(Set == null
+                    ? "need 4 positions and 4 orientations (HEAD, LEFT_HAND, RIGHT_HAND, WAIST)"
+                    : "need " + rows + " positions and orientations, one per site of " + Set.Name);
+            int mask = valid ?? full;
+            if (mask < 0 || mask > full) throw new ArgumentException("valid must be in 0.." + full);
+            var pos = new Vec3[rows];
+            var quat = new Quat[rows];
+            for (int i = 0; i < rows; i++)
             {
-                if ((valid >> i & 1) == 0) { pos[i] = Vec3.Zero; quat[i] = Quat.Identity; continue; }
+                if ((mask >> i & 1) == 0) { pos[i] = Vec3.Zero; quat[i] = Quat.Identity; continue; }
                 var p = positions[i];
                 if (!(Math.Abs(p.X) <= Protocol.MaxCoordM && Math.Abs(p.Y) <= Protocol.MaxCoordM && Math.Abs(p.Z) <= Protocol.MaxCoordM))
-                    throw ErrorCodes.OutOfRange("trackers[" + i + "]", "tracker " + i + " position " + p);
+                    throw ErrorCodes.OutOfRange(key + "[" + i + "]", key + "[" + i + "] value " + p);
                 double n = orientations[i].Norm;
                 if (!(Fields.IsFinite(n) && n > 1e-6))
-                    throw ErrorCodes.NotNormalised("trackers[" + i + "]", "tracker " + i + " orientation " + orientations[i]);
+                    throw ErrorCodes.NotNormalised(key + "[" + i + "]", key + "[" + i + "] orientation " + orientations[i]);
                 pos[i] = p;
                 quat[i] = orientations[i].Normalised;
             }
@@ -171,7 +181,7 @@ namespace Posecast.Client
             double tt = t ?? now;
             if (!(tt >= 0.0 && tt <= Protocol.MaxTimeS && tt >= LastT))
                 throw new ArgumentException("frame time " + tt + " s is outside [0, 1e12] or before the last one");
-            return new Frame { Seq = s, T = tt, Positions = pos, Orientations = quat, Valid = valid };
+            return new Frame { Seq = s, T = tt, Positions = pos, Orientations = quat, Valid = mask, Sites = Set != null };
         }
 
         /// <summary>The frame left at client time `now`: its seq and time are taken.</summary>

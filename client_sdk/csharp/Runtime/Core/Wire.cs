@@ -88,7 +88,7 @@ namespace Posecast.Client
             h.Token = Fields.Str(m, "token", lim.MaxTokenBytes, 0);
             h.Room = Fields.Id(m, "room", lim.MaxRoomBytes);
             h.Name = Fields.Name(m, "name", lim.MaxNameBytes);
-            if (Fields.Has(m, "layout")) h.Layout = Fields.Enum(m, "layout", Protocol.Layouts);
+            if (Fields.Has(m, "layout")) h.Layout = Layout(m);
             if (Fields.Has(m, "rate_hz")) h.RateHz = Fields.Float(m, "rate_hz", 1.0, lim.MaxRateHz);
             if (Fields.Has(m, "watch"))
             {
@@ -154,8 +154,28 @@ namespace Posecast.Client
             if (hasHeight) return new Calibrate { HeightM = Fields.Float(m, "height_m", Protocol.MinHeightM, Protocol.MaxHeightM) };
             if (!hasTpose) throw ErrorCodes.BadField("height_m", "calibrate needs height_m or tpose: true");
             Vec3[] pos; Quat[] quat;
+            if (Fields.Has(m, "sites"))
+            {
+                if (Fields.Has(m, "trackers")) throw ErrorCodes.BadField("sites", "give trackers or sites, not both");
+                Fields.Sites(m, "sites", null, out pos, out quat);
+                return new Calibrate { Positions = pos, Orientations = quat, Sites = true };
+            }
             Fields.Trackers(m, "trackers", Protocol.AllTrackersValid, out pos, out quat);
             return new Calibrate { Positions = pos, Orientations = quat };
+        }
+
+        /// <summary>hello.layout: a named layout or a tracker set (BAD_FIELD saying why not).</summary>
+        private static string Layout(MsgValue m)
+        {
+            string text = Fields.Str(m, "layout", TrackerSet.MaxLayoutBytes);
+            if (Array.IndexOf(Protocol.Layouts, text) >= 0) return text;
+            try { TrackerSet.Parse(text); }
+            catch (ArgumentException exc)
+            {
+                throw ErrorCodes.BadField("layout", "layout '" + text + "': " + exc.Message
+                    + " (a named layout: " + string.Join(", ", Protocol.Layouts) + ", or a tracker set)");
+            }
+            return text;
         }
 
         private static Frame DecFrame(MsgValue m)
@@ -164,6 +184,14 @@ namespace Posecast.Client
             try
             {
                 double t = Fields.Float(m, "t", 0.0, TMax);
+                if (Fields.Has(m, "sites"))
+                {
+                    if (Fields.Has(m, "trackers")) throw ErrorCodes.BadField("sites", "give trackers or sites, not both");
+                    int? mask = Fields.Has(m, "valid") ? (int?)Fields.Int(m, "valid", 0, (1 << TrackerSet.MaxSites) - 1) : null;
+                    Vec3[] sp; Quat[] sq;
+                    int sv = Fields.Sites(m, "sites", mask, out sp, out sq);
+                    return new Frame { Seq = seq, T = t, Positions = sp, Orientations = sq, Valid = sv, Sites = true };
+                }
                 int valid = Fields.Has(m, "valid") ? (int)Fields.Int(m, "valid", 0, Protocol.AllTrackersValid) : Protocol.AllTrackersValid;
                 Vec3[] pos; Quat[] quat;
                 Fields.Trackers(m, "trackers", valid, out pos, out quat);
@@ -267,8 +295,8 @@ namespace Posecast.Client
 
         private static MsgValue Trackers(Vec3[] pos, Quat[] quat)
         {
-            var rows = new List<MsgValue>(Protocol.NumTrackers);
-            for (int i = 0; i < Protocol.NumTrackers; i++)
+            var rows = new List<MsgValue>(pos.Length);
+            for (int i = 0; i < pos.Length; i++)
                 rows.Add(MsgValue.Array(F(pos[i].X), F(pos[i].Y), F(pos[i].Z),
                                         F(quat[i].X), F(quat[i].Y), F(quat[i].Z), F(quat[i].W)));
             return MsgValue.Array(rows);
@@ -317,13 +345,13 @@ namespace Posecast.Client
                 {
                     var c = (Calibrate)msg;
                     if (!c.TPose) return Head("calibrate").Add("height_m", F(c.HeightM.Value));
-                    return Head("calibrate").Add("tpose", MsgValue.True).Add("trackers", Trackers(c.Positions, c.Orientations));
+                    return Head("calibrate").Add("tpose", MsgValue.True).Add(c.Sites ? "sites" : "trackers", Trackers(c.Positions, c.Orientations));
                 }
                 case "frame":
                 {
                     var f = (Frame)msg;
-                    var d = Head("frame").Add("seq", I(f.Seq)).Add("t", F(f.T)).Add("trackers", Trackers(f.Positions, f.Orientations));
-                    if (f.Valid != Protocol.AllTrackersValid) d.Add("valid", I(f.Valid));
+                    var d = Head("frame").Add("seq", I(f.Seq)).Add("t", F(f.T)).Add(f.Sites ? "sites" : "trackers", Trackers(f.Positions, f.Orientations));
+                    if (f.Valid != (1 << f.Positions.Length) - 1) d.Add("valid", I(f.Valid));
                     return d;
                 }
                 case "pose":

@@ -91,6 +91,7 @@ from posecast_client.session import (
     classify_join_reply,
     is_retryable,
 )
+from posecast_client.sites import tracker_set
 from posecast_client.sources.base import TrackerSample
 
 log = logging.getLogger("posecast_client")
@@ -270,7 +271,11 @@ class Client:
             layout: the tracked points, which picks the server's model:
                 :class:`Layout` ``HMD3_WAIST`` (``"hmd3+waist"``: head, both hands,
                 waist) or ``HMD3`` (``"hmd3"``: headset and controllers only; the
-                waist slot of frames is ignored). Servers serve both by default.
+                waist slot of frames is ignored), both served by default; or a
+                tracker set (:mod:`posecast_client.sites`, such as
+                ``"head,left_hand,right_hand,waist,left_foot,right_foot"``), served
+                where the server runs the ``sites`` model: frames then carry one row
+                per site, in the set's order.
             rate_hz: frames per second this client will send (absent: 60).
             watch: further rooms to watch (backend tokens only).
             pose_rate_hz: v2: poses per second to receive, 60 (absent), 30, 20 or 15
@@ -279,7 +284,9 @@ class Client:
         Raises:
             ProtocolError: the typed refusal (``UnauthenticatedError``,
                 ``ForbiddenError``, ``RoomFullError``...).
+            ValueError: ``layout`` names no layout or tracker set (nothing is sent).
         """
+        tracker = tracker_set(layout)
         if self._closing:
             raise ClientClosedError("the client is closed")
         if self._ws is None or self._hello_args is not None:
@@ -288,10 +295,12 @@ class Client:
                             "watch": watch, "pose_rate_hz": pose_rate_hz}  # fmt: skip
         if layout == Layout.HMD3_WAIST:
             self._hello_args["layout"] = None  # the default: canonical hellos leave it out
+        self.session.tracker_set = tracker
         try:
             welcome = await self._handshake(self._ws)
         except BaseException:
             self._hello_args = None
+            self.session.tracker_set = None
             raise
         self._joined.set()
         self._tasks = [asyncio.create_task(self._run(self._ws), name="posecast-client")]
@@ -440,7 +449,7 @@ class Client:
         positions: ArrayLike,
         orientations: ArrayLike,
         *,
-        valid: int = ALL_VALID,
+        valid: int | None = None,
         seq: int | None = None,
         t: float | None = None,
     ) -> int | None:
@@ -449,9 +458,11 @@ class Client:
 
         Args:
             positions: ``(4, 3)`` world metres in slot order HEAD, LEFT_HAND,
-                RIGHT_HAND, WAIST.
-            orientations: ``(4, 4)`` world quaternions xyzw; normalised before sending.
-            valid: bit ``i`` set means slot ``i`` is tracked (15: all).
+                RIGHT_HAND, WAIST; for a tracker set ``(n, 3)``, one row per site in
+                the set's order (an inertial site's world acceleration, m/s^2).
+            orientations: ``(4, 4)`` (a set: ``(n, 4)``) world quaternions xyzw;
+                normalised before sending.
+            valid: bit ``i`` set means row ``i`` is tracked (default: all).
             seq: the frame counter (default: one more than the last, from ``seq0``);
                 an explicit seq must be newer than the last one.
             t: the sample time on this client's ``time.monotonic()`` clock (default:
@@ -465,6 +476,9 @@ class Client:
         """
         self._check_usable()
         now = time.monotonic()
+        if valid is None:
+            ts = self.session.tracker_set
+            valid = ALL_VALID if ts is None else ts.all_valid
         frame = self.session.frame(positions, orientations, now=now, valid=valid, seq=seq, t=t)
         if await self.send(frame):
             self.session.sent(frame, now)
@@ -504,13 +518,17 @@ class Client:
     async def calibrate(
         self, *, height_m: float | None = None, tpose: TrackerSample | None = None
     ) -> bool:
-        """Calibrate the avatar by standing height (metres) or by a T-pose sample."""
+        """Calibrate the avatar by standing height (metres) or by a T-pose sample (the
+        four trackers, or every site of the player's tracker set)."""
         if (height_m is None) == (tpose is None):
             raise ValueError("give height_m or tpose")
         if tpose is not None:
             q = np.asarray(tpose.orientations, dtype=np.float64)
             q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-            return await self.send(Calibrate(positions=np.asarray(tpose.positions), orientations=q))
+            sites = self.session.tracker_set is not None
+            return await self.send(
+                Calibrate(positions=np.asarray(tpose.positions), orientations=q, sites=sites)
+            )
         return await self.send(Calibrate(height_m=height_m))
 
     async def events(self, *, until: asyncio.Future[Any] | None = None) -> AsyncIterator[Event]:

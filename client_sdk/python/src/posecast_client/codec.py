@@ -41,6 +41,7 @@ from posecast_client.errors import (
     VersionUnsupportedError,
 )
 from posecast_client.protocol import (
+    ALL_SITES_VALID,
     ALL_VALID,
     DEFAULT_LIMITS,
     F64,
@@ -52,6 +53,7 @@ from posecast_client.protocol import (
     MAX_DEPTH,
     MAX_HEIGHT_M,
     MAX_ID_BYTES,
+    MAX_LAYOUT_BYTES,
     MAX_MAP_LEN,
     MAX_SERVER_MESSAGE_BYTES_V2,
     MAX_STR_BYTES,
@@ -88,6 +90,7 @@ from posecast_client.protocol import (
     Skeleton,
     Welcome,
 )
+from posecast_client.sites import MAX_SITES, tracker_set
 from posecast_client.skeleton import JOINT_NAMES, NUM_JOINTS
 
 Map = dict[str, Any]
@@ -310,15 +313,37 @@ def _point(v: Any, path: str) -> tuple[float, float, float]:
     return x, y, z
 
 
-def _trackers(v: Any, path: str, valid: int) -> tuple[F64, F64]:
-    """4 rows ``[px py pz qx qy qz qw]`` -> positions (4, 3), orientations (4, 4).
+def _layout(v: Any, path: str) -> str:
+    """``hello.layout``: a named layout or a tracker set (:mod:`posecast_client.sites`)."""
+    text = _str(v, path, 1, MAX_LAYOUT_BYTES)
+    if text not in LAYOUTS:
+        try:
+            tracker_set(text)
+        except ValueError as exc:
+            raise BadFieldError(
+                f"layout {text!r}: {exc} (a named layout: {', '.join(LAYOUTS)}, or a tracker set)",
+                field=path,
+            ) from None
+    return text
+
+
+def _trackers(v: Any, path: str, valid: int, rows: int | None = 4) -> tuple[F64, F64]:
+    """4 rows ``[px py pz qx qy qz qw]`` -> positions (4, 3), orientations (4, 4)
+    (``rows=None``: a tracker set's 1 to 10 rows, ``frame.sites``).
 
     Tracked slots are range-checked and their quaternions renormalised exactly as the
     spec writes it; untracked slots are only type-checked and read as origin + identity.
     """
-    if type(v) is not list or len(v) != 4:
+    if rows is None:
+        if type(v) is not list or not 1 <= len(v) <= MAX_SITES:
+            raise _bad(path, f"an array of 1 to {MAX_SITES} sites")
+        if valid > (1 << len(v)) - 1:
+            raise OutOfRangeError(
+                f"valid {valid} has bits beyond the {len(v)} sites", field="valid"
+            )
+    elif type(v) is not list or len(v) != rows:
         raise _bad(path, "an array of 4 trackers")
-    out = np.zeros((4, 7))  # (4, 7)
+    out = np.zeros((len(v), 7))  # (n, 7)
     out[:, 6] = 1.0
     for i, row in enumerate(v):
         at = f"{path}[{i}]"
@@ -377,7 +402,7 @@ def _hello(f: _Fields, lim: Limits) -> Hello:
         token=f.req("token", _str, 0, lim.max_token_bytes),
         room=f.req("room", _id, lim.max_room_bytes),
         name=f.req("name", _name, lim.max_name_bytes),
-        layout=f.opt("layout", _enum, LAYOUTS),
+        layout=f.opt("layout", _layout),
         rate_hz=f.opt("rate_hz", _float, 1.0, lim.max_rate_hz),
         watch=tuple(_id(r, f"watch[{i}]", lim.max_room_bytes) for i, r in enumerate(watch)),
         pose_rate_hz=f.opt("pose_rate_hz", _pose_rate) if f.version >= PROTOCOL_V2 else None,
@@ -408,6 +433,12 @@ def _calibrate(f: _Fields, lim: Limits) -> Calibrate:
         raise BadFieldError("give height_m or tpose, not both", field="tpose")
     if not tpose:
         return Calibrate(height_m=f.req("height_m", _float, MIN_HEIGHT_M, MAX_HEIGHT_M))
+    if f.has("sites"):
+        if f.has("trackers"):
+            raise BadFieldError("give trackers or sites, not both", field="sites")
+        n = len(f.m["sites"]) if type(f.m["sites"]) is list else 0
+        pos, quat = f.req("sites", _trackers, (1 << n) - 1, None)
+        return Calibrate(positions=pos, orientations=quat, sites=True)
     pos, quat = f.req("trackers", _trackers, ALL_VALID)
     return Calibrate(positions=pos, orientations=quat)
 
@@ -416,8 +447,16 @@ def _frame(f: _Fields, lim: Limits) -> Frame:
     seq = f.req("seq", _int, 0, UINT32_MAX)
     try:
         t = f.req("t", _time)
-        valid = f.opt("valid", _int, 0, ALL_VALID)
-        valid = ALL_VALID if valid is None else valid
+        if f.has("sites"):
+            if f.has("trackers"):
+                raise BadFieldError("give trackers or sites, not both", field="sites")
+            mask = f.opt("valid", _int, 0, ALL_SITES_VALID)
+            n = len(f.m["sites"]) if type(f.m["sites"]) is list else 0
+            valid = (1 << n) - 1 if mask is None else mask
+            pos, quat = f.req("sites", _trackers, valid, None)
+            return Frame(seq, t, pos, quat, valid, sites=True)
+        mask = f.opt("valid", _int, 0, ALL_VALID)
+        valid = ALL_VALID if mask is None else mask
         pos, quat = f.req("trackers", _trackers, valid)
     except ProtocolError as exc:
         exc.ref_seq = seq
@@ -594,11 +633,13 @@ _ENCODERS: dict[str, Callable[[Any], Map]] = {
     },
     "calibrate": lambda c: (
         {"height_m": float(c.height_m)} if c.positions is None
-        else {"tpose": True, "trackers": _rows(c.positions, c.orientations)}
+        else {"tpose": True,
+              ("sites" if c.sites else "trackers"): _rows(c.positions, c.orientations)}
     ),
     "frame": lambda f: {
-        "seq": int(f.seq), "t": float(f.t), "trackers": _rows(f.positions, f.orientations),
-        "valid": None if f.valid == ALL_VALID else int(f.valid),
+        "seq": int(f.seq), "t": float(f.t),
+        ("sites" if f.sites else "trackers"): _rows(f.positions, f.orientations),
+        "valid": None if f.valid == (1 << len(f.positions)) - 1 else int(f.valid),
     },
     "pose": _enc_pose,
     "presence": lambda p: {"event": p.event, "room": p.room, "player": p.player, "name": p.name,

@@ -52,6 +52,8 @@ MIN_HEIGHT_M, MAX_HEIGHT_M = 0.9, 2.5  # calibrate.height_m
 MAX_ID_BYTES = 64  # player and session ids
 UINT32_MAX = 2**32 - 1
 ALL_VALID = 0b1111  # frame.valid with all four trackers tracked
+ALL_SITES_VALID = (1 << 10) - 1  # the largest frame.valid of a tracker set's sites
+MAX_LAYOUT_BYTES = 128  # hello.layout: the longest tracker set's name is 124 bytes
 POS_UNIT_M = 0.001  # one int16 step of pose.pos_mm
 ROT_SCALE = 32767.0  # one int16 step of pose.rot is 1 / ROT_SCALE
 
@@ -166,12 +168,14 @@ class Welcome:
 
 @dataclass(frozen=True, slots=True, eq=False)
 class Calibrate:
-    """Player -> server: by standing height, or by a T-pose frame (all four trackers)."""
+    """Player -> server: by standing height, or by a T-pose frame (all four trackers,
+    or every site of the player's tracker set)."""
 
     TYPE: ClassVar[str] = "calibrate"
     height_m: float | None = None
-    positions: F64 | None = None  # (4, 3) metres: the T-pose frame
-    orientations: F64 | None = None  # (4, 4) xyzw
+    positions: F64 | None = None  # (4, 3) metres: the T-pose frame (sites: (n, 3))
+    orientations: F64 | None = None  # (4, 4) xyzw (sites: (n, 4))
+    sites: bool = False  # the T-pose is a tracker set's (``sites`` on the wire)
 
     @property
     def tpose(self) -> bool:
@@ -185,9 +189,11 @@ class Frame:
     TYPE: ClassVar[str] = "frame"
     seq: int
     t: float  # client time the trackers were sampled, seconds
-    positions: F64  # (4, 3) metres, TrackerSlot order
-    orientations: F64  # (4, 4) xyzw, unit length
-    valid: int = ALL_VALID  # bit i set: slot i is tracked
+    positions: F64  # (4, 3) metres, TrackerSlot order (sites: (n, 3) in set order,
+    # metres, or m/s^2 for an inertial site)
+    orientations: F64  # (4, 4) xyzw, unit length (sites: (n, 4))
+    valid: int = ALL_VALID  # bit i set: slot (site row) i is tracked
+    sites: bool = False  # a tracker set's frame (``sites`` on the wire, not ``trackers``)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -202,7 +208,7 @@ class Pose:
     rotations: F64 | None = None  # (19, 4) world xyzw (v1: not renormalised)
     local_rotations: F64 | None = None  # v2: (19, 4) PELVIS world, then each joint's local
     keyframe: bool = False  # v2: this record was a keyframe
-    reach_limited: bool = False  # v2: the head or a hand could not reach its tracker
+    reach_limited: bool = False  # v2: the head, a hand or a tracked foot or knee missed its tracker
 
 
 @dataclass(frozen=True, slots=True)

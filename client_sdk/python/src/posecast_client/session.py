@@ -58,6 +58,7 @@ from posecast_client.records import (
     items2world,
     skeleton2offsets,
 )
+from posecast_client.sites import TrackerSet
 
 
 @dataclass(frozen=True, slots=True)
@@ -184,6 +185,8 @@ class ClientSession:
     want_resync: bool = False  # a record could not be applied: ask for keyframes
     last_seq: int | None = None
     last_t: float = 0.0
+    # The player's tracker set (frames carry its rows as ``sites``), None: 4 slots.
+    tracker_set: TrackerSet | None = None
     _sent_at: OrderedDict[int, float] = field(default_factory=OrderedDict)
 
     # --- outgoing ----------------------------------------------------------------------
@@ -214,35 +217,39 @@ class ClientSession:
     ) -> Frame:
         """A checked frame, with the next ``seq`` and time ``now`` unless given.
 
-        Tracked slots: positions finite and within +-1000 m (OUT_OF_RANGE), orientations
-        finite and not zero (NOT_NORMALISED), then normalised. Untracked slots are sent
-        as origin + identity whatever they hold (NaN included).
+        Rows: the four tracker slots, or (after joining with a tracker set) one per site
+        of :attr:`tracker_set`, sent as ``sites``. Tracked rows: values finite and within
+        +-1000 (OUT_OF_RANGE), orientations finite and not zero (NOT_NORMALISED), then
+        normalised. Untracked rows are sent as origin + identity whatever they hold (NaN
+        included).
 
         Raises:
-            OutOfRangeError, NotNormalisedError: a tracked slot is unusable.
+            OutOfRangeError, NotNormalisedError: a tracked row is unusable.
             OutOfOrderError, DuplicateError: an explicit ``seq`` is not newer.
-            ValueError: wrong shapes, ``valid`` outside 0..15, or a time outside
+            ValueError: wrong shapes, ``valid`` beyond the rows, or a time outside
                 [0, 1e12] or before the last frame's.
         """
-        pos = np.array(positions, dtype=np.float64)  # (4, 3), a copy
-        quat = np.array(orientations, dtype=np.float64)  # (4, 4)
-        if pos.shape != (4, 3) or quat.shape != (4, 4):
+        ts = self.tracker_set
+        rows, full = (4, ALL_VALID) if ts is None else (len(ts), ts.all_valid)
+        key = "trackers" if ts is None else "sites"
+        pos = np.array(positions, dtype=np.float64)  # (rows, 3), a copy
+        quat = np.array(orientations, dtype=np.float64)  # (rows, 4)
+        if pos.shape != (rows, 3) or quat.shape != (rows, 4):
             raise ValueError(
-                f"need positions (4, 3) and orientations (4, 4), got {pos.shape}, {quat.shape}"
+                f"need positions ({rows}, 3) and orientations ({rows}, 4), got "
+                f"{pos.shape}, {quat.shape}"
             )
-        if not 0 <= valid <= ALL_VALID:
-            raise ValueError(f"valid must be in 0..15, not {valid}")
-        for i in range(4):
+        if not 0 <= valid <= full:
+            raise ValueError(f"valid must be in 0..{full}, not {valid}")
+        for i in range(rows):
             if not valid >> i & 1:
                 pos[i], quat[i] = 0.0, (0.0, 0.0, 0.0, 1.0)
                 continue
             if not (np.abs(pos[i]) <= MAX_COORD_M).all():  # NaN fails too
-                raise OutOfRangeError(f"tracker {i} position {pos[i]} m", field=f"trackers[{i}]")
+                raise OutOfRangeError(f"{key}[{i}] value {pos[i]}", field=f"{key}[{i}]")
             n = math.sqrt(float(quat[i] @ quat[i]))
             if not (math.isfinite(n) and n > 1e-6):
-                raise NotNormalisedError(
-                    f"tracker {i} orientation {quat[i]}", field=f"trackers[{i}]"
-                )
+                raise NotNormalisedError(f"{key}[{i}] orientation {quat[i]}", field=f"{key}[{i}]")
             quat[i] /= n
         if seq is None:
             seq = self.seq0 if self.last_seq is None else seq_next(self.last_seq)
@@ -257,7 +264,7 @@ class ClientSession:
         t = now if t is None else float(t)
         if not (0.0 <= t <= MAX_TIME_S and t >= self.last_t):
             raise ValueError(f"frame time {t} s is outside [0, 1e12] or before the last one")
-        return Frame(seq, t, pos, quat, valid)
+        return Frame(seq, t, pos, quat, valid, sites=ts is not None)
 
     def sent(self, frame: Frame, now: float) -> None:
         """``frame`` left at client time ``now``: its seq and time are taken."""

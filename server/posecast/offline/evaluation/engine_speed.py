@@ -9,6 +9,11 @@ With ``hmd3_share`` above 0 both shipped models are loaded (a :class:`MultiEngin
 as ``posecast serve`` runs them) and that share of the players is headset-only: each
 model steps its own players in one batch, so a tick costs two decoder calls.
 
+With ``sets`` every player is on the one model of every tracker set (``sites``), the
+players taking the six sets of the evaluation table in turn (3, 4, 6, 8 positional
+points, 3 + 2 and 3 + 4 inertial): mixed sets in one batch, one decoder call a tick,
+measured beside the single-layout figure (``hmd3+waist``) count by count.
+
 Every figure is for one backend (``native``, ``onnx`` or ``torch``); the report names
 the one that ran, which is ``onnx`` where ``native`` was asked for and could not load.
 """
@@ -25,12 +30,14 @@ import numpy as np
 
 from posecast.offline.dataset.frames import derive_frames
 from posecast.offline.motion.synthetic import walk_clip
+from posecast.offline.train.masks import TABLE_SETS
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.multi import MultiEngine
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
 from posecast.online.inference.loader import load_engine, load_multi_engine
 from posecast.tracking.layouts import Layout
+from posecast.tracking.sites import Kind, TrackerSet, site_tracks
 
 FRAME_BUDGET_MS = 1000.0 / 60.0
 # Multiply-accumulates per sample per frame (decoder FC + GRU + heads, anomaly AE),
@@ -80,10 +87,13 @@ def bench(
     lookahead: int = 10,
     hmd3_share: float = 0.0,
     backend: str = "native",
+    sets: bool = False,
 ) -> BenchResult:
     cfg = EngineConfig(samples=samples, lookahead=lookahead)
     n3 = round(hmd3_share * players)
     engine: Engine | MultiEngine
+    if sets:
+        return _bench_sets(players, samples, ticks, warmup, threads, cfg, backend)
     if hmd3_share > 0:
         engine = load_multi_engine(cfg, (Layout.HMD3_WAIST, Layout.HMD3), None, threads, backend)
         used = "+".join(sorted(set(engine.backends.values())))
@@ -121,6 +131,54 @@ def bench(
     )
 
 
+def _site_frames(seconds: float = 8.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The walk's synthetic trackers on every site: positions, orientations and
+    accelerations, ``(F, 10, ...)``."""
+    clip = walk_clip(seconds, 60.0, seed=3)
+    return site_tracks(*clip.fk(), 60.0)
+
+
+def _bench_sets(
+    players: int,
+    samples: int,
+    ticks: int,
+    warmup: int,
+    threads: int,
+    cfg: EngineConfig,
+    backend: str,
+) -> BenchResult:
+    """:func:`bench` with every player on the ``sites`` model, the table's sets in turn."""
+    engine = load_engine(cfg, None, threads, Layout.SITES, backend, capacity=players)
+    sets = [TrackerSet.parse(s) for s in TABLE_SETS.values()]
+    rss0 = _rss_mb()
+    for p in range(players):
+        engine.add_player(f"p{p}", seed=p, tracker_set=sets[p % len(sets)])
+    pos, quat, acc = _site_frames()
+    inertial = [(ts.kinds() == Kind.INERTIAL)[:, None] for ts in sets]
+    values = [np.where(i, acc, pos) for i in inertial]  # (F, 10, 3) per set
+    times = []
+    for t in range(warmup + ticks):
+        for p in range(players):
+            k = (t + 37 * p) % len(pos)
+            engine.push(f"p{p}", TrackerFrame(t, values[p % len(sets)][k], quat[k]))
+        t0 = time.perf_counter()
+        engine.tick()
+        if t >= warmup:
+            times.append(time.perf_counter() - t0)
+    ms = np.array(times) * 1000.0
+    p50 = float(np.percentile(ms, 50))
+    return BenchResult(
+        players=players,
+        samples=samples,
+        hmd3_players=0,
+        backend=engine.backend_name,
+        tick_p50_ms=round(p50, 3),
+        tick_p99_ms=round(float(np.percentile(ms, 99)), 3),
+        gflops=0.0,  # the sites decoder's input layer is wider: MAC_PER_SAMPLE is not its
+        rss_mb=round((_rss_mb() - rss0) / max(1, players), 3),
+    )
+
+
 def naive_loop(
     players: int, samples: int = 100, ticks: int = 60, threads: int = 2, backend: str = "native"
 ) -> float:
@@ -153,10 +211,11 @@ def run(
     naive_players: int,
     hmd3_share: float = 0.0,
     backend: str = "native",
+    sets: bool = False,
 ) -> dict[str, Any]:
     """The whole report for ``backend`` (``backend`` in it: the one that ran)."""
     return run_side_by_side(
-        [backend], player_counts, samples, threads, ticks, naive_players, hmd3_share
+        [backend], player_counts, samples, threads, ticks, naive_players, hmd3_share, sets
     )[0]
 
 
@@ -168,6 +227,7 @@ def run_side_by_side(
     ticks: int,
     naive_players: int,
     hmd3_share: float = 0.0,
+    sets: bool = False,
 ) -> list[dict[str, Any]]:
     """One report per backend, measured side by side: every player count runs on each
     backend in turn before the next count, so a change in the machine's load between
@@ -189,6 +249,14 @@ def run_side_by_side(
                         p, samples, ticks=ticks, threads=threads, hmd3_share=hmd3_share, backend=b
                     )
                 )
+    mixed_sets: list[list[BenchResult]] = [[] for _ in backends]
+    if sets:  # beside the single-layout figure: each count right after it, per backend
+        for j, p in enumerate(player_counts):
+            for i, b in enumerate(used):
+                mixed_sets[i].append(
+                    bench(p, samples, ticks=ticks, threads=threads, backend=b, sets=True)
+                )
+                results[i][j] = bench(p, samples, ticks=ticks, threads=threads, backend=b)
     naive = [
         {
             "players": naive_players,
@@ -201,8 +269,28 @@ def run_side_by_side(
     ]
     return [
         _report(asked, b, results[i], both[i], naive[i], samples, threads, hmd3_share)
+        | (_sets_report(mixed_sets[i], results[i]) if sets else {})
         for i, (asked, b) in enumerate(zip(backends, used, strict=True))
     ]
+
+
+def _sets_report(mixed: list[BenchResult], single: list[BenchResult]) -> dict[str, Any]:
+    fits = [r.players for r in mixed if r.realtime()]
+    return {
+        "mixed_sets": {
+            "backend": mixed[0].backend,
+            "sets": list(TABLE_SETS),
+            "tick_p50_ms": [r.tick_p50_ms for r in mixed],
+            "tick_p99_ms": [r.tick_p99_ms for r in mixed],
+            # p50 of the mixed sets over the 4-point model's, measured right after it
+            "p50_ratio": [
+                round(m.tick_p50_ms / max(s.tick_p50_ms, 1e-9), 3)
+                for m, s in zip(mixed, single, strict=True)
+            ],
+            "max_realtime_players": max(fits) if fits else 0,
+            "rss_mb_per_player": [r.rss_mb for r in mixed],
+        }
+    }
 
 
 def _isa(backend: str) -> str | None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +23,7 @@ from posecast.offline.evaluation.reconstruct import (
 from posecast.online.engine.anomaly import AnomalyScorer
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.ik import floor_ik
+from posecast.online.engine.leg_ik import solve_legs, tracks_legs
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
 from posecast.online.engine.upper_ik import solve_upper_body
@@ -29,7 +31,16 @@ from posecast.online.inference.artifact import load_artifact
 from posecast.online.inference.backends import Backend, load_backend
 from posecast.skeleton import LOWER_BODY, NUM_ROTATIONS
 from posecast.tracking.features import TrackerSlot
-from posecast.tracking.layouts import Layout, pelvis_from_head, spec
+from posecast.tracking.layouts import Layout, PlayerLayout, model_layout, pelvis_from_head, spec
+from posecast.tracking.sites import (
+    IMU_ACC_BIAS,
+    IMU_ACC_NOISE,
+    Kind,
+    TrackerSet,
+    clip_site_features,
+    imu_noise,
+    site_tracks,
+)
 
 VARIANTS = ("cvae_1sample", "cvae_ik", "cvae_ik_ssi", "ae_ik", "baseline_mean_lower_body")
 FLAG_KEYS = ("flagged_rate", *(f"flagged_{c}_rate" for c in pl.CATEGORIES))
@@ -66,6 +77,50 @@ def _truth(fr: Frames) -> tuple[np.ndarray, np.ndarray]:
     )
 
 
+@dataclass(frozen=True)
+class Tracks:
+    """What a clip's player sends, frame by frame, in the engine's rows (4 tracker
+    slots, or the ten sites of a tracker set): ``values`` ``(T, rows, 3)`` positions
+    (an inertial site's acceleration), ``quat`` ``(T, rows, 4)``; and the network's
+    input ``features`` ``(T, F)``. Rows 0-3 are head, hands and waist either way."""
+
+    values: np.ndarray
+    quat: np.ndarray
+    features: np.ndarray
+
+
+def clip_tracks(
+    fr: Frames,
+    fps: float,
+    layout: PlayerLayout,
+    seed: int = 0,
+    acc_noise: float = IMU_ACC_NOISE,
+    acc_bias: float = IMU_ACC_BIAS,
+) -> Tracks:
+    """The trackers of ``layout`` on a clip. A tracker set's sites sit on their joints of
+    the true pose (:func:`~posecast.tracking.sites.site_tracks`); its inertial sites'
+    accelerations get the training's sensor noise (``acc_noise`` white, ``acc_bias``
+    held over the clip, m/s^2), drawn from ``seed``."""
+    if not isinstance(layout, TrackerSet):
+        ls = spec(layout)
+        features = (
+            fr["features"]
+            if ls.layout is Layout.HMD3_WAIST
+            else ls.clip_features(fr["tracker_pos"], fr["tracker_quat"], fps)
+        )
+        return Tracks(
+            fr["tracker_pos"].astype(np.float64),
+            fr["tracker_quat"].astype(np.float64),
+            np.asarray(features, np.float32),
+        )
+    kinds = layout.kinds()
+    pos, quat, acc = site_tracks(*_truth(fr), fps)
+    acc = acc + imu_noise(np.random.default_rng(seed), len(acc), acc_noise, acc_bias)
+    values = np.where((kinds == Kind.INERTIAL)[:, None], acc, pos)
+    features = clip_site_features(pos, quat, acc, kinds, fps).astype(np.float32)
+    return Tracks(values, quat, features)
+
+
 def evaluate(
     clips: Sequence[Frames],
     fps: float,
@@ -73,13 +128,15 @@ def evaluate(
     models_dir: str | Path | None = None,
     log: Callable[[str], None] | None = None,
     engine_cfg: EngineConfig | None = None,
-    layout: str = Layout.HMD3_WAIST,
+    layout: PlayerLayout | str = Layout.HMD3_WAIST,
     backend: str = "native",
 ) -> dict[str, Any]:
     """Metrics per variant over ``clips`` (each a :data:`Frames` dict with ground truth),
-    for the model of tracker ``layout``. The full method (``cvae_ik_ssi``) runs the SSI
-    engine on ``backend`` (the report's ``backend`` names the one that ran); the other
-    variants and the scores behind ``implausible_rate`` run the ONNX models.
+    for the model of tracker ``layout`` (a named layout, or a
+    :class:`~posecast.tracking.sites.TrackerSet` for the one model of every set). The
+    full method (``cvae_ik_ssi``) runs the SSI engine on ``backend`` (the report's
+    ``backend`` names the one that ran); the other variants and the scores behind
+    ``implausible_rate`` run the ONNX models.
 
     ``baseline_mean_lower_body`` takes the true upper body and pelvis whatever the
     layout, so only its lower-body numbers are a floor to beat.
@@ -90,7 +147,9 @@ def evaluate(
     ``cvae_ik`` measures SSI alone.
     ``cvae_1sample`` is the network's raw pose.
     """
-    ls = spec(layout)
+    player_layout = layout if isinstance(layout, TrackerSet) else Layout(layout)
+    ls = spec(model_layout(player_layout))
+    tracker_set = player_layout if isinstance(player_layout, TrackerSet) else None
     dec = load_artifact(ls.decoder, models_dir)
     scorer = AnomalyScorer(load_artifact(ls.anomaly, models_dir))
     if "ae_ik" in variants and ls.layout is not Layout.HMD3_WAIST:
@@ -101,12 +160,9 @@ def evaluate(
     mean_pose = _mean_leg_pose(base.meta)
     leg_rot = [int(j) - 1 for j in LOWER_BODY]  # rotation rows of the leg joints
     results: dict[str, Any] = {}
-    feats_of = [
-        fr["features"].astype(np.float32)
-        if ls.layout is Layout.HMD3_WAIST
-        else ls.clip_features(fr["tracker_pos"], fr["tracker_quat"], fps).astype(np.float32)
-        for fr in clips
-    ]
+    tracks = [clip_tracks(fr, fps, player_layout, seed=i) for i, fr in enumerate(clips)]
+    # The pelvis of a single-sample variant: the waist tracker's, or the decoder's own.
+    root_from_waist = tracker_set.tracks_waist if tracker_set is not None else not ls.predicts_root
     truth = [_truth(fr) for fr in clips]
     engine_cfg = engine_cfg or EngineConfig()
     ssi_backend = (
@@ -120,20 +176,21 @@ def evaluate(
         transitions = 0
         if name == "cvae_ik_ssi":
             assert ssi_backend is not None
-            ssi = run_ssi(ssi_backend, clips, engine_cfg)
+            ssi = run_ssi(ssi_backend, tracks, engine_cfg, tracker_set)
         for ci, fr in enumerate(clips):
-            feats = feats_of[ci]
-            wpos = fr["tracker_pos"][:, TrackerSlot.WAIST].astype(np.float64)
-            wmat = quat2mat(fr["tracker_quat"][:, TrackerSlot.WAIST].astype(np.float64))
-            root_mat, root_pos = wmat, wpos
+            tr = tracks[ci]
+            feats = tr.features
+            # The true pelvis (baseline_mean_lower_body), or the waist tracker's.
+            root_mat = quat2mat(fr["tracker_quat"][:, TrackerSlot.WAIST].astype(np.float64))
+            root_pos = fr["tracker_pos"][:, TrackerSlot.WAIST].astype(np.float64)
             if name == "cvae_ik_ssi":
                 wm, wp, n_trans = ssi[ci]
                 transitions += n_trans
             elif name.startswith("cvae"):
                 rot, con, root = decode_cvae(dec, feats, np.zeros(latent, np.float32))
-                if root is not None:
-                    head_pos = fr["tracker_pos"][:, TrackerSlot.HEAD]
-                    head_quat = fr["tracker_quat"][:, TrackerSlot.HEAD]
+                if root is not None and not root_from_waist:
+                    head_pos = tr.values[:, TrackerSlot.HEAD]
+                    head_quat = tr.quat[:, TrackerSlot.HEAD]
                     root_mat, root_pos = pelvis_from_head(root, head_pos, head_quat)
             elif name == "ae_ik":
                 assert ae is not None
@@ -153,7 +210,9 @@ def evaluate(
                     if engine_cfg.floor_ik:
                         floor_ik(wm, wp)
                     if engine_cfg.upper_body_ik:
-                        wm, wp = _upper_body(wm, wp, fr)
+                        if tracker_set is not None:
+                            wm, wp = _legs(wm, wp, tr, tracker_set)
+                        wm, wp = _upper_body(wm, wp, tr)
             gt_mat, gt = truth[ci]
             acc.add("mpjpe_cm", m.mpjpe(wp, gt))
             acc.add("lower_mpjpe_cm", m.lower_mpjpe(wp, gt))
@@ -188,7 +247,7 @@ def evaluate(
             gt_acc.add(key, pair)
     ground_truth = {k: round(v, 4) for k, v in gt_acc.means().items()}
     return {
-        "layout": str(ls.layout),
+        "layout": str(player_layout),
         "backend": ssi_backend.name if ssi_backend is not None else None,
         "variants": results,
         "clips": len(clips),
@@ -199,22 +258,34 @@ def evaluate(
     }
 
 
-def _upper_body(wm: np.ndarray, wp: np.ndarray, fr: Frames) -> tuple[np.ndarray, np.ndarray]:
+def _upper_body(wm: np.ndarray, wp: np.ndarray, tr: Tracks) -> tuple[np.ndarray, np.ndarray]:
     """The engine's upper-body pass over a clip: head and hands onto the clip's trackers."""
-    pos, quat, _ = solve_upper_body(
-        wp,
-        mat2quat(wm),
-        fr["tracker_pos"].astype(np.float64),
-        fr["tracker_quat"].astype(np.float64),
-    )
+    slots = len(TrackerSlot)
+    pos, quat, _ = solve_upper_body(wp, mat2quat(wm), tr.values[:, :slots], tr.quat[:, :slots])
+    return quat2mat(quat.astype(np.float64)), pos.astype(np.float64)
+
+
+def _legs(
+    wm: np.ndarray, wp: np.ndarray, tr: Tracks, tracker_set: TrackerSet
+) -> tuple[np.ndarray, np.ndarray]:
+    """The engine's lower-body pass over a clip: feet and knees onto a tracker set's
+    positional trackers (a no-op for a set without them)."""
+    kinds = np.broadcast_to(tracker_set.kinds(), (len(wp), len(tracker_set.kinds())))
+    if not tracks_legs(kinds[:1]).any():
+        return wm, wp
+    pos, quat, _ = solve_legs(wp, mat2quat(wm), tr.values, tr.quat, kinds)
     return quat2mat(quat.astype(np.float64)), pos.astype(np.float64)
 
 
 def run_ssi(
-    backend: Backend, clips: Sequence[Frames], cfg: EngineConfig
+    backend: Backend,
+    clips: Sequence[Tracks],
+    cfg: EngineConfig,
+    tracker_set: TrackerSet | None = None,
 ) -> list[tuple[np.ndarray, np.ndarray, int]]:
-    """The full method: every clip as one player of one engine on ``backend``, all
-    stepped together.
+    """The full method: every clip's trackers as one player of one engine on
+    ``backend`` (every player on ``tracker_set``, for the sites model), all stepped
+    together.
 
     Returns per clip the emitted world rotations ``(T, 19, 3, 3)`` and positions
     ``(T, 19, 3)``, aligned with the input frames (the engine's ``tau``-frame delay
@@ -224,25 +295,22 @@ def run_ssi(
         backend.decoder, backend.pool, cfg, capacity=len(clips), backend_name=backend.name
     )
     for i in range(len(clips)):
-        engine.add_player(str(i), seed=i)
-    out = [np.full((len(fr["features"]), 19, 3), np.nan, np.float32) for fr in clips]
-    rots = [np.full((len(fr["features"]), 19, 4), np.nan, np.float32) for fr in clips]
+        engine.add_player(str(i), seed=i, tracker_set=tracker_set)
+    out = [np.full((len(tr.values), 19, 3), np.nan, np.float32) for tr in clips]
+    rots = [np.full((len(tr.values), 19, 4), np.nan, np.float32) for tr in clips]
     done: dict[int, int] = {}
-    longest = max(len(fr["features"]) for fr in clips)
+    longest = max(len(tr.values) for tr in clips)
     for t in range(longest + cfg.lookahead):
-        for i, fr in enumerate(clips):
-            if t < len(fr["features"]):
-                pos, quat = fr["tracker_pos"][t], fr["tracker_quat"][t]
-                engine.push(
-                    str(i), TrackerFrame(t, pos.astype(np.float64), quat.astype(np.float64))
-                )
+        for i, tr in enumerate(clips):
+            if t < len(tr.values):
+                engine.push(str(i), TrackerFrame(t, tr.values[t], tr.quat[t]))
         for pose in engine.tick().poses:
             i = int(pose.player)
             if not pose.held and 0 <= pose.seq < len(out[i]):
                 out[i][pose.seq] = pose.positions
                 rots[i][pose.seq] = pose.rotations
-        for i, fr in enumerate(clips):
-            if i not in done and t + 1 >= len(fr["features"]) + cfg.lookahead:
+        for i, tr in enumerate(clips):
+            if i not in done and t + 1 >= len(tr.values) + cfg.lookahead:
                 done[i] = engine.transitions(str(i))
                 engine.remove_player(str(i))
     if any(np.isnan(o).any() for o in out):

@@ -26,7 +26,7 @@ from posecast.offline.train.data import Normalisation, TrainArrays, compose_site
 from posecast.offline.train.losses import PoseFK, position_mse_cm2, split_root, velocity_mse_cm2
 from posecast.offline.train.masks import add_inertial_noise, cycle_table_kinds, sample_kinds
 from posecast.tracking.layouts import spec
-from posecast.tracking.sites import SITE_ROW, Kind, Site
+from posecast.tracking.sites import IMU_ACC_BIAS, IMU_ACC_NOISE, SITE_ROW, Kind, Site
 
 
 @dataclass(frozen=True)
@@ -54,8 +54,8 @@ class CVAETrainConfig:
     # The one model of every tracker set (layout ``sites``): sensor noise on the
     # synthetic IMU accelerations, m/s^2 (docs/model-card.md), and the share of windows
     # that take one of the evaluation table's sets (posecast.offline.train.masks).
-    imu_acc_noise: float = 0.5
-    imu_acc_bias: float = 0.2
+    imu_acc_noise: float = IMU_ACC_NOISE
+    imu_acc_bias: float = IMU_ACC_BIAS
     table_share: float = 0.25
     seed: int = 0
     log_every: int = 100

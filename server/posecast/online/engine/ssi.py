@@ -50,6 +50,7 @@ from posecast.online.engine.batch_fk import pelvis_from_head32
 from posecast.online.engine.calibration import Calibration, WaistFilter, apply_all, orient_all
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.ik import LEGS, floor_ik, floor_lift
+from posecast.online.engine.leg_ik import solve_legs, tracks_legs
 from posecast.online.engine.selectors import AnomalySelector, Selector, choose_anomaly_rows
 from posecast.online.engine.slots import SlotArrays
 from posecast.online.engine.types import EngineEvent, PoseOut, TickResult, TrackerFrame
@@ -520,9 +521,18 @@ class Engine:
         if self.cfg.floor_ik:
             _floor(wp, rotations)
         reach_limited = np.zeros(E, np.bool_)
+        if self.cfg.upper_body_ik and self._sites:
+            # A tracker set's positional feet and knees: the legs onto their trackers.
+            kinds = s["kinds"][slots]
+            legs = np.flatnonzero(tracks_legs(kinds))
+            if len(legs):
+                wp[legs], rotations[legs], reach_limited[legs] = solve_legs(
+                    wp[legs], rotations[legs], pos[legs], quat[legs], kinds[legs]
+                )
         if self.cfg.upper_body_ik:
             # Head and hands onto their (calibrated) trackers, before the user's scale.
-            wp, rotations, reach_limited = solve_upper_body(wp, rotations, pos, quat)
+            wp, rotations, upper_limited = solve_upper_body(wp, rotations, pos, quat)
+            reach_limited |= upper_limited
         limited = reach_limited.tolist()
         scale = np.array([p.calibration.scale for p, _, _ in emit], np.float32)
         positions = wp / scale[:, None, None]

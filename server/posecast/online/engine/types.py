@@ -39,8 +39,9 @@ class PoseOut:
     sample: int  # the latent sample shown (the destination during a transition)
     transitioning: bool
     held: bool  # the input was held over a missing frame
-    # The upper-body pass left the head or a hand more than 1 mm from its tracker (out of
-    # the body's reach: bad calibration, a thrown controller). A v2 record flag.
+    # The tracker passes left the head, a hand or (a tracker set) a positional foot or
+    # knee more than 1 mm from its tracker (out of the body's reach: bad calibration, a
+    # thrown controller). A v2 record flag.
     reach_limited: bool = False
     # The calibration scale the positions were divided by (canonical metres per user
     # metre): FK of the rotations with the reference bones / scale gives the positions.

@@ -51,8 +51,9 @@ from posecast_client.cli.common import (
     token_for,
     unique_suffix,
 )
-from posecast_client.protocol import Error, Pose
+from posecast_client.protocol import Error, Layout, Pose
 from posecast_client.session import Reconnecting
+from posecast_client.sites import tracker_set
 from posecast_client.sources import BvhReplaySource, ReplaySource, TrackerSample, WalkSource
 
 
@@ -123,6 +124,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="v2: poses per second each headset receives (60)",
     )
+    p.add_argument(
+        "--layout", action="append", metavar="LAYOUT",
+        help="what player i sends: hmd3+waist (default), hmd3, or a tracker set such as "
+        "head,left_hand,right_hand,waist,left_foot:imu,right_foot:imu (repeatable: the "
+        "players take them in turn)",
+    )  # fmt: skip
     p.add_argument("--json", type=Path, help="also write the summary here as JSON")
     p.add_argument("-q", "--quiet", action="store_true", help="print only the summary")
     return p
@@ -138,10 +145,17 @@ def make_source(args: argparse.Namespace, i: int, slot_in_room: int) -> ReplaySo
         "dropout": args.dropout,
         "seed": args.seed + i,
         "offset_m": ((slot_in_room % 4) * 1.2, 0.0, (slot_in_room // 4) * 1.2),
+        "tracker_set": tracker_set(layout_of(args, i)),
     }
     if args.bvh:
         return BvhReplaySource(args.bvh[i % len(args.bvh)], **options)
     return WalkSource(seconds=max(10.0, min(args.duration, 60.0)), **options)
+
+
+def layout_of(args: argparse.Namespace, i: int) -> str:
+    """The layout player ``i`` joins with (``--layout``, in turn)."""
+    layouts = args.layout or [Layout.HMD3_WAIST.value]
+    return str(layouts[i % len(layouts)])
 
 
 async def _for(
@@ -172,7 +186,11 @@ async def run_player(
     stops = (stop,) if leave is None else (stop, leave)
     try:
         await client.join(
-            report.room, f"Sim {i}", rate_hz=min(args.rate, 120.0), pose_rate_hz=args.pose_rate
+            report.room,
+            f"Sim {i}",
+            layout=layout_of(args, i),
+            rate_hz=min(args.rate, 120.0),
+            pose_rate_hz=args.pose_rate,
         )
         report.version = client.version
         report.active = True
@@ -376,6 +394,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         raise SystemExit("posecast-sim: --churn-every and --progress-every must not be negative")
     if args.token and args.churn_every > 0:
         raise SystemExit("posecast-sim: churn needs a fresh token per player; use --secret")
+    for layout in args.layout or ():
+        try:
+            tracker_set(layout)
+        except ValueError as exc:
+            raise SystemExit(
+                f"posecast-sim: --layout {layout!r}: {exc} (hmd3+waist, hmd3, or a tracker set)"
+            ) from None
     summary = asyncio.run(run(args))
     print_summary(summary)
     if args.json is not None:

@@ -15,12 +15,14 @@ F64 = NDArray[np.float64]
 
 @dataclass(frozen=True, slots=True, eq=False)
 class TrackerSample:
-    """One frame of the four trackers, in slot order HEAD, LEFT_HAND, RIGHT_HAND, WAIST.
+    """One frame of the four trackers, in slot order HEAD, LEFT_HAND, RIGHT_HAND, WAIST
+    (or of a tracker set's sites, in the set's order).
 
     Attributes:
-        positions: ``(4, 3)`` world metres (+Y up).
-        orientations: ``(4, 4)`` world xyzw.
-        valid: bit ``i`` set means slot ``i`` is tracked (15: all four).
+        positions: ``(4, 3)`` world metres (+Y up); a set's ``(n, 3)``, an inertial
+            site's row its world acceleration, m/s^2.
+        orientations: ``(4, 4)`` world xyzw (a set's ``(n, 4)``).
+        valid: bit ``i`` set means row ``i`` is tracked (15: all four).
         t: host monotonic time of the sample, seconds (``time.monotonic()``), or
             ``None`` to let the client stamp the send time.
         device_seq: the device's own frame counter, when it has one.
