@@ -16,16 +16,21 @@ import numpy as np
 import pytest
 
 from posecast_client.rotations import quat_normalize
+from posecast_client.sites import TrackerSet
 from posecast_client.sources import HidTrackerSource, SerialTrackerSource, TrackerSample
 from posecast_client.sources.framing import (
     HID_REPORT_BYTES,
+    HID_SITES_REPORT_BYTES,
     SERIAL_FRAME_BYTES,
     SERIAL_SYNC,
     HidReportDecoder,
     SerialFrameDecoder,
     crc8,
     encode_hid_report,
+    encode_hid_sites_report,
     encode_serial_frame,
+    encode_serial_sites,
+    to_tracker_set,
 )
 
 Sent = dict[int, tuple[np.ndarray, np.ndarray, int]]
@@ -228,9 +233,109 @@ def test_the_examples_in_devices_md_are_what_the_encoders_write() -> None:
         pytest.skip("proto/devices.md not found (repo only)")
     blocks = [b for b in re.findall(r"```\n(.*?)```", doc.read_text("utf-8"), re.DOTALL)
               if re.fullmatch(r"[0-9a-f\s]+", b)]  # fmt: skip
-    serial_hex, hid_hex = ("".join(b.split()) for b in blocks)
+    serial_hex, hid_hex, serial2_hex, hid2_hex = ("".join(b.split()) for b in blocks)
     pos = np.array([[0, 1.6, 0], [0.3, 1.0, 0.1], [-0.3, 1.0, 0.1], [0, 1.0, 0]])
     quat = np.tile([0.0, 0.0, 0.0, 1.0], (4, 1))
     assert encode_serial_frame(1, 16667, pos, quat).hex() == serial_hex
     assert encode_hid_report(1, 16667, pos, quat).hex() == hid_hex
+    sites = ["head", "left_hand", "right_hand", "left_foot:imu", "right_foot:imu"]
+    values = np.vstack([pos[:3], [[0, 9.5, 0], [0.5, 0, -1.25]]])
+    quat5 = np.tile([0.0, 0.0, 0.0, 1.0], (5, 1))
+    assert encode_serial_sites(1, 16667, sites, values, quat5).hex() == serial2_hex
+    assert encode_hid_sites_report(1, 16667, sites, values, quat5).hex() == hid2_hex
+    (s,) = SerialFrameDecoder().feed(bytes.fromhex(serial2_hex))
+    assert s.sites == tuple(sites)
     assert zlib.crc32(b"123456789") == 0xCBF43926
+
+
+# --- version 2: tracker sets ---------------------------------------------------------
+
+DEVICE_SITES = ("left_foot:imu", "head", "right_foot:imu", "left_hand", "right_hand", "waist")
+PLAYER_SET = "head,left_hand,right_hand,waist,left_foot:imu,right_foot:imu,left_knee"
+
+
+def random_set_sample(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    values = rng.uniform(-3.0, 3.0, (len(DEVICE_SITES), 3))
+    values[[0, 2]] *= 5.0  # accelerations, m/s^2
+    return values, quat_normalize(rng.normal(size=(len(DEVICE_SITES), 4)))
+
+
+def test_serial_sites_frames_round_trip_through_garbage(rng: np.random.Generator) -> None:
+    dec = SerialFrameDecoder()
+    sent = [random_set_sample(rng) for _ in range(40)]
+    stream = b"".join(
+        rng.integers(0, 256, int(rng.integers(0, 30)), dtype=np.uint8).tobytes()
+        + encode_serial_sites(k, k * 16_667, DEVICE_SITES, v, q, valid=0b111011 if k % 5 else None)
+        for k, (v, q) in enumerate(sent)
+    )
+    got = [s for i in range(0, len(stream), 37) for s in dec.feed(stream[i : i + 37])]
+    assert [s.device_seq for s in got] == list(range(40))
+    for s in got:
+        v, q = sent[s.device_seq or 0]
+        assert s.sites == DEVICE_SITES
+        for i in range(len(DEVICE_SITES)):
+            if s.valid >> i & 1:
+                np.testing.assert_allclose(s.positions[i], v[i], rtol=1e-6, atol=1e-5)
+                assert np.abs(np.abs((s.orientations[i] * q[i]).sum()) - 1.0) < 1e-8
+            else:
+                np.testing.assert_array_equal(s.positions[i], 0.0)
+    assert dec.stats.bad_payload == 0
+
+
+def test_sites_rows_in_the_players_set_order() -> None:
+    ts = TrackerSet.parse(PLAYER_SET)
+    v = np.arange(18, dtype=float).reshape(6, 3)
+    q = np.tile([0.0, 0.0, 0.0, 1.0], (6, 1))
+    (s,) = SerialFrameDecoder().feed(encode_serial_sites(1, 0, DEVICE_SITES, v, q))
+    out = to_tracker_set(s, ts)
+    # head, hands, waist, the IMUs, then the knee the device does not send (untracked)
+    np.testing.assert_array_equal(out.positions[:6], v[[1, 3, 4, 5, 0, 2]])
+    assert out.valid == 0b0111111 and out.sites == tuple(PLAYER_SET.split(","))
+    # A positional left foot in the set does not take the device's inertial one.
+    other = to_tracker_set(s, TrackerSet.parse("head,left_hand,right_hand,left_foot"))
+    assert other.valid == 0b0111
+
+
+def test_bad_sites_frames_are_dropped() -> None:
+    v, q = np.zeros((2, 3)), np.tile([0.0, 0.0, 0.0, 1.0], (2, 1))
+    dec = SerialFrameDecoder()
+    twice = encode_serial_sites(1, 0, ["head", "head"], v, q)  # a site listed twice
+    beyond = encode_serial_sites(2, 0, ["head", "waist"], v, q, valid=0b100)
+    far = encode_serial_sites(3, 0, ["head", "waist"], v + 2000.0, q)
+    assert dec.feed(twice + beyond + far) == []
+    assert dec.stats.bad_payload == 3 and dec.stats.bad_checksum == 0
+
+
+def test_hid_sites_reports(rng: np.random.Generator) -> None:
+    v, q = random_set_sample(rng)
+    report = encode_hid_sites_report(7, 123, DEVICE_SITES, v, q)
+    assert len(report) == HID_SITES_REPORT_BYTES == 161 and report[0] == 2
+    dec = HidReportDecoder()
+    s = dec.decode(report)
+    assert s is not None and s.sites == DEVICE_SITES and s.device_seq == 7
+    inertial = np.array(["imu" in n for n in DEVICE_SITES])
+    err = np.abs(s.positions - v)
+    assert (err[inertial] <= 0.005 + 1e-9).all() and (err[~inertial] <= 0.0005 + 1e-9).all()
+    bad = bytearray(report)
+    bad[50] ^= 4
+    assert dec.decode(bytes(bad)) is None and dec.stats.bad_checksum == 1
+
+
+def test_a_sites_source_refuses_four_slot_frames_and_reorders_sets() -> None:
+    ts = TrackerSet.parse(PLAYER_SET)
+    v, q = np.zeros((6, 3)), np.tile([0.0, 0.0, 0.0, 1.0], (6, 1))
+    reports = [
+        encode_hid_report(0, 0, np.zeros((4, 3)), np.tile([0.0, 0.0, 0.0, 1.0], (4, 1))),
+        encode_hid_sites_report(1, 0, DEVICE_SITES, v, q),
+    ]
+    source = HidTrackerSource(device=FakeHid(reports), timeout_ms=1, tracker_set=ts)
+
+    async def first() -> TrackerSample:
+        async with source:
+            async for s in source:
+                return s
+        raise AssertionError("no sample")
+
+    s = asyncio.run(asyncio.wait_for(first(), 10.0))
+    assert s.positions.shape == (7, 3) and s.device_seq == 1
+    assert source.stats.bad_payload == 1 and source.stats.samples == 1

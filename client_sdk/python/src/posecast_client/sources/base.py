@@ -27,6 +27,8 @@ class TrackerSample:
             ``None`` to let the client stamp the send time.
         device_seq: the device's own frame counter, when it has one.
         device_t: the device's own clock, seconds, when it has one.
+        sites: a tracker-set device's row names (``left_foot:imu``...), in its row
+            order, when the rows are not the four slots (``proto/devices.md``, v2).
     """
 
     positions: F64
@@ -35,6 +37,7 @@ class TrackerSample:
     t: float | None = None
     device_seq: int | None = None
     device_t: float | None = None
+    sites: tuple[str, ...] | None = None
 
 
 class TrackerSource(abc.ABC):

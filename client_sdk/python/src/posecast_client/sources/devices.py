@@ -18,12 +18,15 @@ import time
 from collections.abc import AsyncIterator
 from typing import Any, Protocol
 
+from posecast_client.sites import TrackerSet
 from posecast_client.sources.base import TrackerSample, TrackerSource
 from posecast_client.sources.framing import (
     HID_REPORT_BYTES,
+    HID_SITES_REPORT_BYTES,
     FramingStats,
     HidReportDecoder,
     SerialFrameDecoder,
+    to_tracker_set,
 )
 
 
@@ -61,6 +64,11 @@ class SerialTrackerSource(TrackerSource):
         baudrate: bits per second (460800: a 133-byte frame at 120 Hz needs ~160 kbit/s).
         port: an already open port object instead of ``url`` (tests, custom transports).
         timeout_s: how long one blocking read waits; bounds how fast ``aclose`` returns.
+        tracker_set: the player's tracker set (a layout string or a
+            :class:`~posecast_client.sites.TrackerSet`): the device sends version-2
+            frames of named sites, yielded in the set's row order (a site the device
+            does not send is untracked); without one, version-1 frames of the four
+            slots.
     """
 
     def __init__(
@@ -70,7 +78,9 @@ class SerialTrackerSource(TrackerSource):
         baudrate: int = 460_800,
         port: SerialPort | None = None,
         timeout_s: float = 0.05,
+        tracker_set: str | TrackerSet | None = None,
     ) -> None:
+        self.tracker_set = _as_set(tracker_set)
         if port is None:
             serial = _optional("serial", "serial")
             port = serial.serial_for_url(url, baudrate=baudrate, timeout=timeout_s)
@@ -89,7 +99,9 @@ class SerialTrackerSource(TrackerSource):
         while not self._closed:
             data = await asyncio.to_thread(self._read)
             for sample in self.decoder.feed(data, time.monotonic()):
-                yield sample
+                out = _rows_for(sample, self.tracker_set, self.decoder.stats)
+                if out is not None:
+                    yield out
 
     async def aclose(self) -> None:
         self._closed = True
@@ -104,6 +116,8 @@ class HidTrackerSource(TrackerSource):
         serial_number: picks one of several identical devices.
         device: an already open device object instead (tests, other HID libraries).
         timeout_ms: how long one blocking read waits; bounds how fast ``aclose`` returns.
+        tracker_set: as for :class:`SerialTrackerSource` (report id 2 carries a set's
+            named sites).
     """
 
     def __init__(
@@ -114,7 +128,9 @@ class HidTrackerSource(TrackerSource):
         serial_number: str | None = None,
         device: HidDevice | None = None,
         timeout_ms: int = 50,
+        tracker_set: str | TrackerSet | None = None,
     ) -> None:
+        self.tracker_set = _as_set(tracker_set)
         if device is None:
             opened = _optional("hid", "hid").device()
             opened.open(vendor_id, product_id, serial_number)
@@ -130,12 +146,33 @@ class HidTrackerSource(TrackerSource):
 
     async def __aiter__(self) -> AsyncIterator[TrackerSample]:
         while not self._closed:
-            report = await asyncio.to_thread(self.device.read, HID_REPORT_BYTES, self.timeout_ms)
+            size = HID_REPORT_BYTES if self.tracker_set is None else HID_SITES_REPORT_BYTES
+            report = await asyncio.to_thread(self.device.read, size, self.timeout_ms)
             if report:  # empty: the read timed out
                 sample = self.decoder.decode(bytes(report), time.monotonic())
                 if sample is not None:
-                    yield sample
+                    out = _rows_for(sample, self.tracker_set, self.decoder.stats)
+                    if out is not None:
+                        yield out
 
     async def aclose(self) -> None:
         self._closed = True
         self.device.close()
+
+
+def _as_set(tracker_set: str | TrackerSet | None) -> TrackerSet | None:
+    if tracker_set is None or isinstance(tracker_set, TrackerSet):
+        return tracker_set
+    return TrackerSet.parse(tracker_set)
+
+
+def _rows_for(
+    sample: TrackerSample, tracker_set: TrackerSet | None, stats: FramingStats
+) -> TrackerSample | None:
+    """A decoded sample in the rows the source yields, or None (counted as a bad
+    payload) when its format is not the one the source was opened for."""
+    if (sample.sites is None) != (tracker_set is None):
+        stats.bad_payload += 1
+        stats.samples -= 1
+        return None
+    return sample if tracker_set is None else to_tracker_set(sample, tracker_set)

@@ -18,6 +18,15 @@ and bridge bugs)::
 
     report id u8 = 1 | version << 4 | valid (u8) | seq u8 | CRC-8 u8 | t_us u32 LE
     | 4 x (px py pz int16 mm, qx qy qz qw int16 x 32767), LE      = 64 bytes
+
+Version 2 of both carries the rows of a **tracker set** (any of the ten sites, each
+positional or inertial), each row naming its site::
+
+    serial payload: seq u32 | t_us u64 | valid u16 | n u8 | n x row       (15 + 21 n)
+        row: site u8 (bits 0-3 the site, bit 7 inertial) | x y z float32 (m or m/s^2)
+             | qx qy qz qw int16 x 32767
+    HID report id 2 (161 bytes): id | 2 << 4 | seq u8 | CRC-8 | t_us u32 | valid u16
+        | n u8 | 10 x row (site u8 | x y z int16: mm, or cm/s^2 inertial | q int16 x 4)
 """
 
 from __future__ import annotations
@@ -26,9 +35,11 @@ import math
 import struct
 import zlib
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
+from posecast_client.sites import INERTIAL_SUFFIX, SITES, TrackerSet
 from posecast_client.sources.base import F64, TrackerSample
 
 SERIAL_SYNC = b"\xa5\x5a"
@@ -42,6 +53,18 @@ HID_VERSION = 1
 HID_REPORT_BYTES = 64
 _HID = struct.Struct("<BBBBI28h")  # id, version|valid, seq, crc8, t_us, 4 x 7 int16
 _QUAT_SLACK = 0.01  # a device quaternion this far off unit length is garbage
+
+# Version 2: a tracker set's rows (proto/devices.md, "Tracker sets").
+SITES_VERSION = 2
+_SITES_HEAD = struct.Struct("<IQHB")  # seq, t_us, valid, n
+_SITES_ROW = struct.Struct("<B3f4h")  # site | inertial << 7, x y z, quaternion x 32767
+MAX_DEVICE_SITES = len(SITES)  # 10
+HID_SITES_REPORT_ID = 2
+_HID_SITES_HEAD = struct.Struct("<BBBBIHB")  # id, version << 4, seq, crc8, t_us, valid, n
+_HID_SITES_ROW = struct.Struct("<B3h4h")  # site | inertial << 7, x y z, quaternion x 32767
+HID_SITES_REPORT_BYTES = _HID_SITES_HEAD.size + MAX_DEVICE_SITES * _HID_SITES_ROW.size  # 161
+INERTIAL_BIT = 0x80
+ACC_UNIT = 0.01  # m/s^2 per int16 step of a HID inertial row
 
 
 def _check_slots(pos: F64, quat: F64, valid: int) -> bool:
@@ -62,6 +85,62 @@ def _untracked_to_identity(pos: F64, quat: F64, valid: int) -> None:
             pos[i], quat[i] = 0.0, (0.0, 0.0, 0.0, 1.0)
 
 
+def _check_rows(pos: F64, quat: F64, valid: int) -> bool:
+    """:func:`_check_slots` over any number of rows."""
+    for i in range(len(pos)):
+        if valid >> i & 1:
+            if not (np.isfinite(pos[i]).all() and (np.abs(pos[i]) <= 1000.0).all()):
+                return False
+            n = math.sqrt(float(quat[i] @ quat[i]))
+            if not abs(n - 1.0) <= _QUAT_SLACK:
+                return False
+    return True
+
+
+def _site_names(codes: list[int]) -> tuple[str, ...] | None:
+    """Row codes (site | inertial << 7) -> ``("head", "left_foot:imu", ...)``, or None
+    for an unknown site, a reserved bit or a site listed twice."""
+    names = []
+    for c in codes:
+        site = c & 0x7F
+        if site >= MAX_DEVICE_SITES:
+            return None
+        names.append(SITES[site] + (INERTIAL_SUFFIX if c & INERTIAL_BIT else ""))
+    bare = [n.split(":")[0] for n in names]
+    return tuple(names) if len(set(bare)) == len(bare) else None
+
+
+def _site_codes(sites: tuple[str, ...] | list[str]) -> list[int]:
+    codes = []
+    for name in sites:
+        imu = name.endswith(INERTIAL_SUFFIX)
+        codes.append(
+            SITES.index(name[: -len(INERTIAL_SUFFIX)] if imu else name)
+            | (INERTIAL_BIT if imu else 0)
+        )
+    return codes
+
+
+def to_tracker_set(sample: TrackerSample, tracker_set: TrackerSet) -> TrackerSample:
+    """A tracker-set device's sample in the rows of ``tracker_set``: each site of the set
+    from the device row that names it (same kind), untracked where the device has
+    none; rows the set does not list are dropped."""
+    n = len(tracker_set)
+    pos = np.zeros((n, 3))
+    quat = np.tile([0.0, 0.0, 0.0, 1.0], (n, 1))
+    valid = 0
+    rows = {name: j for j, name in enumerate(sample.sites or ())}
+    for i, (site, imu) in enumerate(zip(tracker_set.sites, tracker_set.inertial, strict=True)):
+        j = rows.get(site + (INERTIAL_SUFFIX if imu else ""))
+        if j is not None and sample.valid >> j & 1:
+            pos[i], quat[i] = sample.positions[j], sample.orientations[j]
+            valid |= 1 << i
+    return TrackerSample(
+        pos, quat, valid, t=sample.t, device_seq=sample.device_seq, device_t=sample.device_t,
+        sites=tuple(tracker_set.name.split(",")),
+    )  # fmt: skip
+
+
 # --- serial ------------------------------------------------------------------------
 
 
@@ -72,6 +151,30 @@ def encode_serial_frame(
     rows = np.hstack([positions, orientations]).astype(np.float32).ravel()  # (28,)
     payload = _PAYLOAD.pack(seq & 0xFFFFFFFF, t_us, valid, *rows.tolist())
     body = bytes((SERIAL_VERSION, len(payload))) + payload
+    return SERIAL_SYNC + body + zlib.crc32(body).to_bytes(4, "little")
+
+
+def encode_serial_sites(
+    seq: int,
+    t_us: int,
+    sites: tuple[str, ...] | list[str],
+    values: F64,
+    orientations: F64,
+    valid: int | None = None,
+) -> bytes:
+    """One version-2 serial frame of a tracker set's rows: ``sites`` names each row
+    (``left_foot:imu`` for an inertial one), ``values`` ``(n, 3)`` metres or m/s^2,
+    ``orientations`` ``(n, 4)`` xyzw."""
+    n = len(sites)
+    if not 1 <= n <= MAX_DEVICE_SITES:
+        raise ValueError(f"1 to {MAX_DEVICE_SITES} rows, not {n}")
+    mask = (1 << n) - 1 if valid is None else valid
+    q = np.rint(np.asarray(orientations, dtype=np.float64) * 32767.0).astype(int)
+    payload = _SITES_HEAD.pack(seq & 0xFFFFFFFF, t_us, mask, n) + b"".join(
+        _SITES_ROW.pack(code, *map(float, v), *map(int, qq))
+        for code, v, qq in zip(_site_codes(sites), np.asarray(values), q, strict=True)
+    )
+    body = bytes((SITES_VERSION, len(payload))) + payload
     return SERIAL_SYNC + body + zlib.crc32(body).to_bytes(4, "little")
 
 
@@ -124,6 +227,8 @@ class SerialFrameDecoder:
 
     @staticmethod
     def _payload(body: bytes, now: float | None) -> TrackerSample | None:
+        if body[0] == SITES_VERSION:
+            return _sites_payload(body[2:], body[1], now)
         if body[0] != SERIAL_VERSION or body[1] != SERIAL_PAYLOAD_BYTES:
             return None
         seq, t_us, valid, *values = _PAYLOAD.unpack(body[2:])
@@ -133,6 +238,42 @@ class SerialFrameDecoder:
             return None
         _untracked_to_identity(pos, quat, valid)
         return TrackerSample(pos, quat, valid, t=now, device_seq=seq, device_t=t_us * 1e-6)
+
+
+def _sites_payload(payload: bytes, length: int, now: float | None) -> TrackerSample | None:
+    """A version-2 serial payload, or None when it is malformed or absurd."""
+    if length < _SITES_HEAD.size or len(payload) != length:
+        return None
+    seq, t_us, valid, n = _SITES_HEAD.unpack_from(payload)
+    if not 1 <= n <= MAX_DEVICE_SITES or length != _SITES_HEAD.size + n * _SITES_ROW.size:
+        return None
+    rows = [
+        _SITES_ROW.unpack_from(payload, _SITES_HEAD.size + i * _SITES_ROW.size) for i in range(n)
+    ]
+    return _sites_sample([r[0] for r in rows], [r[1:4] for r in rows], [r[4:] for r in rows],
+                         valid, n, now, seq, t_us * 1e-6)  # fmt: skip
+
+
+def _sites_sample(
+    codes: list[int],
+    values: list[Any],
+    quats: list[Any],
+    valid: int,
+    n: int,
+    now: float | None,
+    seq: int,
+    t_s: float,
+) -> TrackerSample | None:
+    names = _site_names(codes)
+    pos = np.array(values, dtype=np.float64).reshape(n, 3)
+    quat = np.array(quats, dtype=np.float64).reshape(n, 4) / 32767.0
+    if names is None or valid > (1 << n) - 1 or not _check_rows(pos, quat, valid):
+        return None
+    for i in range(n):
+        if not valid >> i & 1:
+            pos[i], quat[i] = 0.0, (0.0, 0.0, 0.0, 1.0)
+    quat /= np.linalg.norm(quat, axis=1, keepdims=True)
+    return TrackerSample(pos, quat, valid, t=now, device_seq=seq, device_t=t_s, sites=names)
 
 
 # --- HID ---------------------------------------------------------------------------
@@ -180,6 +321,45 @@ def encode_hid_report(
     return bytes(report)
 
 
+def encode_hid_sites_report(
+    seq: int,
+    t_us: int,
+    sites: tuple[str, ...] | list[str],
+    values: F64,
+    orientations: F64,
+    valid: int | None = None,
+) -> bytes:
+    """One 161-byte tracker-set HID report (report id 2): positional rows in
+    millimetres (within +-32.767 m), inertial rows in 0.01 m/s^2 (within +-327 m/s^2)."""
+    n = len(sites)
+    if not 1 <= n <= MAX_DEVICE_SITES:
+        raise ValueError(f"1 to {MAX_DEVICE_SITES} rows, not {n}")
+    codes = _site_codes(sites)
+    unit = np.array([ACC_UNIT if c & INERTIAL_BIT else 0.001 for c in codes])[:, None]
+    v = np.rint(np.asarray(values, dtype=np.float64) / unit)
+    q = np.rint(np.asarray(orientations, dtype=np.float64) * 32767.0)
+    if not ((np.abs(v) <= 32767).all() and (np.abs(q) <= 32767).all()):
+        raise ValueError("a value beyond the int16 range or a quaternion beyond unit length")
+    mask = (1 << n) - 1 if valid is None else valid
+    report = bytearray(HID_SITES_REPORT_BYTES)
+    _HID_SITES_HEAD.pack_into(
+        report,
+        0,
+        HID_SITES_REPORT_ID,
+        SITES_VERSION << 4,
+        seq & 0xFF,
+        0,
+        t_us & 0xFFFFFFFF,
+        mask,
+        n,
+    )
+    for i in range(n):
+        at = _HID_SITES_HEAD.size + i * _HID_SITES_ROW.size
+        _HID_SITES_ROW.pack_into(report, at, codes[i], *map(int, v[i]), *map(int, q[i]))
+    report[3] = _report_crc(bytes(report))
+    return bytes(report)
+
+
 @dataclass
 class HidReportDecoder:
     """Decodes reports one by one; unwraps the 8-bit seq and 32-bit microsecond clock."""
@@ -190,6 +370,8 @@ class HidReportDecoder:
 
     def decode(self, report: bytes, now: float | None = None) -> TrackerSample | None:
         """A report in, its sample out (``None``, counted in ``stats``, if it is bad)."""
+        if report[:1] == bytes((HID_SITES_REPORT_ID,)):
+            return self._sites(report, now)
         if len(report) != HID_REPORT_BYTES or report[0] != HID_REPORT_ID:
             self.stats.bad_payload += 1
             return None
@@ -210,3 +392,33 @@ class HidReportDecoder:
         return TrackerSample(
             pos, quat, valid, t=now, device_seq=self._seq, device_t=self._t_us * 1e-6
         )
+
+    def _sites(self, report: bytes, now: float | None) -> TrackerSample | None:
+        if len(report) != HID_SITES_REPORT_BYTES:
+            self.stats.bad_payload += 1
+            return None
+        if report[3] != _report_crc(report):
+            self.stats.bad_checksum += 1
+            return None
+        _, vv, seq8, _, t32, valid, n = _HID_SITES_HEAD.unpack_from(report)
+        if vv != SITES_VERSION << 4 or not 1 <= n <= MAX_DEVICE_SITES:
+            self.stats.bad_payload += 1
+            return None
+        rows = [
+            _HID_SITES_ROW.unpack_from(report, _HID_SITES_HEAD.size + i * _HID_SITES_ROW.size)
+            for i in range(n)
+        ]
+        codes = [r[0] for r in rows]
+        unit = [ACC_UNIT if c & INERTIAL_BIT else 0.001 for c in codes]
+        values = [[x * u for x in r[1:4]] for r, u in zip(rows, unit, strict=True)]
+        seq = seq8 if self._seq is None else self._seq + ((seq8 - self._seq) & 0xFF)
+        t_us = t32 if self._t_us is None else self._t_us + ((t32 - self._t_us) & 0xFFFFFFFF)
+        sample = _sites_sample(
+            codes, values, [r[4:] for r in rows], valid, n, now, seq, t_us * 1e-6
+        )
+        if sample is None:
+            self.stats.bad_payload += 1
+            return None
+        self._seq, self._t_us = seq, t_us
+        self.stats.samples += 1
+        return sample
