@@ -13,7 +13,7 @@ from posecast.geometry.rotations import aa2mat, mat2quat, quat2mat
 from posecast.online.engine.calibration import Calibration
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import PoseOut, TrackerFrame
-from posecast.online.engine.upper_ik import solve_upper_body
+from posecast.online.engine.upper_ik import SPINE_REACH_M, reach_shift, solve_upper_body
 from posecast.skeleton import LOWER_BODY, PARENTS, Joint, reference_offsets
 from posecast.tracking.features import TrackerSlot
 from tests.online.engine.conftest import BackendLoader
@@ -188,6 +188,35 @@ def test_out_of_reach_targets_get_a_straight_chain_and_a_flag() -> None:
         d = p[3:, joint] - p[3:, Joint.SPINE]
         up = np.tile([0.0, 1.0, 0.0], (3, 1))
         np.testing.assert_allclose(d / np.linalg.norm(d, axis=-1, keepdims=True), up, atol=1e-6)
+
+
+def test_a_guessed_pelvis_follows_a_headset_beyond_the_spines_reach() -> None:
+    """``free_root``: a headset 20 cm beyond the spine chain's reach moves the whole
+    body (legs too) by the least that makes it reachable, and the head lands on it; a
+    pose whose pelvis is a waist tracker's stays put and is flagged instead."""
+    E = 4
+    pos, quat = random_poses(E, seed=8)
+    tp, tq = trackers(pos, np.zeros((E, 4, 3)), random_quats(E, seed=9))
+    v = tp[:, TrackerSlot.HEAD] - pos[:, Joint.SPINE]
+    u = v / np.linalg.norm(v, axis=-1, keepdims=True)
+    tp[:, TrackerSlot.HEAD] = pos[:, Joint.SPINE] + u * (SPINE_REACH_M + 0.2)
+    free = np.array([True, True, False, False])
+    out_pos, out_quat, limited = solve_upper_body(pos, quat, tp, tq, free)
+    assert_bones_kept(out_pos)
+    assert_fk_consistent(out_pos, out_quat)
+    p = out_pos.astype(np.float64)
+    np.testing.assert_array_less(
+        np.linalg.norm(p[:2, Joint.HEAD] - tp[:2, TrackerSlot.HEAD], axis=-1), 1e-3
+    )
+    np.testing.assert_allclose(p[:2, Joint.PELVIS], pos[:2, Joint.PELVIS] + 0.2 * u[:2], atol=1e-6)
+    np.testing.assert_allclose(
+        p[:2, Joint.LEFT_TOE], pos[:2, Joint.LEFT_TOE] + 0.2 * u[:2], atol=1e-6
+    )
+    np.testing.assert_allclose(p[2:, Joint.PELVIS], pos[2:, Joint.PELVIS], atol=1e-6)
+    assert limited[2:].all()
+    # Within reach nothing moves.
+    near = reach_shift(pos, pos[:, Joint.SPINE] + 0.4 * u)
+    np.testing.assert_array_equal(near, 0.0)
 
 
 # --- the engine -----------------------------------------------------------------------

@@ -212,7 +212,7 @@ def evaluate(
                     if engine_cfg.upper_body_ik:
                         if tracker_set is not None:
                             wm, wp = _legs(wm, wp, tr, tracker_set)
-                        wm, wp = _upper_body(wm, wp, tr)
+                        wm, wp = _upper_body(wm, wp, tr, not root_from_waist)
             gt_mat, gt = truth[ci]
             acc.add("mpjpe_cm", m.mpjpe(wp, gt))
             acc.add("lower_mpjpe_cm", m.lower_mpjpe(wp, gt))
@@ -258,10 +258,16 @@ def evaluate(
     }
 
 
-def _upper_body(wm: np.ndarray, wp: np.ndarray, tr: Tracks) -> tuple[np.ndarray, np.ndarray]:
-    """The engine's upper-body pass over a clip: head and hands onto the clip's trackers."""
+def _upper_body(
+    wm: np.ndarray, wp: np.ndarray, tr: Tracks, free_root: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """The engine's upper-body pass over a clip: head and hands onto the clip's trackers
+    (``free_root``: the pelvis is the decoder's, which may follow the headset)."""
     slots = len(TrackerSlot)
-    pos, quat, _ = solve_upper_body(wp, mat2quat(wm), tr.values[:, :slots], tr.quat[:, :slots])
+    free = np.full(len(wp), free_root)
+    pos, quat, _ = solve_upper_body(
+        wp, mat2quat(wm), tr.values[:, :slots], tr.quat[:, :slots], free
+    )
     return quat2mat(quat.astype(np.float64)), pos.astype(np.float64)
 
 

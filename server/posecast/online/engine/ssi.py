@@ -531,7 +531,11 @@ class Engine:
                 )
         if self.cfg.upper_body_ik:
             # Head and hands onto their (calibrated) trackers, before the user's scale.
-            wp, rotations, upper_limited = solve_upper_body(wp, rotations, pos, quat)
+            free = None
+            if self.layout.predicts_root:  # a pelvis from the decoder may follow the head
+                waist = self._waist_rows(slots)
+                free = np.ones(E, np.bool_) if waist is None else ~waist
+            wp, rotations, upper_limited = solve_upper_body(wp, rotations, pos, quat, free)
             reach_limited |= upper_limited
         limited = reach_limited.tolist()
         scale = np.array([p.calibration.scale for p, _, _ in emit], np.float32)

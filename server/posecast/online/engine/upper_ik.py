@@ -136,11 +136,27 @@ def _across(v: F64, u: F64) -> F64:
     return out
 
 
+def reach_shift(positions: F64, head_target: F64) -> F64:
+    """Per pose ``(E, 3)``, the smallest move of the whole body that brings the spine
+    joint within :data:`SPINE_REACH_M` of the headset ``(E, 3)`` (zero where it is)."""
+    v = head_target - positions[:, Joint.SPINE]
+    d = _norm(v)
+    over = np.maximum(d - SPINE_REACH_M, 0.0)
+    out: F64 = v * (over / np.maximum(d, _EPS))[:, None]
+    return out
+
+
+# How far the spine chain (spine -> chest -> neck -> head, 0.52 m) may reach before a
+# pose whose pelvis is a guess (no waist tracker) is moved instead: nearly straight.
+SPINE_REACH_M = float(_BONE_M[[Joint.CHEST, Joint.NECK, Joint.HEAD]].sum()) - 0.01
+
+
 def solve_upper_body(
     positions: NDArray[np.floating],
     rotations: NDArray[np.floating],
     tracker_pos: NDArray[np.floating],
     tracker_quat: NDArray[np.floating],
+    free_root: NDArray[np.bool_] | None = None,
 ) -> tuple[F32, F32, NDArray[np.bool_]]:
     """Head and hands of ``E`` poses onto their trackers.
 
@@ -149,6 +165,9 @@ def solve_upper_body(
         rotations: world joint rotations ``(E, 19, 4)`` xyzw.
         tracker_pos: the trackers ``(E, 4, 3)`` in the same frame and scale, slot order.
         tracker_quat: their orientations ``(E, 4, 4)`` xyzw (calibration offsets applied).
+        free_root: per pose, whether its pelvis is the network's guess (no waist
+            tracker): a headset beyond the spine's reach then moves the whole body
+            toward it (:func:`reach_shift`) instead of leaving the head short.
 
     Returns:
         ``(positions (E, 19, 3), rotations (E, 19, 4), reach_limited (E,))``: float32
@@ -160,6 +179,9 @@ def solve_upper_body(
     mat = quat2mat(quat_in)  # (E, 19, 3, 3)
     tp = np.asarray(tracker_pos, np.float64)
     tq = np.asarray(tracker_quat, np.float64)
+    if free_root is not None and free_root.any():
+        rows = np.flatnonzero(free_root)
+        pos[rows] += reach_shift(pos[rows], tp[rows, TrackerSlot.HEAD])[:, None]
 
     # 1. The spine chain. A FABRIK sweep spreads the bend over the three bones (more
     # sweeps converge slowly near full extension, where a standing user's headset is,
