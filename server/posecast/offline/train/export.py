@@ -210,8 +210,18 @@ def git_revision(cwd: str | Path | None = None) -> str:
         out = subprocess.run(
             ["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True, text=True, check=True
         )
+        # Dirty: a tracked file changed, the artifacts being written aside (an export
+        # that replaces a shipped model would otherwise always call itself dirty).
         dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"],
+            [
+                "git",
+                "status",
+                "--porcelain",
+                "--untracked-files=no",
+                "--",
+                ":/",
+                ":(top,exclude)server/posecast/artifacts",
+            ],
             cwd=cwd,
             capture_output=True,
             text=True,
