@@ -177,10 +177,14 @@ def verdict(data: bytes | str, peer: Peer) -> Verdict:
             if d < 0:
                 return Verdict("OUT_OF_ORDER", False, "seq")
         peer.last_seq = msg.seq
+        if msg.sites:  # the attackers join with a named layout: trackers, never sites
+            return Verdict("BAD_FIELD", False, "sites")
         return Verdict(None)
     if isinstance(msg, Bye):
         return Verdict(None, bye=True)
     if isinstance(msg, Calibrate):
+        if msg.sites:  # a tracker set's T-pose, from a player of a named layout
+            return Verdict("BAD_FIELD", False, "sites")
         try:
             if msg.height_m is not None:
                 Calibration.from_height(msg.height_m)
