@@ -327,22 +327,30 @@ def _layout(v: Any, path: str) -> str:
     return text
 
 
-def _trackers(v: Any, path: str, valid: int, rows: int | None = 4) -> tuple[F64, F64]:
-    """4 rows ``[px py pz qx qy qz qw]`` -> positions (4, 3), orientations (4, 4)
-    (``rows=None``: a tracker set's 1 to 10 rows, ``frame.sites``).
+def _trackers(v: Any, path: str, valid: int) -> tuple[F64, F64]:
+    """4 rows ``[px py pz qx qy qz qw]`` -> positions (4, 3), orientations (4, 4).
 
     Tracked slots are range-checked and their quaternions renormalised exactly as the
     spec writes it; untracked slots are only type-checked and read as origin + identity.
     """
-    if rows is None:
-        if type(v) is not list or not 1 <= len(v) <= MAX_SITES:
-            raise _bad(path, f"an array of 1 to {MAX_SITES} sites")
-        if valid > (1 << len(v)) - 1:
-            raise OutOfRangeError(
-                f"valid {valid} has bits beyond the {len(v)} sites", field="valid"
-            )
-    elif type(v) is not list or len(v) != rows:
+    if type(v) is not list or len(v) != 4:
         raise _bad(path, "an array of 4 trackers")
+    return _checked_rows(v, path, valid)
+
+
+def _sites(v: Any, path: str, valid: int | None) -> tuple[F64, F64, int]:
+    """A tracker set's 1 to 10 rows, checked as :func:`_trackers` checks trackers, with
+    ``valid`` (``None``: all) a bit mask over them -> ``(positions, orientations, valid)``."""
+    if type(v) is not list or not 1 <= len(v) <= MAX_SITES:
+        raise _bad(path, f"an array of 1 to {MAX_SITES} sites")
+    full = (1 << len(v)) - 1
+    if valid is not None and valid > full:
+        raise OutOfRangeError(f"valid {valid} has bits beyond the {len(v)} sites", field="valid")
+    mask = full if valid is None else valid
+    return (*_checked_rows(v, path, mask), mask)
+
+
+def _checked_rows(v: list[Any], path: str, valid: int) -> tuple[F64, F64]:
     out = np.zeros((len(v), 7))  # (n, 7)
     out[:, 6] = 1.0
     for i, row in enumerate(v):
@@ -436,8 +444,7 @@ def _calibrate(f: _Fields, lim: Limits) -> Calibrate:
     if f.has("sites"):
         if f.has("trackers"):
             raise BadFieldError("give trackers or sites, not both", field="sites")
-        n = len(f.m["sites"]) if type(f.m["sites"]) is list else 0
-        pos, quat = f.req("sites", _trackers, (1 << n) - 1, None)
+        pos, quat, _ = f.req("sites", _sites, None)
         return Calibrate(positions=pos, orientations=quat, sites=True)
     pos, quat = f.req("trackers", _trackers, ALL_VALID)
     return Calibrate(positions=pos, orientations=quat)
@@ -451,9 +458,7 @@ def _frame(f: _Fields, lim: Limits) -> Frame:
             if f.has("trackers"):
                 raise BadFieldError("give trackers or sites, not both", field="sites")
             mask = f.opt("valid", _int, 0, ALL_SITES_VALID)
-            n = len(f.m["sites"]) if type(f.m["sites"]) is list else 0
-            valid = (1 << n) - 1 if mask is None else mask
-            pos, quat = f.req("sites", _trackers, valid, None)
+            pos, quat, valid = f.req("sites", _sites, mask)
             return Frame(seq, t, pos, quat, valid, sites=True)
         mask = f.opt("valid", _int, 0, ALL_VALID)
         valid = ALL_VALID if mask is None else mask

@@ -107,3 +107,11 @@ def tracker_set(layout: str | None) -> TrackerSet | None:
     if layout is None or layout in (Layout.HMD3_WAIST, Layout.HMD3):
         return None
     return TrackerSet.parse(layout)
+
+
+def as_tracker_set(tracker_set: str | TrackerSet | None) -> TrackerSet | None:
+    """A source's ``tracker_set`` argument: a set, a layout string naming one
+    (``ValueError`` if it does not), or ``None`` (the four slots)."""
+    if tracker_set is None or isinstance(tracker_set, TrackerSet):
+        return tracker_set
+    return TrackerSet.parse(tracker_set)

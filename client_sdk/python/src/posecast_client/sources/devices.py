@@ -18,7 +18,7 @@ import time
 from collections.abc import AsyncIterator
 from typing import Any, Protocol
 
-from posecast_client.sites import TrackerSet
+from posecast_client.sites import TrackerSet, as_tracker_set
 from posecast_client.sources.base import TrackerSample, TrackerSource
 from posecast_client.sources.framing import (
     HID_REPORT_BYTES,
@@ -80,7 +80,7 @@ class SerialTrackerSource(TrackerSource):
         timeout_s: float = 0.05,
         tracker_set: str | TrackerSet | None = None,
     ) -> None:
-        self.tracker_set = _as_set(tracker_set)
+        self.tracker_set = as_tracker_set(tracker_set)
         if port is None:
             serial = _optional("serial", "serial")
             port = serial.serial_for_url(url, baudrate=baudrate, timeout=timeout_s)
@@ -130,7 +130,7 @@ class HidTrackerSource(TrackerSource):
         timeout_ms: int = 50,
         tracker_set: str | TrackerSet | None = None,
     ) -> None:
-        self.tracker_set = _as_set(tracker_set)
+        self.tracker_set = as_tracker_set(tracker_set)
         if device is None:
             opened = _optional("hid", "hid").device()
             opened.open(vendor_id, product_id, serial_number)
@@ -158,12 +158,6 @@ class HidTrackerSource(TrackerSource):
     async def aclose(self) -> None:
         self._closed = True
         self.device.close()
-
-
-def _as_set(tracker_set: str | TrackerSet | None) -> TrackerSet | None:
-    if tracker_set is None or isinstance(tracker_set, TrackerSet):
-        return tracker_set
-    return TrackerSet.parse(tracker_set)
 
 
 def _rows_for(

@@ -68,8 +68,9 @@ ACC_UNIT = 0.01  # m/s^2 per int16 step of a HID inertial row
 
 
 def _check_slots(pos: F64, quat: F64, valid: int) -> bool:
-    """Tracked slots: finite, within +-1000 m, quaternion about unit length."""
-    for i in range(4):
+    """Tracked rows (the four slots, or a set's sites): finite, within +-1000, quaternion
+    about unit length."""
+    for i in range(len(pos)):
         if valid >> i & 1:
             if not (np.isfinite(pos[i]).all() and (np.abs(pos[i]) <= 1000.0).all()):
                 return False
@@ -80,21 +81,9 @@ def _check_slots(pos: F64, quat: F64, valid: int) -> bool:
 
 
 def _untracked_to_identity(pos: F64, quat: F64, valid: int) -> None:
-    for i in range(4):
+    for i in range(len(pos)):
         if not valid >> i & 1:
             pos[i], quat[i] = 0.0, (0.0, 0.0, 0.0, 1.0)
-
-
-def _check_rows(pos: F64, quat: F64, valid: int) -> bool:
-    """:func:`_check_slots` over any number of rows."""
-    for i in range(len(pos)):
-        if valid >> i & 1:
-            if not (np.isfinite(pos[i]).all() and (np.abs(pos[i]) <= 1000.0).all()):
-                return False
-            n = math.sqrt(float(quat[i] @ quat[i]))
-            if not abs(n - 1.0) <= _QUAT_SLACK:
-                return False
-    return True
 
 
 def _site_names(codes: list[int]) -> tuple[str, ...] | None:
@@ -267,11 +256,9 @@ def _sites_sample(
     names = _site_names(codes)
     pos = np.array(values, dtype=np.float64).reshape(n, 3)
     quat = np.array(quats, dtype=np.float64).reshape(n, 4) / 32767.0
-    if names is None or valid > (1 << n) - 1 or not _check_rows(pos, quat, valid):
+    if names is None or valid > (1 << n) - 1 or not _check_slots(pos, quat, valid):
         return None
-    for i in range(n):
-        if not valid >> i & 1:
-            pos[i], quat[i] = 0.0, (0.0, 0.0, 0.0, 1.0)
+    _untracked_to_identity(pos, quat, valid)
     quat /= np.linalg.norm(quat, axis=1, keepdims=True)
     return TrackerSample(pos, quat, valid, t=now, device_seq=seq, device_t=t_s, sites=names)
 

@@ -43,7 +43,7 @@ from numpy.typing import ArrayLike
 from posecast_client.bvh import read_bvh
 from posecast_client.errors import BvhError
 from posecast_client.rotations import F64, fk, mat2quat, quat2mat, quat_mul, quat_nlerp
-from posecast_client.sites import MAX_SITES, SITES, TrackerSet
+from posecast_client.sites import MAX_SITES, SITES, TrackerSet, as_tracker_set
 from posecast_client.skeleton import PARENTS, TRACKER_JOINTS, reference_offsets
 from posecast_client.sources.base import TrackerSample, TrackerSource
 from posecast_client.sources.walk import walk_motion
@@ -221,7 +221,7 @@ class WalkSource(ReplaySource):
         **kw: Any,
     ) -> None:
         root, local = walk_motion(seconds, rate_hz, seed)
-        ts = _as_set(tracker_set)
+        ts = as_tracker_set(tracker_set)
         joints = TRACKER_JOINTS if ts is None else ts.joints
         pos, quat = _trackers_from_canonical(root, local, joints)
         inertial = None if ts is None else ts.inertial
@@ -254,7 +254,7 @@ class BvhReplaySource(ReplaySource):
         tracker_set: str | TrackerSet | None = None,
         **kw: Any,
     ) -> None:
-        ts = _as_set(tracker_set)
+        ts = as_tracker_set(tracker_set)
         bvh = read_bvh(path)
         if rig is None:
             rig = next((r for r in RIGS if set(r.joints) <= set(bvh.names)), None)
@@ -279,12 +279,6 @@ class BvhReplaySource(ReplaySource):
         super().__init__(
             pos[first:, idx], mat2quat(world[first:, idx]), fps, inertial=inertial, **kw
         )
-
-
-def _as_set(tracker_set: str | TrackerSet | None) -> TrackerSet | None:
-    if tracker_set is None or isinstance(tracker_set, TrackerSet):
-        return tracker_set
-    return TrackerSet.parse(tracker_set)
 
 
 def _trackers_from_canonical(
