@@ -10,9 +10,8 @@
  * be. Head and both hands are required and positional.
  */
 
-import { NotNormalisedError, OutOfRangeError } from "./errors.js";
-import { LAYOUTS, MAX_COORD_M, type Tracker } from "./messages.js";
-import type { TrackerPose } from "./trackers.js";
+import { LAYOUTS, type Tracker } from "./messages.js";
+import { checkedRow, type TrackerPose, UNTRACKED } from "./trackers.js";
 
 /** The ten sites, in the model's row order. */
 export const SITES = [
@@ -119,7 +118,7 @@ export type SitesInput = { readonly [K in SiteKey]?: TrackerPose | ImuReading | 
   readonly t?: number;
 };
 
-const UNTRACKED: Tracker = [0, 0, 0, 0, 0, 0, 1];
+const VALUE = { label: "value", unit: "" } as const;
 
 /**
  * `SitesInput` -> the set's wire rows (`frame.sites`) and the `valid` mask, checked as
@@ -145,16 +144,7 @@ export function toSites(set: TrackerSet, input: SitesInput): { sites: Tracker[];
       throw new RangeError(`${site}: give ${want}`);
     }
     valid |= 1 << i;
-    const [x, y, z] = value;
-    if (!(Math.abs(x) <= MAX_COORD_M && Math.abs(y) <= MAX_COORD_M && Math.abs(z) <= MAX_COORD_M)) {
-      throw new OutOfRangeError(`${site} value ${value}`, { field });
-    }
-    const [qx, qy, qz, qw] = reading.orientation;
-    const n = Math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw);
-    if (!(Number.isFinite(n) && n > 1e-6)) {
-      throw new NotNormalisedError(`${site} orientation ${reading.orientation}`, { field });
-    }
-    return [x, y, z, qx / n, qy / n, qz / n, qw / n];
+    return checkedRow(value, reading.orientation, site, field, VALUE);
   });
   return { sites: rows, valid };
 }

@@ -34,7 +34,9 @@ export interface FrameInput {
 }
 
 const SLOT_KEYS = ["head", "leftHand", "rightHand", "waist"] as const;
-const UNTRACKED: Tracker = [0, 0, 0, 0, 0, 0, 1];
+/** An untracked row on the wire: the origin with the identity rotation. */
+export const UNTRACKED: Tracker = [0, 0, 0, 0, 0, 0, 1];
+const POSITION = { label: "position", unit: " m" } as const;
 
 /**
  * `FrameInput` -> the wire's 4 trackers in slot order and the `valid` bit mask.
@@ -48,20 +50,36 @@ export function toTrackers(input: FrameInput): { trackers: Trackers; valid: numb
     const slot = input[key];
     if (!slot) return UNTRACKED;
     valid |= 1 << i;
-    const field = `trackers[${i}]`;
-    const [px, py, pz] = slot.position;
-    if (!(Math.abs(px) <= MAX_COORD_M && Math.abs(py) <= MAX_COORD_M && Math.abs(pz) <= MAX_COORD_M)) {
-      throw new OutOfRangeError(`${key} position ${slot.position} m`, { field });
-    }
-    const [qx, qy, qz, qw] = slot.orientation;
-    const n = Math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw);
-    if (!(Number.isFinite(n) && n > 1e-6)) {
-      throw new NotNormalisedError(`${key} orientation ${slot.orientation}`, { field });
-    }
-    return [px, py, pz, qx / n, qy / n, qz / n, qw / n];
+    return checkedRow(slot.position, slot.orientation, key, `trackers[${i}]`, POSITION);
   });
   if (rows.length !== NUM_TRACKERS) throw new Error("unreachable: 4 slots");
   return { trackers: rows as unknown as Trackers, valid };
+}
+
+/**
+ * One wire row from a value (a position, or an IMU's acceleration) and an orientation,
+ * checked as the server checks it: the value finite and within +-1000
+ * (OutOfRangeError), the orientation finite and not zero (NotNormalisedError), then
+ * normalised. `name` (`head`, `left_foot`) and `what` (`position 0,1,0 m`'s words)
+ * make the messages, `field` names the row.
+ */
+export function checkedRow(
+  value: readonly [number, number, number],
+  orientation: readonly [number, number, number, number],
+  name: string,
+  field: string,
+  what: { readonly label: string; readonly unit: string },
+): Tracker {
+  const [px, py, pz] = value;
+  if (!(Math.abs(px) <= MAX_COORD_M && Math.abs(py) <= MAX_COORD_M && Math.abs(pz) <= MAX_COORD_M)) {
+    throw new OutOfRangeError(`${name} ${what.label} ${value}${what.unit}`, { field });
+  }
+  const [qx, qy, qz, qw] = orientation;
+  const n = Math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw);
+  if (!(Number.isFinite(n) && n > 1e-6)) {
+    throw new NotNormalisedError(`${name} orientation ${orientation}`, { field });
+  }
+  return [px, py, pz, qx / n, qy / n, qz / n, qw / n];
 }
 
 /** World position of `joint` in `pose`, metres. */

@@ -23,6 +23,7 @@ from __future__ import annotations
 import os
 import resource
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -107,26 +108,60 @@ def bench(
         else:
             engine.add_player(f"p{p}", seed=p)
     pos, quat = _frames()
+    ms = _timed_ticks(
+        engine,
+        players,
+        warmup,
+        ticks,
+        lambda t, p, k: TrackerFrame(t, pos[k], quat[k]),
+        len(pos),
+    )
+    flop = 2.0 * MAC_PER_SAMPLE * players * samples
+    return _result(players, samples, n3, used, ms, flop, rss0)
+
+
+def _timed_ticks(
+    engine: Engine | MultiEngine,
+    players: int,
+    warmup: int,
+    ticks: int,
+    frame: Callable[[int, int, int], TrackerFrame],
+    frames: int,
+) -> np.ndarray:
+    """Milliseconds of each measured tick: every tick, player ``p`` pushes
+    ``frame(t, p, k)`` (``k`` its own phase of the ``frames``-long clip), then the
+    engine ticks; the first ``warmup`` ticks are not kept."""
     times = []
     for t in range(warmup + ticks):
         for p in range(players):
-            k = (t + 37 * p) % len(pos)
-            engine.push(f"p{p}", TrackerFrame(t, pos[k], quat[k]))
+            engine.push(f"p{p}", frame(t, p, (t + 37 * p) % frames))
         t0 = time.perf_counter()
         engine.tick()
         if t >= warmup:
             times.append(time.perf_counter() - t0)
-    ms = np.array(times) * 1000.0
+    return np.array(times) * 1000.0
+
+
+def _result(
+    players: int,
+    samples: int,
+    hmd3_players: int,
+    backend: str,
+    ms: np.ndarray,
+    flop: float | None,
+    rss0: float,
+) -> BenchResult:
+    """The figures of one run from its tick times (``flop`` per tick, ``None``: not
+    counted, GFLOP/s 0)."""
     p50 = float(np.percentile(ms, 50))
-    flop = 2.0 * MAC_PER_SAMPLE * players * samples
     return BenchResult(
         players=players,
         samples=samples,
-        hmd3_players=n3,
-        backend=used,
+        hmd3_players=hmd3_players,
+        backend=backend,
         tick_p50_ms=round(p50, 3),
         tick_p99_ms=round(float(np.percentile(ms, 99)), 3),
-        gflops=round(flop / (p50 / 1000.0) / 1e9, 2),
+        gflops=0.0 if flop is None else round(flop / (p50 / 1000.0) / 1e9, 2),
         rss_mb=round((_rss_mb() - rss0) / max(1, players), 3),
     )
 
@@ -156,27 +191,16 @@ def _bench_sets(
     pos, quat, acc = _site_frames()
     inertial = [(ts.kinds() == Kind.INERTIAL)[:, None] for ts in sets]
     values = [np.where(i, acc, pos) for i in inertial]  # (F, 10, 3) per set
-    times = []
-    for t in range(warmup + ticks):
-        for p in range(players):
-            k = (t + 37 * p) % len(pos)
-            engine.push(f"p{p}", TrackerFrame(t, values[p % len(sets)][k], quat[k]))
-        t0 = time.perf_counter()
-        engine.tick()
-        if t >= warmup:
-            times.append(time.perf_counter() - t0)
-    ms = np.array(times) * 1000.0
-    p50 = float(np.percentile(ms, 50))
-    return BenchResult(
-        players=players,
-        samples=samples,
-        hmd3_players=0,
-        backend=engine.backend_name,
-        tick_p50_ms=round(p50, 3),
-        tick_p99_ms=round(float(np.percentile(ms, 99)), 3),
-        gflops=0.0,  # the sites decoder's input layer is wider: MAC_PER_SAMPLE is not its
-        rss_mb=round((_rss_mb() - rss0) / max(1, players), 3),
+    ms = _timed_ticks(
+        engine,
+        players,
+        warmup,
+        ticks,
+        lambda t, p, k: TrackerFrame(t, values[p % len(sets)][k], quat[k]),
+        len(pos),
     )
+    # GFLOP/s not counted: the sites decoder's input layer is wider than MAC_PER_SAMPLE's.
+    return _result(players, samples, 0, engine.backend_name, ms, None, rss0)
 
 
 def naive_loop(

@@ -96,11 +96,13 @@ def clip_tracks(
     seed: int = 0,
     acc_noise: float = IMU_ACC_NOISE,
     acc_bias: float = IMU_ACC_BIAS,
+    truth: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Tracks:
     """The trackers of ``layout`` on a clip. A tracker set's sites sit on their joints of
-    the true pose (:func:`~posecast.tracking.sites.site_tracks`); its inertial sites'
-    accelerations get the training's sensor noise (``acc_noise`` white, ``acc_bias``
-    held over the clip, m/s^2), drawn from ``seed``."""
+    the true pose (:func:`~posecast.tracking.sites.site_tracks`; ``truth``: the clip's
+    world rotations and positions when the caller has them already); its inertial
+    sites' accelerations get the training's sensor noise (``acc_noise`` white,
+    ``acc_bias`` held over the clip, m/s^2), drawn from ``seed``."""
     if not isinstance(layout, TrackerSet):
         ls = spec(layout)
         features = (
@@ -114,7 +116,7 @@ def clip_tracks(
             np.asarray(features, np.float32),
         )
     kinds = layout.kinds()
-    pos, quat, acc = site_tracks(*_truth(fr), fps)
+    pos, quat, acc = site_tracks(*(truth or _truth(fr)), fps)
     acc = acc + imu_noise(np.random.default_rng(seed), len(acc), acc_noise, acc_bias)
     values = np.where((kinds == Kind.INERTIAL)[:, None], acc, pos)
     features = clip_site_features(pos, quat, acc, kinds, fps).astype(np.float32)
@@ -160,10 +162,12 @@ def evaluate(
     mean_pose = _mean_leg_pose(base.meta)
     leg_rot = [int(j) - 1 for j in LOWER_BODY]  # rotation rows of the leg joints
     results: dict[str, Any] = {}
-    tracks = [clip_tracks(fr, fps, player_layout, seed=i) for i, fr in enumerate(clips)]
+    truth = [_truth(fr) for fr in clips]
+    tracks = [
+        clip_tracks(fr, fps, player_layout, seed=i, truth=truth[i]) for i, fr in enumerate(clips)
+    ]
     # The pelvis of a single-sample variant: the waist tracker's, or the decoder's own.
     root_from_waist = tracker_set.tracks_waist if tracker_set is not None else not ls.predicts_root
-    truth = [_truth(fr) for fr in clips]
     engine_cfg = engine_cfg or EngineConfig()
     ssi_backend = (
         load_backend(backend, ls.layout, models_dir, cfg=engine_cfg)

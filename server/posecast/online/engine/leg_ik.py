@@ -28,8 +28,8 @@ from numpy.typing import NDArray
 from posecast.geometry.rotations import mat2quat, quat2mat
 from posecast.online.engine.ik import norm3 as _norm
 from posecast.online.engine.ik import swing_mat
-from posecast.online.engine.upper_ik import REACH_TOLERANCE_M, _turn, two_bone
-from posecast.skeleton import Joint, reference_offsets
+from posecast.online.engine.upper_ik import _BONE_M, REACH_TOLERANCE_M, _turn, two_bone
+from posecast.skeleton import Joint
 from posecast.tracking.sites import SITE_ROW, Kind, Site
 
 F32 = NDArray[np.float32]
@@ -40,7 +40,6 @@ _LEGS = (
     (Joint.LEFT_THIGH, Joint.LEFT_SHIN, Joint.LEFT_FOOT, Site.LEFT_FOOT, Site.LEFT_KNEE),
     (Joint.RIGHT_THIGH, Joint.RIGHT_SHIN, Joint.RIGHT_FOOT, Site.RIGHT_FOOT, Site.RIGHT_KNEE),
 )
-_BONE_M = np.linalg.norm(reference_offsets(), axis=-1)
 # Joints whose world rotation the pass may change: both legs, toes included.
 LEG_JOINTS = [int(j) for j in range(Joint.LEFT_THIGH, Joint.RIGHT_TOE + 1)]
 
