@@ -280,9 +280,10 @@ def _legs(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The engine's lower-body pass over a clip: feet and knees onto a tracker set's
     positional trackers (a no-op for a set without them)."""
-    kinds = np.broadcast_to(tracker_set.kinds(), (len(wp), len(tracker_set.kinds())))
-    if not tracks_legs(kinds[:1]).any():
+    per_site = tracker_set.kinds()
+    if not tracks_legs(per_site[None]).any():
         return wm, wp
+    kinds = np.broadcast_to(per_site, (len(wp), *per_site.shape))
     pos, quat, _ = solve_legs(wp, mat2quat(wm), tr.values, tr.quat, kinds)
     return quat2mat(quat.astype(np.float64)), pos.astype(np.float64)
 
