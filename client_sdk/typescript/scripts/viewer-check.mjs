@@ -9,9 +9,12 @@
 // HUD panel, the pixels in each player's colour (by hue: the meshes are lit, so the
 // brightness varies); for each consecutive pair, the pixels that changed, and those
 // that changed where an avatar is (in a player's colour in either shot). The demo's
-// walkers stand still for 2.4 s of every 12 s clip, so it keeps taking screenshots
-// (up to TRIES, default 8) until a pair shows motion. It also reads the names on the
-// page (player list, and the labels over the heads).
+// walkers stand still for 2.4 s of every 12 s clip, and cross (one can hide the other,
+// or loop back out of the view until the camera catches up), so it keeps taking
+// screenshots (up to TRIES, default 12) until a pair shows motion with every player
+// visible in both shots (at least VISIBLE_PIXELS of its colour: the test's own minimum
+// for that avatar). It also reads the names on the page (player list, and the labels
+// over the heads).
 //
 // For the meshes, also: (a) with the page frozen on one frame (`posecastViewer.freeze`),
 // a screenshot and the page's body pieces on the screen (`posecastViewer.screen`: each
@@ -34,8 +37,10 @@ if (!url || !outDir) {
   process.exit(2);
 }
 const gapMs = Number(gapArg ?? 400);
-const tries = Number(triesArg ?? 8);
+const tries = Number(triesArg ?? 12);
 const MOVED_PIXELS = 400; // avatar pixels that must change between two shots
+// Pixels of a player's colour that make it visible in a shot (test_viewer.py's minimums).
+const VISIBLE_PIXELS = { mesh: 5000, sticks: 1000 };
 
 /**
  * Runs in the page: pixel statistics of two PNG screenshots (base64), or of one (`b`
@@ -194,7 +199,10 @@ try {
       const [a, b] = shots.slice(-2).map((s) => s.toString("base64"));
       const stats = await page.evaluate(analyse, { a, b });
       pairs.push(stats);
-      if (stats.changed_skeleton_pixels >= MOVED_PIXELS) break;
+      const visible = stats.players.length >= 2 && stats.players.every(
+        (p) => Math.min(p.pixels_a, p.pixels_b) >= VISIBLE_PIXELS[name],
+      );
+      if (visible && stats.changed_skeleton_pixels >= MOVED_PIXELS) break;
     }
     shots.slice(-2).forEach((png, i) => save(png, `${name}-${"ab"[i]}`));
     const mode = await page.evaluate(() => window.posecastViewer.mode);

@@ -46,6 +46,8 @@ STAMP = TS / "node_modules" / ".installed"
 DEBIAN_CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM = Path(os.environ.get("CHROMIUM", str(DEBIAN_CHROMIUM)))
 SHOTS = Path(tempfile.gettempdir()) / "posecast-viewer"
+# viewer-check.mjs picks a pair of shots with each player at least this visible
+# (its VISIBLE_PIXELS): the walkers cross and may hide one another for a moment.
 MIN_PLAYER_PIXELS = 1000  # each stick figure is ~4000-8000 pixels at 1000 x 640
 MIN_MESH_PIXELS = 5000  # each skinned mesh ~10000-20000
 ATTACHED_M = 0.03  # the mesh's rings from the streamed joints (0 with FK-consistent poses)
