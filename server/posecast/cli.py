@@ -488,6 +488,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         outlier_factor=args.outlier_factor,
         upper_body_ik=not args.no_upper_ik,
         floor_ik=not args.no_floor_ik,
+        pelvis_smoothing=not args.no_pelvis_smoothing,
         ik_max_drift_m=drift,
         ik_release_frames=release,
         latent_scale=latent_scale,
@@ -917,6 +918,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="cvae_ik, ae_ik and cvae_ik_ssi without the floor pass (feet below y = 0 "
         "lifted onto it): the network's and the contact IK's own feet",
+    )
+    ev.add_argument(
+        "--no-pelvis-smoothing",
+        action="store_true",
+        help="cvae_ik, ae_ik and cvae_ik_ssi on each frame's own pelvis instead of its "
+        "1-2-1 average with the frames either side",
     )
     ev.set_defaults(func=_cmd_eval)
 

@@ -55,6 +55,11 @@ class ServerConfig:
         "stream the feet where the network and the contact IK put them, below the floor "
         "(y = 0) included, instead of lifting them onto it",
     )
+    no_pelvis_smoothing: bool = _opt(
+        False,
+        "stream each pose on its own frame's pelvis instead of the 1-2-1 average with "
+        "the frames either side (which takes the pelvis's shake out of the legs)",
+    )
     engine_threads: int = _opt(
         2,
         "threads of the engine's inference backend (the native kernels' pool, or ONNX "

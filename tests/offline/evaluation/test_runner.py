@@ -98,7 +98,7 @@ def test_tracker_sets_evaluate_with_the_one_model(set_reports: dict[str, dict]) 
     four, six = set_reports["4p"]["variants"], set_reports["6p"]["variants"]
     # A positional waist gives the pelvis; positional feet hold the ankles, so the legs
     # of the streamed pose are far nearer the truth with them.
-    assert four["cvae_ik_ssi"]["root_pe_cm"] < 1e-3
+    assert four["cvae_ik_ssi"]["root_pe_cm"] < 0.1  # the waist's, smoothed over 3 frames
     assert six["cvae_ik_ssi"]["lower_mpjpe_cm"] < 0.7 * four["cvae_ik_ssi"]["lower_mpjpe_cm"]
     # Without a waist the pelvis is the decoder's own (an error to report).
     assert set_reports["3p+2i"]["variants"]["cvae_ik"]["root_pe_cm"] > 0.0

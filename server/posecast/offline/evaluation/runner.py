@@ -24,6 +24,7 @@ from posecast.online.engine.anomaly import AnomalyScorer
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.ik import floor_ik
 from posecast.online.engine.leg_ik import solve_legs, tracks_legs
+from posecast.online.engine.pelvis import smooth_pelvis_clip
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
 from posecast.online.engine.upper_ik import solve_upper_body
@@ -143,10 +144,11 @@ def evaluate(
     ``baseline_mean_lower_body`` takes the true upper body and pelvis whatever the
     layout, so only its lower-body numbers are a floor to beat.
 
-    ``cvae_ik`` and ``ae_ik`` are what the server would stream without SSI: contact
-    IK, the floor pass (``engine_cfg.floor_ik``) and (when ``engine_cfg.upper_body_ik``,
-    the default) the engine's upper-body pass, so that ``cvae_ik_ssi`` against
-    ``cvae_ik`` measures SSI alone.
+    ``cvae_ik`` and ``ae_ik`` are what the server would stream without SSI: the
+    pelvis smoothing (``engine_cfg.pelvis_smoothing``), contact IK, the floor pass
+    (``engine_cfg.floor_ik``) and (when ``engine_cfg.upper_body_ik``, the default)
+    the engine's upper-body pass, so that ``cvae_ik_ssi`` against ``cvae_ik``
+    measures SSI alone.
     ``cvae_1sample`` is the network's raw pose.
     """
     player_layout = layout if isinstance(layout, TrackerSet) else Layout(layout)
@@ -208,6 +210,8 @@ def evaluate(
             else:
                 raise ValueError(f"unknown variant {name!r}")
             if name != "cvae_ik_ssi":
+                if name.endswith("_ik") and engine_cfg.pelvis_smoothing:
+                    root_mat, root_pos = smooth_pelvis_clip(root_mat, root_pos)
                 wm, wp = pose_from_rotations(rot, root_mat, root_pos)
                 if name.endswith("_ik"):
                     contact_ik(wm, wp, con, engine_cfg.ik_release_frames, engine_cfg.ik_max_drift_m)

@@ -34,6 +34,10 @@ class EngineConfig:
         floor_ik: lift a shown foot that is below the floor (``y = 0``) onto it
             (:func:`posecast.online.engine.ik.floor_ik`; default on, off for research
             evaluation of the network's own legs).
+        pelvis_smoothing: build the shown pose on the pelvis averaged over frames
+            ``e - 1, e, e + 1`` (weights 1, 2, 1; needs ``lookahead >= 1``, adds no lag;
+            :mod:`posecast.online.engine.pelvis`): default on, chosen on the validation
+            split (docs/evaluation.md, "Jitter"); off for research evaluation.
         latent_scale: the pool's latents are ``latent_scale * eps``, ``eps ~ N(0, I)``
             (1.0: the prior; below 1 a truncated pool, nearer the mean).
         home_factor: the threshold at which a player returns to sample 0, the prior's
@@ -54,6 +58,7 @@ class EngineConfig:
     fps: float = 60.0
     upper_body_ik: bool = True
     floor_ik: bool = True
+    pelvis_smoothing: bool = True
     latent_scale: float = 1.0
     home_factor: float | None = 1.0
 

@@ -13,8 +13,10 @@ Per tick, for all ``P`` players x ``N`` samples at once:
    at frame ``n``, the newest)
 5. emit frame ``n - tau`` per player: the current sample's pose, or during a
    transition the decoder re-run on the interpolated latent and hidden state
-   (one more batched call), then that player's own display IK, then the upper-body
-   pass (:mod:`posecast.online.engine.upper_ik`: head and hands on their trackers)
+   (one more batched call), on the pelvis averaged with frames ``n - tau - 1`` and
+   ``n - tau + 1`` (:mod:`posecast.online.engine.pelvis`), then that player's own
+   display IK, the floor pass, a tracker set's leg pass, then the upper-body pass
+   (:mod:`posecast.online.engine.upper_ik`: head and hands on their trackers)
 
 The engine is pure: frames go in with :meth:`Engine.push`, :meth:`Engine.tick`
 returns poses and events (:mod:`posecast.online.engine.types`). No sockets, no
@@ -51,6 +53,7 @@ from posecast.online.engine.calibration import Calibration, WaistFilter, apply_a
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.ik import LEGS, floor_ik, floor_lift
 from posecast.online.engine.leg_ik import solve_legs, tracks_legs
+from posecast.online.engine.pelvis import smooth_pelvis
 from posecast.online.engine.selectors import AnomalySelector, Selector, choose_anomaly_rows
 from posecast.online.engine.slots import SlotArrays
 from posecast.online.engine.types import EngineEvent, PoseOut, TickResult, TrackerFrame
@@ -456,11 +459,13 @@ class Engine:
         s = self.slots
         k = (self._tick - tau) % self._ring  # ring row of frame n - tau, for every player
         emit: list[tuple[_Player, int, float]] = []  # player, sample, weight
+        firsts: list[bool] = []  # frame e is the player's first: no frame e - 1
         for pid in self._order:
             p = self.players[pid]
             e = p.frames - tau
             if e < 0:
                 continue
+            firsts.append(e == 0)
             if p.plan is None or e < p.plan.start:
                 emit.append((p, p.plan.src if p.plan is not None else p.current, 0.0))
             else:
@@ -473,6 +478,9 @@ class Engine:
         con = s["ring_con"][k, slots, samples]
         root = s["ring_root"][k, slots, samples] if self.layout.predicts_root else None
         interp = [i for i, (_, _, w) in enumerate(emit) if 0.0 < w < 1.0]
+        # The emitted samples' own pelvis outputs, before a transition's blend replaces
+        # them (None: no blend): the pelvis smoothing takes its neighbours' motion from these.
+        root_own = root.copy() if root is not None and interp else None
         if interp:
             # Re-decode on the blended latent and hidden state. The cache is affine in
             # the latent, so the blend of two caches is the cache of the blended latent.
@@ -502,9 +510,12 @@ class Engine:
             if p.plan is not None and w >= 1.0:
                 p.plan = None
         pos, quat = s["ring_pos"][k, slots], s["ring_quat"][k, slots]
-        root_mat, root_pos, _ = self._roots(
-            pos, quat, s["ring_rootm"][k, slots], root, 1, self._waist_rows(slots)
-        )
+        waist = self._waist_rows(slots)
+        root_mat, root_pos, _ = self._roots(pos, quat, s["ring_rootm"][k, slots], root, 1, waist)
+        if self.cfg.pelvis_smoothing and tau >= 1:
+            root_mat, root_pos = self._smooth_roots(
+                k, slots, samples, np.array(firsts), root_own, root_mat, root_pos, waist
+            )
         # FK and the players' own display IK, batched: gather their states, step,
         # scatter back.
         E = len(emit)
@@ -557,6 +568,51 @@ class Engine:
             )
             for i, (p, sample, w) in enumerate(emit)
         ]
+
+    def _smooth_roots(
+        self,
+        k: int,
+        slots: NDArray[np.intp],
+        samples: NDArray[np.intp],
+        first: NDArray[np.bool_],
+        root_own: F32 | None,
+        root_mat: F32,
+        root_pos: F32,
+        waist: NDArray[np.bool_] | None,
+    ) -> tuple[F32, F32]:
+        """The shown pelvis at ring row ``k`` (frame ``e``) averaged with frames ``e - 1``
+        and ``e + 1`` (:func:`~posecast.online.engine.pelvis.smooth_pelvis`; the look-ahead
+        holds ``e + 1``, the ring still holds ``e - 1``). A neighbour is the emitted
+        sample's own pelvis there, moved by the difference between the shown pelvis and
+        that sample's at ``e`` (they differ during a transition's blend); a player's first
+        frame stands in for its missing ``e - 1``."""
+        s, L = self.slots, self._ring
+        own = (root_mat, root_pos)
+        if root_own is not None:
+            m, p, _ = self._roots(
+                s["ring_pos"][k, slots],
+                s["ring_quat"][k, slots],
+                s["ring_rootm"][k, slots],
+                root_own,
+                1,
+                waist,
+            )
+            own = (m, p)
+        inv = np.swapaxes(own[0], -1, -2)
+        mats, places = [], []
+        for rows in (np.where(first, k, (k - 1) % L), np.full(len(slots), (k + 1) % L)):
+            m, p, _ = self._roots(
+                s["ring_pos"][rows, slots],
+                s["ring_quat"][rows, slots],
+                s["ring_rootm"][rows, slots],
+                s["ring_root"][rows, slots, samples] if self.layout.predicts_root else None,
+                1,
+                waist,
+            )
+            mats.append((m @ inv) @ root_mat)
+            places.append(root_pos + (p - own[1]))
+        mat, pos = smooth_pelvis((mats[0], root_mat, mats[1]), (places[0], root_pos, places[1]))
+        return mat.astype(np.float32), pos.astype(np.float32)
 
 
 def _floor(wp: F32, rotations: F32) -> None:

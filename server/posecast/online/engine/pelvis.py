@@ -1,0 +1,57 @@
+"""Smoothing the shown pelvis over the look-ahead: frames ``e - 1, e, e + 1``, weights 1, 2, 1.
+
+Every joint of the shown body hangs off the pelvis, so the pelvis's own frame-to-frame
+noise (a waist tracker's, or the 3-point model's pelvis outputs) is carried out to the
+feet and hands by the length of the limbs: the legs, which in the mocap stay planted
+while the hips shake, shake with them. On the validation split that was most of the
+excess jitter of the streamed pose (docs/evaluation.md, "Jitter"). The paper low-passes
+the waist orientation for the same reason (Sec. 4.4); with the engine's look-ahead
+(``tau`` frames; one is enough) the filter can be centred, so it adds no lag: the pose
+shown for frame ``e`` is built on the pelvis averaged over frames ``e - 1``, ``e`` and
+``e + 1`` with weights 1, 2, 1 (positions, and rotations as sign-aligned quaternions,
+renormalised). The head and hands are then put on their trackers as before.
+
+Pure numpy; the engine (:mod:`posecast.online.engine.ssi`) and the evaluation's
+single-sample variants (:mod:`posecast.offline.evaluation.runner`) call the same
+:func:`smooth_pelvis`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from posecast.geometry.rotations import mat2quat, quat2mat
+
+F64 = NDArray[np.float64]
+WEIGHTS = (0.25, 0.5, 0.25)  # frames e - 1, e, e + 1
+
+
+def smooth_pelvis(
+    mats: tuple[NDArray[np.floating], NDArray[np.floating], NDArray[np.floating]],
+    places: tuple[NDArray[np.floating], NDArray[np.floating], NDArray[np.floating]],
+) -> tuple[F64, F64]:
+    """The 1-2-1 average of three pelvis poses: world rotations ``(..., 3, 3)`` and
+    positions ``(..., 3)`` at frames ``e - 1``, ``e``, ``e + 1`` (a missing neighbour is
+    passed as frame ``e`` again) -> the rotation and position shown at frame ``e``."""
+    q = [mat2quat(np.asarray(m, np.float64)) for m in mats]
+    centre = q[1]
+    acc = np.zeros_like(centre)
+    for w, qi in zip(WEIGHTS, q, strict=True):
+        sign = np.where(np.sum(qi * centre, axis=-1, keepdims=True) < 0.0, -1.0, 1.0)
+        acc += w * sign * qi
+    acc /= np.linalg.norm(acc, axis=-1, keepdims=True)
+    pos = sum(w * np.asarray(p, np.float64) for w, p in zip(WEIGHTS, places, strict=True))
+    return quat2mat(acc), np.asarray(pos, np.float64)
+
+
+def smooth_pelvis_clip(mats: NDArray[np.floating], places: NDArray[np.floating]) -> tuple[F64, F64]:
+    """:func:`smooth_pelvis` over a whole clip, ``(T, 3, 3)`` and ``(T, 3)``: the first
+    and last frames stand in for their missing neighbour, as the engine's first frame."""
+    m = np.asarray(mats, np.float64)
+    p = np.asarray(places, np.float64)
+    if len(m) < 2:
+        return m.copy(), p.copy()
+    prev_m, next_m = np.concatenate([m[:1], m[:-1]]), np.concatenate([m[1:], m[-1:]])
+    prev_p, next_p = np.concatenate([p[:1], p[:-1]]), np.concatenate([p[1:], p[-1:]])
+    return smooth_pelvis((prev_m, m, next_m), (prev_p, p, next_p))
