@@ -22,7 +22,7 @@ class EngineConfig:
             sample, ``R_c - min(R) > factor * r`` (see :mod:`posecast.online.engine.selectors`).
         ik_release_frames: frames to blend a released foot back to the network (20).
         ik_max_drift_m: release a foot lock early once the network's ankle is this far
-            from it, then lock again where the foot is (0.1 m; both chosen on the
+            from it, then lock again where the foot is (0.05 m; both chosen on the
             validation split, see docs/evaluation.md; ``None`` keeps every lock for the
             whole predicted contact, as the paper).
         stale_after_frames: frames without input before a player is marked stale (30).
