@@ -34,14 +34,13 @@ def smooth_pelvis(
     """The 1-2-1 average of three pelvis poses: world rotations ``(..., 3, 3)`` and
     positions ``(..., 3)`` at frames ``e - 1``, ``e``, ``e + 1`` (a missing neighbour is
     passed as frame ``e`` again) -> the rotation and position shown at frame ``e``."""
-    q = [mat2quat(np.asarray(m, np.float64)) for m in mats]
+    q = mat2quat(np.stack([np.asarray(m, np.float64) for m in mats]))  # (3, ..., 4)
     centre = q[1]
-    acc = np.zeros_like(centre)
-    for w, qi in zip(WEIGHTS, q, strict=True):
-        sign = np.where(np.sum(qi * centre, axis=-1, keepdims=True) < 0.0, -1.0, 1.0)
-        acc += w * sign * qi
+    w = np.asarray(WEIGHTS).reshape(3, *([1] * centre.ndim))
+    sign = np.where(np.sum(q * centre, axis=-1, keepdims=True) < 0.0, -1.0, 1.0)
+    acc = (w * sign * q).sum(axis=0)
     acc /= np.linalg.norm(acc, axis=-1, keepdims=True)
-    pos = sum(w * np.asarray(p, np.float64) for w, p in zip(WEIGHTS, places, strict=True))
+    pos = (w * np.stack([np.asarray(p, np.float64) for p in places])).sum(axis=0)
     return quat2mat(acc), np.asarray(pos, np.float64)
 
 

@@ -598,19 +598,25 @@ class Engine:
                 waist,
             )
             own = (m, p)
-        inv = np.swapaxes(own[0], -1, -2)
-        mats, places = [], []
-        for rows in (np.where(first, k, (k - 1) % L), np.full(len(slots), (k + 1) % L)):
-            m, p, _ = self._roots(
-                s["ring_pos"][rows, slots],
-                s["ring_quat"][rows, slots],
-                s["ring_rootm"][rows, slots],
-                s["ring_root"][rows, slots, samples] if self.layout.predicts_root else None,
-                1,
-                waist,
-            )
-            mats.append((m @ inv) @ root_mat)
-            places.append(root_pos + (p - own[1]))
+        # Both neighbours in one call: frame e - 1 (or e, on a first frame), then e + 1.
+        E = len(slots)
+        rows = np.concatenate([np.where(first, k, (k - 1) % L), np.full(E, (k + 1) % L)])
+        at = np.concatenate([slots, slots])
+        m, p, _ = self._roots(
+            s["ring_pos"][rows, at],
+            s["ring_quat"][rows, at],
+            s["ring_rootm"][rows, at],
+            s["ring_root"][rows, at, np.concatenate([samples, samples])]
+            if self.layout.predicts_root
+            else None,
+            1,
+            None if waist is None else np.concatenate([waist, waist]),
+        )
+        mats: NDArray[np.floating] = m.reshape(2, E, 3, 3)
+        places: NDArray[np.floating] = p.reshape(2, E, 3)
+        if root_own is not None:  # a blend: move the sample's own motion onto it
+            mats = (mats @ np.swapaxes(own[0], -1, -2)) @ root_mat
+            places = root_pos + (places - own[1])
         mat, pos = smooth_pelvis((mats[0], root_mat, mats[1]), (places[0], root_pos, places[1]))
         return mat.astype(np.float32), pos.astype(np.float32)
 
