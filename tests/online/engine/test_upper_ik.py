@@ -13,7 +13,12 @@ from posecast.geometry.rotations import aa2mat, mat2quat, quat2mat
 from posecast.online.engine.calibration import Calibration
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import PoseOut, TrackerFrame
-from posecast.online.engine.upper_ik import SPINE_REACH_M, reach_shift, solve_upper_body
+from posecast.online.engine.upper_ik import (
+    NECK_TWIST_SHARE,
+    SPINE_REACH_M,
+    reach_shift,
+    solve_upper_body,
+)
 from posecast.skeleton import LOWER_BODY, PARENTS, Joint, reference_offsets
 from posecast.tracking.features import TrackerSlot
 from tests.online.engine.conftest import BackendLoader
@@ -116,6 +121,32 @@ def test_targets_already_met_change_nothing() -> None:
     assert not limited.any()
     np.testing.assert_allclose(out_pos, pos, atol=1e-6)
     np.testing.assert_allclose(quat2mat(out_quat.astype(np.float64)), quat2mat(quat), atol=1e-6)
+
+
+def test_the_neck_takes_its_share_of_a_turn_of_the_head() -> None:
+    """A headset turned 40 degrees about the neck's bone from where the network had the
+    head (the head joint already on the headset): the head's world rotation becomes the
+    headset's, nothing moves, and the neck turns with it by NECK_TWIST_SHARE of the
+    40 degrees about its bone, the head's twist relative to the neck taking the rest."""
+    pos, quat = random_poses(6, seed=8)
+    tp, _ = trackers(pos, np.zeros((6, 4, 3)), quat)
+    mats = quat2mat(quat)
+    bone = pos[:, Joint.HEAD] - pos[:, Joint.NECK]
+    bone /= np.linalg.norm(bone, axis=-1, keepdims=True)
+    turn = aa2mat(bone * np.radians(40.0))
+    tq = quat[:, [Joint.HEAD, Joint.LEFT_HAND, Joint.RIGHT_HAND, Joint.PELVIS]].copy()
+    tq[:, TrackerSlot.HEAD] = mat2quat(turn @ mats[:, Joint.HEAD])
+    out_pos, out_quat, limited = solve_upper_body(pos, quat, tp, tq)
+    assert not limited.any()
+    np.testing.assert_allclose(out_pos, pos, atol=1e-6)
+    out = quat2mat(out_quat.astype(np.float64))
+    np.testing.assert_allclose(out[:, Joint.HEAD], quat2mat(tq[:, TrackerSlot.HEAD]), atol=1e-6)
+    neck_turn = aa2mat(bone * np.radians(40.0 * NECK_TWIST_SHARE))
+    np.testing.assert_allclose(out[:, Joint.NECK], neck_turn @ mats[:, Joint.NECK], atol=1e-6)
+    assert 0.3 < NECK_TWIST_SHARE < 1.0
+    others = [j for j in range(19) if j not in (Joint.NECK, Joint.HEAD)]
+    np.testing.assert_allclose(out[:, others], mats[:, others], atol=1e-6)
+    assert_fk_consistent(out_pos, out_quat)
 
 
 def side(shoulder: np.ndarray, target: np.ndarray, elbow: np.ndarray) -> np.ndarray:

@@ -11,7 +11,9 @@ local rotations gives (a joint that turns carries its whole subtree with it).
    two-bone solves (spine-chest against the rest of the chain, then chest-neck-head)
    put the head on the headset; each of ``SPINE``, ``CHEST``, ``NECK`` turns by the
    smallest rotation (a swing) that points its bone at its new child, carrying the
-   arms along. The head's world rotation becomes the headset's.
+   arms along. The head's world rotation becomes the headset's, and the neck turns
+   about its own bone by :data:`NECK_TWIST_SHARE` of what that changed in the head's
+   twist relative to it (the head stays where it is).
 2. **Arms**, from the shoulders where the chest now holds them: a two-bone solve
    (upper arm, forearm) puts the hand on the controller, the elbow in the plane of
    shoulder, target and the network's own elbow, on the network's side of the
@@ -33,7 +35,7 @@ import itertools
 import numpy as np
 from numpy.typing import NDArray
 
-from posecast.geometry.rotations import mat2quat, quat2mat
+from posecast.geometry.rotations import aa2mat, mat2quat, quat2mat
 from posecast.online.engine.ik import EPS as _EPS
 from posecast.online.engine.ik import norm3 as _norm
 from posecast.online.engine.ik import swing_mat
@@ -151,6 +153,36 @@ def reach_shift(positions: F64, head_target: F64) -> F64:
 SPINE_REACH_M = float(_BONE_M[[Joint.CHEST, Joint.NECK, Joint.HEAD]].sum()) - 0.01
 
 
+def _wrap(angle: F64) -> F64:
+    out: F64 = (angle + np.pi) % (2.0 * np.pi) - np.pi
+    return out
+
+
+def _twist(pos: F64, mat: F64, joint: int, child: int) -> F64:
+    """Per pose ``(E,)``, the twist (radians) about ``joint``'s bone (the line to
+    ``child``) of ``child``'s rotation relative to ``joint``'s."""
+    u, _ = _unit(pos[:, child] - pos[:, joint])  # (E, 3) the bone, world
+    m = mat[:, joint]
+    q = mat2quat(np.swapaxes(m, -1, -2) @ mat[:, child])  # the child's local rotation
+    a = np.einsum("eji,ej->ei", m, u)  # the bone in the joint's frame
+    return _wrap(2.0 * np.arctan2(np.einsum("ei,ei->e", q[:, :3], a), q[:, 3]))
+
+
+def _turn_bone(pos: F64, mat: F64, joint: int, child: int, angle: F64) -> None:
+    """Turn ``joint``'s world rotation about its own bone by ``angle (E,)``, in place:
+    ``child``, on the bone, stays where it is (and keeps its world rotation)."""
+    u, _ = _unit(pos[:, child] - pos[:, joint])
+    mat[:, joint] = aa2mat(u * angle[:, None]) @ mat[:, joint]
+
+
+# The share of the pass's change to the head's twist about the neck (the headset
+# turned left or right of where the network had the head) that the neck takes, the
+# head keeping the rest: a person turns the head with the neck, and the swing-only
+# spine solve, which left all of it to the head joint, wrung it. Chosen on the
+# validation split (docs/evaluation.md, "Rotations: the neck's share of a head turn").
+NECK_TWIST_SHARE = 0.65
+
+
 def solve_upper_body(
     positions: NDArray[np.floating],
     rotations: NDArray[np.floating],
@@ -203,7 +235,10 @@ def solve_upper_body(
     for (joint, child), placed in zip(itertools.pairwise(chain), (chest, neck, head), strict=True):
         _point_bone(pos, mat, joint, child, placed)
     tracker_mat = quat2mat(tq)  # (E, 4, 3, 3)
+    before = _twist(pos, mat, int(Joint.NECK), int(Joint.HEAD))
     mat[:, Joint.HEAD] = tracker_mat[:, TrackerSlot.HEAD]
+    after = _twist(pos, mat, int(Joint.NECK), int(Joint.HEAD))
+    _turn_bone(pos, mat, int(Joint.NECK), int(Joint.HEAD), NECK_TWIST_SHARE * _wrap(after - before))
 
     # 2. Both arms in one batch, from where the chest now holds the shoulders.
     upper, fore, hand = _ARM_UPPER, _ARM_FORE, _ARM_HAND
