@@ -314,6 +314,34 @@ def test_eval_user_error(tmp_path: Path, capsys, extra: list[str], code: str) ->
     user_error(capsys, rc, code)
 
 
+def test_data_clearance_prints_the_engines_table(bvh_dir: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "prepared"
+    assert main(["data", "prepare", "--bvh", str(bvh_dir), "--out", str(out)]) == 0
+    capsys.readouterr()
+    assert main(["data", "clearance", "--data", str(out), "--percentile", "50"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[1].split() == ["speed_m_s", "toe_frames", "clearance_m"]
+    assert lines[-2].startswith("SPEEDS_M_S = (0.125, ") and lines[-1].startswith("CLEARANCE_M")
+    rows = [ln.split() for ln in lines[2:-2]]
+    assert sum(int(r[1]) for r in rows) > 0  # the walk's toe-frames, binned
+    heights = [float(r[2]) for r in rows]
+    assert heights == sorted(heights) and heights[-1] > 0
+
+
+@pytest.mark.parametrize(
+    ("extra", "code"),
+    [
+        (["--split", "holdout"], "CONFIG_INVALID"),
+        (["--percentile", "101"], "CONFIG_INVALID"),
+        (["--percentile", "nan"], "CONFIG_INVALID"),
+        ([], "DATASET_INVALID"),  # --data names no directory
+    ],
+)
+def test_data_clearance_user_error(tmp_path: Path, capsys, extra: list[str], code: str) -> None:
+    rc = main(["data", "clearance", "--data", str(tmp_path / "nope"), *extra])
+    user_error(capsys, rc, code)
+
+
 def test_eval_of_a_directory_without_bvh_files(tmp_path: Path, capsys) -> None:
     user_error(capsys, main(["eval", "--bvh", str(tmp_path)]), "DATA_INVALID")
 

@@ -240,6 +240,36 @@ def _checkpoint(
 # --- Commands --------------------------------------------------------------------------
 
 
+def _cmd_data_clearance(args: argparse.Namespace) -> int:
+    from posecast.offline.dataset.split import SPLITS
+
+    if args.split not in SPLITS:
+        raise _config(f"--split {args.split!r} unknown", f"use one of {', '.join(SPLITS)}")
+    _finite("--percentile", args.percentile, "data clearance")
+    if not 0.0 <= args.percentile <= 100.0:
+        raise _config("--percentile must be within 0 to 100", "for example --percentile 5")
+    _manifest(args.data)
+    from posecast.offline.dataset.clearance import clearance_table
+    from posecast.offline.dataset.store import load_split
+    from posecast.offline.evaluation.runner import clip_truth
+
+    split = load_split(args.data, args.split)
+    if split.n_clips == 0:
+        raise _hinted(
+            DatasetError(f"the {args.split} split has no clips", path=args.data),
+            f"measure another --split (one of {', '.join(SPLITS)})",
+        )
+    clips = (clip_truth(split.clip(i))[1] for i in range(split.n_clips))
+    centres, heights, counts = clearance_table(clips, split.fps, args.percentile)
+    print(f"toe height, percentile {args.percentile:g}, {args.split} split ground truth")
+    print("speed_m_s  toe_frames  clearance_m")
+    for c, n, h in zip(centres, counts, heights, strict=True):
+        print(f"{c:9.3f}  {n:10d}  {h:11.3f}")
+    print(f"SPEEDS_M_S = {centres}")
+    print(f"CLEARANCE_M = {heights}")
+    return 0
+
+
 def _cmd_data_prepare(args: argparse.Namespace) -> int:
     if not (args.bvh or args.amc or args.hdm05):
         raise _config(
@@ -488,6 +518,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         outlier_factor=args.outlier_factor,
         upper_body_ik=not args.no_upper_ik,
         floor_ik=not args.no_floor_ik,
+        swing_clearance=not args.no_swing_clearance,
         pelvis_smoothing=not args.no_pelvis_smoothing,
         ik_max_drift_m=drift,
         ik_release_frames=release,
@@ -804,6 +835,16 @@ def build_parser() -> argparse.ArgumentParser:
     prep.add_argument("-v", "--verbose", action="store_true", help="log every file")
     prep.set_defaults(func=_cmd_data_prepare)
 
+    clear = data_sub.add_parser(
+        "clearance", help="how high real toes keep off the floor at each speed (the engine's table)"
+    )
+    clear.add_argument("--data", required=True, type=Path, help="prepared dataset directory")
+    clear.add_argument("--split", default="train", help="split to measure (default train)")
+    clear.add_argument(
+        "--percentile", type=float, default=5.0, help="height percentile per speed (default 5)"
+    )
+    clear.set_defaults(func=_cmd_data_clearance)
+
     train = sub.add_parser("train", help="train a network (needs posecast[train])")
     train.add_argument("network", choices=("cvae", "ae", "anomaly"))
     train.add_argument("--data", required=True, type=Path, help="prepared dataset directory")
@@ -918,6 +959,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="cvae_ik, ae_ik and cvae_ik_ssi without the floor pass (feet below y = 0 "
         "lifted onto it): the network's and the contact IK's own feet",
+    )
+    ev.add_argument(
+        "--no-swing-clearance",
+        action="store_true",
+        help="the floor pass without the swing clearance (a toe lifted to the height real "
+        "toes keep at its speed): only feet below y = 0 are lifted",
     )
     ev.add_argument(
         "--no-pelvis-smoothing",

@@ -55,6 +55,11 @@ class ServerConfig:
         "stream the feet where the network and the contact IK put them, below the floor "
         "(y = 0) included, instead of lifting them onto it",
     )
+    no_swing_clearance: bool = _opt(
+        False,
+        "lift only feet that are below the floor, not a toe that moves over it to the "
+        "height real toes keep at its speed (the swing clearance)",
+    )
     no_pelvis_smoothing: bool = _opt(
         False,
         "stream each pose on its own frame's pelvis instead of the 1-2-1 average with "

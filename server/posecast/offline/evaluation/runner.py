@@ -21,8 +21,9 @@ from posecast.offline.evaluation.reconstruct import (
     pose_from_rotations,
 )
 from posecast.online.engine.anomaly import AnomalyScorer
+from posecast.online.engine.clearance import clearance_lift, clip_toe_speed
 from posecast.online.engine.config import EngineConfig
-from posecast.online.engine.ik import floor_ik
+from posecast.online.engine.ik import floor_ik, floor_lift
 from posecast.online.engine.leg_ik import solve_legs, tracks_legs
 from posecast.online.engine.pelvis import smooth_pelvis_clip
 from posecast.online.engine.ssi import Engine
@@ -70,7 +71,7 @@ def _mean_leg_pose(meta: dict[str, Any]) -> np.ndarray | None:
     return None if mean is None else np.asarray(mean, dtype=np.float64).reshape(NUM_ROTATIONS, 6)
 
 
-def _truth(fr: Frames) -> tuple[np.ndarray, np.ndarray]:
+def clip_truth(fr: Frames) -> tuple[np.ndarray, np.ndarray]:
     """Ground-truth world rotations ``(T, 19, 3, 3)`` and positions of a clip."""
     root = quat2mat(fr["root_quat"].astype(np.float64))
     return pose_from_rotations(
@@ -117,7 +118,7 @@ def clip_tracks(
             np.asarray(features, np.float32),
         )
     kinds = layout.kinds()
-    pos, quat, acc = site_tracks(*(truth or _truth(fr)), fps)
+    pos, quat, acc = site_tracks(*(truth or clip_truth(fr)), fps)
     acc = acc + imu_noise(np.random.default_rng(seed), len(acc), acc_noise, acc_bias)
     values = np.where((kinds == Kind.INERTIAL)[:, None], acc, pos)
     features = clip_site_features(pos, quat, acc, kinds, fps).astype(np.float32)
@@ -146,9 +147,9 @@ def evaluate(
 
     ``cvae_ik`` and ``ae_ik`` are what the server would stream without SSI: the
     pelvis smoothing (``engine_cfg.pelvis_smoothing``), contact IK, the floor pass
-    (``engine_cfg.floor_ik``) and (when ``engine_cfg.upper_body_ik``, the default)
-    the engine's upper-body pass, so that ``cvae_ik_ssi`` against ``cvae_ik``
-    measures SSI alone.
+    (``engine_cfg.floor_ik``; with it the swing clearance, ``swing_clearance``) and
+    (when ``engine_cfg.upper_body_ik``, the default) the engine's upper-body pass, so
+    that ``cvae_ik_ssi`` against ``cvae_ik`` measures SSI alone.
     ``cvae_1sample`` is the network's raw pose.
     """
     player_layout = layout if isinstance(layout, TrackerSet) else Layout(layout)
@@ -164,7 +165,7 @@ def evaluate(
     mean_pose = _mean_leg_pose(base.meta)
     leg_rot = [int(j) - 1 for j in LOWER_BODY]  # rotation rows of the leg joints
     results: dict[str, Any] = {}
-    truth = [_truth(fr) for fr in clips]
+    truth = [clip_truth(fr) for fr in clips]
     tracks = [
         clip_tracks(fr, fps, player_layout, seed=i, truth=truth[i]) for i, fr in enumerate(clips)
     ]
@@ -216,7 +217,11 @@ def evaluate(
                 if name.endswith("_ik"):
                     contact_ik(wm, wp, con, engine_cfg.ik_release_frames, engine_cfg.ik_max_drift_m)
                     if engine_cfg.floor_ik:
-                        floor_ik(wm, wp)
+                        lift = floor_lift(wp)
+                        if engine_cfg.swing_clearance:
+                            speed = clip_toe_speed(wp, fps)
+                            lift = np.maximum(lift, clearance_lift(wp, speed))
+                        floor_ik(wm, wp, lift=lift)
                     if engine_cfg.upper_body_ik:
                         if tracker_set is not None:
                             wm, wp = _legs(wm, wp, tr, tracker_set)

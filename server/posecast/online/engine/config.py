@@ -33,7 +33,11 @@ class EngineConfig:
             research evaluation of the network's own upper body).
         floor_ik: lift a shown foot that is below the floor (``y = 0``) onto it
             (:func:`posecast.online.engine.ik.floor_ik`; default on, off for research
-            evaluation of the network's own legs).
+            evaluation of the network's own legs). With it, the swing clearance:
+        swing_clearance: lift a shown toe to the height real toes keep at its
+            horizontal speed (:mod:`posecast.online.engine.clearance`; default on,
+            chosen on the validation split, docs/evaluation.md, "Feet"; only with
+            ``floor_ik``).
         pelvis_smoothing: build the shown pose on the pelvis averaged over frames
             ``e - 1, e, e + 1`` (weights 1, 2, 1; needs ``lookahead >= 1``, adds no lag;
             :mod:`posecast.online.engine.pelvis`): default on, chosen on the validation
@@ -58,6 +62,7 @@ class EngineConfig:
     fps: float = 60.0
     upper_body_ik: bool = True
     floor_ik: bool = True
+    swing_clearance: bool = True
     pelvis_smoothing: bool = True
     latent_scale: float = 1.0
     home_factor: float | None = 1.0

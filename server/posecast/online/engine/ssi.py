@@ -15,7 +15,8 @@ Per tick, for all ``P`` players x ``N`` samples at once:
    transition the decoder re-run on the interpolated latent and hidden state
    (one more batched call), on the pelvis averaged with frames ``n - tau - 1`` and
    ``n - tau + 1`` (:mod:`posecast.online.engine.pelvis`), then that player's own
-   display IK, the floor pass, a tracker set's leg pass, then the upper-body pass
+   display IK, the floor pass (with the swing clearance,
+   :mod:`posecast.online.engine.clearance`), a tracker set's leg pass, then the upper-body pass
    (:mod:`posecast.online.engine.upper_ik`: head and hands on their trackers)
 
 The engine is pure: frames go in with :meth:`Engine.push`, :meth:`Engine.tick`
@@ -39,7 +40,7 @@ new sample is fully in place exactly at the frame where the outlier would have s
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -50,6 +51,7 @@ from posecast.geometry.rotations import mat2quat, quat2mat
 from posecast.online.engine.backend import Decoder, Pool, PoolIK
 from posecast.online.engine.batch_fk import pelvis_from_head32
 from posecast.online.engine.calibration import Calibration, WaistFilter, apply_all, orient_all
+from posecast.online.engine.clearance import TOES, clearance_lift, toe_speed
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.ik import LEGS, floor_ik, floor_lift
 from posecast.online.engine.leg_ik import solve_legs, tracks_legs
@@ -89,6 +91,10 @@ class _Player:
     missing: int = 0
     stale: bool = False
     transitions: int = 0
+    # The swing clearance's state: the shown toes' horizontal positions at the last
+    # emitted frame (None before the first) and their averaged speed.
+    toe_xz: F64 | None = None
+    toe_speed: NDArray[np.floating] = field(default_factory=lambda: np.zeros(2))
 
 
 class Engine:
@@ -530,7 +536,10 @@ class Engine:
         for n in _DISPLAY_IK:
             s[n][slots] = state[n]
         if self.cfg.floor_ik:
-            _floor(wp, rotations)
+            lift = floor_lift(wp)
+            if self.cfg.swing_clearance:
+                lift = np.maximum(lift, clearance_lift(wp, self._toe_speeds(emit, wp)))
+            _floor(wp, rotations, lift)
         reach_limited = np.zeros(E, np.bool_)
         if self.cfg.upper_body_ik and self._sites:
             # A tracker set's positional feet and knees: the legs onto their trackers.
@@ -568,6 +577,19 @@ class Engine:
             )
             for i, (p, sample, w) in enumerate(emit)
         ]
+
+    def _toe_speeds(self, emit: list[tuple[_Player, int, float]], wp: F32) -> NDArray[np.floating]:
+        """The emitted players' averaged toe speeds ``(E, 2)``
+        (:func:`~posecast.online.engine.clearance.toe_speed`) from their shown poses
+        ``wp`` before any lift; each player's state moves on to this frame."""
+        xz = wp[:, TOES][:, :, [0, 2]].astype(np.float64)
+        prev = np.stack(
+            [xz[i] if p.toe_xz is None else p.toe_xz for i, (p, _, _) in enumerate(emit)]
+        )
+        speed = toe_speed(prev, xz, np.stack([p.toe_speed for p, _, _ in emit]), self.cfg.fps)
+        for i, (p, _, _) in enumerate(emit):
+            p.toe_xz, p.toe_speed = xz[i], speed[i]
+        return speed
 
     def _smooth_roots(
         self,
@@ -621,10 +643,10 @@ class Engine:
         return mat.astype(np.float32), pos.astype(np.float32)
 
 
-def _floor(wp: F32, rotations: F32) -> None:
+def _floor(wp: F32, rotations: F32, lift: NDArray[np.floating]) -> None:
     """:func:`~posecast.online.engine.ik.floor_ik` on shown poses, in place: positions
-    ``(E, 19, 3)`` and world rotations ``(E, 19, 4)`` (the thighs' and shins' change)."""
-    lift = floor_lift(wp)
+    ``(E, 19, 3)`` and world rotations ``(E, 19, 4)`` (the thighs' and shins' change),
+    each foot lifted by ``lift (E, 2)``."""
     rows = np.flatnonzero(lift.any(axis=1))
     if not len(rows):
         return

@@ -97,6 +97,7 @@ class PosecastServer:
             fps=self.cfg.tick_hz,
             upper_body_ik=not self.cfg.no_upper_ik,
             floor_ik=not self.cfg.no_floor_ik,
+            swing_clearance=not self.cfg.no_swing_clearance,
             pelvis_smoothing=not self.cfg.no_pelvis_smoothing,
         )
         layouts, threads = self.cfg.served_layouts, self.cfg.engine_threads

@@ -1,0 +1,67 @@
+"""Swing clearance: a foot that moves over the floor is lifted off it.
+
+The network's feet sit low: on the validation split most toes the plausibility check
+flags as skating (``docs/evaluation.md``) are within a centimetre of the floor and
+moving at 1-3 m/s, often while a drifted contact lock blends back to the network's
+sliding ankle, where the true toe is 6-7 cm up, in its swing. Real feet keep a
+clearance that grows with their horizontal speed: :data:`CLEARANCE_M` is the 5th
+percentile of the ground-truth toe's height at each speed in :data:`SPEEDS_M_S`, on
+the training split (``posecast data clearance``). The shown pose's toe is lifted to
+that height for its speed, with the floor pass's two-bone solve (so a resting toe
+sits at its resting height, 2 cm, and a sliding one steps over the floor instead).
+
+The speed is the toe's horizontal speed between the previous shown frame and this one,
+measured before any lift (lifting moves a foot straight up: the horizontal track is
+the network's and the contact IK's), smoothed by an exponential average
+(:data:`SPEED_SMOOTHING`) so the lift does not follow each frame's speed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from posecast.online.engine.ik import FLOOR_MAX_LIFT_M, FLOOR_TOLERANCE_M, FLOOR_Y, LEGS
+
+F64 = NDArray[np.floating]
+
+TOES = [int(leg[3]) for leg in LEGS]
+# Speed bins (centres, m/s) and the toe's height (m above the floor) that 95 % of the
+# training split's ground-truth toes keep at that speed, made non-decreasing; measured
+# by `posecast data clearance --data prepared` (docs/evaluation.md, "Feet").
+SPEEDS_M_S = (0.125, 0.375, 0.625, 0.875, 1.125, 1.375, 1.75, 2.25, 2.75, 3.5, 5.0)
+CLEARANCE_M = (0.021, 0.022, 0.024, 0.028, 0.032, 0.037, 0.043, 0.05, 0.055, 0.055, 0.056)
+# Weight of the previous frame's speed in the average (chosen on the validation split).
+SPEED_SMOOTHING = 0.7
+
+
+def toe_speed(prev_xz: F64, toes_xz: F64, prev_speed: F64, fps: float) -> F64:
+    """The averaged horizontal speed ``(B, 2)`` of both toes: ``toes_xz (B, 2, 2)`` now,
+    ``prev_xz`` at the previous frame, ``prev_speed`` its average."""
+    raw = np.sqrt(np.sum((toes_xz - prev_xz) ** 2, axis=-1)) * fps
+    out: F64 = SPEED_SMOOTHING * prev_speed + (1.0 - SPEED_SMOOTHING) * raw
+    return out
+
+
+def clip_toe_speed(world_pos: F64, fps: float) -> F64:
+    """:func:`toe_speed` over a clip ``(T, 19, 3)`` frame by frame, ``(T, 2)``: 0 on the
+    first frame, as the engine starts a player."""
+    xz = np.asarray(world_pos, np.float64)[:, TOES][:, :, [0, 2]]
+    speed = np.zeros((len(xz), 2))
+    for t in range(1, len(xz)):
+        speed[t] = toe_speed(xz[t - 1], xz[t], speed[t - 1], fps)
+    return speed
+
+
+def clearance_lift(world_pos: F64, speed: F64, floor_y: float = FLOOR_Y) -> F64:
+    """How far each foot ``(B, 2)`` must rise for its toe to clear the floor by the
+    height real toes keep at ``speed (B, 2)``; 0 for a toe that does (within
+    :data:`~posecast.online.engine.ik.FLOOR_TOLERANCE_M`), and for one more than
+    :data:`~posecast.online.engine.ik.FLOOR_MAX_LIFT_M` below the floor (a tracking
+    space whose origin is not on the floor: the floor pass leaves those alone too)."""
+    toe_y = np.asarray(world_pos, np.float64)[:, TOES, 1]
+    lift = floor_y + np.interp(speed, SPEEDS_M_S, CLEARANCE_M) - toe_y
+    out: F64 = np.where(
+        (lift > FLOOR_TOLERANCE_M) & (floor_y - toe_y <= FLOOR_MAX_LIFT_M), lift, 0.0
+    )
+    return out

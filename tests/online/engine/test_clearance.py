@@ -1,0 +1,95 @@
+"""The swing clearance (:mod:`posecast.online.engine.clearance`): a toe moving over the
+floor is lifted to the height real toes keep at its speed, straight up, on every
+backend; the evaluation's clip-wise speed is the engine's frame-by-frame one."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from posecast.online.engine.clearance import (
+    CLEARANCE_M,
+    SPEED_SMOOTHING,
+    SPEEDS_M_S,
+    TOES,
+    clearance_lift,
+    clip_toe_speed,
+    toe_speed,
+)
+from posecast.online.engine.ik import FLOOR_MAX_LIFT_M
+from posecast.online.engine.ssi import Engine
+from posecast.online.engine.types import PoseOut, TrackerFrame
+from tests.online.engine.conftest import BackendLoader
+
+WalkFrames = Callable[..., list[TrackerFrame]]
+
+
+def _pose(toe_y: tuple[float, float]) -> np.ndarray:
+    pos = np.zeros((1, 19, 3))
+    pos[0, TOES, 1] = toe_y
+    return pos
+
+
+def test_the_table_rises_with_speed() -> None:
+    assert len(SPEEDS_M_S) == len(CLEARANCE_M)
+    assert np.all(np.diff(SPEEDS_M_S) > 0)
+    assert np.all(np.diff(CLEARANCE_M) >= 0)
+    assert 0.015 < CLEARANCE_M[0] < CLEARANCE_M[-1] < 0.08
+
+
+def test_the_speed_is_an_average_of_the_horizontal_steps() -> None:
+    prev = np.zeros((1, 2, 2))
+    now = np.array([[[0.01, 0.0], [0.0, 0.0]]])  # 1 cm in x: 0.6 m/s at 60 fps
+    speed = toe_speed(prev, now, np.array([[1.0, 1.0]]), 60.0)
+    np.testing.assert_allclose(
+        speed, [[SPEED_SMOOTHING + (1 - SPEED_SMOOTHING) * 0.6, SPEED_SMOOTHING]]
+    )
+    clip = np.zeros((3, 19, 3))
+    clip[:, TOES[0], 0] = [0.0, 0.01, 0.02]
+    clip[:, TOES[0], 1] = [0.5, -0.3, 0.2]  # heights do not count
+    want1 = (1 - SPEED_SMOOTHING) * 0.6
+    want = [[0.0, 0.0], [want1, 0.0], [SPEED_SMOOTHING * want1 + (1 - SPEED_SMOOTHING) * 0.6, 0]]
+    np.testing.assert_allclose(clip_toe_speed(clip, 60.0), want)
+
+
+def test_a_toe_is_lifted_to_its_speeds_clearance_and_no_further() -> None:
+    lift = clearance_lift(_pose((0.0, 0.0)), np.array([[0.0, 2.25]]))
+    np.testing.assert_allclose(lift, [[CLEARANCE_M[0], CLEARANCE_M[SPEEDS_M_S.index(2.25)]]])
+    # Already high enough, or within a millimetre: left alone.
+    assert np.all(clearance_lift(_pose((0.2, CLEARANCE_M[0] - 5e-4)), np.zeros((1, 2))) == 0)
+    # Far below the floor (a tracking space whose origin is at eye level): left alone.
+    deep = clearance_lift(_pose((-FLOOR_MAX_LIFT_M - 0.01, -0.05)), np.zeros((1, 2)))
+    np.testing.assert_allclose(deep, [[0.0, CLEARANCE_M[0] + 0.05]])
+
+
+def _run(engine: Engine, frames: list[TrackerFrame]) -> np.ndarray:
+    engine.add_player("p", seed=3)
+    out: list[PoseOut] = []
+    for f in frames:
+        engine.push("p", f)
+        out += engine.tick().poses
+    return np.stack([p.positions for p in out]).astype(np.float64)
+
+
+@pytest.mark.parametrize("layout", ["hmd3+waist", "hmd3"])
+def test_the_engine_lifts_sliding_toes_straight_up(
+    backend: BackendLoader, walk_frames: WalkFrames, layout: str
+) -> None:
+    """A walk, 8 cm lower (the synthetic walker's 4-point toes swing well clear of the
+    floor; lowered, they scrape it): with the clearance (the default) every shown toe is
+    at least at the clearance of its averaged speed, recomputed from the shown poses
+    (which shows the engine's speed is the evaluation's); without it some toes are
+    lower; the toes' horizontal tracks are the same either way (a lift is straight up)."""
+    frames = [TrackerFrame(f.seq, f.pos - [0.0, 0.08, 0.0], f.quat) for f in walk_frames(0)]
+    cfg = {"samples": 10, "lookahead": 2, "upper_body_ik": False}
+    on = _run(backend.engine(layout, **cfg), frames)
+    off = _run(backend.engine(layout, **cfg, swing_clearance=False), frames)
+    speed = clip_toe_speed(on, 60.0)
+    need = np.interp(speed, SPEEDS_M_S, CLEARANCE_M)
+    toe_on, toe_off = on[:, TOES], off[:, TOES]
+    assert np.all(toe_on[..., 1] >= need - 1.001e-3)
+    assert np.mean(toe_off[..., 1] < need - 5e-3) > 0.05  # the walk's toes do go low
+    np.testing.assert_allclose(toe_on[..., [0, 2]], toe_off[..., [0, 2]], atol=2e-3)
+    np.testing.assert_allclose(clip_toe_speed(off, 60.0), speed, atol=0.05)
