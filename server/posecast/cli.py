@@ -519,6 +519,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         upper_body_ik=not args.no_upper_ik,
         floor_ik=not args.no_floor_ik,
         swing_clearance=not args.no_swing_clearance,
+        knee_hinge=not args.no_knee_hinge,
         pelvis_smoothing=not args.no_pelvis_smoothing,
         ik_max_drift_m=drift,
         ik_release_frames=release,
@@ -965,6 +966,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="the floor pass without the swing clearance (a toe lifted to the height real "
         "toes keep at its speed): only feet below y = 0 are lifted",
+    )
+    ev.add_argument(
+        "--no-knee-hinge",
+        action="store_true",
+        help="cvae_ik, ae_ik and cvae_ik_ssi without the knee hinge (thigh and shin turned "
+        "so each knee bends as a hinge, no joint moving)",
     )
     ev.add_argument(
         "--no-pelvis-smoothing",

@@ -60,6 +60,11 @@ class ServerConfig:
         "lift only feet that are below the floor, not a toe that moves over it to the "
         "height real toes keep at its speed (the swing clearance)",
     )
+    no_knee_hinge: bool = _opt(
+        False,
+        "stream the knees as the network and the leg passes bend them, partly sideways "
+        "included, instead of turning thigh and shin so each knee bends as a hinge",
+    )
     no_pelvis_smoothing: bool = _opt(
         False,
         "stream each pose on its own frame's pelvis instead of the 1-2-1 average with "

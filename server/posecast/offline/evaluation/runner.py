@@ -23,6 +23,7 @@ from posecast.offline.evaluation.reconstruct import (
 from posecast.online.engine.anomaly import AnomalyScorer
 from posecast.online.engine.clearance import clearance_lift, clip_toe_speed
 from posecast.online.engine.config import EngineConfig
+from posecast.online.engine.hinge import hinge_knees
 from posecast.online.engine.ik import floor_ik, floor_lift
 from posecast.online.engine.leg_ik import solve_legs, tracks_legs
 from posecast.online.engine.pelvis import smooth_pelvis_clip
@@ -148,7 +149,8 @@ def evaluate(
     ``cvae_ik`` and ``ae_ik`` are what the server would stream without SSI: the
     pelvis smoothing (``engine_cfg.pelvis_smoothing``), contact IK, the floor pass
     (``engine_cfg.floor_ik``; with it the swing clearance, ``swing_clearance``) and
-    (when ``engine_cfg.upper_body_ik``, the default) the engine's upper-body pass, so
+    the knee hinge (``knee_hinge``) and (when ``engine_cfg.upper_body_ik``, the
+    default) the engine's upper-body pass, so
     that ``cvae_ik_ssi`` against ``cvae_ik`` measures SSI alone.
     ``cvae_1sample`` is the network's raw pose.
     """
@@ -222,9 +224,11 @@ def evaluate(
                             speed = clip_toe_speed(wp, fps)
                             lift = np.maximum(lift, clearance_lift(wp, speed))
                         floor_ik(wm, wp, lift=lift)
+                    if engine_cfg.upper_body_ik and tracker_set is not None:
+                        wm, wp = _legs(wm, wp, tr, tracker_set)
+                    if engine_cfg.knee_hinge:
+                        hinge_knees(wm, wp)
                     if engine_cfg.upper_body_ik:
-                        if tracker_set is not None:
-                            wm, wp = _legs(wm, wp, tr, tracker_set)
                         wm, wp = _upper_body(wm, wp, tr, not root_from_waist)
             gt_mat, gt = truth[ci]
             acc.add("mpjpe_cm", m.mpjpe(wp, gt))

@@ -38,6 +38,9 @@ class EngineConfig:
             horizontal speed (:mod:`posecast.online.engine.clearance`; default on,
             chosen on the validation split, docs/evaluation.md, "Feet"; only with
             ``floor_ik``).
+        knee_hinge: turn the shown thighs and shins so each knee bends as a hinge
+            about its thigh's axis, no joint moving (:mod:`posecast.online.engine.hinge`;
+            default on, off for research evaluation).
         pelvis_smoothing: build the shown pose on the pelvis averaged over frames
             ``e - 1, e, e + 1`` (weights 1, 2, 1; needs ``lookahead >= 1``, adds no lag;
             :mod:`posecast.online.engine.pelvis`): default on, chosen on the validation
@@ -63,6 +66,7 @@ class EngineConfig:
     upper_body_ik: bool = True
     floor_ik: bool = True
     swing_clearance: bool = True
+    knee_hinge: bool = True
     pelvis_smoothing: bool = True
     latent_scale: float = 1.0
     home_factor: float | None = 1.0

@@ -16,7 +16,8 @@ Per tick, for all ``P`` players x ``N`` samples at once:
    (one more batched call), on the pelvis averaged with frames ``n - tau - 1`` and
    ``n - tau + 1`` (:mod:`posecast.online.engine.pelvis`), then that player's own
    display IK, the floor pass (with the swing clearance,
-   :mod:`posecast.online.engine.clearance`), a tracker set's leg pass, then the upper-body pass
+   :mod:`posecast.online.engine.clearance`), a tracker set's leg pass, the knees
+   onto their hinges (:mod:`posecast.online.engine.hinge`), then the upper-body pass
    (:mod:`posecast.online.engine.upper_ik`: head and hands on their trackers)
 
 The engine is pure: frames go in with :meth:`Engine.push`, :meth:`Engine.tick`
@@ -53,6 +54,7 @@ from posecast.online.engine.batch_fk import pelvis_from_head32
 from posecast.online.engine.calibration import Calibration, WaistFilter, apply_all, orient_all
 from posecast.online.engine.clearance import TOES, clearance_lift, toe_speed
 from posecast.online.engine.config import EngineConfig
+from posecast.online.engine.hinge import hinge_knees_quat
 from posecast.online.engine.ik import LEGS, floor_ik, floor_lift
 from posecast.online.engine.leg_ik import solve_legs, tracks_legs
 from posecast.online.engine.pelvis import smooth_pelvis
@@ -549,6 +551,8 @@ class Engine:
                 wp[legs], rotations[legs], reach_limited[legs] = solve_legs(
                     wp[legs], rotations[legs], pos[legs], quat[legs], kinds[legs]
                 )
+        if self.cfg.knee_hinge:
+            hinge_knees_quat(wp, rotations)
         if self.cfg.upper_body_ik:
             # Head and hands onto their (calibrated) trackers, before the user's scale.
             free = None

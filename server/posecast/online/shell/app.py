@@ -98,6 +98,7 @@ class PosecastServer:
             upper_body_ik=not self.cfg.no_upper_ik,
             floor_ik=not self.cfg.no_floor_ik,
             swing_clearance=not self.cfg.no_swing_clearance,
+            knee_hinge=not self.cfg.no_knee_hinge,
             pelvis_smoothing=not self.cfg.no_pelvis_smoothing,
         )
         layouts, threads = self.cfg.served_layouts, self.cfg.engine_threads
