@@ -251,7 +251,7 @@ def _cmd_data_clearance(args: argparse.Namespace) -> int:
     _manifest(args.data)
     from posecast.offline.dataset.clearance import clearance_table
     from posecast.offline.dataset.store import load_split
-    from posecast.offline.evaluation.runner import clip_truth
+    from posecast.offline.evaluation.reconstruct import clip_truth
 
     split = load_split(args.data, args.split)
     if split.n_clips == 0:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from posecast.offline.dataset.clearance import EDGES_M_S, clearance_table, toe_speed_height
-from posecast.online.engine.clearance import CLEARANCE_M, SPEEDS_M_S, TOES
+from posecast.online.engine.clearance import SPEEDS_M_S, TOES
 
 
 def _clip(speed_m_s: float, heights: np.ndarray, fps: float = 60.0) -> np.ndarray:
@@ -35,8 +35,3 @@ def test_the_table_is_a_percentile_per_bin_never_falling_with_speed() -> None:
     assert heights[1:7] == (heights[0],) * 6  # empty bins: the one below
     assert heights[8:] == (heights[7],) * 3
     assert clearance_table([], 60.0) == (SPEEDS_M_S, (0.0,) * len(SPEEDS_M_S), (0,) * 11)
-
-
-def test_the_shipped_table_has_the_shape_the_measure_gives() -> None:
-    assert len(CLEARANCE_M) == len(SPEEDS_M_S)
-    assert list(CLEARANCE_M) == sorted(CLEARANCE_M)

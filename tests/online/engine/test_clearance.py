@@ -11,6 +11,7 @@ import pytest
 
 from posecast.online.engine.clearance import (
     CLEARANCE_M,
+    MAX_STEP_M_S,
     SPEED_SMOOTHING,
     SPEEDS_M_S,
     TOES,
@@ -21,6 +22,7 @@ from posecast.online.engine.clearance import (
 from posecast.online.engine.ik import FLOOR_MAX_LIFT_M
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import PoseOut, TrackerFrame
+from posecast.skeleton import Joint
 from tests.online.engine.conftest import BackendLoader
 
 WalkFrames = Callable[..., list[TrackerFrame]]
@@ -54,14 +56,33 @@ def test_the_speed_is_an_average_of_the_horizontal_steps() -> None:
     np.testing.assert_allclose(clip_toe_speed(clip, 60.0), want)
 
 
+def test_a_jump_of_the_whole_body_starts_the_speed_again_from_rest() -> None:
+    """Frames resuming after a gap, a new scale, a recentred space: a step faster than
+    any toe's is not a foot's speed, so no toe is lifted for it."""
+    prev = np.zeros((2, 2, 2))
+    now = np.zeros((2, 2, 2))
+    now[0, 0, 0] = 0.75  # one toe of pose 0 jumped 0.75 m: 45 m/s
+    now[1, :, 0] = (MAX_STEP_M_S - 0.1) / 60.0  # pose 1: both toes just under the limit
+    speed = toe_speed(prev, now, np.full((2, 2), 2.0), 60.0)
+    np.testing.assert_allclose(speed[0], [0.0, 0.0])  # both feet of that pose restart
+    want = SPEED_SMOOTHING * 2.0 + (1 - SPEED_SMOOTHING) * (MAX_STEP_M_S - 0.1)
+    np.testing.assert_allclose(speed[1], [want, want])
+
+
 def test_a_toe_is_lifted_to_its_speeds_clearance_and_no_further() -> None:
     lift = clearance_lift(_pose((0.0, 0.0)), np.array([[0.0, 2.25]]))
     np.testing.assert_allclose(lift, [[CLEARANCE_M[0], CLEARANCE_M[SPEEDS_M_S.index(2.25)]]])
     # Already high enough, or within a millimetre: left alone.
     assert np.all(clearance_lift(_pose((0.2, CLEARANCE_M[0] - 5e-4)), np.zeros((1, 2))) == 0)
-    # Far below the floor (a tracking space whose origin is at eye level): left alone.
+    # Far below the floor (a tracking space whose origin is at eye level), by the toe or
+    # by the ankle (as the floor pass decides): left alone.
     deep = clearance_lift(_pose((-FLOOR_MAX_LIFT_M - 0.01, -0.05)), np.zeros((1, 2)))
     np.testing.assert_allclose(deep, [[0.0, CLEARANCE_M[0] + 0.05]])
+    ankle_deep = _pose((0.0, 0.0))
+    ankle_deep[0, int(Joint.LEFT_FOOT), 1] = -FLOOR_MAX_LIFT_M - 0.01
+    np.testing.assert_allclose(
+        clearance_lift(ankle_deep, np.zeros((1, 2))), [[0.0, CLEARANCE_M[0]]]
+    )
 
 
 def _run(engine: Engine, frames: list[TrackerFrame]) -> np.ndarray:
@@ -90,6 +111,12 @@ def test_the_engine_lifts_sliding_toes_straight_up(
     need = np.interp(speed, SPEEDS_M_S, CLEARANCE_M)
     toe_on, toe_off = on[:, TOES], off[:, TOES]
     assert np.all(toe_on[..., 1] >= need - 1.001e-3)
+    # A toe the clearance lifted, where the floor pass alone lifted nothing, sits at the
+    # clearance of the speed recomputed here: the engine's speed is this one, not more.
+    feet = off[:, [int(f) for f in (Joint.LEFT_FOOT, Joint.RIGHT_FOOT)], 1]
+    lifted = (toe_on[..., 1] > toe_off[..., 1] + 1e-3) & (np.minimum(feet, toe_off[..., 1]) > 0)
+    assert lifted.sum() > 20
+    np.testing.assert_allclose(toe_on[..., 1][lifted], need[lifted], atol=1.5e-3)
     assert np.mean(toe_off[..., 1] < need - 5e-3) > 0.05  # the walk's toes do go low
     np.testing.assert_allclose(toe_on[..., [0, 2]], toe_off[..., [0, 2]], atol=2e-3)
     np.testing.assert_allclose(clip_toe_speed(off, 60.0), speed, atol=0.05)

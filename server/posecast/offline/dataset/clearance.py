@@ -14,7 +14,7 @@ from collections.abc import Iterable
 import numpy as np
 from numpy.typing import NDArray
 
-from posecast.online.engine.clearance import TOES
+from posecast.online.engine.clearance import TOES, toe_steps
 
 F64 = NDArray[np.floating]
 
@@ -25,9 +25,8 @@ EDGES_M_S = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0, 6.0)
 def toe_speed_height(positions: F64, fps: float) -> tuple[F64, F64]:
     """Both toes' horizontal speeds (m/s) from each frame to the next, and their heights
     at the later frame, flattened: ``(2 (T - 1),)`` each, for one clip ``(T, 19, 3)``."""
-    toes = np.asarray(positions, np.float64)[:, TOES]
-    speed = np.linalg.norm(np.diff(toes[:, :, [0, 2]], axis=0), axis=-1) * fps
-    return speed.ravel(), toes[1:, :, 1].ravel()
+    height = np.asarray(positions, np.float64)[1:, TOES, 1]
+    return toe_steps(positions, fps).ravel(), height.ravel()
 
 
 def clearance_table(

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from posecast.online.engine.clearance import toe_steps
 from posecast.skeleton import FEET, LOWER_BODY, PARENTS, TOES, Joint
 
 F64 = NDArray[np.floating]
@@ -41,8 +42,7 @@ def mpjae(pred: F64, gt: F64, fps: float) -> Acc:
 
 def foot_skate(pred: F64, gt_contacts: F64, fps: float) -> Acc:
     """Mean horizontal toe speed (cm/s) over the frames where the ground truth says contact."""
-    toes = pred[:, [int(t) for t in TOES]][:, :, [0, 2]]  # (T, 2, 2) x, z
-    speed = np.linalg.norm(np.diff(toes, axis=0), axis=-1) * fps  # (T-1, 2)
+    speed = toe_steps(pred, fps)  # (T-1, 2)
     on = gt_contacts[1:] > 0.5
     return float(speed[on].sum() * 100.0), int(on.sum())
 

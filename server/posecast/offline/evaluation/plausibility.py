@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from posecast.offline.evaluation.metrics import local_rotations
+from posecast.online.engine.clearance import toe_steps
 from posecast.skeleton import Joint
 
 F64 = NDArray[np.float64]
@@ -154,7 +155,7 @@ def toe_skate_speed(positions: F64, fps: float, th: Thresholds = DEFAULT) -> F64
     frame and when no toe is down, ``(T,)``."""
     p = np.asarray(positions, np.float64)
     toes = p[:, [int(_L[3]), int(_R[3])]]  # (T, 2, 3)
-    speed = np.linalg.norm(np.diff(toes[:, :, [0, 2]], axis=0), axis=-1) * fps  # (T-1, 2)
+    speed = toe_steps(p, fps)  # (T-1, 2)
     low = toes[:, :, 1] < th.contact_height_m
     down = low[1:] & low[:-1]
     out = np.zeros(len(p))

@@ -11,7 +11,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from posecast.geometry.fk import fk_mat
-from posecast.geometry.rotations import r6d2mat
+from posecast.geometry.rotations import quat2mat, r6d2mat
+from posecast.offline.dataset.frames import Frames
 from posecast.online.engine.ik import MAX_DRIFT_M, RELEASE_FRAMES, ContactIK
 from posecast.online.inference.artifact import Artifact
 from posecast.skeleton import NUM_ROTATIONS, reference_offsets
@@ -58,6 +59,14 @@ def pose_from_rotations(rot6d: F64, root_mat: F64, root_pos: F64) -> tuple[F64, 
     waist tracker's, or a model's own) -> world ``(mat, pos)``."""
     local = np.concatenate([root_mat[:, None], r6d2mat(rot6d)], axis=1)
     return fk_mat(local, root_pos, reference_offsets())
+
+
+def clip_truth(fr: Frames) -> tuple[F64, F64]:
+    """Ground-truth world rotations ``(T, 19, 3, 3)`` and positions of a clip."""
+    root = quat2mat(fr["root_quat"].astype(np.float64))
+    return pose_from_rotations(
+        fr["rot6d"].astype(np.float64), root, fr["root_pos"].astype(np.float64)
+    )
 
 
 def contact_ik(

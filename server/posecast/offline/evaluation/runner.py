@@ -15,6 +15,7 @@ from posecast.offline.dataset.frames import Frames
 from posecast.offline.evaluation import metrics as m
 from posecast.offline.evaluation import plausibility as pl
 from posecast.offline.evaluation.reconstruct import (
+    clip_truth,
     contact_ik,
     decode_ae,
     decode_cvae,
@@ -72,14 +73,6 @@ def _mean_leg_pose(meta: dict[str, Any]) -> np.ndarray | None:
     return None if mean is None else np.asarray(mean, dtype=np.float64).reshape(NUM_ROTATIONS, 6)
 
 
-def clip_truth(fr: Frames) -> tuple[np.ndarray, np.ndarray]:
-    """Ground-truth world rotations ``(T, 19, 3, 3)`` and positions of a clip."""
-    root = quat2mat(fr["root_quat"].astype(np.float64))
-    return pose_from_rotations(
-        fr["rot6d"].astype(np.float64), root, fr["root_pos"].astype(np.float64)
-    )
-
-
 @dataclass(frozen=True)
 class Tracks:
     """What a clip's player sends, frame by frame, in the engine's rows (4 tracker
@@ -119,7 +112,8 @@ def clip_tracks(
             np.asarray(features, np.float32),
         )
     kinds = layout.kinds()
-    pos, quat, acc = site_tracks(*(truth or clip_truth(fr)), fps)
+    true_mat, true_pos = truth or clip_truth(fr)
+    pos, quat, acc = site_tracks(true_mat, true_pos, fps)
     acc = acc + imu_noise(np.random.default_rng(seed), len(acc), acc_noise, acc_bias)
     values = np.where((kinds == Kind.INERTIAL)[:, None], acc, pos)
     features = clip_site_features(pos, quat, acc, kinds, fps).astype(np.float32)
@@ -213,7 +207,7 @@ def evaluate(
             else:
                 raise ValueError(f"unknown variant {name!r}")
             if name != "cvae_ik_ssi":
-                if name.endswith("_ik") and engine_cfg.pelvis_smoothing:
+                if name.endswith("_ik") and engine_cfg.pelvis_smoothing and engine_cfg.lookahead:
                     root_mat, root_pos = smooth_pelvis_clip(root_mat, root_pos)
                 wm, wp = pose_from_rotations(rot, root_mat, root_pos)
                 if name.endswith("_ik"):
