@@ -145,3 +145,31 @@ def test_without_look_ahead_the_pelvis_is_its_own(
     waist = np.stack([f.pos[TrackerSlot.WAIST] for f in frames])
     pelvis = np.stack([p.positions[Joint.PELVIS] for p in poses])
     np.testing.assert_allclose(pelvis, waist, atol=1e-5)
+
+
+def test_rest_frames_before_the_first_frame_are_no_neighbours(
+    backend: BackendLoader, walk_frames: WalkFrames
+) -> None:
+    """A player added a few ticks before its first frame stands at the origin in the
+    rest pose meanwhile; from its first real frame on, its pelvis (4 points: the waist
+    tracker's, smoothed) is the one a player added with its first frame streams: no
+    rest frame at the origin is smoothed into it. (The rest of the body differs: the
+    network's state stepped through the rest frames.)"""
+    frames = walk_frames(0)
+    cfg = {"samples": 4, "lookahead": 2}
+    direct = _run(backend.engine(**cfg), frames)
+    late = backend.engine(**cfg)
+    late.add_player("p", seed=3)
+    waited: list[PoseOut] = []
+    for _ in range(5):
+        waited += late.tick().poses
+    for f in frames:
+        late.push("p", f)
+        waited += late.tick().poses
+    real = [p for p in waited if p.seq >= 0]
+    assert len(waited) > len(real) and [p.seq for p in real] == [p.seq for p in direct]
+    for a, b in zip(real, direct, strict=True):
+        np.testing.assert_allclose(a.positions[Joint.PELVIS], b.positions[Joint.PELVIS], atol=1e-5)
+        np.testing.assert_allclose(
+            np.abs(a.rotations[Joint.PELVIS] @ b.rotations[Joint.PELVIS]), 1.0, atol=1e-5
+        )

@@ -467,13 +467,16 @@ class Engine:
         s = self.slots
         k = (self._tick - tau) % self._ring  # ring row of frame n - tau, for every player
         emit: list[tuple[_Player, int, float]] = []  # player, sample, weight
-        firsts: list[bool] = []  # frame e is the player's first: no frame e - 1
+        # Frame e is the player's first, or its first real one after rest frames (a
+        # player added before its first frame stands at the origin): no frame e - 1.
+        firsts: list[bool] = []
+        before = s["ring_seq"][(k - 1) % self._ring]
         for pid in self._order:
             p = self.players[pid]
             e = p.frames - tau
             if e < 0:
                 continue
-            firsts.append(e == 0)
+            firsts.append(e == 0 or bool(before[p.slot] < 0 <= s["ring_seq"][k, p.slot]))
             if p.plan is None or e < p.plan.start:
                 emit.append((p, p.plan.src if p.plan is not None else p.current, 0.0))
             else:
@@ -540,7 +543,8 @@ class Engine:
         if self.cfg.floor_ik:
             lift = floor_lift(wp)
             if self.cfg.swing_clearance:
-                lift = np.maximum(lift, clearance_lift(wp, self._toe_speeds(emit, wp)))
+                speed = self._toe_speeds(emit, wp, firsts)
+                lift = np.maximum(lift, clearance_lift(wp, speed))
             _floor(wp, rotations, lift)
         reach_limited = np.zeros(E, np.bool_)
         if self.cfg.upper_body_ik and self._sites:
@@ -582,15 +586,21 @@ class Engine:
             for i, (p, sample, w) in enumerate(emit)
         ]
 
-    def _toe_speeds(self, emit: list[tuple[_Player, int, float]], wp: F32) -> NDArray[np.floating]:
+    def _toe_speeds(
+        self, emit: list[tuple[_Player, int, float]], wp: F32, firsts: list[bool]
+    ) -> NDArray[np.floating]:
         """The emitted players' averaged toe speeds ``(E, 2)``
         (:func:`~posecast.online.engine.clearance.toe_speed`) from their shown poses
-        ``wp`` before any lift; each player's state moves on to this frame."""
+        ``wp`` before any lift; each player's state moves on to this frame. A player's
+        first (real) frame starts at rest."""
         xz = wp[:, TOES][:, :, [0, 2]].astype(np.float64)
-        prev = np.stack(
-            [xz[i] if p.toe_xz is None else p.toe_xz for i, (p, _, _) in enumerate(emit)]
-        )
-        speed = toe_speed(prev, xz, np.stack([p.toe_speed for p, _, _ in emit]), self.cfg.fps)
+        start = [p.toe_xz is None or first for (p, _, _), first in zip(emit, firsts, strict=True)]
+        prev = xz.copy()
+        for i, (p, _, _) in enumerate(emit):
+            if not start[i] and p.toe_xz is not None:
+                prev[i] = p.toe_xz
+        was = [np.zeros(2) if start[i] else p.toe_speed for i, (p, _, _) in enumerate(emit)]
+        speed = toe_speed(prev, xz, np.stack(was), self.cfg.fps)
         for i, (p, _, _) in enumerate(emit):
             p.toe_xz, p.toe_speed = xz[i], speed[i]
         return speed
