@@ -39,7 +39,7 @@ import socket
 import sys
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from posecast.errors import (
     AcclaimError,
@@ -52,6 +52,9 @@ from posecast.errors import (
     RigError,
 )
 from posecast.tracking.layouts import Layout
+
+if TYPE_CHECKING:  # the data stack loads only for the commands that need it
+    from posecast.offline.dataset.store import SplitData
 
 _HINT = "hint: "
 _E = TypeVar("_E", bound=PosecastError)
@@ -176,6 +179,22 @@ def _manifest(path: Path) -> dict[str, object]:
     return read_manifest(path)
 
 
+def _split(path: Path, name: str, verb: str) -> SplitData:
+    """The clips of split ``name`` of a prepared dataset (a :class:`DatasetError` with a
+    hint to ``verb`` another split if it has none)."""
+    from posecast.offline.dataset.split import SPLITS
+    from posecast.offline.dataset.store import load_split
+
+    _manifest(path)
+    split = load_split(path, name)
+    if split.n_clips == 0:
+        raise _hinted(
+            DatasetError(f"the {name} split has no clips", path=path),
+            f"{verb} another --split (one of {', '.join(SPLITS)})",
+        )
+    return split
+
+
 def _clip_frames(manifest: dict[str, object], split: str, path: Path) -> list[int]:
     """Frame counts of the clips of one split, from the manifest."""
     clips = manifest.get("clips")
@@ -248,17 +267,10 @@ def _cmd_data_clearance(args: argparse.Namespace) -> int:
     _finite("--percentile", args.percentile, "data clearance")
     if not 0.0 <= args.percentile <= 100.0:
         raise _config("--percentile must be within 0 to 100", "for example --percentile 5")
-    _manifest(args.data)
     from posecast.offline.dataset.clearance import clearance_table
-    from posecast.offline.dataset.store import load_split
     from posecast.offline.evaluation.reconstruct import clip_truth
 
-    split = load_split(args.data, args.split)
-    if split.n_clips == 0:
-        raise _hinted(
-            DatasetError(f"the {args.split} split has no clips", path=args.data),
-            f"measure another --split (one of {', '.join(SPLITS)})",
-        )
+    split = _split(args.data, args.split, "measure")
     clips = (clip_truth(split.clip(i))[1] for i in range(split.n_clips))
     centres, heights, counts = clearance_table(clips, split.fps, args.percentile)
     print(f"toe height, percentile {args.percentile:g}, {args.split} split ground truth")
@@ -554,15 +566,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         clips = [process_file(p, rigs)[1] for p in files]
         fps = 60.0
     else:
-        from posecast.offline.dataset.store import load_split
-
-        _manifest(args.data)
-        split = load_split(args.data, args.split)
-        if split.n_clips == 0:
-            raise _hinted(
-                DatasetError(f"the {args.split} split has no clips", path=args.data),
-                f"evaluate another --split (one of {', '.join(SPLITS)})",
-            )
+        split = _split(args.data, args.split, "evaluate")
         clips = [split.clip(i) for i in range(split.n_clips)]
         fps = split.fps
     report = evaluate(

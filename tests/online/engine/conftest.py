@@ -26,7 +26,7 @@ from posecast.online.engine.anomaly import AnomalyScorer
 from posecast.online.engine.backend import Decoder, Pool
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.ssi import Engine
-from posecast.online.engine.types import TrackerFrame
+from posecast.online.engine.types import PoseOut, TrackerFrame
 from posecast.online.inference.artifact import Artifact, load_artifact
 from posecast.online.inference.backends import Backend, load_backend
 from posecast.tracking.layouts import Layout
@@ -144,3 +144,14 @@ def make_engine(backend: BackendLoader) -> Callable[..., Engine]:
     the backend's).
     Tests pass small ``samples`` (10 or 20) to stay fast."""
     return backend.engine
+
+
+def run_player(engine: Engine, frames: list[TrackerFrame], seed: int = 3) -> list[PoseOut]:
+    """Join one player ``p`` (latents from ``seed``) and stream ``frames``, a tick each:
+    every pose the engine emits, in order."""
+    engine.add_player("p", seed=seed)
+    out: list[PoseOut] = []
+    for f in frames:
+        engine.push("p", f)
+        out += engine.tick().poses
+    return out

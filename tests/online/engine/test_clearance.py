@@ -21,9 +21,9 @@ from posecast.online.engine.clearance import (
 )
 from posecast.online.engine.ik import FLOOR_MAX_LIFT_M
 from posecast.online.engine.ssi import Engine
-from posecast.online.engine.types import PoseOut, TrackerFrame
+from posecast.online.engine.types import TrackerFrame
 from posecast.skeleton import Joint
-from tests.online.engine.conftest import BackendLoader
+from tests.online.engine.conftest import BackendLoader, run_player
 
 WalkFrames = Callable[..., list[TrackerFrame]]
 
@@ -86,12 +86,7 @@ def test_a_toe_is_lifted_to_its_speeds_clearance_and_no_further() -> None:
 
 
 def _run(engine: Engine, frames: list[TrackerFrame]) -> np.ndarray:
-    engine.add_player("p", seed=3)
-    out: list[PoseOut] = []
-    for f in frames:
-        engine.push("p", f)
-        out += engine.tick().poses
-    return np.stack([p.positions for p in out]).astype(np.float64)
+    return np.stack([p.positions for p in run_player(engine, frames)]).astype(np.float64)
 
 
 @pytest.mark.parametrize("layout", ["hmd3+waist", "hmd3"])

@@ -11,10 +11,9 @@ import numpy as np
 from posecast.geometry.fk import fk_mat, world2local_mat
 from posecast.geometry.rotations import aa2mat, mat2quat, quat2mat
 from posecast.online.engine.hinge import KNEES, hinge_knees, hinge_knees_quat
-from posecast.online.engine.ssi import Engine
-from posecast.online.engine.types import PoseOut, TrackerFrame
+from posecast.online.engine.types import TrackerFrame
 from posecast.skeleton import NUM_JOINTS, Joint, reference_offsets
-from tests.online.engine.conftest import BackendLoader
+from tests.online.engine.conftest import BackendLoader, run_player
 
 WalkFrames = Callable[..., list[TrackerFrame]]
 
@@ -80,23 +79,14 @@ def test_the_quaternion_form_is_the_matrix_form() -> None:
     np.testing.assert_allclose(quat2mat(quat.astype(np.float64)), mat, atol=1e-5)
 
 
-def _run(engine: Engine, frames: list[TrackerFrame]) -> list[PoseOut]:
-    engine.add_player("p", seed=3)
-    out: list[PoseOut] = []
-    for f in frames:
-        engine.push("p", f)
-        out += engine.tick().poses
-    return out
-
-
 def test_the_engine_streams_hinged_knees(backend: BackendLoader, walk_frames: WalkFrames) -> None:
     """A walk, 4 points: every bent knee (over 15 degrees) streamed on its hinge within
     0.05 degrees (float32), the same joints as without the hinge; without it some knees
     are off their hinges by more than a degree."""
     frames = walk_frames(0)
     cfg = {"samples": 10, "lookahead": 2, "upper_body_ik": False}
-    on = _run(backend.engine(**cfg), frames)
-    off = _run(backend.engine(**cfg, knee_hinge=False), frames)
+    on = run_player(backend.engine(**cfg), frames)
+    off = run_player(backend.engine(**cfg, knee_hinge=False), frames)
     pos_on = np.stack([p.positions for p in on])
     np.testing.assert_allclose(pos_on, np.stack([p.positions for p in off]), atol=1e-5)
     worst_on, worst_off = 0.0, 0.0

@@ -10,11 +10,10 @@ import numpy as np
 
 from posecast.geometry.rotations import aa2mat, mat2quat, quat2mat
 from posecast.online.engine.pelvis import smooth_pelvis, smooth_pelvis_clip
-from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import PoseOut, TrackerFrame
 from posecast.skeleton import LOWER_BODY, Joint
 from posecast.tracking.features import TrackerSlot
-from tests.online.engine.conftest import BackendLoader
+from tests.online.engine.conftest import BackendLoader, run_player
 
 WalkFrames = Callable[..., list[TrackerFrame]]
 
@@ -72,15 +71,6 @@ def _shaky(frames: list[TrackerFrame], seed: int) -> list[TrackerFrame]:
     return out
 
 
-def _run(engine: Engine, frames: list[TrackerFrame]) -> list[PoseOut]:
-    engine.add_player("p", seed=3)
-    out: list[PoseOut] = []
-    for f in frames:
-        engine.push("p", f)
-        out += engine.tick().poses
-    return out
-
-
 def _jerk(pos: np.ndarray) -> float:
     return float(np.linalg.norm(np.diff(pos, 3, axis=0), axis=-1).mean())
 
@@ -95,8 +85,8 @@ def test_the_engine_streams_the_smoothed_pelvis_without_lag(
     the pelvis is the waist tracker's."""
     frames = _shaky(walk_frames(0), seed=1)
     cfg = {"samples": 10, "lookahead": 2, "upper_body_ik": False}
-    on = _run(backend.engine(**cfg), frames)
-    off = _run(backend.engine(**cfg, pelvis_smoothing=False), frames)
+    on = run_player(backend.engine(**cfg), frames)
+    off = run_player(backend.engine(**cfg, pelvis_smoothing=False), frames)
     assert [p.seq for p in on] == [p.seq for p in off] == [f.seq for f in frames[:-2]]
     waist = np.stack([f.pos[TrackerSlot.WAIST] for f in frames[:-2]])
     pelvis_off = np.stack([p.positions[Joint.PELVIS] for p in off])
@@ -123,8 +113,8 @@ def test_the_headset_only_engine_smooths_its_own_pelvis(
     of the decoder's own pelvis, as the unsmoothed engine streams it."""
     frames = walk_frames(1)
     cfg = {"samples": 1, "lookahead": 1, "upper_body_ik": False}
-    on = _run(backend.engine("hmd3", **cfg), frames)
-    off = _run(backend.engine("hmd3", **cfg, pelvis_smoothing=False), frames)
+    on = run_player(backend.engine("hmd3", **cfg), frames)
+    off = run_player(backend.engine("hmd3", **cfg, pelvis_smoothing=False), frames)
     assert [p.seq for p in on] == [p.seq for p in off]
     m_off = quat2mat(np.stack([p.rotations[Joint.PELVIS] for p in off]).astype(np.float64))
     p_off = np.stack([p.positions[Joint.PELVIS] for p in off]).astype(np.float64)
@@ -141,7 +131,7 @@ def test_without_look_ahead_the_pelvis_is_its_own(
     backend: BackendLoader, walk_frames: WalkFrames
 ) -> None:
     frames = _shaky(walk_frames(2), seed=2)
-    poses = _run(backend.engine(samples=4, lookahead=0, upper_body_ik=False), frames)
+    poses = run_player(backend.engine(samples=4, lookahead=0, upper_body_ik=False), frames)
     waist = np.stack([f.pos[TrackerSlot.WAIST] for f in frames])
     pelvis = np.stack([p.positions[Joint.PELVIS] for p in poses])
     np.testing.assert_allclose(pelvis, waist, atol=1e-5)
@@ -157,7 +147,7 @@ def test_rest_frames_before_the_first_frame_are_no_neighbours(
     network's state stepped through the rest frames.)"""
     frames = walk_frames(0)
     cfg = {"samples": 4, "lookahead": 2}
-    direct = _run(backend.engine(**cfg), frames)
+    direct = run_player(backend.engine(**cfg), frames)
     late = backend.engine(**cfg)
     late.add_player("p", seed=3)
     waited: list[PoseOut] = []
