@@ -142,10 +142,10 @@ def evaluate(
 
     ``cvae_ik`` and ``ae_ik`` are what the server would stream without SSI: the
     pelvis smoothing (``engine_cfg.pelvis_smoothing``), contact IK, the floor pass
-    (``engine_cfg.floor_ik``; with it the swing clearance, ``swing_clearance``) and
-    the knee hinge (``knee_hinge``) and (when ``engine_cfg.upper_body_ik``, the
-    default) the engine's upper-body pass, so
-    that ``cvae_ik_ssi`` against ``cvae_ik`` measures SSI alone.
+    (``engine_cfg.floor_ik``; with it the swing clearance, ``swing_clearance``), the
+    knee hinge (``knee_hinge``) and (when ``engine_cfg.upper_body_ik``, the default)
+    the engine's upper-body pass, so that ``cvae_ik_ssi`` against ``cvae_ik``
+    measures SSI alone.
     ``cvae_1sample`` is the network's raw pose.
     """
     player_layout = layout if isinstance(layout, TrackerSet) else Layout(layout)

@@ -22,8 +22,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from posecast.geometry.rotations import mat2quat, quat2mat
+from posecast.geometry.rotations import aa2mat, mat2quat, quat2mat
 from posecast.online.engine.ik import cross3, unit3
+from posecast.online.engine.upper_ik import _wrap
 from posecast.skeleton import Joint
 
 F64 = NDArray[np.float64]
@@ -46,27 +47,10 @@ _SPAN = np.sin(np.radians(15.0)) - _STRAIGHT
 _FLIP, _FLIP_SPAN = np.radians(90.0), np.radians(30.0)
 
 
-def _turn_about(axis: F64, angle: F64) -> F64:
-    """Rotations ``(B, 3, 3)`` by ``angle (B,)`` about unit ``axis (B, 3)`` (Rodrigues)."""
-    x, y, z = np.moveaxis(axis, -1, 0)
-    c, s = np.cos(angle), np.sin(angle)
-    k = 1.0 - c
-    return np.stack(
-        [
-            c + x * x * k, x * y * k - z * s, x * z * k + y * s,
-            y * x * k + z * s, c + y * y * k, y * z * k - x * s,
-            z * x * k - y * s, z * y * k + x * s, c + z * z * k,
-        ],
-        axis=-1,
-    ).reshape(*angle.shape, 3, 3)  # fmt: skip
-
-
 def _twist_angle(rot: F64, axis: F64) -> F64:
     """The angle ``(B,)`` of the twist part of ``rot (B, 3, 3)`` about unit ``axis``."""
     q = mat2quat(rot)
-    angle = 2.0 * np.arctan2(np.einsum("bi,bi->b", q[:, :3], axis), q[:, 3])
-    out: F64 = (angle + np.pi) % (2.0 * np.pi) - np.pi
-    return out
+    return _wrap(2.0 * np.arctan2(np.einsum("bi,bi->b", q[:, :3], axis), q[:, 3]))
 
 
 def hinge_knees(mat: F64, pos: F64) -> None:
@@ -87,11 +71,11 @@ def hinge_knees(mat: F64, pos: F64) -> None:
         # A shin in front of its thigh (a knee bent backward) would need the thigh
         # turned half round: such knees fade back to the network's.
         weight = weight * np.clip((_FLIP - np.abs(alpha)) / _FLIP_SPAN, 0.0, 1.0)
-        Rt = _turn_about(a, alpha * weight) @ Rt
+        Rt = aa2mat(a * (alpha * weight)[:, None]) @ Rt
         Rs = mat[:, shin]
-        hinged = Rt @ _turn_about(np.broadcast_to(_AXIS, a.shape), np.arccos(cos))
+        hinged = Rt @ aa2mat(_AXIS * np.arccos(cos)[:, None])
         beta = _twist_angle(hinged @ np.swapaxes(Rs, -1, -2), f)
-        mat[:, thigh], mat[:, shin] = Rt, _turn_about(f, beta * weight) @ Rs
+        mat[:, thigh], mat[:, shin] = Rt, aa2mat(f * (beta * weight)[:, None]) @ Rs
 
 
 def hinge_knees_quat(positions: NDArray[np.floating], rotations: NDArray[np.floating]) -> None:

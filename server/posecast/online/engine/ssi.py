@@ -594,13 +594,11 @@ class Engine:
         ``wp`` before any lift; each player's state moves on to this frame. A player's
         first (real) frame starts at rest."""
         xz = wp[:, TOES][:, :, [0, 2]].astype(np.float64)
-        start = [p.toe_xz is None or first for (p, _, _), first in zip(emit, firsts, strict=True)]
-        prev = xz.copy()
-        for i, (p, _, _) in enumerate(emit):
-            if not start[i] and p.toe_xz is not None:
-                prev[i] = p.toe_xz
-        was = [np.zeros(2) if start[i] else p.toe_speed for i, (p, _, _) in enumerate(emit)]
-        speed = toe_speed(prev, xz, np.stack(was), self.cfg.fps)
+        prev, was = xz.copy(), np.zeros((len(emit), 2))  # at rest, where a player starts
+        for i, ((p, _, _), first) in enumerate(zip(emit, firsts, strict=True)):
+            if p.toe_xz is not None and not first:
+                prev[i], was[i] = p.toe_xz, p.toe_speed
+        speed = toe_speed(prev, xz, was, self.cfg.fps)
         for i, (p, _, _) in enumerate(emit):
             p.toe_xz, p.toe_speed = xz[i], speed[i]
         return speed
