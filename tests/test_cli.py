@@ -342,6 +342,27 @@ def test_data_clearance_user_error(tmp_path: Path, capsys, extra: list[str], cod
     user_error(capsys, rc, code)
 
 
+def test_data_wrists_prints_the_wrists_bend(bvh_dir: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "prepared"
+    assert main(["data", "prepare", "--bvh", str(bvh_dir), "--out", str(out)]) == 0
+    capsys.readouterr()
+    assert main(["data", "wrists", "--data", str(out), "--split", "train"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    stats = {ln.split()[0]: float(ln.split()[1]) for ln in lines[1:]}
+    assert list(stats) == ["hand_frames", "mean_deg", "median_deg", "p90_deg", "p99_deg"]
+    assert stats["hand_frames"] > 0
+    assert 0.0 <= stats["median_deg"] <= stats["p90_deg"] <= stats["p99_deg"] <= 180.0
+
+
+@pytest.mark.parametrize(
+    ("extra", "code"),
+    [(["--split", "holdout"], "CONFIG_INVALID"), ([], "DATASET_INVALID")],
+)
+def test_data_wrists_user_error(tmp_path: Path, capsys, extra: list[str], code: str) -> None:
+    rc = main(["data", "wrists", "--data", str(tmp_path / "nope"), *extra])
+    user_error(capsys, rc, code)
+
+
 def test_eval_of_a_directory_without_bvh_files(tmp_path: Path, capsys) -> None:
     user_error(capsys, main(["eval", "--bvh", str(tmp_path)]), "DATA_INVALID")
 

@@ -282,6 +282,22 @@ def _cmd_data_clearance(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_data_wrists(args: argparse.Namespace) -> int:
+    from posecast.offline.dataset.split import SPLITS
+
+    if args.split not in SPLITS:
+        raise _config(f"--split {args.split!r} unknown", f"use one of {', '.join(SPLITS)}")
+    from posecast.offline.dataset.wrists import bend_summary
+    from posecast.offline.evaluation.reconstruct import clip_truth
+
+    split = _split(args.data, args.split, "measure")
+    stats = bend_summary(clip_truth(split.clip(i)) for i in range(split.n_clips))
+    print(f"wrist bend (forearm against a straight wrist), {args.split} split ground truth")
+    for key, value in stats.items():
+        print(f"{key:12s} {value:10.1f}")
+    return 0
+
+
 def _cmd_data_prepare(args: argparse.Namespace) -> int:
     if not (args.bvh or args.amc or args.hdm05):
         raise _config(
@@ -521,6 +537,8 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     (backend,) = _backends("--backend", args.backend, "eval")
     drift = _float_or_off("--ik-max-drift", args.ik_max_drift, ssi_defaults.ik_max_drift_m)
     release = ssi_defaults.ik_release_frames
+    wrist = ssi_defaults.wrist_elbow if args.wrist_elbow is None else args.wrist_elbow
+    _finite("--wrist-elbow", wrist, "eval")
     if args.ik_release_frames is not None:
         _at_least("--ik-release-frames", args.ik_release_frames, 1, "eval")
         release = args.ik_release_frames
@@ -532,6 +550,9 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         floor_ik=not args.no_floor_ik,
         swing_clearance=not args.no_swing_clearance,
         knee_hinge=not args.no_knee_hinge,
+        wrist_elbow=wrist,
+        elbow_hinge=not args.no_elbow_hinge,
+        hand_reach=not args.no_hand_reach,
         pelvis_smoothing=not args.no_pelvis_smoothing,
         ik_max_drift_m=drift,
         ik_release_frames=release,
@@ -850,6 +871,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     clear.set_defaults(func=_cmd_data_clearance)
 
+    wrists = data_sub.add_parser(
+        "wrists", help="how far real wrists bend (behind the engine's elbow hint)"
+    )
+    wrists.add_argument("--data", required=True, type=Path, help="prepared dataset directory")
+    wrists.add_argument("--split", default="val", help="split to measure (default val)")
+    wrists.set_defaults(func=_cmd_data_wrists)
+
     train = sub.add_parser("train", help="train a network (needs posecast[train])")
     train.add_argument("network", choices=("cvae", "ae", "anomaly"))
     train.add_argument("--data", required=True, type=Path, help="prepared dataset directory")
@@ -970,6 +998,26 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="the floor pass without the swing clearance (a toe lifted to the height real "
         "toes keep at its speed): only feet below y = 0 are lifted",
+    )
+    ev.add_argument(
+        "--wrist-elbow",
+        type=float,
+        default=None,
+        metavar="SHARE",
+        help="cvae_ik, ae_ik and cvae_ik_ssi: the share of each elbow's placement taken "
+        "from its controller's rotation, 0 to 1 (default 0.75; 0: the network's elbow)",
+    )
+    ev.add_argument(
+        "--no-elbow-hinge",
+        action="store_true",
+        help="cvae_ik, ae_ik and cvae_ik_ssi without the elbow hinge (upper arm and forearm "
+        "turned so each elbow bends as a hinge, no joint moving)",
+    )
+    ev.add_argument(
+        "--no-hand-reach",
+        action="store_true",
+        help="headset-only and sites players without a waist: leave the guessed pelvis "
+        "where the headset puts it, not moved toward a controller beyond the arm",
     )
     ev.add_argument(
         "--no-knee-hinge",

@@ -19,6 +19,7 @@ from typing import Any
 from posecast.errors import ConfigError
 from posecast.online.auth.tokens import new_secret
 from posecast.online.engine.backend import BACKENDS
+from posecast.online.engine.upper_ik import WRIST_ELBOW_SHARE
 from posecast.online.protocol.messages import Limits
 from posecast.tracking.layouts import Layout
 
@@ -64,6 +65,21 @@ class ServerConfig:
         False,
         "stream the knees as the network and the leg passes bend them, partly sideways "
         "included, instead of turning thigh and shin so each knee bends as a hinge",
+    )
+    no_elbow_hinge: bool = _opt(
+        False,
+        "stream the elbows as the upper-body pass bends them, twisted about the upper arm "
+        "included, instead of turning upper arm and forearm so each elbow bends as a hinge",
+    )
+    wrist_elbow: float = _opt(
+        WRIST_ELBOW_SHARE,
+        "share of each shown elbow's placement taken from its controller's rotation (a "
+        "straight wrist), the rest from the network's elbow; 0 for the network's alone",
+    )
+    no_hand_reach: bool = _opt(
+        False,
+        "leave a headset-only player's guessed pelvis where the headset puts it instead "
+        "of moving it horizontally toward a controller beyond the arm's reach",
     )
     no_pelvis_smoothing: bool = _opt(
         False,
@@ -150,6 +166,8 @@ class ServerConfig:
                 raise ConfigError(f"{name} must be > 0")
         if self.socket_sndbuf_bytes < 0:
             raise ConfigError("socket_sndbuf_bytes must be >= 0")
+        if not 0.0 <= self.wrist_elbow <= 1.0:
+            raise ConfigError("wrist_elbow must be a share between 0 and 1")
         if self.lookahead < 0:
             raise ConfigError("lookahead must be >= 0")
         if self.backend not in BACKENDS:

@@ -1,6 +1,7 @@
-"""The knee hinge (:mod:`posecast.online.engine.hinge`): a knee bent partly sideways is
-turned onto its hinge with no joint moving; a straight or backward-bent knee is left
-alone; the engine streams hinged knees on every backend."""
+"""The knee and elbow hinges (:mod:`posecast.online.engine.hinge`): a knee or elbow bent
+partly sideways is turned onto its hinge with no joint moving; a straight or
+backward-bent one is left alone; the engine streams hinged knees and elbows on every
+backend."""
 
 from __future__ import annotations
 
@@ -10,7 +11,15 @@ import numpy as np
 
 from posecast.geometry.fk import fk_mat, world2local_mat
 from posecast.geometry.rotations import aa2mat, mat2quat, quat2mat
-from posecast.online.engine.hinge import KNEES, hinge_knees, hinge_knees_quat
+from posecast.online.engine.hinge import (
+    ELBOW_AXES,
+    ELBOWS,
+    KNEES,
+    hinge_elbows,
+    hinge_elbows_quat,
+    hinge_knees,
+    hinge_knees_quat,
+)
 from posecast.online.engine.types import TrackerFrame
 from posecast.skeleton import NUM_JOINTS, Joint, reference_offsets
 from tests.online.engine.conftest import BackendLoader, run_player
@@ -105,3 +114,78 @@ def test_the_engine_streams_hinged_knees(backend: BackendLoader, walk_frames: Wa
                 worst_off = max(worst_off, worst)
     assert worst_on < 0.05
     assert worst_off > 1.0
+
+
+# --- elbows ---------------------------------------------------------------------------
+
+
+def _elbow_poses(bend_deg: float, off_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """Poses whose elbows flex ``bend_deg`` about their hinge axis (``ELBOW_AXES``),
+    then turn ``off_deg`` about the upper arm's bone (off the hinge), the upper arms
+    swung a little; both arms."""
+    local = np.broadcast_to(np.eye(3), (1, NUM_JOINTS, 3, 3)).copy()
+    rng = np.random.default_rng(1)
+    for (upper, fore, _), axis, bone in zip(
+        ELBOWS, ELBOW_AXES, ([1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]), strict=True
+    ):
+        local[:, upper] = aa2mat(rng.normal(0.0, 0.3, (1, 3)))
+        hinged = aa2mat(axis[None] * np.radians(bend_deg))
+        local[:, fore] = aa2mat(np.asarray(bone)[None] * np.radians(off_deg)) @ hinged
+    root = np.array([[0.0, 0.95, 0.0]])
+    mat, pos = fk_mat(local, root, reference_offsets())
+    return mat, pos
+
+
+def _off_elbow_hinge_deg(mat: np.ndarray) -> list[float]:
+    out = []
+    for (upper, fore, _), axis in zip(ELBOWS, ELBOW_AXES, strict=True):
+        q = mat2quat(np.swapaxes(mat[:, upper], -1, -2) @ mat[:, fore])[0]
+        along = np.dot(q[:3], axis)
+        twist = np.array([*(along * axis), q[3]])
+        twist /= np.linalg.norm(twist)
+        out.append(float(np.degrees(2.0 * np.arccos(min(1.0, abs(np.dot(q, twist)))))))
+    return out
+
+
+def test_an_elbow_off_its_hinge_goes_onto_it_and_nothing_moves() -> None:
+    """An elbow flexed 70 degrees and turned 30 off its hinge: the upper arm turns about
+    its bone, the elbow ends on its hinge, no joint moves, the hands keep their world
+    rotations (the controllers')."""
+    mat, pos = _elbow_poses(70.0, 30.0)
+    assert min(_off_elbow_hinge_deg(mat)) > 20.0
+    hands = mat[:, [int(Joint.LEFT_HAND), int(Joint.RIGHT_HAND)]].copy()
+    hinge_elbows(mat, pos)
+    assert max(_off_elbow_hinge_deg(mat)) < 1e-4
+    _, again = fk_mat(world2local_mat(mat), pos[:, 0], reference_offsets())
+    np.testing.assert_allclose(again, pos, atol=1e-9)
+    np.testing.assert_allclose(mat[:, [int(Joint.LEFT_HAND), int(Joint.RIGHT_HAND)]], hands)
+    quat = mat2quat(_elbow_poses(70.0, 30.0)[0]).astype(np.float32)
+    hinge_elbows_quat(pos.astype(np.float32), quat)
+    np.testing.assert_allclose(quat2mat(quat.astype(np.float64)), mat, atol=1e-5)
+
+
+def test_a_hinged_or_straight_elbow_is_left_alone() -> None:
+    for bend, off in ((60.0, 0.0), (2.0, 30.0)):
+        mat, pos = _elbow_poses(bend, off)
+        want = mat.copy()
+        hinge_elbows(mat, pos)
+        np.testing.assert_allclose(mat, want, atol=1e-9)
+
+
+def test_the_engine_streams_hinged_elbows(backend: BackendLoader, walk_frames: WalkFrames) -> None:
+    """A walk, 4 points: the streamed pose is the one without the elbow hinge with its
+    elbows then put onto their hinges (the last pass), positions unchanged; and the
+    hinge changed something."""
+    frames = walk_frames(0)[:40]
+    on, off = (
+        run_player(backend.engine(samples=4, lookahead=2, elbow_hinge=e), frames)
+        for e in (True, False)
+    )
+    pos = np.stack([p.positions for p in off])
+    quat = np.stack([p.rotations for p in off])
+    np.testing.assert_array_equal(np.stack([p.positions for p in on]), pos)
+    hinged = quat.copy()
+    hinge_elbows_quat(pos, hinged)
+    got = np.stack([p.rotations for p in on])
+    np.testing.assert_allclose(quat2mat(got), quat2mat(hinged), atol=1e-5)
+    assert np.abs(quat2mat(got) - quat2mat(quat)).max() > 1e-2

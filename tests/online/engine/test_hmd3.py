@@ -107,6 +107,52 @@ def test_the_pelvis_comes_from_the_decoder_under_the_head(
     assert np.all(below > 0.3)  # the body hangs from the head, not from a waist tracker
 
 
+def test_a_guessed_pelvis_follows_a_controller_held_out_of_reach(
+    hmd3_engine: Callable[..., Engine], walk_frames: WalkFrames
+) -> None:
+    """The left controller held 40 cm further out to the left than the walk's hand
+    (beyond the arm), the headset 20 cm lower (the random decoder stands its pelvis
+    0.9 m up, under the head, whose spine then reaches the headset): with
+    ``hand_reach`` (the default) the streamed body moves toward it horizontally
+    before its feet are planted, and the hand ends nearer the controller (on average:
+    the random decoder's arms are anywhere); with ``hand_reach=False`` the pelvis is
+    where the head alone puts it."""
+    frames, left = [], []
+    for f in walk_frames(0)[:40]:
+        pos = f.pos.copy()
+        out = pos[TrackerSlot.LEFT_HAND] - pos[TrackerSlot.RIGHT_HAND]
+        out[1] = 0.0
+        out /= np.linalg.norm(out)
+        pos[TrackerSlot.LEFT_HAND] += 0.4 * out
+        pos[TrackerSlot.HEAD, 1] -= 0.2  # within the spine's reach of the decoder's pelvis
+        frames.append(TrackerFrame(f.seq, pos, f.quat))
+        left.append(out)
+    by_seq = {f.seq: (f, d) for f, d in zip(frames, left, strict=True)}
+    pelvis, miss = {}, {}
+    for reach in (True, False):
+        e = hmd3_engine(samples=4, lookahead=2, hand_reach=reach)
+        e.add_player("a", seed=0)
+        poses = []
+        for f in frames:
+            e.push("a", f)
+            poses += e.tick().poses
+        assert len(poses) == len(frames) - 2
+        pelvis[reach] = np.stack([p.positions[Joint.PELVIS] for p in poses])
+        gap = np.stack(
+            [
+                by_seq[p.seq][0].pos[TrackerSlot.LEFT_HAND] - p.positions[Joint.LEFT_HAND]
+                for p in poses
+            ]
+        )
+        miss[reach] = np.linalg.norm(gap[:, [0, 2]], axis=-1)  # horizontally
+    toward = np.stack([by_seq[s][1] for s in range(len(frames) - 2)])
+    moved = pelvis[True] - pelvis[False]
+    assert np.einsum("ei,ei->e", moved, toward).min() > 0.05
+    np.testing.assert_allclose(moved[:, 1], 0.0, atol=5e-3)  # horizontally (eased: 2 mm)
+    assert miss[False].min() > 0.1
+    assert miss[True].mean() < miss[False].mean() - 0.05
+
+
 def test_the_waist_slot_is_never_read(
     hmd3_engine: Callable[..., Engine], walk_frames: WalkFrames
 ) -> None:

@@ -11,11 +11,19 @@ import numpy as np
 from posecast.geometry.fk import fk_mat, world2local_mat
 from posecast.geometry.rotations import aa2mat, mat2quat, quat2mat
 from posecast.online.engine.calibration import Calibration
+from posecast.online.engine.hinge import hinge_elbows_quat
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import PoseOut, TrackerFrame
 from posecast.online.engine.upper_ik import (
+    ARM_REACH_M,
+    HAND_REACH_SOFTNESS_M,
     NECK_TWIST_SHARE,
+    REACH_EASE,
     SPINE_REACH_M,
+    WRIST_ELBOW_SHARE,
+    ease_reach,
+    ease_reach_clip,
+    reach_root,
     reach_shift,
     solve_upper_body,
 )
@@ -32,12 +40,15 @@ ARMS = (
 BONES = np.linalg.norm(reference_offsets(), axis=-1)
 
 
-def random_poses(E: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def random_poses(E: int, seed: int, straight_wrists: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """``E`` poses of the reference body: world positions ``(E, 19, 3)`` and quats
     ``(E, 19, 4)``; small random local rotations, elbows bent 90-115 degrees so the
-    hands are well inside the arms' reach."""
+    hands are well inside the arms' reach (``straight_wrists``: the hands' local
+    rotations the identity)."""
     rng = np.random.default_rng(seed)
     local = aa2mat(rng.normal(0.0, 0.25, (E, 19, 3)))
+    if straight_wrists:
+        local[:, [Joint.LEFT_HAND, Joint.RIGHT_HAND]] = np.eye(3)
     local[:, 0] = aa2mat(rng.normal(0.0, 0.1, (E, 3)))
     for fore, sign in ((Joint.LEFT_FOREARM, -1.0), (Joint.RIGHT_FOREARM, 1.0)):
         bend = np.zeros((E, 3))
@@ -114,13 +125,60 @@ def test_reachable_targets_are_hit_with_bones_and_fk_kept() -> None:
 
 
 def test_targets_already_met_change_nothing() -> None:
-    pos, quat = random_poses(8, seed=3)
-    tp, _ = trackers(pos, np.zeros((8, 4, 3)), quat)
-    tq = quat[:, [Joint.HEAD, Joint.LEFT_HAND, Joint.RIGHT_HAND, Joint.PELVIS]]
-    out_pos, out_quat, limited = solve_upper_body(pos, quat, tp, tq)
-    assert not limited.any()
-    np.testing.assert_allclose(out_pos, pos, atol=1e-6)
-    np.testing.assert_allclose(quat2mat(out_quat.astype(np.float64)), quat2mat(quat), atol=1e-6)
+    """Trackers where the pose has its head and hands: with straight wrists (where the
+    controllers' rotations put the elbows too) nothing changes; with bent ones nothing
+    changes when the elbows are the network's alone (``wrist_share=0``)."""
+    for straight, share in ((True, WRIST_ELBOW_SHARE), (True, 1.0), (False, 0.0)):
+        pos, quat = random_poses(8, seed=3, straight_wrists=straight)
+        tp, _ = trackers(pos, np.zeros((8, 4, 3)), quat)
+        tq = quat[:, [Joint.HEAD, Joint.LEFT_HAND, Joint.RIGHT_HAND, Joint.PELVIS]]
+        out_pos, out_quat, limited = solve_upper_body(pos, quat, tp, tq, wrist_share=share)
+        assert not limited.any()
+        np.testing.assert_allclose(out_pos, pos, atol=1e-6)
+        np.testing.assert_allclose(quat2mat(out_quat.astype(np.float64)), quat2mat(quat), atol=1e-6)
+
+
+def test_the_elbow_follows_the_controllers_rotation() -> None:
+    """The true pose has straight wrists; the network's has each upper arm swung 40
+    degrees about the shoulder-hand line (the hand where it was, the elbow elsewhere).
+    With the controllers on the true hands: ``wrist_share=1`` puts the elbows back on
+    the true ones, ``0`` leaves the network's, and the default lands between, nearer
+    the truth; the hands are on the controllers every time."""
+    E = 16
+    true_pos, true_quat = random_poses(E, seed=11, straight_wrists=True)
+    pos, mats = true_pos.copy(), quat2mat(true_quat)
+    for upper, fore, _ in ARMS:
+        axis = pos[:, fore + 1] - pos[:, upper]
+        axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
+        R = aa2mat(axis * np.radians(40.0))
+        for j in (fore, fore + 1):
+            pos[:, j] = pos[:, upper] + np.einsum("eab,eb->ea", R, pos[:, j] - pos[:, upper])
+        for j in (upper, fore):  # the hand keeps its world rotation: its wrist now bends
+            mats[:, j] = R @ mats[:, j]
+    quat = mat2quat(mats)
+    assert_fk_consistent(pos, quat)
+    tp, _ = trackers(true_pos, np.zeros((E, 4, 3)), true_quat)
+    tq = true_quat[:, [Joint.HEAD, Joint.LEFT_HAND, Joint.RIGHT_HAND, Joint.PELVIS]]
+
+    def elbow_error(share: float) -> np.ndarray:
+        out_pos, out_quat, limited = solve_upper_body(pos, quat, tp, tq, wrist_share=share)
+        assert not limited.any()
+        assert_bones_kept(out_pos)
+        assert_fk_consistent(out_pos, out_quat)
+        for joint, slot in HANDS:
+            np.testing.assert_array_less(
+                np.linalg.norm(out_pos[:, joint] - tp[:, slot], axis=-1), 1e-4
+            )
+        elbows = [int(Joint.LEFT_FOREARM), int(Joint.RIGHT_FOREARM)]
+        err: np.ndarray = np.linalg.norm(out_pos[:, elbows] - true_pos[:, elbows], axis=-1)
+        return err
+
+    np.testing.assert_array_less(elbow_error(1.0), 1e-4)
+    network = elbow_error(0.0)
+    assert network.min() > 0.05  # 40 degrees of swivel is 6-20 cm at the elbow
+    default = elbow_error(WRIST_ELBOW_SHARE)
+    assert 0.0 < WRIST_ELBOW_SHARE < 1.0
+    np.testing.assert_array_less(default, 0.6 * network)
 
 
 def test_the_neck_takes_its_share_of_a_turn_of_the_head() -> None:
@@ -128,7 +186,7 @@ def test_the_neck_takes_its_share_of_a_turn_of_the_head() -> None:
     head (the head joint already on the headset): the head's world rotation becomes the
     headset's, nothing moves, and the neck turns with it by NECK_TWIST_SHARE of the
     40 degrees about its bone, the head's twist relative to the neck taking the rest."""
-    pos, quat = random_poses(6, seed=8)
+    pos, quat = random_poses(6, seed=8, straight_wrists=True)
     tp, _ = trackers(pos, np.zeros((6, 4, 3)), quat)
     mats = quat2mat(quat)
     bone = pos[:, Joint.HEAD] - pos[:, Joint.NECK]
@@ -159,9 +217,10 @@ def side(shoulder: np.ndarray, target: np.ndarray, elbow: np.ndarray) -> np.ndar
 
 def test_the_elbow_stays_on_the_networks_side_over_a_sweep_of_targets() -> None:
     """The head stays where the network put it (so the shoulders do not move); each hand
-    target sweeps a 9 x 9 x 9 grid of +-8 cm around the network's hand. The solved
-    elbow is on the same side of the shoulder-target line as the network's, and well
-    away from it (no flip through the line)."""
+    target sweeps a 9 x 9 x 9 grid of +-8 cm around the network's hand. With the
+    elbows the network's alone (``wrist_share=0``), the solved elbow is on the same
+    side of the shoulder-target line as the network's, and well away from it (no flip
+    through the line)."""
     pos, quat = random_poses(4, seed=4)
     grid = np.linspace(-0.08, 0.08, 9)
     offsets = np.stack(np.meshgrid(grid, grid, grid, indexing="ij"), -1).reshape(-1, 3)
@@ -172,7 +231,7 @@ def test_the_elbow_stays_on_the_networks_side_over_a_sweep_of_targets() -> None:
     shift[:, 1] = np.tile(offsets, (len(pos), 1))
     shift[:, 2] = -np.tile(offsets, (len(pos), 1))
     tp, tq = trackers(pos_e, shift, random_quats(E, seed=5))
-    out_pos, out_quat, limited = solve_upper_body(pos_e, quat_e, tp, tq)
+    out_pos, out_quat, limited = solve_upper_body(pos_e, quat_e, tp, tq, wrist_share=0.0)
     assert not limited.any()
     for upper, fore, slot in ARMS:
         np.testing.assert_allclose(out_pos[:, upper], pos_e[:, upper], atol=1e-6)
@@ -250,6 +309,58 @@ def test_a_guessed_pelvis_follows_a_headset_beyond_the_spines_reach() -> None:
     np.testing.assert_array_equal(near, 0.0)
 
 
+def test_a_guessed_pelvis_follows_a_controller_beyond_the_arms_reach() -> None:
+    """``reach_root``: a controller 30 cm beyond its arm's reach, out to the side (the
+    headset and the other controller 30 cm that way with it), moves the body toward it
+    horizontally by about that much (the softplus adds up to 2 * ln 2 * its width),
+    after which the arm nearly reaches it; a controller 30 cm beyond reach straight
+    below the shoulder moves nothing vertically (the arm reaches down as far as it
+    can); controllers within reach move the body by under a centimetre (the softplus
+    starts before the arm is straight). The headset
+    wins: with it left where it was, the body moves only as far as the spine still
+    reaches it."""
+    E = 4
+    pos, quat = random_poses(E, seed=12)
+    tp, tq = trackers(pos, np.zeros((E, 4, 3)), quat)
+    # Headsets within the spine's reach: 40 % nearer the spine than the head (so 30 cm
+    # to the side they still are), and for the last pose 2 % (so they are not).
+    near = np.array([0.6, 0.6, 0.6, 0.98])[:, None]
+    tp[:, TrackerSlot.HEAD] = pos[:, Joint.SPINE] + near * (
+        pos[:, Joint.HEAD] - pos[:, Joint.SPINE]
+    )
+    out = np.array([1.0, 0.0, 0.0])
+    for e in (0, 3):  # the right controller moves with the body
+        tp[e, TrackerSlot.LEFT_HAND] = pos[e, Joint.LEFT_UPPER_ARM] + out * (ARM_REACH_M + 0.3)
+        tp[e, TrackerSlot.RIGHT_HAND] += out * 0.3
+    tp[0, TrackerSlot.HEAD] += out * 0.3
+    tp[1, TrackerSlot.LEFT_HAND] = pos[1, Joint.LEFT_UPPER_ARM] - [0.0, ARM_REACH_M + 0.3, 0.0]
+    shift = reach_root(pos, tp)
+    assert shift.shape == (E, 3) and shift.dtype == np.float64
+    head_start = 2.0 * np.log(2.0) * HAND_REACH_SOFTNESS_M
+    assert 0.3 <= shift[0, 0] <= 0.3 + head_start and np.abs(shift[0, 1:]).max() < 1e-3
+    np.testing.assert_array_less(np.abs(shift[1:3]), 0.01)  # the softplus's start only
+    np.testing.assert_array_equal(shift[1:3, 1], 0.0)  # never vertically
+    spine_to_head = tp[3, TrackerSlot.HEAD] - (pos[3, Joint.SPINE] + shift[3])
+    assert shift[3, 0] > 0.1
+    assert np.linalg.norm(spine_to_head) <= SPINE_REACH_M + 1e-9
+    # The pass on the moved body leaves the controller a fifth as far out of reach (the
+    # spine's bend toward the headset moves the shoulder a little) as on the body
+    # where the network put it.
+    free = np.ones(E, np.bool_)
+    miss = []
+    for body in (pos, pos + shift[:, None]):
+        out_pos, _, limited = solve_upper_body(body, quat, tp, tq, free)
+        hand = out_pos[:, Joint.LEFT_HAND] - tp[:, TrackerSlot.LEFT_HAND]
+        miss.append(np.linalg.norm(hand, axis=-1))
+        assert limited[1] and limited[3]
+    assert miss[0][0] > 0.2 and miss[1][0] < 0.2 * miss[0][0]
+    # Only the spine and the shoulders are read: the other rows may be anything.
+    partial = np.full_like(pos, np.nan)
+    keep = [int(Joint.SPINE), int(Joint.LEFT_UPPER_ARM), int(Joint.RIGHT_UPPER_ARM)]
+    partial[:, keep] = pos[:, keep]
+    np.testing.assert_array_equal(reach_root(partial, tp), shift)
+
+
 # --- the engine -----------------------------------------------------------------------
 
 
@@ -270,12 +381,15 @@ def test_the_engine_streams_head_and_hands_on_the_trackers(
     """On a synthetic walk (trackers on the reference body's joints, so the walk's own
     head and hands are within reach) every streamed pose has its head and hands within
     1 cm of the trackers (measured: within 1 mm) and FK-consistent rotations; with
-    ``upper_body_ik=False`` the pose is the one before the pass: the pass applied to it
-    gives the streamed pose, and the pelvis and legs are the same either way."""
+    ``upper_body_ik=False`` (and no elbow hinge) the pose is the one before the pass:
+    the pass and then the elbow hinge applied to it give the streamed pose, and the
+    pelvis and legs are the same either way."""
     frames = walk_frames(0)
     by_seq = {f.seq: f for f in frames}
     on = run(backend.engine(samples=10, lookahead=2), frames)
-    off = run(backend.engine(samples=10, lookahead=2, upper_body_ik=False), frames)
+    off = run(
+        backend.engine(samples=10, lookahead=2, upper_body_ik=False, elbow_hinge=False), frames
+    )
     assert len(on) == len(off) == len(frames) - 2
     for pose in on:
         f = by_seq[pose.seq]
@@ -294,6 +408,7 @@ def test_the_engine_streams_head_and_hands_on_the_trackers(
     tp = np.stack([by_seq[p.seq].pos for p in off])
     tq = np.stack([by_seq[p.seq].quat for p in off])
     again, again_q, _ = solve_upper_body(pos_off, quat_off, tp, tq)
+    hinge_elbows_quat(again, again_q)  # then the elbows onto their hinges
     np.testing.assert_allclose(again, pos_on, atol=1e-5)
     np.testing.assert_allclose(quat2mat(again_q), quat2mat(quat_on), atol=1e-5)
 
@@ -311,3 +426,17 @@ def test_the_engine_reaches_calibrated_trackers_at_the_users_scale(
         f = by_seq[pose.seq]
         for joint, slot in ((Joint.HEAD, TrackerSlot.HEAD), *HANDS):
             assert np.linalg.norm(pose.positions[joint] - f.pos[slot]) < 0.005
+
+
+def test_the_shown_move_eases_toward_reach_roots() -> None:
+    """``ease_reach``: a first frame takes the move whole; a step of the target is
+    followed by ``REACH_EASE`` of what is left each frame (no overshoot); the engine
+    and the evaluation share it (``ease_reach_clip``)."""
+    target = np.zeros((8, 3))
+    target[2:, 0] = 0.1
+    shown = ease_reach_clip(target)
+    np.testing.assert_array_equal(shown[:2], 0.0)
+    left = 0.1 * (1.0 - REACH_EASE) ** np.arange(1, 7)
+    np.testing.assert_allclose(0.1 - shown[2:, 0], left, atol=1e-12)
+    np.testing.assert_array_equal(ease_reach(None, target[5]), target[5])
+    assert 0.0 < REACH_EASE < 1.0

@@ -24,13 +24,13 @@ from posecast.offline.evaluation.reconstruct import (
 from posecast.online.engine.anomaly import AnomalyScorer
 from posecast.online.engine.clearance import clearance_lift, clip_toe_speed
 from posecast.online.engine.config import EngineConfig
-from posecast.online.engine.hinge import hinge_knees
+from posecast.online.engine.hinge import hinge_elbows, hinge_knees
 from posecast.online.engine.ik import floor_ik, floor_lift
 from posecast.online.engine.leg_ik import solve_legs, tracks_legs
 from posecast.online.engine.pelvis import smooth_pelvis_clip
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
-from posecast.online.engine.upper_ik import solve_upper_body
+from posecast.online.engine.upper_ik import ease_reach_clip, reach_root, solve_upper_body
 from posecast.online.inference.artifact import load_artifact
 from posecast.online.inference.backends import Backend, load_backend
 from posecast.skeleton import LOWER_BODY, NUM_ROTATIONS
@@ -144,8 +144,10 @@ def evaluate(
     pelvis smoothing (``engine_cfg.pelvis_smoothing``), contact IK, the floor pass
     (``engine_cfg.floor_ik``; with it the swing clearance, ``swing_clearance``), the
     knee hinge (``knee_hinge``) and (when ``engine_cfg.upper_body_ik``, the default)
-    the engine's upper-body pass, so that ``cvae_ik_ssi`` against ``cvae_ik``
-    measures SSI alone.
+    the engine's upper-body pass (its elbow hint at ``wrist_elbow``; a guessed pelvis
+    first moved toward out-of-reach trackers, ``hand_reach``, before the contact IK as
+    the engine does), then the elbow hinge (``elbow_hinge``), so that ``cvae_ik_ssi``
+    against ``cvae_ik`` measures SSI alone.
     ``cvae_1sample`` is the network's raw pose.
     """
     player_layout = layout if isinstance(layout, TrackerSet) else Layout(layout)
@@ -210,6 +212,8 @@ def evaluate(
                 if name.endswith("_ik") and engine_cfg.pelvis_smoothing and engine_cfg.lookahead:
                     root_mat, root_pos = smooth_pelvis_clip(root_mat, root_pos)
                 wm, wp = pose_from_rotations(rot, root_mat, root_pos)
+                if name.endswith("_ik") and not root_from_waist and _reaches(engine_cfg):
+                    wp = wp + ease_reach_clip(reach_root(wp, tr.values))[:, None]
                 if name.endswith("_ik"):
                     contact_ik(wm, wp, con, engine_cfg.ik_release_frames, engine_cfg.ik_max_drift_m)
                     if engine_cfg.floor_ik:
@@ -223,7 +227,11 @@ def evaluate(
                     if engine_cfg.knee_hinge:
                         hinge_knees(wm, wp)
                     if engine_cfg.upper_body_ik:
-                        wm, wp = _upper_body(wm, wp, tr, not root_from_waist)
+                        wm, wp = _upper_body(
+                            wm, wp, tr, not root_from_waist, engine_cfg.wrist_elbow
+                        )
+                    if engine_cfg.elbow_hinge:
+                        hinge_elbows(wm, wp)
             gt_mat, gt = truth[ci]
             acc.add("mpjpe_cm", m.mpjpe(wp, gt))
             acc.add("lower_mpjpe_cm", m.lower_mpjpe(wp, gt))
@@ -269,15 +277,21 @@ def evaluate(
     }
 
 
+def _reaches(cfg: EngineConfig) -> bool:
+    """Whether a guessed pelvis follows out-of-reach trackers (as the engine moves it)."""
+    return cfg.upper_body_ik and cfg.hand_reach
+
+
 def _upper_body(
-    wm: np.ndarray, wp: np.ndarray, tr: Tracks, free_root: bool
+    wm: np.ndarray, wp: np.ndarray, tr: Tracks, free_root: bool, wrist_share: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """The engine's upper-body pass over a clip: head and hands onto the clip's trackers
-    (``free_root``: the pelvis is the decoder's, which may follow the headset)."""
+    (``free_root``: the pelvis is the decoder's, which may follow the headset;
+    ``wrist_share``: of the elbows' hints, the controllers' share)."""
     slots = len(TrackerSlot)
     free = np.full(len(wp), free_root)
     pos, quat, _ = solve_upper_body(
-        wp, mat2quat(wm), tr.values[:, :slots], tr.quat[:, :slots], free
+        wp, mat2quat(wm), tr.values[:, :slots], tr.quat[:, :slots], free, wrist_share
     )
     return quat2mat(quat.astype(np.float64)), pos.astype(np.float64)
 

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 from posecast.errors import ConfigError
 from posecast.online.engine.ik import MAX_DRIFT_M, RELEASE_FRAMES
+from posecast.online.engine.upper_ik import WRIST_ELBOW_SHARE
 
 
 @dataclass(frozen=True)
@@ -38,6 +39,18 @@ class EngineConfig:
             horizontal speed (:mod:`posecast.online.engine.clearance`; default on,
             chosen on the validation split, docs/evaluation.md, "Feet"; only with
             ``floor_ik``).
+        wrist_elbow: the share of each shown elbow's placement that comes from its
+            controller's rotation (a straight wrist), the rest from the network's
+            elbow (0.75, chosen on the validation split; 0 for the network's alone;
+            :func:`posecast.online.engine.upper_ik.solve_upper_body`).
+        hand_reach: move a pelvis that is the decoder's guess (no waist tracker)
+            toward a controller beyond the arm's reach, horizontally, before the feet
+            are planted (:func:`posecast.online.engine.upper_ik.reach_root`; default
+            on, with ``upper_body_ik``).
+        elbow_hinge: turn the shown upper arms and forearms so each elbow bends as
+            a hinge about its upper arm's axis, no joint moving (after the upper-body
+            pass; :func:`posecast.online.engine.hinge.hinge_elbows`; default on, off for
+            research evaluation).
         knee_hinge: turn the shown thighs and shins so each knee bends as a hinge
             about its thigh's axis, no joint moving (:mod:`posecast.online.engine.hinge`;
             default on, off for research evaluation).
@@ -67,6 +80,9 @@ class EngineConfig:
     floor_ik: bool = True
     swing_clearance: bool = True
     knee_hinge: bool = True
+    elbow_hinge: bool = True
+    wrist_elbow: float = WRIST_ELBOW_SHARE
+    hand_reach: bool = True
     pelvis_smoothing: bool = True
     latent_scale: float = 1.0
     home_factor: float | None = 1.0
@@ -84,5 +100,7 @@ class EngineConfig:
             raise ConfigError("latent_scale must be positive")
         if self.home_factor is not None and not 0.0 <= self.home_factor < float("inf"):
             raise ConfigError("home_factor must be a finite number >= 0")
+        if not 0.0 <= self.wrist_elbow <= 1.0:
+            raise ConfigError("wrist_elbow must be a share between 0 and 1")
         if self.waist_filter_hz is not None and not self.waist_filter_hz > 0:
             raise ConfigError("waist_filter_hz must be positive")

@@ -18,7 +18,8 @@ Per tick, for all ``P`` players x ``N`` samples at once:
    display IK, the floor pass (with the swing clearance,
    :mod:`posecast.online.engine.clearance`), a tracker set's leg pass, the knees
    onto their hinges (:mod:`posecast.online.engine.hinge`), then the upper-body pass
-   (:mod:`posecast.online.engine.upper_ik`: head and hands on their trackers)
+   (:mod:`posecast.online.engine.upper_ik`: head and hands on their trackers) and the
+   elbows onto their hinges
 
 The engine is pure: frames go in with :meth:`Engine.push`, :meth:`Engine.tick`
 returns poses and events (:mod:`posecast.online.engine.types`). No sockets, no
@@ -50,18 +51,23 @@ from numpy.typing import NDArray
 from posecast.geometry.fk import fk_positions
 from posecast.geometry.rotations import mat2quat, quat2mat
 from posecast.online.engine.backend import Decoder, Pool, PoolIK
-from posecast.online.engine.batch_fk import pelvis_from_head32
+from posecast.online.engine.batch_fk import fk32, pelvis_from_head32
 from posecast.online.engine.calibration import Calibration, WaistFilter, apply_all, orient_all
 from posecast.online.engine.clearance import TOES, clearance_lift, toe_speed
 from posecast.online.engine.config import EngineConfig
-from posecast.online.engine.hinge import hinge_knees_quat
+from posecast.online.engine.hinge import hinge_elbows_quat, hinge_knees_quat
 from posecast.online.engine.ik import LEGS, floor_ik, floor_lift
 from posecast.online.engine.leg_ik import solve_legs, tracks_legs
 from posecast.online.engine.pelvis import smooth_pelvis
 from posecast.online.engine.selectors import AnomalySelector, Selector, choose_anomaly_rows
 from posecast.online.engine.slots import SlotArrays
 from posecast.online.engine.types import EngineEvent, PoseOut, TickResult, TrackerFrame
-from posecast.online.engine.upper_ik import solve_upper_body
+from posecast.online.engine.upper_ik import (
+    REACH_JOINTS,
+    ease_reach,
+    reach_root,
+    solve_upper_body,
+)
 from posecast.skeleton import NUM_JOINTS, REST_PELVIS_HEIGHT_M, reference_offsets
 from posecast.tracking.features import TRACKER_JOINT_INDEX, TrackerSlot
 from posecast.tracking.layouts import Layout, spec
@@ -97,6 +103,9 @@ class _Player:
     # emitted frame (None before the first) and their averaged speed.
     toe_xz: F64 | None = None
     toe_speed: NDArray[np.floating] = field(default_factory=lambda: np.zeros(2))
+    # The shown move of a guessed pelvis toward out-of-reach trackers at the last
+    # emitted frame (upper_ik.ease_reach; None before the first).
+    reach: F64 | None = None
 
 
 class Engine:
@@ -527,6 +536,20 @@ class Engine:
             root_mat, root_pos = self._smooth_roots(
                 k, slots, samples, np.array(firsts), root_own, root_mat, root_pos, waist
             )
+        free = None  # per emitted pose, whether its pelvis is the decoder's guess
+        if self.layout.predicts_root:
+            free = np.ones(len(emit), np.bool_) if waist is None else ~waist
+        if self.cfg.upper_body_ik and self.cfg.hand_reach and free is not None and free.any():
+            # A guessed pelvis moves toward the trackers it cannot reach, before the
+            # display IK plants the feet (upper_ik.reach_root).
+            rows = np.flatnonzero(free)
+            _, near = fk32(rot[rows], root_mat[rows], root_pos[rows], False, REACH_JOINTS)
+            target = reach_root(near, pos[rows])
+            root_pos = root_pos.copy()
+            for r, i in enumerate(rows.tolist()):
+                p = emit[i][0]
+                p.reach = ease_reach(None if firsts[i] else p.reach, target[r])
+                root_pos[i] += p.reach.astype(np.float32)
         # FK and the players' own display IK, batched: gather their states, step,
         # scatter back.
         E = len(emit)
@@ -558,13 +581,14 @@ class Engine:
         if self.cfg.knee_hinge:
             hinge_knees_quat(wp, rotations)
         if self.cfg.upper_body_ik:
-            # Head and hands onto their (calibrated) trackers, before the user's scale.
-            free = None
-            if self.layout.predicts_root:  # a pelvis from the decoder may follow the head
-                waist = self._waist_rows(slots)
-                free = np.ones(E, np.bool_) if waist is None else ~waist
-            wp, rotations, upper_limited = solve_upper_body(wp, rotations, pos, quat, free)
+            # Head and hands onto their (calibrated) trackers, before the user's scale
+            # (a pelvis from the decoder may follow the head).
+            wp, rotations, upper_limited = solve_upper_body(
+                wp, rotations, pos, quat, free, self.cfg.wrist_elbow
+            )
             reach_limited |= upper_limited
+        if self.cfg.elbow_hinge:
+            hinge_elbows_quat(wp, rotations)
         limited = reach_limited.tolist()
         scale = np.array([p.calibration.scale for p, _, _ in emit], np.float32)
         positions = wp / scale[:, None, None]

@@ -16,13 +16,18 @@ local rotations gives (a joint that turns carries its whole subtree with it).
    twist relative to it (the head stays where it is).
 2. **Arms**, from the shoulders where the chest now holds them: a two-bone solve
    (upper arm, forearm) puts the hand on the controller, the elbow in the plane of
-   shoulder, target and the network's own elbow, on the network's side of the
-   shoulder-target line (so the elbow never flips). The hand's world rotation becomes
-   the controller's.
+   shoulder, target and a hint, on the hint's side of the shoulder-target line (so
+   the elbow never flips). The hint is the network's own elbow blended, by
+   ``wrist_share`` (:data:`WRIST_ELBOW_SHARE`), with the elbow a straight wrist
+   would put behind the controller (the controller's rotation gives the forearm's
+   direction): a controller held palm down or turned up says where the elbow is. The
+   hand's world rotation becomes the controller's.
 3. **Out of reach** (bad calibration, a thrown controller): the chain reaches straight
    along the line to the target, as far as its bones allow, and the pose is flagged:
    ``reach_limited`` is true when any of the three effectors ends more than
-   :data:`REACH_TOLERANCE_M` from its tracker.
+   :data:`REACH_TOLERANCE_M` from its tracker. A pelvis that is the network's guess
+   (no waist tracker) is first moved toward what it cannot reach, before the leg
+   passes plant the feet (:func:`reach_root`).
 
 Glossary as in :mod:`posecast.geometry.rotations` (``mat`` acts on column vectors,
 ``quat`` is xyzw). Pure numpy: no inference library, no I/O.
@@ -141,7 +146,11 @@ def _across(v: F64, u: F64) -> F64:
 def reach_shift(positions: F64, head_target: F64) -> F64:
     """Per pose ``(E, 3)``, the smallest move of the whole body that brings the spine
     joint within :data:`SPINE_REACH_M` of the headset ``(E, 3)`` (zero where it is)."""
-    v = head_target - positions[:, Joint.SPINE]
+    return _spine_shift(positions[:, Joint.SPINE], head_target)
+
+
+def _spine_shift(spine: F64, head_target: F64) -> F64:
+    v = head_target - spine
     d = _norm(v)
     over = np.maximum(d - SPINE_REACH_M, 0.0)
     out: F64 = v * (over / np.maximum(d, _EPS))[:, None]
@@ -151,6 +160,82 @@ def reach_shift(positions: F64, head_target: F64) -> F64:
 # How far the spine chain (spine -> chest -> neck -> head, 0.52 m) may reach before a
 # pose whose pelvis is a guess (no waist tracker) is moved instead: nearly straight.
 SPINE_REACH_M = float(_BONE_M[[Joint.CHEST, Joint.NECK, Joint.HEAD]].sum()) - 0.01
+
+# How far an arm (shoulder -> elbow -> hand) reaches, nearly straight, and how softly a
+# guessed pelvis starts to follow a controller beyond it: the move is the softplus of
+# the overreach at this width (metres), so it sets in smoothly instead of with a kink
+# the jitter shows. Chosen on the validation split (docs/evaluation.md, "Hands out of
+# reach: a guessed pelvis follows the controllers").
+ARM_REACH_M = float(_BONE_M[_ARM_FORE[0]] + _BONE_M[_ARM_HAND[0]]) - 0.01
+HAND_REACH_SOFTNESS_M = 0.05
+_REACH_ROUNDS = 2  # the move toward the controllers, again from where the first put it
+
+
+def reach_root(positions: NDArray[np.floating], tracker_pos: NDArray[np.floating]) -> F64:
+    """Per pose ``(E, 3)``, the move of a whole body whose pelvis is a guess that
+    brings the headset within the spine's reach (:func:`reach_shift`) and each
+    controller, horizontally, within its arm's (the controllers of a player who reaches
+    for something: a person steps or leans toward it, and the network, which does not
+    know how far the arms are, left the body behind). Vertical overreach stays with
+    the arms (a person crouches rather than sinks), so the feet stay on the floor, and
+    the headset wins: the body moves toward a controller only as far as the spine
+    still reaches the headset from there.
+
+    Reads only the spine and shoulder rows of ``positions (E, 19, 3)`` (FK of the
+    network's pose: :data:`REACH_JOINTS`); ``tracker_pos (E, >=3, 3)`` in slot order.
+    """
+    spine = np.asarray(positions[:, Joint.SPINE], np.float64)  # (E, 3)
+    shoulders = np.asarray(positions[:, _ARM_UPPER], np.float64)  # (E, 2, 3)
+    tp = np.asarray(tracker_pos, np.float64)
+    head = tp[:, TrackerSlot.HEAD]
+    shift = _spine_shift(spine, head)
+    w = HAND_REACH_SOFTNESS_M
+    for _ in range(_REACH_ROUNDS):
+        v = tp[:, _HAND_SLOTS] - (shoulders + shift[:, None])  # (E, 2, 3)
+        d = _norm(v)
+        over = w * np.logaddexp(0.0, (d - ARM_REACH_M) / w)  # softplus of the overreach
+        step = (v * (over / np.maximum(d, _EPS))[..., None]).sum(axis=1)
+        step[:, 1] = 0.0  # its horizontal part
+        shift = shift + _within(head - (spine + shift), step, SPINE_REACH_M)[:, None] * step
+    return shift
+
+
+def _within(c: F64, step: F64, radius: float) -> F64:
+    """Per row, the largest ``t`` in ``[0, 1]`` with ``|c - t * step| <= radius``, for
+    ``|c| <= radius`` (``(E, 3)`` each): how much of a move the headset allows."""
+    a = np.einsum("ei,ei->e", step, step)
+    b = np.einsum("ei,ei->e", c, step)
+    slack = np.maximum(radius * radius - np.einsum("ei,ei->e", c, c), 0.0)
+    t = (b + np.sqrt(b * b + a * slack)) / np.maximum(a, _EPS * _EPS)
+    out: F64 = np.clip(t, 0.0, 1.0)
+    return out
+
+
+REACH_JOINTS = (int(Joint.SPINE), *_ARM_UPPER)  # the joints reach_root reads
+
+# The shown move follows reach_root's by this share a frame (an exponential average, a
+# time constant of about 3 frames at 60 Hz): the move answers the hands' motion frame
+# by frame, which the shown body would otherwise shake with. Chosen on the validation
+# split (docs/evaluation.md, "Hands out of reach").
+REACH_EASE = 0.3
+
+
+def ease_reach(previous: F64 | None, target: F64) -> F64:
+    """One frame of the shown move ``(..., 3)`` toward ``target`` (``previous`` None:
+    a first frame, which takes the target as it is)."""
+    if previous is None:
+        return target
+    out: F64 = previous + REACH_EASE * (target - previous)
+    return out
+
+
+def ease_reach_clip(targets: F64) -> F64:
+    """:func:`ease_reach` along a clip's frames ``(T, 3)`` (the engine's, offline)."""
+    out = np.empty_like(targets)
+    previous: F64 | None = None
+    for t, target in enumerate(targets):
+        previous = out[t] = ease_reach(previous, target)
+    return out
 
 
 def _wrap(angle: F64) -> F64:
@@ -182,6 +267,16 @@ def _turn_bone(pos: F64, mat: F64, joint: int, child: int, angle: F64) -> None:
 # validation split (docs/evaluation.md, "Rotations: the neck's share of a head turn").
 NECK_TWIST_SHARE = 0.65
 
+# The share of the elbow hint that comes from the controller's rotation (a straight
+# wrist: the forearm along the hand's rest direction, rotated by the controller), the
+# rest from the network's own elbow. Chosen on the validation split (docs/evaluation.md,
+# "Elbows: the controller's rotation"): 1.0 was closest in position there, 0.75 in
+# rotation and within 0.05 cm. The mocap wrists there hardly bend (0 degrees at the
+# median, 14 at the 90th percentile: `posecast data wrists`), a player's do, so the
+# network keeps a quarter.
+WRIST_ELBOW_SHARE = 0.75
+_HAND_DIR = reference_offsets()[_ARM_HAND] / _BONE_M[_ARM_HAND][:, None]  # (2, 3) at rest
+
 
 def solve_upper_body(
     positions: NDArray[np.floating],
@@ -189,6 +284,7 @@ def solve_upper_body(
     tracker_pos: NDArray[np.floating],
     tracker_quat: NDArray[np.floating],
     free_root: NDArray[np.bool_] | None = None,
+    wrist_share: float = WRIST_ELBOW_SHARE,
 ) -> tuple[F32, F32, NDArray[np.bool_]]:
     """Head and hands of ``E`` poses onto their trackers.
 
@@ -200,6 +296,8 @@ def solve_upper_body(
         free_root: per pose, whether its pelvis is the network's guess (no waist
             tracker): a headset beyond the spine's reach then moves the whole body
             toward it (:func:`reach_shift`) instead of leaving the head short.
+        wrist_share: how much of each elbow's hint comes from its controller's
+            rotation, the rest from the network's elbow (0: the network's alone).
 
     Returns:
         ``(positions (E, 19, 3), rotations (E, 19, 4), reach_limited (E,))``: float32
@@ -243,10 +341,17 @@ def solve_upper_body(
     # 2. Both arms in one batch, from where the chest now holds the shoulders.
     upper, fore, hand = _ARM_UPPER, _ARM_FORE, _ARM_HAND
     shoulder = pos[:, upper]  # (E, 2, 3)
+    hand_target = tp[:, _HAND_SLOTS]  # (E, 2, 3)
+    hint = pos[:, fore]
+    if wrist_share > 0.0:
+        # A straight wrist: the forearm points where the controller's rest direction does.
+        forearm = np.einsum("ekab,kb->eka", tracker_mat[:, _HAND_SLOTS], _HAND_DIR)
+        behind = hand_target - float(_BONE_M[hand[0]]) * forearm
+        hint = (1.0 - wrist_share) * hint + wrist_share * behind
     elbow, wrist = two_bone(
         shoulder.reshape(-1, 3),
-        pos[:, fore].reshape(-1, 3),
-        tp[:, _HAND_SLOTS].reshape(-1, 3),
+        hint.reshape(-1, 3),
+        hand_target.reshape(-1, 3),
         float(_BONE_M[fore[0]]),
         float(_BONE_M[hand[0]]),
         np.array([[0.0, -1.0, 0.0]]),  # where a straight network arm bends its elbow

@@ -99,6 +99,9 @@ class PosecastServer:
             floor_ik=not self.cfg.no_floor_ik,
             swing_clearance=not self.cfg.no_swing_clearance,
             knee_hinge=not self.cfg.no_knee_hinge,
+            wrist_elbow=self.cfg.wrist_elbow,
+            elbow_hinge=not self.cfg.no_elbow_hinge,
+            hand_reach=not self.cfg.no_hand_reach,
             pelvis_smoothing=not self.cfg.no_pelvis_smoothing,
         )
         layouts, threads = self.cfg.served_layouts, self.cfg.engine_threads
