@@ -538,7 +538,8 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     drift = _float_or_off("--ik-max-drift", args.ik_max_drift, ssi_defaults.ik_max_drift_m)
     release = ssi_defaults.ik_release_frames
     wrist = ssi_defaults.wrist_elbow if args.wrist_elbow is None else args.wrist_elbow
-    _finite("--wrist-elbow", wrist, "eval")
+    if not 0.0 <= wrist <= 1.0:  # NaN included
+        raise _config(f"--wrist-elbow {wrist} must be a share from 0 to 1", "e.g. 0.75, or 0")
     if args.ik_release_frames is not None:
         _at_least("--ik-release-frames", args.ik_release_frames, 1, "eval")
         release = args.ik_release_frames

@@ -59,6 +59,8 @@ def test_env_values_are_typed() -> None:
         {"max_message_bytes": 100},  # below the protocol's floor
         {"max_players_per_room": 33},  # above the v1 maximum
         {"log_level": "LOUD"},
+        {"wrist_elbow": 1.5},
+        {"wrist_elbow": float("nan")},
     ],
 )
 def test_bad_values_are_refused_once_at_the_edge(change: dict[str, object]) -> None:

@@ -78,8 +78,9 @@ class ServerConfig:
     )
     no_hand_reach: bool = _opt(
         False,
-        "leave a headset-only player's guessed pelvis where the headset puts it instead "
-        "of moving it horizontally toward a controller beyond the arm's reach",
+        "leave a guessed pelvis (a headset-only player, a tracker set without a waist) "
+        "where the headset puts it, after the feet are planted, instead of moving it "
+        "beforehand, horizontally toward a controller beyond the arm's reach too",
     )
     no_pelvis_smoothing: bool = _opt(
         False,

@@ -153,6 +153,37 @@ def test_a_guessed_pelvis_follows_a_controller_held_out_of_reach(
     assert miss[True].mean() < miss[False].mean() - 0.05
 
 
+def test_a_players_eased_reach_is_its_own(
+    hmd3_engine: Callable[..., Engine], walk_frames: WalkFrames
+) -> None:
+    """Two headset-only players in one engine, one holding a controller out of reach
+    (its pelvis moves, eased frame by frame): the other streams what it streams alone,
+    so the eased move is kept per player."""
+    frames = walk_frames(1)[:30]
+    far = []
+    for f in frames:
+        pos = f.pos.copy()
+        pos[TrackerSlot.HEAD, 1] -= 0.2
+        out = pos[TrackerSlot.LEFT_HAND] - pos[TrackerSlot.RIGHT_HAND]
+        out[1] = 0.0
+        pos[TrackerSlot.LEFT_HAND] += 0.4 * out / np.linalg.norm(out)
+        far.append(TrackerFrame(f.seq, pos, f.quat))
+    both, alone = hmd3_engine(samples=4, lookahead=2), hmd3_engine(samples=4, lookahead=2)
+    both.add_player("reach", seed=1)
+    for e in (both, alone):
+        e.add_player("calm", seed=2)
+    got: dict[str, list[np.ndarray]] = {"both": [], "alone": []}
+    for f, g in zip(frames, far, strict=True):
+        both.push("reach", g)
+        both.push("calm", f)
+        alone.push("calm", f)
+        got["both"] += [p.positions for p in both.tick().poses if p.player == "calm"]
+        got["alone"] += [p.positions for p in alone.tick().poses]
+    assert len(got["both"]) == len(frames) - 2
+    # (within float32 rounding: a backend may round a batch of two differently)
+    np.testing.assert_allclose(np.stack(got["both"]), np.stack(got["alone"]), atol=1e-5)
+
+
 def test_the_waist_slot_is_never_read(
     hmd3_engine: Callable[..., Engine], walk_frames: WalkFrames
 ) -> None:

@@ -48,9 +48,9 @@ class EngineConfig:
             are planted (:func:`posecast.online.engine.upper_ik.reach_root`; default
             on, with ``upper_body_ik``).
         elbow_hinge: turn the shown upper arms and forearms so each elbow bends as
-            a hinge about its upper arm's axis, no joint moving (after the upper-body
-            pass; :func:`posecast.online.engine.hinge.hinge_elbows`; default on, off for
-            research evaluation).
+            a hinge about a fixed axis in its upper arm's frame, no joint moving
+            (after the upper-body pass; :func:`posecast.online.engine.hinge.hinge_elbows`;
+            default on, off for research evaluation).
         knee_hinge: turn the shown thighs and shins so each knee bends as a hinge
             about its thigh's axis, no joint moving (:mod:`posecast.online.engine.hinge`;
             default on, off for research evaluation).

@@ -14,7 +14,8 @@ Per tick, for all ``P`` players x ``N`` samples at once:
 5. emit frame ``n - tau`` per player: the current sample's pose, or during a
    transition the decoder re-run on the interpolated latent and hidden state
    (one more batched call), on the pelvis averaged with frames ``n - tau - 1`` and
-   ``n - tau + 1`` (:mod:`posecast.online.engine.pelvis`), then that player's own
+   ``n - tau + 1`` (:mod:`posecast.online.engine.pelvis`; a guessed pelvis then
+   moved toward trackers beyond reach, ``upper_ik.reach_root``), then that player's own
    display IK, the floor pass (with the swing clearance,
    :mod:`posecast.online.engine.clearance`), a tracker set's leg pass, the knees
    onto their hinges (:mod:`posecast.online.engine.hinge`), then the upper-body pass

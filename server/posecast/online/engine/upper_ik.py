@@ -25,9 +25,10 @@ local rotations gives (a joint that turns carries its whole subtree with it).
 3. **Out of reach** (bad calibration, a thrown controller): the chain reaches straight
    along the line to the target, as far as its bones allow, and the pose is flagged:
    ``reach_limited`` is true when any of the three effectors ends more than
-   :data:`REACH_TOLERANCE_M` from its tracker. A pelvis that is the network's guess
-   (no waist tracker) is first moved toward what it cannot reach, before the leg
-   passes plant the feet (:func:`reach_root`).
+   :data:`REACH_TOLERANCE_M` from its tracker. The engine (``hand_reach``) moves a
+   pelvis that is the network's guess (no waist tracker) toward what it cannot reach
+   before the leg passes plant the feet (:func:`reach_root`, :func:`ease_reach`); this
+   function does not.
 
 Glossary as in :mod:`posecast.geometry.rotations` (``mat`` acts on column vectors,
 ``quat`` is xyzw). Pure numpy: no inference library, no I/O.
