@@ -15,7 +15,8 @@ from collections.abc import Iterable
 import numpy as np
 from numpy.typing import NDArray
 
-from posecast.skeleton import Joint, reference_offsets
+from posecast.online.engine.upper_ik import straight_forearms
+from posecast.skeleton import Joint
 
 F64 = NDArray[np.floating]
 
@@ -27,9 +28,7 @@ def wrist_bend_deg(world_mat: F64, world_pos: F64) -> F64:
     """Both wrists' bend, degrees ``(T, 2)``, of one clip (world rotations
     ``(T, 19, 3, 3)`` and positions ``(T, 19, 3)``): the angle between each forearm and
     the direction a straight wrist gives it from the hand's rotation."""
-    rest = reference_offsets()[_HAND]
-    rest = rest / np.linalg.norm(rest, axis=-1, keepdims=True)  # (2, 3)
-    straight = np.einsum("tkab,kb->tka", np.asarray(world_mat, np.float64)[:, _HAND], rest)
+    straight = straight_forearms(np.asarray(world_mat)[:, _HAND])  # (T, 2, 3)
     pos = np.asarray(world_pos, np.float64)
     fore = pos[:, _HAND] - pos[:, _FORE]
     fore /= np.maximum(np.linalg.norm(fore, axis=-1, keepdims=True), 1e-12)

@@ -212,7 +212,7 @@ def evaluate(
                 if name.endswith("_ik") and engine_cfg.pelvis_smoothing and engine_cfg.lookahead:
                     root_mat, root_pos = smooth_pelvis_clip(root_mat, root_pos)
                 wm, wp = pose_from_rotations(rot, root_mat, root_pos)
-                if name.endswith("_ik") and not root_from_waist and _reaches(engine_cfg):
+                if name.endswith("_ik") and not root_from_waist and engine_cfg.reaches:
                     wp = wp + ease_reach_clip(reach_root(wp, tr.values))[:, None]
                 if name.endswith("_ik"):
                     contact_ik(wm, wp, con, engine_cfg.ik_release_frames, engine_cfg.ik_max_drift_m)
@@ -275,11 +275,6 @@ def evaluate(
         "implausible_threshold_m": scorer.threshold_m,
         "ground_truth": ground_truth,
     }
-
-
-def _reaches(cfg: EngineConfig) -> bool:
-    """Whether a guessed pelvis follows out-of-reach trackers (as the engine moves it)."""
-    return cfg.upper_body_ik and cfg.hand_reach
 
 
 def _upper_body(

@@ -87,6 +87,12 @@ class EngineConfig:
     latent_scale: float = 1.0
     home_factor: float | None = 1.0
 
+    @property
+    def reaches(self) -> bool:
+        """Whether a guessed pelvis is moved toward out-of-reach trackers before the
+        feet are planted (``hand_reach``, part of the upper-body pass)."""
+        return self.upper_body_ik and self.hand_reach
+
     def __post_init__(self) -> None:
         if self.samples < 1:
             raise ConfigError("samples must be >= 1")

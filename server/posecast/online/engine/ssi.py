@@ -540,7 +540,7 @@ class Engine:
         free = None  # per emitted pose, whether its pelvis is the decoder's guess
         if self.layout.predicts_root:
             free = np.ones(len(emit), np.bool_) if waist is None else ~waist
-        if self.cfg.upper_body_ik and self.cfg.hand_reach and free is not None and free.any():
+        if self.cfg.reaches and free is not None and free.any():
             # A guessed pelvis moves toward the trackers it cannot reach, before the
             # display IK plants the feet (upper_ik.reach_root).
             rows = np.flatnonzero(free)

@@ -279,6 +279,14 @@ WRIST_ELBOW_SHARE = 0.75
 _HAND_DIR = reference_offsets()[_ARM_HAND] / _BONE_M[_ARM_HAND][:, None]  # (2, 3) at rest
 
 
+def straight_forearms(hand_mat: NDArray[np.floating]) -> F64:
+    """Unit forearm directions ``(..., 2, 3)`` (left, right; elbow to hand) that a
+    straight wrist gives hands of world rotations ``hand_mat (..., 2, 3, 3)``: the
+    hand's rest bone direction turned by its rotation."""
+    out: F64 = np.einsum("...kab,kb->...ka", np.asarray(hand_mat, np.float64), _HAND_DIR)
+    return out
+
+
 def solve_upper_body(
     positions: NDArray[np.floating],
     rotations: NDArray[np.floating],
@@ -346,8 +354,9 @@ def solve_upper_body(
     hint = pos[:, fore]
     if wrist_share > 0.0:
         # A straight wrist: the forearm points where the controller's rest direction does.
-        forearm = np.einsum("ekab,kb->eka", tracker_mat[:, _HAND_SLOTS], _HAND_DIR)
-        behind = hand_target - float(_BONE_M[hand[0]]) * forearm
+        behind = hand_target - float(_BONE_M[hand[0]]) * straight_forearms(
+            tracker_mat[:, _HAND_SLOTS]
+        )
         hint = (1.0 - wrist_share) * hint + wrist_share * behind
     elbow, wrist = two_bone(
         shoulder.reshape(-1, 3),
