@@ -554,6 +554,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         wrist_elbow=wrist,
         elbow_hinge=not args.no_elbow_hinge,
         hand_reach=not args.no_hand_reach,
+        pelvis_lean=not args.no_pelvis_lean,
         pelvis_smoothing=not args.no_pelvis_smoothing,
         ik_max_drift_m=drift,
         ik_release_frames=release,
@@ -1019,6 +1020,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="headset-only and sites players without a waist: leave the guessed pelvis "
         "where the headset puts it, not moved toward a controller beyond the arm",
+    )
+    ev.add_argument(
+        "--no-pelvis-lean",
+        action="store_true",
+        help="headset-only and sites players without a waist: leave the guessed pelvis "
+        "as the network turned it, not leant so that the line to the head meets the headset",
     )
     ev.add_argument(
         "--no-knee-hinge",

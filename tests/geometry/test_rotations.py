@@ -10,6 +10,7 @@ import pytest
 from posecast.geometry.rotations import (
     aa2mat,
     aa2quat,
+    axis_angle_mat,
     axis_mat,
     euler2mat,
     mat2aa,
@@ -365,3 +366,15 @@ def test_yaw_round_trip_and_heading() -> None:
     # Looking up or down (a turn about the body's X axis) leaves the heading alone.
     pitched = quat_mul(q, aa2quat([0.6, 0.0, 0.0]))
     np.testing.assert_allclose(quat2yaw(pitched), yaw, atol=1e-12)
+
+
+def test_axis_angle_mat_matches_aa2mat(rng: np.random.Generator) -> None:
+    """Rodrigues on a unit axis gives :func:`aa2mat` of axis times angle, a zero angle
+    the identity (any axis)."""
+    axis = rng.normal(size=(64, 3))
+    axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
+    angle = rng.uniform(-np.pi, np.pi, 64)
+    angle[:4] = 0.0
+    got = axis_angle_mat(axis, angle)
+    np.testing.assert_allclose(got, aa2mat(axis * angle[:, None]), atol=1e-12)
+    np.testing.assert_allclose(got[:4], np.broadcast_to(np.eye(3), (4, 3, 3)), atol=1e-15)

@@ -24,6 +24,9 @@ _AXES = {"X": 0, "Y": 1, "Z": 2}
 _EPS = 1e-12
 
 
+_EYE3 = np.eye(3)
+
+
 def _arr(x: ArrayLike) -> NDArray[np.float64]:
     """Float64 view or copy of ``x`` (the reference math runs in double precision)."""
     return np.asarray(x, dtype=np.float64)
@@ -200,6 +203,19 @@ def quat2aa(q: ArrayLike) -> F:
 
 def aa2mat(aa: ArrayLike) -> F:
     return quat2mat(aa2quat(aa))
+
+
+def axis_angle_mat(axis: ArrayLike, angle: ArrayLike) -> F:
+    """Rotations ``(B, 3, 3)`` by ``angle (B,)`` radians about unit ``axis (B, 3)``
+    (Rodrigues' formula; cheaper than :func:`aa2mat` when the axis is unit already)."""
+    u = _arr(axis)
+    t = _arr(angle)
+    c, s = np.cos(t)[:, None, None], np.sin(t)[:, None, None]
+    x, y, z = u[:, 0], u[:, 1], u[:, 2]
+    zero = np.zeros_like(x)
+    k = np.stack([zero, -z, y, z, zero, -x, -y, x, zero], axis=-1).reshape(-1, 3, 3)
+    out: F = c * _EYE3 + s * k + (1.0 - c) * (u[:, :, None] * u[:, None, :])
+    return out
 
 
 def mat2aa(m: ArrayLike) -> F:

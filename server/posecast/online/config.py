@@ -82,6 +82,12 @@ class ServerConfig:
         "where the headset puts it, after the feet are planted, instead of moving it "
         "beforehand, horizontally toward a controller beyond the arm's reach too",
     )
+    no_pelvis_lean: bool = _opt(
+        False,
+        "leave a guessed pelvis (a headset-only player, a tracker set without a waist) "
+        "as the network turned it instead of leaning it so that the line to the head "
+        "points at the headset, before the feet are planted",
+    )
     no_pelvis_smoothing: bool = _opt(
         False,
         "stream each pose on its own frame's pelvis instead of the 1-2-1 average with "

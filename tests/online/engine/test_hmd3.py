@@ -18,12 +18,14 @@ import numpy as np
 import pytest
 import torch
 
-from posecast.offline.evaluation.reconstruct import decode_cvae
+from posecast.geometry.rotations import quat2mat
+from posecast.offline.evaluation.reconstruct import decode_cvae, pose_from_rotations
 from posecast.offline.nets.cvae import CVAE, CVAEConfig
 from posecast.offline.train.export import build_decoder, sidecar
 from posecast.online.engine.multi import MultiEngine
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
+from posecast.online.engine.upper_ik import lean_root
 from posecast.online.inference.artifact import Artifact, default_models_dir, load_artifact
 from posecast.skeleton import Joint
 from posecast.tracking.features import TrackerSlot
@@ -82,6 +84,20 @@ def _engine4(backend: BackendLoader, **cfg: object) -> Engine:
     return backend.engine(Layout.HMD3_WAIST, **cfg)  # type: ignore[arg-type]
 
 
+def _offline(
+    decoder: Artifact, frames: list[TrackerFrame]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The decoder's pose of ``frames`` at eps = 0, offline on ONNX Runtime: rotations
+    ``(T, 108)``, and its pelvis (rotations, positions) out of the head frame."""
+    pos = np.stack([f.pos for f in frames])
+    quat = np.stack([f.quat for f in frames])
+    feats = spec(Layout.HMD3).clip_features(pos, quat, 60.0).astype(np.float32)
+    rot, _, root = decode_cvae(decoder, feats, np.zeros(30, np.float32))
+    assert root is not None
+    root_mat, root_pos = pelvis_from_head(root, pos[:, TrackerSlot.HEAD], quat[:, TrackerSlot.HEAD])
+    return rot, root_mat, root_pos
+
+
 def test_the_pelvis_comes_from_the_decoder_under_the_head(
     hmd3_decoder: Artifact, hmd3_engine: Callable[..., Engine], walk_frames: WalkFrames
 ) -> None:
@@ -96,15 +112,48 @@ def test_the_pelvis_comes_from_the_decoder_under_the_head(
         e.push("a", f)
         (pose,) = e.tick().poses
         got.append(pose.positions[Joint.PELVIS])
-    pos = np.stack([f.pos for f in frames])
-    quat = np.stack([f.quat for f in frames])
-    feats = spec(Layout.HMD3).clip_features(pos, quat, 60.0).astype(np.float32)
-    _, _, root = decode_cvae(hmd3_decoder, feats, np.zeros(30, np.float32))
-    assert root is not None
-    _, want = pelvis_from_head(root, pos[:, TrackerSlot.HEAD], quat[:, TrackerSlot.HEAD])
+    _, _, want = _offline(hmd3_decoder, frames)
     np.testing.assert_allclose(np.stack(got), want, atol=1e-4)
-    below = pos[:, TrackerSlot.HEAD, 1] - np.stack(got)[:, 1]
+    below = np.stack([f.pos[TrackerSlot.HEAD, 1] for f in frames]) - np.stack(got)[:, 1]
     assert np.all(below > 0.3)  # the body hangs from the head, not from a waist tracker
+
+
+def test_a_guessed_pelvis_leans_toward_a_headset_lower_than_the_networks_head(
+    hmd3_decoder: Artifact, hmd3_engine: Callable[..., Engine], walk_frames: WalkFrames
+) -> None:
+    """The headset 15 cm lower and 20 cm further along the walk than the walk's head
+    (a player bending over). With one sample and no look-ahead, the streamed pelvis
+    turns by the swing that aims the line from the decoder's pelvis to its head (FK of
+    its pose, offline on ONNX Runtime) at the headset (``pelvis_lean``, the default),
+    and keeps the decoder's rotation with ``pelvis_lean=False``."""
+    frames = []
+    for f in walk_frames(0)[:30]:
+        pos = f.pos.copy()
+        pos[TrackerSlot.HEAD] += [0.0, -0.15, 0.0]
+        pos[TrackerSlot.HEAD, [0, 2]] += 0.2 * _heading(f.quat[TrackerSlot.HEAD])
+        frames.append(TrackerFrame(f.seq, pos, f.quat))
+    rot, root_mat, root_pos = _offline(hmd3_decoder, frames)
+    _, fk = pose_from_rotations(rot.astype(np.float64), root_mat, root_pos)
+    headset = np.stack([f.pos[TrackerSlot.HEAD] for f in frames])
+    turn = lean_root(root_pos, fk[:, Joint.HEAD], headset)
+    assert (
+        np.degrees(np.arccos(np.clip((np.trace(turn, axis1=1, axis2=2) - 1) / 2, -1, 1))).min() > 5
+    )
+    for lean, want in ((True, turn @ root_mat), (False, root_mat)):
+        e = hmd3_engine(samples=1, lookahead=0, pelvis_lean=lean)
+        e.add_player("a", seed=0)
+        got = []
+        for f in frames:
+            e.push("a", f)
+            (pose,) = e.tick().poses
+            got.append(quat2mat(pose.rotations[Joint.PELVIS].astype(np.float64)))
+        np.testing.assert_allclose(np.stack(got), want, atol=1e-4)
+
+
+def _heading(q: np.ndarray) -> np.ndarray:
+    """The horizontal unit direction ``(x, z)`` a headset of orientation ``q`` faces."""
+    f = quat2mat(q) @ np.array([0.0, 0.0, 1.0])
+    return f[[0, 2]] / np.linalg.norm(f[[0, 2]])
 
 
 def test_a_guessed_pelvis_follows_a_controller_held_out_of_reach(
@@ -130,7 +179,9 @@ def test_a_guessed_pelvis_follows_a_controller_held_out_of_reach(
     by_seq = {f.seq: (f, d) for f, d in zip(frames, left, strict=True)}
     pelvis, miss = {}, {}
     for reach in (True, False):
-        e = hmd3_engine(samples=4, lookahead=2, hand_reach=reach)
+        # Without the lean, which may already turn this random decoder's shoulder
+        # toward the far controller: the reach alone.
+        e = hmd3_engine(samples=4, lookahead=2, hand_reach=reach, pelvis_lean=False)
         e.add_player("a", seed=0)
         poses = []
         for f in frames:

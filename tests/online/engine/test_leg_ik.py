@@ -10,7 +10,7 @@ import pytest
 
 from posecast.geometry.fk import fk_mat, world2local_mat
 from posecast.geometry.rotations import aa2mat, mat2quat, quat2mat
-from posecast.online.engine.leg_ik import LEG_JOINTS, solve_legs, tracks_legs
+from posecast.online.engine.leg_ik import LEG_JOINTS, senses_legs, solve_legs, tracks_legs
 from posecast.skeleton import PARENTS, Joint, reference_offsets
 from posecast.tracking.sites import SITE_JOINT_INDEX, TrackerSet
 
@@ -159,3 +159,20 @@ def test_the_knee_bends_as_a_hinge() -> None:
     a = plaus.joint_angles(quat2mat(quat.astype(np.float64)))
     np.testing.assert_allclose(a["knee_side"], 0.0, atol=1e-3)
     assert (a["knee_flex"] > 0).all()
+
+
+def test_a_set_senses_its_legs_with_any_foot_or_knee_tracker() -> None:
+    """``senses_legs``: positional or inertial feet or knees count (their sets keep the
+    hips as the network has them; a guessed pelvis of the others leans), hands, head
+    and waist do not."""
+    sensed = [
+        FEET,
+        KNEES,
+        "head,left_hand,right_hand,left_foot:imu,right_foot:imu",
+        "head,left_hand,right_hand,left_knee:imu",
+    ]
+    blind = ["head,left_hand,right_hand", "head,left_hand,right_hand,waist"]
+    for text in sensed:
+        assert senses_legs(kinds_of(text, 2)).all(), text
+    for text in blind:
+        assert not senses_legs(kinds_of(text, 2)).any(), text

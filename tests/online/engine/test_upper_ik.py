@@ -9,7 +9,8 @@ from collections.abc import Callable
 import numpy as np
 
 from posecast.geometry.fk import fk_mat, world2local_mat
-from posecast.geometry.rotations import aa2mat, mat2quat, quat2mat
+from posecast.geometry.rotations import aa2mat, mat2aa, mat2quat, mat2r6d, quat2mat
+from posecast.offline.evaluation.reconstruct import pose_from_rotations
 from posecast.online.engine.calibration import Calibration
 from posecast.online.engine.hinge import hinge_elbows_quat
 from posecast.online.engine.ssi import Engine
@@ -17,15 +18,18 @@ from posecast.online.engine.types import PoseOut, TrackerFrame
 from posecast.online.engine.upper_ik import (
     ARM_REACH_M,
     HAND_REACH_SOFTNESS_M,
-    NECK_TWIST_SHARE,
+    LEAN_SHARE,
+    NECK_SHARE,
     REACH_EASE,
     SPINE_REACH_M,
     WRIST_ELBOW_SHARE,
     ease_reach,
     ease_reach_clip,
+    lean_root,
     reach_root,
     reach_shift,
     solve_upper_body,
+    turn_pelvis,
 )
 from posecast.skeleton import LOWER_BODY, PARENTS, Joint, reference_offsets
 from posecast.tracking.features import TrackerSlot
@@ -181,11 +185,18 @@ def test_the_elbow_follows_the_controllers_rotation() -> None:
     np.testing.assert_array_less(default, 0.6 * network)
 
 
+def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Degrees between rotation matrices ``(..., 3, 3)``."""
+    rel = np.swapaxes(a, -1, -2) @ b
+    cos = np.clip((np.trace(rel, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
+    return np.degrees(np.arccos(cos))
+
+
 def test_the_neck_takes_its_share_of_a_turn_of_the_head() -> None:
     """A headset turned 40 degrees about the neck's bone from where the network had the
     head (the head joint already on the headset): the head's world rotation becomes the
-    headset's, nothing moves, and the neck turns with it by NECK_TWIST_SHARE of the
-    40 degrees about its bone, the head's twist relative to the neck taking the rest."""
+    headset's, nothing moves, and the neck turns with it by NECK_SHARE of the 40
+    degrees about its bone, the head's rotation relative to the neck taking the rest."""
     pos, quat = random_poses(6, seed=8, straight_wrists=True)
     tp, _ = trackers(pos, np.zeros((6, 4, 3)), quat)
     mats = quat2mat(quat)
@@ -199,11 +210,38 @@ def test_the_neck_takes_its_share_of_a_turn_of_the_head() -> None:
     np.testing.assert_allclose(out_pos, pos, atol=1e-6)
     out = quat2mat(out_quat.astype(np.float64))
     np.testing.assert_allclose(out[:, Joint.HEAD], quat2mat(tq[:, TrackerSlot.HEAD]), atol=1e-6)
-    neck_turn = aa2mat(bone * np.radians(40.0 * NECK_TWIST_SHARE))
+    neck_turn = aa2mat(bone * np.radians(40.0 * NECK_SHARE))
     np.testing.assert_allclose(out[:, Joint.NECK], neck_turn @ mats[:, Joint.NECK], atol=1e-6)
-    assert 0.3 < NECK_TWIST_SHARE < 1.0
+    assert 0.3 < NECK_SHARE < 1.0
     others = [j for j in range(19) if j not in (Joint.NECK, Joint.HEAD)]
     np.testing.assert_allclose(out[:, others], mats[:, others], atol=1e-6)
+    assert_fk_consistent(out_pos, out_quat)
+
+
+def test_a_player_bending_over_curls_the_whole_chain() -> None:
+    """The network's spine upright; the player curled forward (spine, chest and neck
+    25, 25 and 15 degrees about +X) and the headset on that head, turned with it. Every
+    joint of the chain ends within 8 degrees of the curl (1.0, 4.0, 7.8 and 4.8 for
+    spine, chest, neck and head), the neck sharing the head's pitch: the solve before
+    the lean and the neck's share (a swing for each bone, the head taking the headset's
+    turn) left the neck straight, 15 degrees off, and the head 9.6."""
+    E = 2
+    upright = np.broadcast_to(np.eye(3), (E, 19, 3, 3)).copy()
+    root = np.tile([0.0, 0.98, 0.0], (E, 1))
+    wm, wp = fk_mat(upright, root, reference_offsets())
+    curl = upright.copy()
+    for joint, degrees in ((Joint.SPINE, 25.0), (Joint.CHEST, 25.0), (Joint.NECK, 15.0)):
+        curl[:, joint] = aa2mat(np.tile([np.radians(degrees), 0.0, 0.0], (E, 1)))
+    true_mat, true_pos = fk_mat(curl, root, reference_offsets())
+    slots = [Joint.HEAD, Joint.LEFT_HAND, Joint.RIGHT_HAND, Joint.PELVIS]
+    tp, tq = true_pos[:, slots], mat2quat(true_mat[:, slots])
+    out_pos, out_quat, limited = solve_upper_body(wp, mat2quat(wm), tp, tq)
+    assert not limited.any()
+    out_local = world2local_mat(quat2mat(out_quat.astype(np.float64)))
+    chain = [Joint.SPINE, Joint.CHEST, Joint.NECK, Joint.HEAD]
+    assert (_angle(out_local[:, chain], curl[:, chain]) < 8.0).all()
+    np.testing.assert_allclose(out_pos[:, Joint.HEAD], tp[:, TrackerSlot.HEAD], atol=1e-3)
+    assert 0.5 <= LEAN_SHARE <= 1.0
     assert_fk_consistent(out_pos, out_quat)
 
 
@@ -216,7 +254,7 @@ def side(shoulder: np.ndarray, target: np.ndarray, elbow: np.ndarray) -> np.ndar
 
 
 def test_the_elbow_stays_on_the_networks_side_over_a_sweep_of_targets() -> None:
-    """The head stays where the network put it (so the shoulders do not move); each hand
+    """The head stays where and as the network put it (so the shoulders do not move); each hand
     target sweeps a 9 x 9 x 9 grid of +-8 cm around the network's hand. With the
     elbows the network's alone (``wrist_share=0``), the solved elbow is on the same
     side of the shoulder-target line as the network's, and well away from it (no flip
@@ -231,6 +269,7 @@ def test_the_elbow_stays_on_the_networks_side_over_a_sweep_of_targets() -> None:
     shift[:, 1] = np.tile(offsets, (len(pos), 1))
     shift[:, 2] = -np.tile(offsets, (len(pos), 1))
     tp, tq = trackers(pos_e, shift, random_quats(E, seed=5))
+    tq[:, TrackerSlot.HEAD] = quat_e[:, Joint.HEAD]  # the headset as the network's head
     out_pos, out_quat, limited = solve_upper_body(pos_e, quat_e, tp, tq, wrist_share=0.0)
     assert not limited.any()
     for upper, fore, slot in ARMS:
@@ -343,9 +382,9 @@ def test_a_guessed_pelvis_follows_a_controller_beyond_the_arms_reach() -> None:
     spine_to_head = tp[3, TrackerSlot.HEAD] - (pos[3, Joint.SPINE] + shift[3])
     assert shift[3, 0] > 0.1
     assert np.linalg.norm(spine_to_head) <= SPINE_REACH_M + 1e-9
-    # The pass on the moved body leaves the controller a fifth as far out of reach (the
-    # spine's bend toward the headset moves the shoulder a little) as on the body
-    # where the network put it.
+    # The pass on the moved body leaves the controller under a third as far out of
+    # reach as on the body where the network put it (not nearer: the chain's lean and
+    # bend toward a headset 40 % nearer the spine carry the shoulder).
     free = np.ones(E, np.bool_)
     miss = []
     for body in (pos, pos + shift[:, None]):
@@ -353,7 +392,7 @@ def test_a_guessed_pelvis_follows_a_controller_beyond_the_arms_reach() -> None:
         hand = out_pos[:, Joint.LEFT_HAND] - tp[:, TrackerSlot.LEFT_HAND]
         miss.append(np.linalg.norm(hand, axis=-1))
         assert limited[1] and limited[3]
-    assert miss[0][0] > 0.2 and miss[1][0] < 0.2 * miss[0][0]
+    assert miss[0][0] > 0.2 and miss[1][0] < 0.33 * miss[0][0]
     # Only the spine and the shoulders are read: the other rows may be anything.
     partial = np.full_like(pos, np.nan)
     keep = [int(Joint.SPINE), int(Joint.LEFT_UPPER_ARM), int(Joint.RIGHT_UPPER_ARM)]
@@ -440,3 +479,39 @@ def test_the_shown_move_eases_toward_reach_roots() -> None:
     np.testing.assert_allclose(0.1 - shown[2:, 0], left, atol=1e-12)
     np.testing.assert_array_equal(ease_reach(None, target[5]), target[5])
     assert 0.0 < REACH_EASE < 1.0
+
+
+def test_a_guessed_pelvis_leans_so_the_line_to_the_head_meets_the_headset() -> None:
+    """``lean_root`` and ``turn_pelvis``: the turned pelvis carries the upper body
+    about itself (the pelvis stays, the bones keep their lengths) so the line from it
+    to the head points at the headset, by the smallest turn (a swing); the thighs keep
+    their world rotations, so each leg only follows its hip."""
+    E = 6
+    rng = np.random.default_rng(21)
+    rot6d = mat2r6d(aa2mat(rng.normal(0.0, 0.3, (E, 18, 3)))).reshape(E, 108).astype(np.float32)
+    root_mat = aa2mat(rng.normal(0.0, 0.1, (E, 3)))
+    root_pos = np.array([0.0, 0.95, 0.0]) + rng.normal(0.0, 0.03, (E, 3))
+    wm, wp = pose_from_rotations(rot6d.reshape(E, 18, 6), root_mat, root_pos)
+    pelvis, head = wp[:, Joint.PELVIS], wp[:, Joint.HEAD]
+    # The headset 15 cm forward and 12 cm lower than the network's head: bent over.
+    headset = head + np.array([0.0, -0.12, 0.15])
+    turn = lean_root(pelvis, head, headset)
+    new_rot, new_root = turn_pelvis(rot6d, root_mat, turn)
+    assert new_rot.shape == rot6d.shape and new_rot.dtype == rot6d.dtype
+    nm, npos = pose_from_rotations(new_rot.reshape(E, 18, 6), new_root, root_pos)
+    line = npos[:, Joint.HEAD] - npos[:, Joint.PELVIS]
+    want = headset - pelvis
+    cos = np.sum(line * want, -1) / np.linalg.norm(line, axis=-1) / np.linalg.norm(want, axis=-1)
+    assert cos.min() > 1 - 1e-6
+    np.testing.assert_allclose(npos[:, Joint.PELVIS], pelvis, atol=1e-9)
+    np.testing.assert_allclose(
+        np.linalg.norm(line, axis=-1), np.linalg.norm(head - pelvis, axis=-1)
+    )
+    for thigh in (Joint.LEFT_THIGH, Joint.RIGHT_THIGH):
+        np.testing.assert_allclose(nm[:, thigh], wm[:, thigh], atol=1e-5)
+    upper = [j for j in range(1, 19) if j not in LOWER_BODY]
+    np.testing.assert_allclose(nm[:, upper], turn[:, None] @ wm[:, upper], atol=1e-5)
+    axis = mat2aa(turn)  # a swing: about the axis square to both lines, no twist about them
+    axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
+    np.testing.assert_allclose(np.sum(axis * (head - pelvis), -1), 0.0, atol=1e-9)
+    np.testing.assert_allclose(np.sum(axis * want, -1), 0.0, atol=1e-9)

@@ -26,14 +26,20 @@ from posecast.online.engine.clearance import clearance_lift, clip_toe_speed
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.hinge import hinge_elbows, hinge_knees
 from posecast.online.engine.ik import floor_ik, floor_lift
-from posecast.online.engine.leg_ik import solve_legs, tracks_legs
+from posecast.online.engine.leg_ik import senses_legs, solve_legs, tracks_legs
 from posecast.online.engine.pelvis import smooth_pelvis_clip
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
-from posecast.online.engine.upper_ik import ease_reach_clip, reach_root, solve_upper_body
+from posecast.online.engine.upper_ik import (
+    ease_reach_clip,
+    lean_root,
+    reach_root,
+    solve_upper_body,
+    turn_pelvis,
+)
 from posecast.online.inference.artifact import load_artifact
 from posecast.online.inference.backends import Backend, load_backend
-from posecast.skeleton import LOWER_BODY, NUM_ROTATIONS
+from posecast.skeleton import LOWER_BODY, NUM_ROTATIONS, Joint
 from posecast.tracking.features import TrackerSlot
 from posecast.tracking.layouts import Layout, PlayerLayout, model_layout, pelvis_from_head, spec
 from posecast.tracking.sites import (
@@ -211,6 +217,16 @@ def evaluate(
             if name != "cvae_ik_ssi":
                 if name.endswith("_ik") and engine_cfg.pelvis_smoothing and engine_cfg.lookahead:
                     root_mat, root_pos = smooth_pelvis_clip(root_mat, root_pos)
+                # As the engine: a set that senses its legs keeps its hips as they are.
+                legs_sensed = tracker_set is not None and bool(
+                    senses_legs(tracker_set.kinds()[None])[0]
+                )
+                lean = not root_from_waist and not legs_sensed and engine_cfg.leans
+                if name.endswith("_ik") and lean:
+                    _, near = pose_from_rotations(rot, root_mat, root_pos)
+                    turn = lean_root(root_pos, near[:, Joint.HEAD], tr.values[:, TrackerSlot.HEAD])
+                    leant, turned = turn_pelvis(rot, root_mat, turn)
+                    rot, root_mat = np.asarray(leant), np.asarray(turned, np.float64)
                 wm, wp = pose_from_rotations(rot, root_mat, root_pos)
                 if name.endswith("_ik") and not root_from_waist and engine_cfg.reaches:
                     wp = wp + ease_reach_clip(reach_root(wp, tr.values))[:, None]

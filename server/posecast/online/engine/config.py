@@ -47,6 +47,11 @@ class EngineConfig:
             toward a controller beyond the arm's reach, horizontally, before the feet
             are planted (:func:`posecast.online.engine.upper_ik.reach_root`; default
             on, with ``upper_body_ik``).
+        pelvis_lean: turn a pelvis that is the decoder's guess (no waist tracker)
+            about itself so that the line from it to the network's head points at the
+            headset, the upper body with it and the legs following the hips, before
+            the hand reach and the feet (:func:`posecast.online.engine.upper_ik.lean_root`;
+            default on, with ``upper_body_ik``; chosen on the validation split).
         elbow_hinge: turn the shown upper arms and forearms so each elbow bends as
             a hinge about a fixed axis in its upper arm's frame, no joint moving
             (after the upper-body pass; :func:`posecast.online.engine.hinge.hinge_elbows`;
@@ -83,6 +88,7 @@ class EngineConfig:
     elbow_hinge: bool = True
     wrist_elbow: float = WRIST_ELBOW_SHARE
     hand_reach: bool = True
+    pelvis_lean: bool = True
     pelvis_smoothing: bool = True
     latent_scale: float = 1.0
     home_factor: float | None = 1.0
@@ -92,6 +98,12 @@ class EngineConfig:
         """Whether a guessed pelvis is moved toward out-of-reach trackers before the
         feet are planted (``hand_reach``, part of the upper-body pass)."""
         return self.upper_body_ik and self.hand_reach
+
+    @property
+    def leans(self) -> bool:
+        """Whether a guessed pelvis leans toward the headset before the hand reach and
+        the feet (``pelvis_lean``, part of the upper-body pass)."""
+        return self.upper_body_ik and self.pelvis_lean
 
     def __post_init__(self) -> None:
         if self.samples < 1:

@@ -26,7 +26,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from posecast.geometry.rotations import mat2quat, quat2mat
+from posecast.geometry.rotations import axis_angle_mat, mat2quat, quat2mat
 from posecast.online.engine.ik import cross3, unit3
 from posecast.online.engine.upper_ik import _wrap
 from posecast.skeleton import NUM_JOINTS, Joint
@@ -82,19 +82,6 @@ def _twist_angle(rot: F64, axis: F64) -> F64:
     return _wrap(2.0 * np.arctan2(np.einsum("bi,bi->b", v, axis), w))
 
 
-_EYE = np.eye(3)
-
-
-def _turn(axis: F64, angle: F64) -> F64:
-    """Rotations ``(B, 3, 3)`` by ``angle (B,)`` about unit ``axis (B, 3)`` (Rodrigues)."""
-    c, s = np.cos(angle)[:, None, None], np.sin(angle)[:, None, None]
-    x, y, z = axis[:, 0], axis[:, 1], axis[:, 2]
-    zero = np.zeros_like(x)
-    k = np.stack([zero, -z, y, z, zero, -x, -y, x, zero], axis=-1).reshape(-1, 3, 3)
-    out: F64 = c * _EYE + s * k + (1.0 - c) * (axis[:, :, None] * axis[:, None, :])
-    return out
-
-
 def hinge_knees(mat: F64, pos: F64) -> None:
     """Both knees of ``B`` poses onto their hinges, in place: world rotations
     ``mat (B, 19, 3, 3)`` change, positions ``pos (B, 19, 3)`` are read only."""
@@ -132,12 +119,12 @@ def _hinge(mat: F64, pos: F64, limbs: tuple[tuple[int, int, int, F64, F64], ...]
     # A limb bent the wrong way (a knee or an elbow bent backward) would need its upper
     # bone turned half round: such limbs fade back to the network's.
     weight = weight * np.clip((_FLIP - np.abs(alpha)) / _FLIP_SPAN, 0.0, 1.0)
-    Rt = _turn(a, alpha * weight) @ Rt
+    Rt = axis_angle_mat(a, alpha * weight) @ Rt
     Rs = mat[:, lower].reshape(-1, 3, 3)
-    hinged = Rt @ _turn(axis, np.arccos(cos))
+    hinged = Rt @ axis_angle_mat(axis, np.arccos(cos))
     beta = _twist_angle(hinged @ np.swapaxes(Rs, -1, -2), f)
     mat[:, upper] = Rt.reshape(B, L, 3, 3)
-    mat[:, lower] = (_turn(f, beta * weight) @ Rs).reshape(B, L, 3, 3)
+    mat[:, lower] = (axis_angle_mat(f, beta * weight) @ Rs).reshape(B, L, 3, 3)
 
 
 def hinge_knees_quat(positions: NDArray[np.floating], rotations: NDArray[np.floating]) -> None:

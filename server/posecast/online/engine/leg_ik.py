@@ -74,6 +74,15 @@ def tracks_legs(kinds: NDArray[np.integer]) -> NDArray[np.bool_]:
     return out
 
 
+def senses_legs(kinds: NDArray[np.integer]) -> NDArray[np.bool_]:
+    """Per row of ``kinds (E, 10)``, whether the set tracks a foot or a knee in any way
+    (positional or inertial): its legs then carry evidence of their own, which a
+    guessed pelvis's lean (``upper_ik.lean_root``) would bend at the hips."""
+    rows = [SITE_ROW[s] for leg in _LEGS for s in leg[3:]]
+    out: NDArray[np.bool_] = (np.asarray(kinds)[:, rows] != Kind.ABSENT).any(axis=1)
+    return out
+
+
 def solve_legs(
     positions: NDArray[np.floating],
     rotations: NDArray[np.floating],

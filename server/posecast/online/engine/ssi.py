@@ -58,18 +58,20 @@ from posecast.online.engine.clearance import TOES, clearance_lift, toe_speed
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.hinge import hinge_elbows_quat, hinge_knees_quat
 from posecast.online.engine.ik import LEGS, floor_ik, floor_lift
-from posecast.online.engine.leg_ik import solve_legs, tracks_legs
+from posecast.online.engine.leg_ik import senses_legs, solve_legs, tracks_legs
 from posecast.online.engine.pelvis import smooth_pelvis
 from posecast.online.engine.selectors import AnomalySelector, Selector, choose_anomaly_rows
 from posecast.online.engine.slots import SlotArrays
 from posecast.online.engine.types import EngineEvent, PoseOut, TickResult, TrackerFrame
 from posecast.online.engine.upper_ik import (
-    REACH_JOINTS,
+    LEAN_JOINTS,
     ease_reach,
+    lean_root,
     reach_root,
     solve_upper_body,
+    turn_pelvis,
 )
-from posecast.skeleton import NUM_JOINTS, REST_PELVIS_HEIGHT_M, reference_offsets
+from posecast.skeleton import NUM_JOINTS, REST_PELVIS_HEIGHT_M, Joint, reference_offsets
 from posecast.tracking.features import TRACKER_JOINT_INDEX, TrackerSlot
 from posecast.tracking.layouts import Layout, spec
 from posecast.tracking.sites import SITE_JOINT_INDEX, Kind, TrackerSet
@@ -540,17 +542,30 @@ class Engine:
         free = None  # per emitted pose, whether its pelvis is the decoder's guess
         if self.layout.predicts_root:
             free = np.ones(len(emit), np.bool_) if waist is None else ~waist
-        if self.cfg.reaches and free is not None and free.any():
-            # A guessed pelvis moves toward the trackers it cannot reach, before the
-            # display IK plants the feet (upper_ik.reach_root).
+        if (self.cfg.reaches or self.cfg.leans) and free is not None and free.any():
+            # A guessed pelvis leans so that the line to the head meets the headset
+            # (upper_ik.lean_root), then moves toward the trackers it cannot reach
+            # (upper_ik.reach_root), before the display IK plants the feet.
             rows = np.flatnonzero(free)
-            _, near = fk32(rot[rows], root_mat[rows], root_pos[rows], False, REACH_JOINTS)
-            target = reach_root(near, pos[rows])
-            root_pos = root_pos.copy()
-            for r, i in enumerate(rows.tolist()):
-                p = emit[i][0]
-                p.reach = ease_reach(None if firsts[i] else p.reach, target[r])
-                root_pos[i] += p.reach.astype(np.float32)
+            _, near = fk32(rot[rows], root_mat[rows], root_pos[rows], False, LEAN_JOINTS)
+            if self.cfg.leans:
+                head = near[:, Joint.HEAD]
+                turn = lean_root(root_pos[rows], head, pos[rows, TrackerSlot.HEAD])
+                if self._sites:  # a set that senses its legs keeps its hips as they are
+                    turn[senses_legs(s["kinds"][slots[rows]])] = np.eye(3)
+                root_mat = root_mat.copy()
+                rot[rows], root_mat[rows] = turn_pelvis(rot[rows], root_mat[rows], turn)
+                pivot = root_pos[rows, None].astype(np.float64)
+                near = near.astype(np.float64)  # only LEAN_JOINTS' rows are defined
+                lean = list(LEAN_JOINTS)
+                near[:, lean] = pivot + np.einsum("eab,ekb->eka", turn, near[:, lean] - pivot)
+            if self.cfg.reaches:
+                target = reach_root(near, pos[rows])
+                root_pos = root_pos.copy()
+                for r, i in enumerate(rows.tolist()):
+                    p = emit[i][0]
+                    p.reach = ease_reach(None if firsts[i] else p.reach, target[r])
+                    root_pos[i] += p.reach.astype(np.float32)
         # FK and the players' own display IK, batched: gather their states, step,
         # scatter back.
         E = len(emit)

@@ -6,14 +6,17 @@ display foot IK, in calibrated canonical-body metres) and changes rotations only
 every bone keeps its length, and every joint's world rotation stays what FK of the
 local rotations gives (a joint that turns carries its whole subtree with it).
 
-1. **Spine chain** (``SPINE -> CHEST -> NECK -> HEAD``): one FABRIK sweep from
-   the network's own bend spread the correction over the three bones, then two exact
-   two-bone solves (spine-chest against the rest of the chain, then chest-neck-head)
-   put the head on the headset; each of ``SPINE``, ``CHEST``, ``NECK`` turns by the
-   smallest rotation (a swing) that points its bone at its new child, carrying the
-   arms along. The head's world rotation becomes the headset's, and the neck turns
-   about its own bone by :data:`NECK_TWIST_SHARE` of what that changed in the head's
-   twist relative to it (the head stays where it is).
+1. **Spine chain** (``SPINE -> CHEST -> NECK -> HEAD``): the spine, then the chest,
+   turns by :data:`LEAN_SHARE` of the swing that aims the line from it to the head at
+   the headset (a player who bends over leans the chain; the network's own bends
+   kept). The neck's world rotation is then :data:`NECK_SHARE` of the way from the
+   chest's to the headset's, and a two-bone solve of spine and chest puts the neck
+   joint where that neck holds the head on the headset (twice). An exact finish: one
+   FABRIK sweep spreads what is left over the three bones, then two two-bone solves
+   (spine-chest against the rest of the chain, then chest-neck-head) put the head on
+   the headset; each bone turns by the smallest rotation (a swing) that points it at
+   its new child, carrying the arms along. The head's world rotation becomes the
+   headset's.
 2. **Arms**, from the shoulders where the chest now holds them: a two-bone solve
    (upper arm, forearm) puts the hand on the controller, the elbow in the plane of
    shoulder, target and a hint, on the hint's side of the shoulder-target line (so
@@ -41,10 +44,16 @@ import itertools
 import numpy as np
 from numpy.typing import NDArray
 
-from posecast.geometry.rotations import aa2mat, mat2quat, quat2mat
+from posecast.geometry.rotations import (
+    axis_angle_mat,
+    mat2quat,
+    mat2r6d,
+    quat2mat,
+    r6d2mat,
+)
 from posecast.online.engine.ik import EPS as _EPS
+from posecast.online.engine.ik import cross3, swing_mat
 from posecast.online.engine.ik import norm3 as _norm
-from posecast.online.engine.ik import swing_mat
 from posecast.online.engine.ik import unit3 as _unit
 from posecast.skeleton import NUM_JOINTS, PARENTS, Joint, reference_offsets
 from posecast.tracking.features import TRACKER_JOINT_INDEX, TrackerSlot
@@ -213,6 +222,37 @@ def _within(c: F64, step: F64, radius: float) -> F64:
 
 
 REACH_JOINTS = (int(Joint.SPINE), *_ARM_UPPER)  # the joints reach_root reads
+LEAN_JOINTS = (*REACH_JOINTS, int(Joint.HEAD))  # and the head, which lean_root reads
+_THIGHS = [int(Joint.LEFT_THIGH) - 1, int(Joint.RIGHT_THIGH) - 1]  # their network rows
+
+
+def lean_root(pelvis: NDArray[np.floating], head: NDArray[np.floating], head_target: F64) -> F64:
+    """Per pose, the turn ``(E, 3, 3)`` of a guessed pelvis about itself that aims the
+    line from it to the network's head ``(E, 3)`` at the headset ``(E, 3)``: the
+    smallest rotation (a swing; about a horizontal axis when both lines are upright,
+    so the heading stays). A player who bends over leans from the hips; the network,
+    which leans too little then, left the spine to fold toward the headset."""
+    p = np.asarray(pelvis, np.float64)
+    out: F64 = swing_mat(np.asarray(head, np.float64) - p, np.asarray(head_target) - p)
+    return out
+
+
+def turn_pelvis(
+    rot6d: NDArray[np.floating], root_mat: NDArray[np.floating], turn: F64
+) -> tuple[NDArray[np.floating], NDArray[np.floating]]:
+    """The network's pose ``rot6d (E, 108)`` or ``(E, 18, 6)`` on a pelvis
+    ``root_mat (E, 3, 3)`` turned by ``turn (E, 3, 3)`` on the left: the upper body
+    turns with the pelvis, the thighs keep their world rotations (their local ones
+    take the turn back), so the legs only follow the hips. Returns the new
+    ``(rot6d, root_mat)``, in the inputs' shapes and dtypes."""
+    old = np.asarray(root_mat, np.float64)
+    new = np.asarray(turn, np.float64) @ old
+    rows = np.array(rot6d, copy=True).reshape(len(old), -1, 6)
+    back = np.swapaxes(new, -1, -2) @ old  # (E, 3, 3): new^T old
+    thighs = back[:, None] @ r6d2mat(rows[:, _THIGHS].astype(np.float64))
+    rows[:, _THIGHS] = mat2r6d(thighs)
+    return rows.reshape(np.shape(rot6d)), new.astype(np.asarray(root_mat).dtype)
+
 
 # The shown move follows reach_root's by this share a frame (an exponential average, a
 # time constant of about 3 frames at 60 Hz): the move answers the hands' motion frame
@@ -244,29 +284,55 @@ def _wrap(angle: F64) -> F64:
     return out
 
 
-def _twist(pos: F64, mat: F64, joint: int, child: int) -> F64:
-    """Per pose ``(E,)``, the twist (radians) about ``joint``'s bone (the line to
-    ``child``) of ``child``'s rotation relative to ``joint``'s."""
-    u, _ = _unit(pos[:, child] - pos[:, joint])  # (E, 3) the bone, world
-    m = mat[:, joint]
-    q = mat2quat(np.swapaxes(m, -1, -2) @ mat[:, child])  # the child's local rotation
-    a = np.einsum("eji,ej->ei", m, u)  # the bone in the joint's frame
-    return _wrap(2.0 * np.arctan2(np.einsum("ei,ei->e", q[:, :3], a), q[:, 3]))
+def _neck(chest_mat: F64, neck_local: F64, head_local: F64, head_mat: F64) -> F64:
+    """The neck's world rotations ``(E, 3, 3)`` under a chest ``chest_mat``: the
+    network's (``neck_local``, relative to the chest) turned by :data:`NECK_SHARE` of
+    the turn that the head, at its own ``head_local``, still needs to take the
+    headset's ``head_mat``. Nothing turns when the network's head has it already."""
+    held = chest_mat @ neck_local
+    rest = np.swapaxes(held, -1, -2) @ head_mat @ np.swapaxes(head_local, -1, -2)
+    out: F64 = held @ _part_of_turn(rest, NECK_SHARE)
+    return out
 
 
-def _turn_bone(pos: F64, mat: F64, joint: int, child: int, angle: F64) -> None:
-    """Turn ``joint``'s world rotation about its own bone by ``angle (E,)``, in place:
-    ``child``, on the bone, stays where it is (and keeps its world rotation)."""
-    u, _ = _unit(pos[:, child] - pos[:, joint])
-    mat[:, joint] = aa2mat(u * angle[:, None]) @ mat[:, joint]
+def _part_of_swing(a: F64, b: F64, share: float) -> F64:
+    """``share`` of the smallest rotation ``(E, 3, 3)`` taking direction ``a (E, 3)``
+    onto ``b``: about the same axis, by that share of the angle (none for directions
+    exactly opposite, which have no smallest rotation)."""
+    ua, _ = _unit(a)
+    ub, _ = _unit(b)
+    v = cross3(ua, ub)
+    s = _norm(v)
+    c = np.einsum("ei,ei->e", ua, ub)
+    angle = np.where(s > _EPS, share * np.arctan2(s, c), 0.0)  # opposite: no turn
+    return axis_angle_mat(v / np.maximum(s, _EPS)[:, None], angle)
 
 
-# The share of the pass's change to the head's twist about the neck (the headset
-# turned left or right of where the network had the head) that the neck takes, the
-# head keeping the rest: a person turns the head with the neck, and the swing-only
-# spine solve, which left all of it to the head joint, wrung it. Chosen on the
-# validation split (docs/evaluation.md, "Rotations: the neck's share of a head turn").
-NECK_TWIST_SHARE = 0.65
+def _part_of_turn(R: F64, share: float) -> F64:
+    """``share`` of each rotation ``R (E, 3, 3)``: about its axis, by that share of its
+    angle (at most half a turn)."""
+    q = mat2quat(R)
+    q = np.where(q[:, 3:] < 0.0, -q, q)
+    s = _norm(q[:, :3])
+    return axis_angle_mat(
+        q[:, :3] / np.maximum(s, _EPS)[:, None], share * 2.0 * np.arctan2(s, q[:, 3])
+    )
+
+
+# The spine chain's lean: the share of the swing aiming the line from the spine (then
+# from the chest) to the head at the headset that each of the two takes before the
+# rest is solved. The network, which leans too little when a player bends over (the
+# headset 10 cm or more under its head on a tenth of the validation frames for the
+# headset-only model), left all of it to the exact solve, which folded the neck.
+# Chosen on the validation split (docs/evaluation.md, "The spine chain: lean, then
+# the neck between chest and head").
+LEAN_SHARE = 0.8
+# The neck's world rotation: this share of the way from the chest's to the headset's
+# (twist included; the head keeps the rest), as the neck sits between them. Chosen on
+# the validation split with LEAN_SHARE (the same section).
+NECK_SHARE = 0.5
+_NECK_ROUNDS = 2  # neck placed, spine and chest solved, neck turned again
+_HEAD_OFFSET = reference_offsets()[Joint.HEAD]  # (3,) the head from the neck, neck frame
 
 # The share of the elbow hint that comes from the controller's rotation (a straight
 # wrist: the forearm along the hand's rest direction, rotated by the controller), the
@@ -322,30 +388,49 @@ def solve_upper_body(
         rows = np.flatnonzero(free_root)
         pos[rows] += reach_shift(pos[rows], tp[rows, TrackerSlot.HEAD])[:, None]
 
-    # 1. The spine chain. A FABRIK sweep spreads the bend over the three bones (more
-    # sweeps converge slowly near full extension, where a standing user's headset is,
-    # and cost a tick's time); two exact two-bone solves finish from its shape: the
-    # chest at its distance from the target (within what neck and head can span), then
-    # neck and head onto the target.
+    # 1. The spine chain. First the lean: the spine, then the chest, turns by
+    # LEAN_SHARE of the swing that aims the line from it to the head at the headset
+    # (the network's bends kept, the chain leant from its base). Then the neck takes
+    # NECK_SHARE of the turn from the chest to the headset, and spine and chest (a
+    # two-bone solve) put the neck joint where that neck holds the head on the headset.
+    # Last the exact finish: a FABRIK sweep spreads what is left over the three bones
+    # (more sweeps converge slowly near full extension, where a standing user's headset
+    # is, and cost a tick's time), then two two-bone solves from its shape: the chest at
+    # its distance from the target (within what neck and head can span), then neck and
+    # head onto the target.
     chain = [int(j) for j in _SPINE_CHAIN]
+    spine, chest_j, neck_j, head_j = chain
     head_target = tp[:, TrackerSlot.HEAD]
+    tracker_mat = quat2mat(tq)  # (E, 4, 3, 3)
+    head_mat = tracker_mat[:, TrackerSlot.HEAD]
+    neck_local = np.swapaxes(mat[:, chest_j], -1, -2) @ mat[:, neck_j]  # the network's
+    head_local = np.swapaxes(mat[:, neck_j], -1, -2) @ mat[:, head_j]
+    for joint in (spine, chest_j):
+        aim = pos[:, head_j] - pos[:, joint], head_target - pos[:, joint]
+        _turn(pos, mat, joint, _part_of_swing(*aim, LEAN_SHARE))
     lengths = _BONE_M[chain[1:]]  # spine-chest, chest-neck, neck-head
-    shaped = fabrik(pos[:, chain], lengths, head_target, FABRIK_SWEEPS)  # (E, 4, 3)
     forward = mat[:, Joint.CHEST, :, 2]  # the chest's +Z: where a straight spine bends
+    for _ in range(_NECK_ROUNDS):
+        neck_mat = _neck(mat[:, chest_j], neck_local, head_local, head_mat)
+        neck_at = head_target - neck_mat @ _HEAD_OFFSET
+        chest, _ = two_bone(
+            pos[:, spine], pos[:, chest_j], neck_at, lengths[0], lengths[1], forward
+        )
+        _point_bone(pos, mat, spine, chest_j, chest)
+        _point_bone(pos, mat, chest_j, neck_j, neck_at)
+        neck_mat = _neck(mat[:, chest_j], neck_local, head_local, head_mat)
+        _turn(pos, mat, neck_j, neck_mat @ np.swapaxes(mat[:, neck_j], -1, -2))
+    shaped = fabrik(pos[:, chain], lengths, head_target, FABRIK_SWEEPS)  # (E, 4, 3)
     span = np.clip(
         _norm(head_target - shaped[:, 1]),
         abs(lengths[1] - lengths[2]),
         lengths[1] + lengths[2],
     )
-    chest, _ = two_bone(pos[:, Joint.SPINE], shaped[:, 1], head_target, lengths[0], span, forward)
+    chest, _ = two_bone(pos[:, spine], shaped[:, 1], head_target, lengths[0], span, forward)
     neck, head = two_bone(chest, shaped[:, 2], head_target, lengths[1], lengths[2], forward)
     for (joint, child), placed in zip(itertools.pairwise(chain), (chest, neck, head), strict=True):
         _point_bone(pos, mat, joint, child, placed)
-    tracker_mat = quat2mat(tq)  # (E, 4, 3, 3)
-    before = _twist(pos, mat, int(Joint.NECK), int(Joint.HEAD))
-    mat[:, Joint.HEAD] = tracker_mat[:, TrackerSlot.HEAD]
-    after = _twist(pos, mat, int(Joint.NECK), int(Joint.HEAD))
-    _turn_bone(pos, mat, int(Joint.NECK), int(Joint.HEAD), NECK_TWIST_SHARE * _wrap(after - before))
+    mat[:, Joint.HEAD] = head_mat
 
     # 2. Both arms in one batch, from where the chest now holds the shoulders.
     upper, fore, hand = _ARM_UPPER, _ARM_FORE, _ARM_HAND
