@@ -176,6 +176,10 @@ def evaluate(
     # The pelvis of a single-sample variant: the waist tracker's, or the decoder's own.
     root_from_waist = tracker_set.tracks_waist if tracker_set is not None else not ls.predicts_root
     engine_cfg = engine_cfg or EngineConfig()
+    # A guessed pelvis leans toward the headset, as the engine's does; not that of a set
+    # that senses its legs, which keeps its hips as they are.
+    legs_sensed = tracker_set is not None and bool(senses_legs(tracker_set.kinds()[None])[0])
+    lean = not root_from_waist and not legs_sensed and engine_cfg.leans
     ssi_backend = (
         load_backend(backend, ls.layout, models_dir, cfg=engine_cfg)
         if "cvae_ik_ssi" in variants
@@ -217,11 +221,6 @@ def evaluate(
             if name != "cvae_ik_ssi":
                 if name.endswith("_ik") and engine_cfg.pelvis_smoothing and engine_cfg.lookahead:
                     root_mat, root_pos = smooth_pelvis_clip(root_mat, root_pos)
-                # As the engine: a set that senses its legs keeps its hips as they are.
-                legs_sensed = tracker_set is not None and bool(
-                    senses_legs(tracker_set.kinds()[None])[0]
-                )
-                lean = not root_from_waist and not legs_sensed and engine_cfg.leans
                 if name.endswith("_ik") and lean:
                     _, near = pose_from_rotations(rot, root_mat, root_pos)
                     turn = lean_root(root_pos, near[:, Joint.HEAD], tr.values[:, TrackerSlot.HEAD])

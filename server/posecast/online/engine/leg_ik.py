@@ -40,6 +40,7 @@ _LEGS = (
     (Joint.LEFT_THIGH, Joint.LEFT_SHIN, Joint.LEFT_FOOT, Site.LEFT_FOOT, Site.LEFT_KNEE),
     (Joint.RIGHT_THIGH, Joint.RIGHT_SHIN, Joint.RIGHT_FOOT, Site.RIGHT_FOOT, Site.RIGHT_KNEE),
 )
+_LEG_SITES = [SITE_ROW[s] for leg in _LEGS for s in leg[3:]]  # feet and knees' site rows
 # Joints whose world rotation the pass may change: both legs, toes included.
 LEG_JOINTS = [int(j) for j in range(Joint.LEFT_THIGH, Joint.RIGHT_TOE + 1)]
 
@@ -69,8 +70,7 @@ _STRAIGHT, _BENT = np.sin(np.radians(5.0)), np.sin(np.radians(15.0)) - np.sin(np
 
 def tracks_legs(kinds: NDArray[np.integer]) -> NDArray[np.bool_]:
     """Per row of ``kinds (E, 10)``, whether the pass has anything to do."""
-    rows = [SITE_ROW[s] for leg in _LEGS for s in leg[3:]]
-    out: NDArray[np.bool_] = (np.asarray(kinds)[:, rows] == Kind.POSITIONAL).any(axis=1)
+    out: NDArray[np.bool_] = (np.asarray(kinds)[:, _LEG_SITES] == Kind.POSITIONAL).any(axis=1)
     return out
 
 
@@ -78,8 +78,7 @@ def senses_legs(kinds: NDArray[np.integer]) -> NDArray[np.bool_]:
     """Per row of ``kinds (E, 10)``, whether the set tracks a foot or a knee in any way
     (positional or inertial): its legs then carry evidence of their own, which a
     guessed pelvis's lean (``upper_ik.lean_root``) would bend at the hips."""
-    rows = [SITE_ROW[s] for leg in _LEGS for s in leg[3:]]
-    out: NDArray[np.bool_] = (np.asarray(kinds)[:, rows] != Kind.ABSENT).any(axis=1)
+    out: NDArray[np.bool_] = (np.asarray(kinds)[:, _LEG_SITES] != Kind.ABSENT).any(axis=1)
     return out
 
 

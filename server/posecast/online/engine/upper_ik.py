@@ -9,9 +9,9 @@ local rotations gives (a joint that turns carries its whole subtree with it).
 1. **Spine chain** (``SPINE -> CHEST -> NECK -> HEAD``): the spine, then the chest,
    turns by :data:`LEAN_SHARE` of the swing that aims the line from it to the head at
    the headset (a player who bends over leans the chain; the network's own bends
-   kept). The neck's world rotation is then :data:`NECK_SHARE` of the way from the
-   chest's to the headset's, and a two-bone solve of spine and chest puts the neck
-   joint where that neck holds the head on the headset (twice). An exact finish: one
+   kept). The neck then turns by :data:`NECK_SHARE` of the turn the network's head
+   still needs to take the headset's rotation, and a two-bone solve of spine and chest
+   puts the neck joint where that neck holds the head on the headset (twice). An exact finish: one
    FABRIK sweep spreads what is left over the three bones, then two two-bone solves
    (spine-chest against the rest of the chain, then chest-neck-head) put the head on
    the headset; each bone turns by the smallest rotation (a swing) that points it at
@@ -325,11 +325,12 @@ def _part_of_turn(R: F64, share: float) -> F64:
 # headset 10 cm or more under its head on a tenth of the validation frames for the
 # headset-only model), left all of it to the exact solve, which folded the neck.
 # Chosen on the validation split (docs/evaluation.md, "The spine chain: lean, then
-# the neck between chest and head").
+# the neck's share").
 LEAN_SHARE = 0.8
-# The neck's world rotation: this share of the way from the chest's to the headset's
-# (twist included; the head keeps the rest), as the neck sits between them. Chosen on
-# the validation split with LEAN_SHARE (the same section).
+# The share the neck takes of the turn (swing and twist) that the network's head still
+# needs to take the headset's rotation, the head keeping the rest, as the neck sits
+# between chest and head. Chosen on the validation split with LEAN_SHARE (the same
+# section).
 NECK_SHARE = 0.5
 _NECK_ROUNDS = 2  # neck placed, spine and chest solved, neck turned again
 _HEAD_OFFSET = reference_offsets()[Joint.HEAD]  # (3,) the head from the neck, neck frame
@@ -391,7 +392,7 @@ def solve_upper_body(
     # 1. The spine chain. First the lean: the spine, then the chest, turns by
     # LEAN_SHARE of the swing that aims the line from it to the head at the headset
     # (the network's bends kept, the chain leant from its base). Then the neck takes
-    # NECK_SHARE of the turn from the chest to the headset, and spine and chest (a
+    # NECK_SHARE of the turn the network's head still needs, and spine and chest (a
     # two-bone solve) put the neck joint where that neck holds the head on the headset.
     # Last the exact finish: a FABRIK sweep spreads what is left over the three bones
     # (more sweeps converge slowly near full extension, where a standing user's headset
