@@ -556,6 +556,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         hand_reach=not args.no_hand_reach,
         pelvis_lean=not args.no_pelvis_lean,
         pelvis_smoothing=not args.no_pelvis_smoothing,
+        floor_select=not args.no_floor_select,
         ik_max_drift_m=drift,
         ik_release_frames=release,
         latent_scale=latent_scale,
@@ -1026,6 +1027,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="headset-only and sites players without a waist: leave the guessed pelvis "
         "as the network turned it, not leant so that the line to the head meets the headset",
+    )
+    ev.add_argument(
+        "--no-floor-select",
+        action="store_true",
+        help="cvae_ik_ssi: keep in the pool samples with a foot deeper below the floor "
+        "than the floor pass lifts (by default SSI never moves to one, and leaves one)",
     )
     ev.add_argument(
         "--no-knee-hinge",

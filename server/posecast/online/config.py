@@ -88,6 +88,11 @@ class ServerConfig:
         "as the network turned it instead of leaning it so that the line to the head "
         "points at the headset, before the feet are planted",
     )
+    no_floor_select: bool = _opt(
+        False,
+        "let SSI move to a sample with a foot deeper below the floor than the floor pass "
+        "lifts (0.4 m), and stay on one, instead of leaving such samples out of the pool",
+    )
     no_pelvis_smoothing: bool = _opt(
         False,
         "stream each pose on its own frame's pelvis instead of the 1-2-1 average with "

@@ -13,6 +13,7 @@ from posecast.online.engine.ik import (
     apply_leg_ik,
     floor_ik,
     floor_lift,
+    sunk,
     two_bone_ik,
 )
 from posecast.skeleton import NUM_JOINTS, Joint, reference_offsets
@@ -322,3 +323,22 @@ def test_floor_ik_bends_a_straight_leg_to_lift_its_foot() -> None:
     assert lowest(wp, L_FOOT, L_TOE) == pytest.approx(0.0, abs=1e-6)
     assert wp[0, Joint.LEFT_SHIN, 2] > wp[0, Joint.LEFT_THIGH, 2]  # the knee went forward
     assert_leg_is_rigid(wm, wp)
+
+
+def test_sunk_is_a_foot_deeper_than_the_floor_pass_lifts() -> None:
+    """``sunk`` says which poses the floor pass leaves under the floor: a foot (the lower
+    of ankle and toe) more than ``FLOOR_MAX_LIFT_M`` down, on any batch shape."""
+    wm, wp = crouch()
+    wp = wp - np.array([0.0, lowest(wp, L_FOOT, L_TOE), 0.0])  # the lower foot on y = 0
+    depths = (0.0, -0.3, 0.1, FLOOR_MAX_LIFT_M - 0.01, FLOOR_MAX_LIFT_M + 0.01, 1.5)
+    poses = np.stack([wp[0] - np.array([0.0, d, 0.0]) for d in depths])  # (6, 19, 3)
+    assert sunk(poses).tolist() == [False, False, False, False, True, True]
+    # One foot is enough: the right leg alone pushed down 0.5 m.
+    one = wp.copy()
+    one[0, Joint.RIGHT_FOOT :, 1] -= FLOOR_MAX_LIFT_M + 0.1
+    assert sunk(one).tolist() == [True]
+    assert sunk(poses.reshape(2, 3, NUM_JOINTS, 3)).tolist() == [[False] * 3, [False, True, True]]
+    # What sunk calls too deep, floor_ik leaves alone; what it does not, floor_ik lifts.
+    for d, deep in zip(depths[2:5], (False, False, True), strict=True):
+        m, p = wm.copy(), wp - np.array([0.0, d, 0.0])
+        assert bool(floor_ik(m, p).any()) is not deep, d

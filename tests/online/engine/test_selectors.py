@@ -14,7 +14,9 @@ from posecast.online.engine.selectors import (
     Selector,
     TargetSelector,
     choose_anomaly_rows,
+    off_the_floor,
 )
+from posecast.online.engine.ik import FLOOR_MAX_LIFT_M
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
 from posecast.skeleton import NUM_JOINTS, Joint
@@ -110,6 +112,46 @@ def test_home_returns_to_the_mean_sample_inside_the_band() -> None:
     assert sel.choose(4, np.array([2.0, 0.125, 0.375, 0.375, 2.0]), NO_POSES) == 1
     with pytest.raises(ValueError):
         AnomalySelector(2.0, home=3.0)
+
+
+# --- +inf: a sample out of the pool (the engine's floor check) ------------------------
+
+
+def test_samples_out_of_the_pool_neither_widen_the_spread_nor_are_chosen() -> None:
+    """The estimator's median and minimum are over the pool alone: with four of seven
+    samples out, the median of the rest (0.11) makes the current 0.30 an outlier, where
+    counting the out samples as large errors would put the median at infinity and
+    never move. The destination is the best in the pool."""
+    inf = np.inf
+    scores = np.array([inf, 0.11, 0.30, inf, 0.10, inf, inf])
+    assert LITERAL.choose(2, scores, NO_POSES) == 4
+    assert FROM_MIN.choose(2, scores, NO_POSES) == 4
+    assert AnomalySelector(home=1.0).choose(2, scores, NO_POSES) == 4  # home is out
+    assert FROM_MIN.choose(4, scores, NO_POSES) is None  # the best stays
+
+
+def test_a_current_sample_out_of_the_pool_is_left_for_the_best() -> None:
+    """Out of the pool is an outlier whatever the spread; home (sample 0) takes it when
+    home is in the pool and no outlier itself."""
+    scores = np.array([0.20, 0.20, 0.10, np.inf, 0.20])  # r = 0.1
+    assert LITERAL.choose(3, scores, NO_POSES) == 2
+    assert AnomalySelector(home=1.0).choose(3, scores, NO_POSES) == 0
+    assert LITERAL.choose(0, np.full(5, np.inf), NO_POSES) is None  # no pool: stay
+
+
+def test_off_the_floor_takes_samples_deeper_than_the_floor_pass_out() -> None:
+    """Player 0: sample 1's feet 0.5 m under the floor (out), sample 2's 0.3 m (the floor
+    pass lifts it: in). Player 1: every sample 1.5 m down, an eye-level origin: its
+    scores are left as they are."""
+    pos = np.zeros((2, 3, NUM_JOINTS, 3))
+    pos[..., 1] = 1.0
+    pos[0, 1, :, 1] -= 1.0 + FLOOR_MAX_LIFT_M + 0.1
+    pos[0, 2, :, 1] -= 1.0 + FLOOR_MAX_LIFT_M - 0.1
+    pos[1, :, :, 1] -= 2.5
+    scores = np.array([[0.1, 0.2, 0.3], [0.4, 0.5, 0.6]])
+    got = off_the_floor(scores, pos)
+    np.testing.assert_array_equal(got, [[0.1, np.inf, 0.3], [0.4, 0.5, 0.6]])
+    np.testing.assert_array_equal(scores, [[0.1, 0.2, 0.3], [0.4, 0.5, 0.6]])  # not in place
 
 
 @pytest.mark.parametrize("home", [None, 0.5, 1.0])

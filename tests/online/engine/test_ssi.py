@@ -322,6 +322,55 @@ def test_no_new_transition_while_one_is_in_flight(
     assert engine.current_sample("p") == 7
 
 
+class SinkingPool(RecordingPool):
+    """The backend's pool, with the post-IK poses of one player's samples ``sink`` pushed
+    1 m under the floor from its step ``at`` (1-based) on: the selector sees them sunk,
+    their anomaly errors (computed before) unchanged."""
+
+    def __init__(self, pool: Pool, samples: int, sink: list[int], at: int) -> None:
+        super().__init__(pool)
+        self.samples, self.sink, self.at, self.steps = samples, sink, at, 0
+
+    def step(self, *args: Any) -> np.ndarray:
+        scores = super().step(*args)
+        self.steps += 1
+        if self.steps >= self.at:
+            world = args[-1].reshape(-1, self.samples, NUM_JOINTS, 3)
+            world[:, self.sink, :, 1] -= 1.0
+        return scores
+
+
+@pytest.mark.parametrize("floor_select", [True, False])
+def test_ssi_leaves_a_sample_sunk_below_the_floor_for_the_best_standing_one(
+    make_engine: MakeEngine, walk_frames: WalkFrames, floor_select: bool
+) -> None:
+    """After a walk on sample 0, sample 0 and every other even sample sink 1 m under the
+    floor, deeper than the floor pass lifts. On that very tick the engine leaves sample
+    0 for the odd sample of least anomaly error (home, sample 0, is out of the pool),
+    though by its error alone sample 0 is no outlier; with ``floor_select=False`` it
+    decides on the errors alone, as the paper's selector would."""
+    N, sink = 10, [0, 2, 4, 6, 8]
+    engine = make_engine(samples=N, lookahead=10, transition_frames=10, floor_select=floor_select)
+    engine.pool = pool = SinkingPool(engine.pool, N, sink, at=WARMUP + 1)
+    engine.add_player("p", seed=0, selector=Never())
+    selector = AnomalySelector(factor=2.0, home=1.0)
+    for t, frame in enumerate(walk_frames(0)[: WARMUP + 1]):
+        if t == WARMUP:
+            engine.set_selector("p", selector)
+        engine.push("p", frame)
+        started = engine.tick().transitions
+    raw = pool.last.astype(np.float64)
+    by_error = selector.choose(0, raw, np.zeros((N, NUM_JOINTS, 3)))
+    standing = [i for i in range(N) if i not in sink]
+    best_standing = standing[int(np.argmin(raw[standing]))]
+    assert by_error != best_standing  # the errors alone would not choose it
+    if floor_select:
+        assert (started, engine.current_sample("p")) == (1, best_standing)
+    else:
+        assert engine.current_sample("p") == (0 if by_error is None else by_error)
+        assert started == (0 if by_error is None else 1)
+
+
 @pytest.mark.parametrize(("tau", "at"), [(10, 25), (3, 60)])
 def test_transition_jumps_stay_bounded(
     backend: BackendLoader,

@@ -63,6 +63,11 @@ class EngineConfig:
             ``e - 1, e, e + 1`` (weights 1, 2, 1; needs ``lookahead >= 1``, adds no lag;
             :mod:`posecast.online.engine.pelvis`): default on, chosen on the validation
             split (docs/evaluation.md, "Jitter"); off for research evaluation.
+        floor_select: SSI leaves out of the pool, frame by frame, every sample with a
+            foot deeper below the floor than the floor pass lifts (it is never chosen,
+            and a current sample that sinks that deep is left); needs ``floor_ik``;
+            default on, off for research evaluation (docs/evaluation.md, "SSI and the
+            floor").
         latent_scale: the pool's latents are ``latent_scale * eps``, ``eps ~ N(0, I)``
             (1.0: the prior; below 1 a truncated pool, nearer the mean).
         home_factor: the threshold at which a player returns to sample 0, the prior's
@@ -90,6 +95,7 @@ class EngineConfig:
     hand_reach: bool = True
     pelvis_lean: bool = True
     pelvis_smoothing: bool = True
+    floor_select: bool = True
     latent_scale: float = 1.0
     home_factor: float | None = 1.0
 

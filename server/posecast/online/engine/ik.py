@@ -270,11 +270,27 @@ def floor_lift(
     """How far each foot ``(B, 2)`` must rise for the lower of its ankle and toe to
     reach ``floor_y``: 0 for a foot on or above it (within :data:`FLOOR_TOLERANCE_M`),
     or more than ``max_lift_m`` below."""
+    lift = floor_y - _foot_low(world_pos)  # (B, 2)
+    out: F64 = np.where((lift > FLOOR_TOLERANCE_M) & (lift <= max_lift_m), lift, 0.0)
+    return out
+
+
+def _foot_low(world_pos: F64) -> F64:
+    """The height of the lower of ankle and toe of each foot, ``(..., 19, 3)`` ->
+    ``(..., 2)``."""
     feet = [int(leg[2]) for leg in LEGS]
     toes = [int(leg[3]) for leg in LEGS]
-    low = np.minimum(world_pos[:, feet, 1], world_pos[:, toes, 1])  # (B, 2)
-    lift = floor_y - np.asarray(low, np.float64)
-    out: F64 = np.where((lift > FLOOR_TOLERANCE_M) & (lift <= max_lift_m), lift, 0.0)
+    low = np.minimum(world_pos[..., feet, 1], world_pos[..., toes, 1])
+    return np.asarray(low, np.float64)
+
+
+def sunk(
+    world_pos: F64, floor_y: float = FLOOR_Y, max_lift_m: float = FLOOR_MAX_LIFT_M
+) -> NDArray[np.bool_]:
+    """Whether each pose ``(..., 19, 3)`` has a foot deeper below ``floor_y`` than
+    :func:`floor_ik` lifts (the lower of its ankle and toe more than ``max_lift_m``
+    down): a pose the floor pass cannot stand on the floor. ``(...,)``."""
+    out: NDArray[np.bool_] = np.any(floor_y - _foot_low(world_pos) > max_lift_m, axis=-1)
     return out
 
 

@@ -17,6 +17,9 @@ samples agree closely (``min R > 2/3 median R``) every sample, the best included
 to 0.1 % at 7.9 transitions a minute, while the scale-free rule at factor 2 never
 fired and at factor 1 needed 23.7 transitions a minute for the same rate, so the
 paper's rule is the default.
+A score of ``+inf`` takes a sample out of the pool for that frame: the engine marks so
+every sample whose feet sink deeper than the floor pass lifts (:func:`off_the_floor`).
+
 * :class:`TargetSelector` (eq. 3): ``argmin`` distance from an end effector to a target.
 * :class:`ObstacleSelector` (eq. 4): ``argmax`` distance from a joint to an obstacle.
 """
@@ -29,6 +32,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from posecast.online.engine.ik import sunk
 from posecast.skeleton import Joint
 
 F64 = NDArray[np.floating]
@@ -40,7 +44,10 @@ class Selector(Protocol):
 
         Args:
             current: index of the sample shown now.
-            scores: ``(N,)`` anomaly errors ``R`` (metres) of every sample.
+            scores: ``(N,)`` anomaly errors ``R`` (metres) of every sample; ``+inf``
+                marks a sample out of the pool this frame (the engine's floor check:
+                feet deeper below the floor than the floor pass lifts), never a
+                destination, and left when it is the current one.
             positions: ``(N, 19, 3)`` post-IK world positions of every sample.
         """
         ...
@@ -66,8 +73,11 @@ class AnomalySelector:
             raise ValueError("home must be within [0, factor]")
 
     def choose(self, current: int, scores: F64, positions: F64) -> int | None:
-        low = float(np.min(scores))
-        r = float(np.median(scores)) - low
+        pool = scores[scores != np.inf]  # +inf: out of the pool (Selector.choose)
+        if not len(pool):
+            return None
+        low = float(np.min(pool))
+        r = float(np.median(pool)) - low
         base = low if self.baseline == "min" else 0.0
         zero_ok = self.home is not None and not scores[0] - base > self.factor * r
         if not scores[current] - base > self.factor * r:
@@ -100,9 +110,17 @@ def choose_anomaly_rows(
     index (``argmin`` with the current sample excluded).
     """
     rows = np.arange(len(scores))
-    low = scores.min(axis=1)  # (M,)
-    with np.errstate(invalid="ignore"):  # inf - inf is NaN, and NaN never moves, as in choose
-        r = np.median(scores, axis=1) - low
+    # The estimator's median and minimum are over each row's pool: +inf is out of it.
+    # A row with a NaN keeps it (NaN never moves); a row all out has no pool (NaN too).
+    out = scores == np.inf
+    nan = np.isnan(scores)
+    dead = out.all(axis=1) | nan.any(axis=1)  # (M,) no pool, or a NaN: never moves
+    pool = np.where(out, np.nan, np.where(nan, 0.0, scores))
+    pool[dead] = 0.0  # (their low and r are set to NaN below)
+    low = np.nanmin(pool, axis=1)  # (M,)
+    low[dead] = np.nan
+    with np.errstate(invalid="ignore"):
+        r = np.nanmedian(pool, axis=1) - low
         base = np.where(from_min, low, 0.0)
         outlier = scores[rows, current] - base > factor * r
         zero_out = scores[:, 0] - base > factor * r
@@ -120,6 +138,18 @@ def choose_anomaly_rows(
         back = on & away & ~outlier & (scores[:, 0] - base <= home * r)
     to_zero = (outlier & zero_ok & away) | back
     return np.where(to_zero, 0, chosen)
+
+
+def off_the_floor(scores: F64, positions: F64) -> F64:
+    """``scores (P, N)`` with ``+inf`` (out of the pool, :meth:`Selector.choose`) for
+    each sample whose post-IK pose ``positions (P, N, 19, 3)`` has a foot deeper below
+    the floor than the floor pass lifts (:func:`~posecast.online.engine.ik.sunk`). A
+    player whose every sample is that deep (a tracking space whose origin is not on the
+    floor) keeps its scores: the floor says nothing about which of them is better."""
+    deep = sunk(positions)  # (P, N)
+    deep &= ~deep.all(axis=1, keepdims=True)
+    out: F64 = np.where(deep, np.inf, scores) if deep.any() else scores
+    return out
 
 
 @dataclass(frozen=True)

@@ -60,7 +60,12 @@ from posecast.online.engine.hinge import hinge_elbows_quat, hinge_knees_quat
 from posecast.online.engine.ik import LEGS, floor_ik, floor_lift
 from posecast.online.engine.leg_ik import senses_legs, solve_legs, tracks_legs
 from posecast.online.engine.pelvis import smooth_pelvis
-from posecast.online.engine.selectors import AnomalySelector, Selector, choose_anomaly_rows
+from posecast.online.engine.selectors import (
+    AnomalySelector,
+    Selector,
+    choose_anomaly_rows,
+    off_the_floor,
+)
 from posecast.online.engine.slots import SlotArrays
 from posecast.online.engine.types import EngineEvent, PoseOut, TickResult, TrackerFrame
 from posecast.online.engine.upper_ik import (
@@ -307,7 +312,7 @@ class Engine:
         ).reshape(P, N)
         wp = world.reshape(P, N, NUM_JOINTS, 3)
 
-        started = self._select(np.asarray(scores, np.float64), wp)
+        started = self._select(self._floor_check(np.asarray(scores, np.float64), wp), wp)
         poses = self._emit()
         for pid in self._order:
             self.players[pid].frames += 1
@@ -433,6 +438,16 @@ class Engine:
                 p.last = f
         return events
 
+    def _floor_check(self, scores: F64, positions: F32) -> F64:
+        """``scores (P, N)`` with ``+inf`` for every sample out of its player's pool this
+        frame (``EngineConfig.floor_select``; :func:`.selectors.off_the_floor`).
+        The anomaly error judges a pose in the character frame and cannot see the
+        floor; without the check SSI moved crouching players onto straight-legged
+        samples whose feet then showed half a metre under it (docs/evaluation.md)."""
+        if not (self.cfg.floor_select and self.cfg.floor_ik):
+            return scores
+        return np.asarray(off_the_floor(scores, positions), np.float64)
+
     def _select(self, scores: F64, positions: F32) -> int:
         """Run every idle player's selector at the newest frame (``scores (P, N)``,
         ``positions (P, N, 19, 3)``); plan the transitions asked for, return how many.
@@ -556,9 +571,13 @@ class Engine:
                 root_mat = root_mat.copy()
                 rot[rows], root_mat[rows] = turn_pelvis(rot[rows], root_mat[rows], turn)
                 pivot = root_pos[rows, None].astype(np.float64)
-                near = near.astype(np.float64)  # only LEAN_JOINTS' rows are defined
                 lean = list(LEAN_JOINTS)
-                near[:, lean] = pivot + np.einsum("eab,ekb->eka", turn, near[:, lean] - pivot)
+                # Only LEAN_JOINTS' rows of fk32's output are defined: the others are
+                # whatever the buffer held, which a cast to float64 may trip on
+                # (a signalling NaN raises "invalid value"), so they are not cast.
+                leant = np.zeros(near.shape, np.float64)
+                leant[:, lean] = pivot + np.einsum("eab,ekb->eka", turn, near[:, lean] - pivot)
+                near = leant
             if self.cfg.reaches:
                 target = reach_root(near, pos[rows])
                 root_pos = root_pos.copy()

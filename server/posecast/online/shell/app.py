@@ -104,6 +104,7 @@ class PosecastServer:
             hand_reach=not self.cfg.no_hand_reach,
             pelvis_lean=not self.cfg.no_pelvis_lean,
             pelvis_smoothing=not self.cfg.no_pelvis_smoothing,
+            floor_select=not self.cfg.no_floor_select,
         )
         layouts, threads = self.cfg.served_layouts, self.cfg.engine_threads
         return load_multi_engine(ecfg, layouts, self.cfg.models_dir, threads, self.cfg.backend)
