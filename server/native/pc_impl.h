@@ -261,9 +261,12 @@ static void fk_row(const PcPool *w, const float *rot, const float *rm, const flo
     }
 }
 
-/* ik.two_bone_ik for one leg, in double as the reference computes it. */
+/* ik.two_bone_ik for one leg, in double as the reference computes it; hint (the
+ * thigh's forward axis, or NULL) with hint_m: the knee on the hint's side of the
+ * hip-target line (a knee behind it mirrored), a nearly straight leg bent toward it. */
 static void two_bone(const double *hip, const double *knee, const double *ankle,
-                     const double *target, double *k2, double *a2) {
+                     const double *target, const double *hint, double hint_m, double *k2,
+                     double *a2) {
     double e1[3], e2[3], to[3], bend[3];
     for (int i = 0; i < 3; i++) {
         e1[i] = knee[i] - hip[i];
@@ -282,6 +285,23 @@ static void two_bone(const double *hip, const double *knee, const double *ankle,
     double bu = bend[0] * u[0] + bend[1] * u[1] + bend[2] * u[2];
     double v[3] = {bend[0] - bu * u[0], bend[1] - bu * u[1], bend[2] - bu * u[2]};
     double vn = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    if (hint) {
+        double hu = hint[0] * u[0] + hint[1] * u[1] + hint[2] * u[2];
+        double h[3] = {hint[0] - hu * u[0], hint[1] - hu * u[1], hint[2] - hu * u[2]};
+        double hn = sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2]);
+        hn = hn > 1e-9 ? hn : 1e-9;
+        for (int i = 0; i < 3; i++) h[i] /= hn;
+        double back = v[0] * h[0] + v[1] * h[1] + v[2] * h[2];
+        back = back < 0.0 ? back : 0.0;
+        for (int i = 0; i < 3; i++) v[i] -= 2.0 * back * h[i]; /* mirrored to the front */
+        if (hint_m > 0.0) {
+            double w = vn / hint_m, vd = vn > 1e-9 ? vn : 1e-9;
+            w = w < 0.0 ? 0.0 : (w > 1.0 ? 1.0 : w);
+            w = w * w;
+            for (int i = 0; i < 3; i++) v[i] = w * v[i] / vd + (1.0 - w) * h[i];
+            vn = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+        }
+    }
     if (vn > 1e-6) {
         for (int i = 0; i < 3; i++) v[i] /= vn;
     } else { /* a straight leg: bend forward (+Z) */
@@ -300,9 +320,11 @@ static void two_bone(const double *hip, const double *knee, const double *ankle,
     }
 }
 
-/* ik.ContactIK.step for one row (positions only, as the candidate pool runs it).
- * Returns which legs it moved (bit 0 left, bit 1 right). */
-static int ik_row(const PcPoolArgs *a, int64_t row, float *wp) {
+/* ik.ContactIK.step for one row: positions only, as the candidate pool runs it
+ * (fwd NULL), or with each thigh's forward axis fwd[2][3] for the shown pose, whose
+ * knees never bend away from it. Returns which legs it moved (bit 0 left, bit 1
+ * right). */
+static int ik_row(const PcPoolArgs *a, int64_t row, float *wp, const double (*fwd)[3]) {
     int moved = 0;
     static const int LEG[2][4] = {{11, 12, 13, 14}, {15, 16, 17, 18}};
     const int rf = a->release_frames, den = rf > 1 ? rf : 1;
@@ -338,7 +360,7 @@ static int ik_row(const PcPoolArgs *a, int64_t row, float *wp) {
                 hip[k] = wp[3 * thigh + k];
                 knee[k] = wp[3 * shin + k];
             }
-            two_bone(hip, knee, feet, target, k2, a2);
+            two_bone(hip, knee, feet, target, fwd ? fwd[s] : NULL, 0.0, k2, a2);
             for (int k = 0; k < 3; k++) {
                 float toe_off = wp[3 * toe + k] - wp[3 * foot + k];
                 wp[3 * shin + k] = (float)k2[k];
@@ -364,7 +386,7 @@ static void pool_tile(const PcPool *w, const PcPoolArgs *a, int64_t r0, int64_t 
         const float *rm = a->root_mat + g * 9, *rp = a->root_pos + g * 3;
         float *wp = a->wp + (size_t)row * NJ;
         fk_row(w, a->rot + (size_t)row * 108, rm, rp, wp);
-        ik_row(a, row, wp);
+        ik_row(a, row, wp, NULL);
         /* anomaly.score_mats: heading removed, origin on the floor under the pelvis */
         float yaw = atan2f(rm[2], rm[8]), c = cosf(yaw), s = sinf(yaw);
         float iy[9] = {c, 0.0f, -s, 0.0f, 1.0f, 0.0f, s, 0.0f, c};
@@ -496,7 +518,10 @@ static void emit_row(const PcPool *w, const PcPoolArgs *a, int64_t row, float *q
     }
     float before[PC_J * 3];
     memcpy(before, wp, sizeof(before));
-    const int moved = ik_row(a, row, wp); /* positions and state, as the candidate pool */
+    double fwd[2][3]; /* each thigh's forward axis: its world rotation's third column */
+    for (int s = 0; s < 2; s++)
+        for (int k = 0; k < 3; k++) fwd[s][k] = wm[LEG[s][0]][3 * k + 2];
+    const int moved = ik_row(a, row, wp, fwd); /* positions and state, knees forward */
     for (int s = 0; s < 2; s++) {
         const int thigh = LEG[s][0], shin = LEG[s][1], foot = LEG[s][2];
         if (!(moved >> s & 1)) continue;

@@ -342,3 +342,52 @@ def test_sunk_is_a_foot_deeper_than_the_floor_pass_lifts() -> None:
     for d, deep in zip(depths[2:5], (False, False, True), strict=True):
         m, p = wm.copy(), wp - np.array([0.0, d, 0.0])
         assert bool(floor_ik(m, p).any()) is not deep, d
+
+
+def hyperextended_leg(rad: float = -0.1) -> tuple[np.ndarray, np.ndarray]:
+    """World rotations and positions ``(1, 19, ...)`` of the reference body standing
+    straight, its left knee bent ``rad`` the wrong way (backward, hyperextended)."""
+    local = np.broadcast_to(np.eye(3), (NUM_JOINTS, 3, 3)).copy()
+    local[L_SHIN] = axis_mat("X", rad)
+    wm, wp = fk_mat(local, np.array([0.0, 0.9, 0.0]), reference_offsets())
+    return wm[None].copy(), wp[None].copy()
+
+
+def knee_ahead_m(wp: np.ndarray) -> float:
+    """How far the left knee is in front (+Z) of its hip-ankle line, metres."""
+    hip, knee, ankle = wp[0, L_THIGH], wp[0, L_SHIN], wp[0, L_FOOT]
+    u = (ankle - hip) / np.linalg.norm(ankle - hip)
+    off = (knee - hip) - np.dot(knee - hip, u) * u
+    return float(off[2])
+
+
+@pytest.mark.parametrize("rad", [-0.1, -0.02])
+def test_a_knee_drawn_in_bends_forward_even_from_a_hyperextended_leg(rad: float) -> None:
+    """A locked foot 15 cm nearer the hip than a slightly hyperextended leg reaches: the
+    shown pose (rotations given) bends the knee forward, the way a knee bends, with
+    bone lengths kept and the knee's offset mirrored (as far in front as it was
+    behind, before the bend the reach adds); the candidate pool (positions only) keeps
+    the leg's own plane, so its knee goes further back."""
+    wm, wp = hyperextended_leg(rad)
+    assert knee_ahead_m(wp) < 0.0  # behind the line: hyperextended
+    target = wp[:, [L_FOOT, Joint.RIGHT_FOOT]].copy()
+    target[0, 0, 1] += 0.15
+    active = np.array([[True, False]])
+    shown_m, shown_p = wm.copy(), wp.copy()
+    apply_leg_ik(shown_m, shown_p, target, active)
+    pool_p = wp.copy()
+    apply_leg_ik(None, pool_p, target, active)
+    np.testing.assert_allclose(shown_p[0, L_FOOT], target[0, 0], atol=1e-9)
+    np.testing.assert_allclose(pool_p[0, L_FOOT], target[0, 0], atol=1e-9)
+    assert knee_ahead_m(shown_p) > 0.1  # bent forward by the reach
+    assert knee_ahead_m(pool_p) < -0.1  # the same bend, backward
+    np.testing.assert_allclose(knee_ahead_m(shown_p), -knee_ahead_m(pool_p), atol=1e-9)
+    assert_leg_is_rigid(shown_m, shown_p)
+    # A leg already bent forward is bent as it was, with or without rotations.
+    wm, wp = hyperextended_leg(-rad)
+    target = wp[:, [L_FOOT, Joint.RIGHT_FOOT]].copy()
+    target[0, 0, 1] += 0.15
+    a, b = wp.copy(), wp.copy()
+    apply_leg_ik(wm.copy(), a, target, active)
+    apply_leg_ik(None, b, target, active)
+    np.testing.assert_allclose(a, b, atol=1e-12)

@@ -161,10 +161,24 @@ def test_emit_matches_the_numpy_display_path(level: str) -> None:
     s = {k: inp[k].copy() for k in ("locked", "lock_pos", "release", "suppressed")}
     wm, wp = fk32(inp["rot"], inp["root_mat"], inp["root_pos"])
     assert wm is not None
+    before_m, before_p = wm.copy(), wp.copy()
     ContactIK(s["locked"], s["lock_pos"], s["release"], 10, s["suppressed"], 0.2).step(
         wm, wp, inp["con"]
     )
     q = mat2quat(wm)
+    # Both paths ran the knee mirror (ik.two_bone_ik's hint): many moved legs had their
+    # knee behind the thigh's forward side of the hip-to-new-ankle line.
+    behind = 0
+    for thigh, shin, foot in ((11, 12, 13), (15, 16, 17)):
+        moved = np.abs(wp[:, foot] - before_p[:, foot]).max(-1) > 1e-6
+        u = wp[:, foot] - before_p[:, thigh]
+        u /= np.linalg.norm(u, axis=-1, keepdims=True)
+        bend = before_p[:, shin] - before_p[:, thigh]
+        fwd = before_m[:, thigh, :, 2]
+        off = bend - np.sum(bend * u, -1, keepdims=True) * u
+        h = fwd - np.sum(fwd * u, -1, keepdims=True) * u
+        behind += int((moved & (np.sum(off * h, -1) < 0)).sum())
+    assert behind > 50
     assert np.abs(positions - wp).max() < 1e-4  # 0.1 mm (float32 FK, float64 IK)
     # q and -q are one rotation; mat2quat keeps w >= 0, so compare up to sign
     dq = np.minimum(np.abs(quats - q).max(-1), np.abs(quats + q).max(-1))

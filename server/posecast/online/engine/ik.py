@@ -68,13 +68,22 @@ def two_bone_ik(
     and the old knee, so the leg bends the way it bent. Unreachable targets are
     approached along the hip-target line with the leg straight.
 
+    ``hint`` (directions ``(B, 3)``: the thigh's forward axis, where a knee bends) puts
+    the knee on the hint's side of the hip-target line: a knee behind it (hyperextended)
+    is mirrored to the front (its offset's component against the hint flipped, so a
+    knee just behind the line moves just as little, and nothing jumps), because a
+    target nearer the hip than the leg's length would bend such a leg backward: the
+    network's nearly straight, slightly hyperextended legs showed knees bent 70 deg the
+    wrong way when a locked foot drew them in (docs/evaluation.md, "Knees that bend
+    backward").
+
     A nearly straight leg defines that plane poorly: its knee is off the line by
     ``sqrt(2 l (l1 + l2 - d))``, a millimetre for a micrometre short of full reach,
     in a direction rounding decides, and the new knee would go there. With ``hint``
-    (directions ``(B, 3)``, e.g. the thigh's forward axis) the plane's direction is the
-    blend ``w v + (1 - w) hint`` of the unit directions, ``w = (offset / hint_m)^2``
-    capped at 1: a straight leg bends toward the hint, a leg bent by ``hint_m`` or more
-    as it bent, and nothing jumps in between.
+    and ``hint_m`` the plane's direction is the blend ``w v + (1 - w) hint`` of the
+    unit directions, ``w = (offset / hint_m)^2`` capped at 1: a straight leg bends
+    toward the hint, a leg bent by ``hint_m`` or more as it bent, and nothing jumps in
+    between.
     """
     l1 = np.linalg.norm(knee - hip, axis=-1, keepdims=True)
     l2 = np.linalg.norm(ankle - knee, axis=-1, keepdims=True)
@@ -85,12 +94,15 @@ def two_bone_ik(
     bend = knee - hip
     v = bend - np.sum(bend * u, axis=-1, keepdims=True) * u
     v_n = np.linalg.norm(v, axis=-1, keepdims=True)
-    if hint is not None and hint_m > 0.0:
+    if hint is not None:
         h = hint - np.sum(hint * u, axis=-1, keepdims=True) * u
         h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-9)
-        w = np.clip(v_n / hint_m, 0.0, 1.0) ** 2  # the old knee's say in the plane
-        v = w * v / np.maximum(v_n, 1e-9) + (1.0 - w) * h
-        v_n = np.linalg.norm(v, axis=-1, keepdims=True)
+        back = np.minimum(np.sum(v * h, axis=-1, keepdims=True), 0.0)
+        v = v - 2.0 * back * h  # a knee behind the line mirrored to its front (same |v|)
+        if hint_m > 0.0:
+            w = np.clip(v_n / hint_m, 0.0, 1.0) ** 2  # the old knee's say in the plane
+            v = w * v / np.maximum(v_n, 1e-9) + (1.0 - w) * h
+            v_n = np.linalg.norm(v, axis=-1, keepdims=True)
     # A straight leg has no bend plane: bend the knee forward (+Z of the world).
     fallback = np.broadcast_to(np.array([0.0, 0.0, 1.0]), v.shape)
     fallback = fallback - np.sum(fallback * u, axis=-1, keepdims=True) * u
@@ -166,8 +178,8 @@ def apply_leg_ik(
     Thigh and shin world rotations get the smallest swing that points their bones at
     the new knee and ankle; the foot keeps its world rotation, and the toe follows.
     With ``world_mat=None`` only positions move (the candidate pool needs no more).
-    ``bend_hint_m`` (with ``world_mat``): :func:`two_bone_ik`'s ``hint_m``, the hint
-    being the thigh's forward (+Z) axis, where a knee bends.
+    With ``world_mat`` a knee never bends away from its thigh's forward (+Z) axis (the
+    ``hint`` of :func:`two_bone_ik`), and ``bend_hint_m`` is its ``hint_m``.
     """
     for side, (thigh, shin, foot, toe) in enumerate(LEGS):
         on = active[:, side]
@@ -234,7 +246,10 @@ class ContactIK:
         )
 
     def step(self, world_mat: F64 | None, world_pos: F64, contact_prob: F64) -> None:
-        """Post-process one frame of ``B`` poses in place: ``(B, 19, 3, 3)``, ``(B, 19, 3)``."""
+        """Post-process one frame of ``B`` poses in place: ``(B, 19, 3, 3)``, ``(B, 19, 3)``.
+        With ``world_mat`` (the shown pose) a moved knee never bends away from its
+        thigh's forward axis (:func:`apply_leg_ik`); without (the candidate pool)
+        positions alone move, each knee in its leg's own bend plane."""
         feet = world_pos[:, [LEGS[0][2], LEGS[1][2]]]  # (B, 2, 3) network ankles
         predicted = contact_prob > CONTACT_THRESHOLD
         assert self.suppressed is not None
