@@ -8,6 +8,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
+from posecast.online.engine.ik import FLOOR_MAX_LIFT_M
 from posecast.online.engine.selectors import (
     AnomalySelector,
     ObstacleSelector,
@@ -16,7 +17,6 @@ from posecast.online.engine.selectors import (
     choose_anomaly_rows,
     off_the_floor,
 )
-from posecast.online.engine.ik import FLOOR_MAX_LIFT_M
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
 from posecast.skeleton import NUM_JOINTS, Joint

@@ -562,7 +562,8 @@ class Engine:
             # (upper_ik.lean_root), then moves toward the trackers it cannot reach
             # (upper_ik.reach_root), before the display IK plants the feet.
             rows = np.flatnonzero(free)
-            _, near = fk32(rot[rows], root_mat[rows], root_pos[rows], False, LEAN_JOINTS)
+            _, near32 = fk32(rot[rows], root_mat[rows], root_pos[rows], False, LEAN_JOINTS)
+            near: NDArray[np.floating] = near32
             if self.cfg.leans:
                 head = near[:, Joint.HEAD]
                 turn = lean_root(root_pos[rows], head, pos[rows, TrackerSlot.HEAD])
