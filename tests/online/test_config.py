@@ -104,3 +104,18 @@ def test_no_upper_ik_reaches_the_engine() -> None:
         cfg = ServerConfig.from_sources({"POSECAST_TOKEN_SECRET": SECRET, **env})
         multi = PosecastServer(cfg)._default_engine()
         assert all(e.cfg.upper_body_ik is on for e in multi.engines.values())
+
+
+def test_no_floor_select_reaches_the_engine() -> None:
+    """``POSECAST_NO_FLOOR_SELECT`` (and ``--no-floor-select``) lets SSI keep samples whose
+    feet sink below the floor pass's reach; SSI leaves them out by default."""
+    from posecast.online.shell.app import PosecastServer
+
+    base = {"POSECAST_TOKEN_SECRET": SECRET}
+    for cfg, on in (
+        (ServerConfig.from_sources(base), True),
+        (ServerConfig.from_sources({**base, "POSECAST_NO_FLOOR_SELECT": "1"}), False),
+        (ServerConfig.from_sources(base, {"no_floor_select": True}), False),
+    ):
+        multi = PosecastServer(cfg)._default_engine()
+        assert all(e.cfg.floor_select is on for e in multi.engines.values())

@@ -111,16 +111,21 @@ def choose_anomaly_rows(
     """
     rows = np.arange(len(scores))
     # The estimator's median and minimum are over each row's pool: +inf is out of it.
-    # A row with a NaN keeps it (NaN never moves); a row all out has no pool (NaN too).
     out = scores == np.inf
-    nan = np.isnan(scores)
-    dead = out.all(axis=1) | nan.any(axis=1)  # (M,) no pool, or a NaN: never moves
-    pool = np.where(out, np.nan, np.where(nan, 0.0, scores))
-    pool[dead] = 0.0  # (their low and r are set to NaN below)
-    low = np.nanmin(pool, axis=1)  # (M,)
-    low[dead] = np.nan
+    if out.any():
+        # Sorted, a row's k pool scores come first: its median is the mean of the
+        # middle two of them (np.median's arithmetic). A row with a NaN, or with no
+        # pool, never moves (NaN low and r).
+        k = scores.shape[1] - out.sum(axis=1)  # (M,)
+        ranked = np.sort(scores, axis=1)  # NaN sorts last, after +inf
+        mid = np.maximum(k, 1)
+        med = 0.5 * (ranked[rows, (mid - 1) // 2] + ranked[rows, mid // 2])
+        low = ranked[:, 0].copy()
+        low[(k == 0) | np.isnan(scores).any(axis=1)] = np.nan
+    else:  # NaN anywhere in a row makes its low and median NaN: it never moves
+        low, med = scores.min(axis=1), np.median(scores, axis=1)
     with np.errstate(invalid="ignore"):
-        r = np.nanmedian(pool, axis=1) - low
+        r = med - low
         base = np.where(from_min, low, 0.0)
         outlier = scores[rows, current] - base > factor * r
         zero_out = scores[:, 0] - base > factor * r
