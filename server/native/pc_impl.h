@@ -261,12 +261,11 @@ static void fk_row(const PcPool *w, const float *rot, const float *rm, const flo
     }
 }
 
-/* ik.two_bone_ik for one leg, in double as the reference computes it; hint (the
- * thigh's forward axis, or NULL) with hint_m: the knee on the hint's side of the
- * hip-target line (a knee behind it mirrored), a nearly straight leg bent toward it. */
+/* ik.two_bone_ik for one leg, in double as the reference computes it, without hint_m
+ * (the contact IK passes none): hint (the thigh's forward axis, or NULL) keeps the
+ * knee on its side of the hip-target line, a knee behind it mirrored to the front. */
 static void two_bone(const double *hip, const double *knee, const double *ankle,
-                     const double *target, const double *hint, double hint_m, double *k2,
-                     double *a2) {
+                     const double *target, const double *hint, double *k2, double *a2) {
     double e1[3], e2[3], to[3], bend[3];
     for (int i = 0; i < 3; i++) {
         e1[i] = knee[i] - hip[i];
@@ -293,14 +292,7 @@ static void two_bone(const double *hip, const double *knee, const double *ankle,
         for (int i = 0; i < 3; i++) h[i] /= hn;
         double back = v[0] * h[0] + v[1] * h[1] + v[2] * h[2];
         back = back < 0.0 ? back : 0.0;
-        for (int i = 0; i < 3; i++) v[i] -= 2.0 * back * h[i]; /* mirrored to the front */
-        if (hint_m > 0.0) {
-            double w = vn / hint_m, vd = vn > 1e-9 ? vn : 1e-9;
-            w = w < 0.0 ? 0.0 : (w > 1.0 ? 1.0 : w);
-            w = w * w;
-            for (int i = 0; i < 3; i++) v[i] = w * v[i] / vd + (1.0 - w) * h[i];
-            vn = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-        }
+        for (int i = 0; i < 3; i++) v[i] -= 2.0 * back * h[i]; /* mirrored: same length */
     }
     if (vn > 1e-6) {
         for (int i = 0; i < 3; i++) v[i] /= vn;
@@ -360,7 +352,7 @@ static int ik_row(const PcPoolArgs *a, int64_t row, float *wp, const double (*fw
                 hip[k] = wp[3 * thigh + k];
                 knee[k] = wp[3 * shin + k];
             }
-            two_bone(hip, knee, feet, target, fwd ? fwd[s] : NULL, 0.0, k2, a2);
+            two_bone(hip, knee, feet, target, fwd ? fwd[s] : NULL, k2, a2);
             for (int k = 0; k < 3; k++) {
                 float toe_off = wp[3 * toe + k] - wp[3 * foot + k];
                 wp[3 * shin + k] = (float)k2[k];
