@@ -7,6 +7,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+import pytest
 
 from posecast.geometry.fk import fk_mat, world2local_mat
 from posecast.geometry.rotations import aa2mat, mat2aa, mat2quat, mat2r6d, quat2mat
@@ -18,6 +19,7 @@ from posecast.online.engine.types import PoseOut, TrackerFrame
 from posecast.online.engine.upper_ik import (
     ARM_REACH_M,
     HAND_REACH_SOFTNESS_M,
+    LEAN_MOST_RAD,
     LEAN_SHARE,
     NECK_SHARE,
     REACH_EASE,
@@ -515,3 +517,20 @@ def test_a_guessed_pelvis_leans_so_the_line_to_the_head_meets_the_headset() -> N
     axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
     np.testing.assert_allclose(np.sum(axis * (head - pelvis), -1), 0.0, atol=1e-9)
     np.testing.assert_allclose(np.sum(axis * want, -1), 0.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("deg", [10.0, 29.0, 45.0, 90.0, 150.0])
+def test_a_guessed_pelvis_leans_at_most_lean_most_rad(deg: float) -> None:
+    """A headset ``deg`` degrees off the line from the pelvis to the network's head (about
+    a horizontal axis): the pelvis turns by that angle up to ``LEAN_MOST_RAD`` (30
+    degrees), and no further, about the same axis; the spine chain takes the rest."""
+    pelvis = np.array([[0.0, 0.95, 0.0]])
+    head = pelvis + np.array([[0.0, 0.6, 0.0]])
+    t = np.radians(deg)
+    headset = pelvis + 0.5 * np.array([[0.0, np.cos(t), np.sin(t)]])  # leant forward
+    turn = lean_root(pelvis, head, headset)
+    angle = np.degrees(np.linalg.norm(mat2aa(turn), axis=-1))
+    np.testing.assert_allclose(angle, min(deg, np.degrees(LEAN_MOST_RAD)), atol=1e-9)
+    line = (turn[0] @ (head - pelvis)[0])[None]
+    bent = np.degrees(np.arctan2(line[0, 2], line[0, 1]))  # forward from upright
+    assert bent == pytest.approx(min(deg, 30.0), abs=1e-9)

@@ -226,15 +226,25 @@ LEAN_JOINTS = (*REACH_JOINTS, int(Joint.HEAD))  # and the head, which lean_root 
 _THIGHS = [int(Joint.LEFT_THIGH) - 1, int(Joint.RIGHT_THIGH) - 1]  # their network rows
 
 
+# The most a guessed pelvis leans (lean_root), radians. The full swing bent the hips
+# past human range on samples whose network head was far from the headset (SSI's
+# destinations on the validation split's dances: joint-angle flags 0.36 % of the
+# streamed headset-only frames against 0.05 % without SSI); 30 degrees, chosen on the
+# validation split among 10, 20, 30 and 45 degrees, hard and soft (tanh) caps
+# (docs/evaluation.md, "How far a guessed pelvis leans").
+LEAN_MOST_RAD = np.radians(30.0)
+
+
 def lean_root(pelvis: NDArray[np.floating], head: NDArray[np.floating], head_target: F64) -> F64:
     """Per pose, the turn ``(E, 3, 3)`` of a guessed pelvis about itself that aims the
     line from it to the network's head ``(E, 3)`` at the headset ``(E, 3)``: the
     smallest rotation (a swing; about a horizontal axis when both lines are upright,
-    so the heading stays). A player who bends over leans from the hips; the network,
-    which leans too little then, left the spine to fold toward the headset."""
+    so the heading stays), by at most :data:`LEAN_MOST_RAD` (the rest is the spine
+    chain's). A player who bends over leans from the hips; the network, which leans
+    too little then, left the spine to fold toward the headset."""
     p = np.asarray(pelvis, np.float64)
-    out: F64 = swing_mat(np.asarray(head, np.float64) - p, np.asarray(head_target) - p)
-    return out
+    a, b = np.asarray(head, np.float64) - p, np.asarray(head_target, np.float64) - p
+    return _part_of_swing(a, b, 1.0, LEAN_MOST_RAD)
 
 
 def turn_pelvis(
@@ -295,17 +305,17 @@ def _neck(chest_mat: F64, neck_local: F64, head_local: F64, head_mat: F64) -> F6
     return out
 
 
-def _part_of_swing(a: F64, b: F64, share: float) -> F64:
+def _part_of_swing(a: F64, b: F64, share: float, most_rad: float = np.pi) -> F64:
     """``share`` of the smallest rotation ``(E, 3, 3)`` taking direction ``a (E, 3)``
-    onto ``b``: about the same axis, by that share of the angle (none for directions
-    exactly opposite, which have no smallest rotation)."""
+    onto ``b``: about the same axis, by that share of the angle, at most ``most_rad``
+    (none for directions exactly opposite, which have no smallest rotation)."""
     ua, _ = _unit(a)
     ub, _ = _unit(b)
     v = cross3(ua, ub)
     s = _norm(v)
     c = np.einsum("ei,ei->e", ua, ub)
     angle = np.where(s > _EPS, share * np.arctan2(s, c), 0.0)  # opposite: no turn
-    return axis_angle_mat(v / np.maximum(s, _EPS)[:, None], angle)
+    return axis_angle_mat(v / np.maximum(s, _EPS)[:, None], np.minimum(angle, most_rad))
 
 
 def _part_of_turn(R: F64, share: float) -> F64:
