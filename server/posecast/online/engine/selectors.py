@@ -17,8 +17,9 @@ samples agree closely (``min R > 2/3 median R``) every sample, the best included
 to 0.1 % at 7.9 transitions a minute, while the scale-free rule at factor 2 never
 fired and at factor 1 needed 23.7 transitions a minute for the same rate, so the
 paper's rule is the default.
-A score of ``+inf`` takes a sample out of the pool for that frame: the engine marks so
-every sample whose feet sink deeper than the floor pass lifts (:func:`off_the_floor`).
+A score of ``+inf`` takes a sample out of the anomaly selector's pool for that frame:
+the engine marks so every sample whose feet sink deeper than the floor pass lifts
+(:func:`off_the_floor`); the position selectors below do not read scores.
 
 * :class:`TargetSelector` (eq. 3): ``argmin`` distance from an end effector to a target.
 * :class:`ObstacleSelector` (eq. 4): ``argmax`` distance from a joint to an obstacle.
@@ -46,8 +47,11 @@ class Selector(Protocol):
             current: index of the sample shown now.
             scores: ``(N,)`` anomaly errors ``R`` (metres) of every sample; ``+inf``
                 marks a sample out of the pool this frame (the engine's floor check:
-                feet deeper below the floor than the floor pass lifts), never a
-                destination, and left when it is the current one.
+                feet deeper below the floor than the floor pass lifts), which
+                :class:`AnomalySelector` never moves to and leaves when it is the
+                current one. The selectors that judge positions alone
+                (:class:`TargetSelector`, :class:`ObstacleSelector`) do not read
+                scores and may pick such a sample.
             positions: ``(N, 19, 3)`` post-IK world positions of every sample.
         """
         ...
