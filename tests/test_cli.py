@@ -261,6 +261,14 @@ def test_a_bug_keeps_its_traceback(monkeypatch) -> None:
         ("cvae", ["--no-orientation"], "CONFIG_INVALID"),  # the 4-point layout has none
         ("ae", ["--layout", "hmd3"], "CONFIG_INVALID"),
         ("anomaly", ["--rot-weight", "10"], "CONFIG_INVALID"),
+        ("anomaly", ["--hidden", "256"], "CONFIG_INVALID"),
+        ("anomaly", ["--device", "auto"], "CONFIG_INVALID"),
+        ("cvae", ["--hidden", "100"], "CONFIG_INVALID"),  # not a multiple of 64
+        ("cvae", ["--hidden", "0"], "CONFIG_INVALID"),
+        ("cvae", ["--window", "1"], "CONFIG_INVALID"),
+        ("cvae", ["--batch", "0"], "CONFIG_INVALID"),
+        ("cvae", ["--kl-weight", "-1"], "CONFIG_INVALID"),
+        ("cvae", ["--budget-min", "inf"], "CONFIG_INVALID"),
         ("anomaly", ["--steps", "0"], "CONFIG_INVALID"),
         ("cvae", [], "DATASET_INVALID"),  # --data names no directory
         ("anomaly", [], "DATASET_INVALID"),
@@ -468,3 +476,17 @@ def test_demo_on_a_port_in_use_is_a_config_error(capsys) -> None:
         rc = main(["demo", "--port", str(port), "--seconds", "1", "--samples", "8"])
     err = user_error(capsys, rc, "CONFIG_INVALID")
     assert f"127.0.0.1:{port}" in err
+
+
+def test_train_device_auto_takes_cuda_only_where_torch_sees_one(monkeypatch) -> None:
+    import torch
+
+    import posecast.cli as cli
+    from posecast.errors import PosecastError
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    assert cli._train_device("auto") == cli._train_device("cpu") == "cpu"
+    with pytest.raises(PosecastError, match="no CUDA device"):
+        cli._train_device("cuda")
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    assert cli._train_device("auto") == cli._train_device("cuda") == "cuda"

@@ -375,6 +375,24 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+# The sequence trainers' defaults (posecast.offline.train.cvae_trainer), here so that
+# the parser's help and the anomaly AE's checks need not import torch.
+_KL_WEIGHT, _HIDDEN, _WINDOW, _BATCH = 1.0, 128, 60, 128
+
+
+def _train_device(name: str) -> str:
+    """``--device``: ``auto`` is CUDA when torch sees one, else the CPU; a named
+    accelerator that torch cannot see is a configuration error."""
+    import torch
+
+    cuda = torch.cuda.is_available()
+    if name == "auto":
+        return "cuda" if cuda else "cpu"
+    if name == "cuda" and not cuda:
+        raise _config("--device cuda: torch sees no CUDA device", "use --device cpu or auto")
+    return name
+
+
 def _cmd_train(args: argparse.Namespace) -> int:
     import dataclasses
 
@@ -385,12 +403,34 @@ def _cmd_train(args: argparse.Namespace) -> int:
     _at_least("--seed", args.seed, 0, cmd)
     _finite("--rot-weight", args.rot_weight, cmd)
     _finite("--vel-weight", args.vel_weight, cmd)
+    _finite("--kl-weight", args.kl_weight, cmd)
+    _finite("--budget-min", args.budget_min, cmd)
+    for option, value, low in (("--hidden", args.hidden, 64), ("--window", args.window, 2)):
+        _at_least(option, value, low, cmd)
+    _at_least("--batch", args.batch, 1, cmd)
+    if args.hidden % 64:
+        raise _config(
+            f"--hidden {args.hidden} must be a multiple of 64",
+            "the native kernels run GRUs 64 units at a time: pick 128, 192, 256, ...",
+        )
     layout = Layout(args.layout)
+    sequence_only = (
+        layout != Layout.HMD3_WAIST
+        or args.rot_weight
+        or args.vel_weight
+        or args.no_orientation
+        or args.kl_weight != _KL_WEIGHT
+        or args.hidden != _HIDDEN
+        or args.window != _WINDOW
+        or args.batch != _BATCH
+        or args.budget_min
+        or args.device != "cpu"
+    )
     if args.network == "anomaly":
-        if layout != Layout.HMD3_WAIST or args.rot_weight or args.vel_weight or args.no_orientation:
+        if sequence_only:
             raise _config(
-                "--layout, --rot-weight, --vel-weight and --no-orientation apply to cvae and "
-                "ae only",
+                "--layout, --rot-weight, --vel-weight, --kl-weight, --hidden, --window, "
+                "--batch, --budget-min, --device and --no-orientation apply to cvae and ae only",
                 "the anomaly AE reads poses, not trackers: drop those options",
             )
     elif args.network == "ae" and layout != Layout.HMD3_WAIST:
@@ -416,6 +456,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         ls = spec(layout)
         model_cfg = CVAEConfig(
             n_features=ls.n_features,
+            hidden=args.hidden,
             deterministic=det,
             encoder_sees_pose=not det,
             layout=str(ls.layout),
@@ -426,6 +467,11 @@ def _cmd_train(args: argparse.Namespace) -> int:
             seed=args.seed,
             rot_weight=args.rot_weight,
             vel_weight=args.vel_weight,
+            kl_weight=args.kl_weight,
+            window=args.window,
+            batch=args.batch,
+            budget_s=args.budget_min * 60.0,
+            device=_train_device(args.device),
             no_orientation=args.no_orientation,
         )
         if args.steps is not None:
@@ -904,6 +950,37 @@ def build_parser() -> argparse.ArgumentParser:
         default=0.0,
         help="weight of the joint-velocity loss, cm^2 per frame (0: none, as the earlier "
         "weights; docs/model-card.md)",
+    )
+    train.add_argument(
+        "--kl-weight",
+        type=float,
+        default=_KL_WEIGHT,
+        help=f"weight of the KL term (default {_KL_WEIGHT:g})",
+    )
+    train.add_argument(
+        "--hidden",
+        type=int,
+        default=_HIDDEN,
+        help=f"GRU width, a multiple of 64 (default {_HIDDEN})",
+    )
+    train.add_argument(
+        "--window", type=int, default=_WINDOW, help=f"frames per window (default {_WINDOW})"
+    )
+    train.add_argument(
+        "--batch", type=int, default=_BATCH, help=f"windows per step (default {_BATCH})"
+    )
+    train.add_argument(
+        "--device",
+        default="cpu",
+        choices=("cpu", "cuda", "auto"),
+        help="where to train (default cpu; auto: CUDA when torch sees one)",
+    )
+    train.add_argument(
+        "--budget-min",
+        type=float,
+        default=0.0,
+        help="wall-time budget in minutes, data loading included: the run plans its steps "
+        "(at most --steps) to end, its learning-rate decay included, inside it (0: none)",
     )
     train.add_argument(
         "--layout",

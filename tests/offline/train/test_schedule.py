@@ -20,3 +20,37 @@ def test_more_steps_on_resume_moves_the_decay() -> None:
     short, long = CVAETrainConfig(steps=8000), CVAETrainConfig(steps=11000)
     assert learning_rate(short, 7000) < short.lr
     assert learning_rate(long, 7000) == long.lr  # the longer run decays later
+
+
+def test_a_budget_plans_the_steps_that_fit() -> None:
+    from posecast.offline.train.cvae_trainer import plan_steps
+
+    cfg = CVAETrainConfig(steps=20000, budget_s=600.0)
+    # 100 steps done after 60 s (data loading included) at 0.1 s a step: 90 % of the
+    # 540 s left is 4,860 steps more.
+    assert plan_steps(cfg, 100, 60.0, 0.1) == 100 + 4860
+    assert plan_steps(cfg, 100, 60.0, 0.001) == 20000  # never more than asked
+    assert plan_steps(cfg, 100, 900.0, 0.1) == 101  # over budget: stop at the next step
+
+
+def test_a_budgeted_run_ends_inside_its_budget(prepared_dir, tmp_path) -> None:
+    """The run re-plans its steps from its measured speed and stops long before the
+    steps asked for, its learning rate decayed (the checkpoint keeps the steps it ran).
+    How long it took is not asserted: that depends on the machine's load."""
+    import dataclasses
+
+    from posecast.offline.nets.cvae import CVAEConfig
+    from posecast.offline.train.checkpoint import load_checkpoint
+    from posecast.offline.train.cvae_trainer import train_cvae
+
+    cfg = CVAETrainConfig(
+        steps=10**6, batch=4, window=10, log_every=5, val_every=10**6, ckpt_every=10**6,
+        threads=1, speeds=(1.0,), budget_s=8.0,
+    )  # fmt: skip
+    ckpt = train_cvae(prepared_dir, tmp_path, CVAEConfig(hidden=64), cfg, log=lambda _: None)
+    state = load_checkpoint(ckpt)
+    steps = state["train_config"]["steps"]
+    assert state["step"] == steps < 10**6
+    assert any("planned_steps" in h for h in state["history"])
+    last = dataclasses.replace(cfg, steps=steps)
+    assert learning_rate(last, steps) == pytest.approx(cfg.lr * cfg.final_lr_ratio)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -62,6 +62,14 @@ class CVAETrainConfig:
     val_every: int = 1000
     ckpt_every: int = 500
     threads: int = 2
+    # "cpu", "cuda" or any torch device string; the CLI's "auto" resolves to "cuda" when
+    # torch sees one. Nothing requires an accelerator: the default is the CPU.
+    device: str = "cpu"
+    # Wall-time budget in seconds (0: none), data loading included: until the learning
+    # rate starts to decay, each log re-plans ``steps`` (never above the given number)
+    # so that the run, its decay included, ends inside the budget at the speed measured
+    # since the last log. The checkpoint's ``train_config`` keeps the steps it ran.
+    budget_s: float = 0.0
     mirror: bool = True
     speeds: tuple[float, ...] = (0.8, 1.0, 1.2)
     bone_scale: tuple[float, float] = (0.92, 1.08)
@@ -78,9 +86,10 @@ def _batch(
     T: int,
     kinds: np.ndarray | None = None,
     noise: tuple[np.random.Generator, float, float] | None = None,
+    device: str = "cpu",
 ) -> dict[str, torch.Tensor]:
-    """One batch of windows; ``kinds (B, 10)``: each window's tracker set (layout
-    ``sites``), ``noise``: the generator and IMU noise levels to add."""
+    """One batch of windows on ``device``; ``kinds (B, 10)``: each window's tracker set
+    (layout ``sites``), ``noise``: the generator and IMU noise levels to add."""
     idx = starts[:, None] + np.arange(T)[None, :]  # (B, T)
     raw = arr.features[idx]
     extra: dict[str, torch.Tensor] = {}
@@ -94,7 +103,7 @@ def _batch(
     feats = (raw - norm.feat_mean) / norm.feat_std
     pos = arr.local_pos[idx]  # (B, T, 19, 3)
     pose_in = (pos.reshape(*idx.shape, 57) - norm.pose_mean) / norm.pose_std
-    return {
+    out = {
         **extra,
         "x": torch.from_numpy(np.ascontiguousarray(feats, dtype=np.float32)),
         "pose_in": torch.from_numpy(np.ascontiguousarray(pose_in, dtype=np.float32)),
@@ -103,6 +112,9 @@ def _batch(
         "contacts": torch.from_numpy(arr.contacts[idx]),
         "rot6d": torch.from_numpy(arr.rot6d[idx]),
     }
+    if device == "cpu":
+        return out
+    return {k: v.to(device, non_blocking=True) for k, v in out.items()}
 
 
 def _losses(
@@ -172,8 +184,9 @@ def train_cvae(
         f"({time.perf_counter() - t0:.1f} s)"
     )
     torch.manual_seed(cfg.seed)
-    model = CVAE(model_cfg)
-    fk = PoseFK()
+    dev = cfg.device
+    model = CVAE(model_cfg).to(dev)
+    fk = PoseFK().to(dev)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr, betas=(0.9, 0.999))
     norm = Normalisation.fit(train)
     step = 0
@@ -182,7 +195,7 @@ def train_cvae(
     if resume and ckpt_path.exists():
         state = load_checkpoint(ckpt_path)
         model.load_state_dict(state["model"])
-        opt.load_state_dict(state["optim"])
+        opt.load_state_dict(state["optim"])  # moves the moments to the parameters' device
         norm = Normalisation.from_dict(state["norm"])
         step, history, elapsed = state["step"], state["history"], state["train_seconds"]
         torch.set_rng_state(state["torch_rng"])
@@ -197,7 +210,7 @@ def train_cvae(
             ckpt_path,
             {
                 "kind": "ae" if model_cfg.deterministic else "cvae",
-                "model": model.state_dict(),
+                "model": {k: v.cpu() for k, v in model.state_dict().items()},
                 "optim": opt.state_dict(),
                 "config": model_cfg.to_dict(),
                 "train_config": asdict(cfg),
@@ -219,7 +232,7 @@ def train_cvae(
             group["lr"] = learning_rate(cfg, step)
         kinds = sample_kinds(rng, cfg.batch, cfg.table_share) if sites else None
         noise = (rng, cfg.imu_acc_noise, cfg.imu_acc_bias)
-        b = _batch(train, rng.choice(starts, cfg.batch), norm, cfg.window, kinds, noise)
+        b = _batch(train, rng.choice(starts, cfg.batch), norm, cfg.window, kinds, noise, dev)
         parts = _losses(model, fk, b, cfg)
         opt.zero_grad(set_to_none=True)
         parts["loss"].backward()  # type: ignore[no-untyped-call]
@@ -235,6 +248,11 @@ def train_cvae(
                 "seconds": elapsed,
             }
             rec["frames_per_s"] = frames_since / dt
+            if cfg.budget_s > 0 and step < cfg.decay_from * cfg.steps:
+                planned = plan_steps(cfg, step, time.perf_counter() - t0, dt / cfg.log_every)
+                if planned != cfg.steps:
+                    cfg = replace(cfg, steps=planned)
+                    rec["planned_steps"] = planned
             if step % cfg.val_every == 0 or step == cfg.steps:
                 rec["val_mpjpe_cm"] = evaluate_val(model, fk, val, val_starts, norm, cfg)
                 model.train()
@@ -245,6 +263,15 @@ def train_cvae(
         if step % cfg.ckpt_every == 0 or step == cfg.steps:
             save()
     return ckpt_path
+
+
+def plan_steps(cfg: CVAETrainConfig, step: int, spent_s: float, step_s: float) -> int:
+    """The steps a run with ``cfg.budget_s`` can finish: ``step`` done after ``spent_s``
+    seconds, ``step_s`` seconds a step lately; 10 % of what is left is kept for the
+    validation passes and checkpoints. Never more than ``cfg.steps``, never fewer than
+    ``step + 1``."""
+    left = max(0.0, cfg.budget_s - spent_s) * 0.9
+    return max(step + 1, min(cfg.steps, step + int(left / max(step_s, 1e-9))))
 
 
 def learning_rate(cfg: CVAETrainConfig, step: int) -> float:
@@ -275,8 +302,8 @@ def evaluate_val(
     kinds = cycle_table_kinds(len(starts)) if val.features_imu is not None else None
     for i in range(0, len(starts), 256):
         k = None if kinds is None else kinds[i : i + 256]
-        b = _batch(val, starts[i : i + 256], norm, cfg.window, k)
-        z = torch.zeros(*b["x"].shape[:2], model.cfg.latent)
+        b = _batch(val, starts[i : i + 256], norm, cfg.window, k, device=cfg.device)
+        z = torch.zeros(*b["x"].shape[:2], model.cfg.latent, device=b["x"].device)
         if model.cfg.deterministic:
             z, _, _ = model.encoder(b["x"])
         out, _, _ = model.decoder(b["x"], z)
