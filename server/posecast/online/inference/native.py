@@ -9,8 +9,8 @@ computed once per player per frame inside :func:`posecast._native.decode`.
 Instruction-set level: the best this CPU runs (``avx512bf16``, ``avx512f``, ``avx2``,
 ``generic``), capped by ``POSECAST_NATIVE_ISA``; :func:`native_isa` says which.
 ``avx512bf16`` (the GRU gates as bf16 weights times fp32 state; every other product
-fp32) runs only when ``POSECAST_NATIVE_ISA=avx512bf16`` asks for it: its effect on
-the evaluation figures has not been measured on a machine that runs it. Before a
+fp32) runs only when ``POSECAST_NATIVE_ISA=avx512bf16`` asks for it (its evaluation
+figures and tick cost: docs/engine.md, "Runtime dispatch"). Before a
 level above ``generic`` is first used, :func:`load_native` checks it against
 ``generic`` on one small batch and steps down a level if they disagree.
 """
