@@ -600,6 +600,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         wrist_elbow=wrist,
         elbow_hinge=not args.no_elbow_hinge,
         hand_reach=not args.no_hand_reach,
+        head_drop=not args.no_head_drop,
         pelvis_lean=not args.no_pelvis_lean,
         pelvis_smoothing=not args.no_pelvis_smoothing,
         floor_select=not args.no_floor_select,
@@ -1098,6 +1099,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="headset-only and sites players without a waist: leave the guessed pelvis "
         "where the headset puts it, not moved toward a controller beyond the arm",
+    )
+    ev.add_argument(
+        "--no-head-drop",
+        action="store_true",
+        help="headset-only and sites players without a waist: leave the guessed body at "
+        "its height when its head stands above the headset, not lowered by half of that",
     )
     ev.add_argument(
         "--no-pelvis-lean",

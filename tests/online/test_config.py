@@ -119,3 +119,18 @@ def test_no_floor_select_reaches_the_engine() -> None:
     ):
         multi = PosecastServer(cfg)._default_engine()
         assert all(e.cfg.floor_select is on for e in multi.engines.values())
+
+
+def test_no_head_drop_reaches_the_engine() -> None:
+    """``POSECAST_NO_HEAD_DROP`` (and ``--no-head-drop``) leaves a guessed body at its
+    height; it is lowered toward a headset under its head by default."""
+    from posecast.online.shell.app import PosecastServer
+
+    base = {"POSECAST_TOKEN_SECRET": SECRET}
+    for cfg, on in (
+        (ServerConfig.from_sources(base), True),
+        (ServerConfig.from_sources({**base, "POSECAST_NO_HEAD_DROP": "1"}), False),
+        (ServerConfig.from_sources(base, {"no_head_drop": True}), False),
+    ):
+        multi = PosecastServer(cfg)._default_engine()
+        assert all(e.cfg.head_drop is on for e in multi.engines.values())

@@ -82,6 +82,12 @@ class ServerConfig:
         "where the headset puts it, after the feet are planted, instead of moving it "
         "beforehand, horizontally toward a controller beyond the arm's reach too",
     )
+    no_head_drop: bool = _opt(
+        False,
+        "leave a guessed body (a headset-only player, a tracker set without a waist) at "
+        "the height the network gave it when its head stands above the headset, the "
+        "spine chain folding that height away, instead of lowering it by half of it",
+    )
     no_pelvis_lean: bool = _opt(
         False,
         "leave a guessed pelvis (a headset-only player, a tracker set without a waist) "

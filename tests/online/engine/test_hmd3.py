@@ -25,7 +25,7 @@ from posecast.offline.train.export import build_decoder, sidecar
 from posecast.online.engine.multi import MultiEngine
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
-from posecast.online.engine.upper_ik import lean_root
+from posecast.online.engine.upper_ik import lean_root, reach_root
 from posecast.online.inference.artifact import Artifact, default_models_dir, load_artifact
 from posecast.skeleton import Joint
 from posecast.tracking.features import TrackerSlot
@@ -180,8 +180,10 @@ def test_a_guessed_pelvis_follows_a_controller_held_out_of_reach(
     pelvis, miss = {}, {}
     for reach in (True, False):
         # Without the lean, which may already turn this random decoder's shoulder
-        # toward the far controller: the reach alone.
-        e = hmd3_engine(samples=4, lookahead=2, hand_reach=reach, pelvis_lean=False)
+        # toward the far controller, and the drop (the next test): the reach alone.
+        e = hmd3_engine(
+            samples=4, lookahead=2, hand_reach=reach, pelvis_lean=False, head_drop=False
+        )
         e.add_player("a", seed=0)
         poses = []
         for f in frames:
@@ -202,6 +204,42 @@ def test_a_guessed_pelvis_follows_a_controller_held_out_of_reach(
     np.testing.assert_allclose(moved[:, 1], 0.0, atol=5e-3)  # horizontally (eased: 2 mm)
     assert miss[False].min() > 0.1
     assert miss[True].mean() < miss[False].mean() - 0.05
+
+
+def test_a_guessed_body_drops_toward_a_headset_under_its_head(
+    hmd3_decoder: Artifact, hmd3_engine: Callable[..., Engine], walk_frames: WalkFrames
+) -> None:
+    """The headset 1.2 m lower than the walk's head, under the head of the random decoder
+    (whose pelvis stands 0.9 m up and whose spine hangs): one sample, no look-ahead,
+    no lean. With ``head_drop`` (the default) the streamed body is lower than with
+    ``head_drop=False``, eased like the reach, by what ``reach_root`` adds for the drop
+    on the decoder's pose (FK, offline on ONNX Runtime); the drop's arithmetic is
+    ``test_upper_ik``'s."""
+    frames = []
+    for f in walk_frames(0)[:40]:
+        pos = f.pos.copy()
+        pos[TrackerSlot.HEAD, 1] -= 1.2
+        frames.append(TrackerFrame(f.seq, pos, f.quat))
+    rot, root_mat, root_pos = _offline(hmd3_decoder, frames)
+    _, fk = pose_from_rotations(rot.astype(np.float64), root_mat, root_pos)
+    tp = np.stack([f.pos for f in frames])
+    above = fk[:, Joint.HEAD, 1] - tp[:, TrackerSlot.HEAD, 1]
+    assert above.min() > 0.05  # the precondition: the decoder's head over the headset
+    want = (reach_root(fk, tp) - reach_root(fk, tp, drop=0.0))[:, 1]
+    assert want.max() < -0.05
+    pelvis = {}
+    for drop in (True, False):
+        e = hmd3_engine(samples=1, lookahead=0, pelvis_lean=False, head_drop=drop)
+        e.add_player("a", seed=0)
+        got = []
+        for f in frames:
+            e.push("a", f)
+            (pose,) = e.tick().poses
+            got.append(pose.positions[Joint.PELVIS])
+        pelvis[drop] = np.stack(got)
+    moved = (pelvis[True] - pelvis[False])[:, 1]
+    assert np.all(moved < 0.0)
+    np.testing.assert_allclose(moved[20:], want[20:], atol=0.01)  # eased: caught up
 
 
 def test_a_players_eased_reach_is_its_own(

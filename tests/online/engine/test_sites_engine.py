@@ -82,3 +82,28 @@ def test_a_sites_engine_needs_the_set_and_the_multi_engine_routes_sets() -> None
     multi.add_player("w", 1, "hmd3+waist")
     assert multi.counts() == {"sites": 1, "hmd3+waist": 1}
     assert TrackerSet.parse(TABLE_SETS["8p"]).kind(Site.LEFT_KNEE) == 1
+
+
+def test_a_set_that_senses_its_legs_keeps_its_height() -> None:
+    """The headset 30 cm under the rest frame's head (a crouch the network does not
+    see): the 3-point player's guessed body drops toward it (``head_drop``), the
+    player with two foot IMUs keeps the height its legs give (the leg pass would sink
+    its feet again), the drop switched off or not."""
+    names = ("3p", "3p+2i")
+    pelvis: dict[bool, dict[str, np.ndarray]] = {}
+    for drop in (True, False):
+        e = load_engine(EngineConfig(samples=8, head_drop=drop), None, 1, "sites", "onnx")
+        for i, n in enumerate(names):
+            e.add_player(n, seed=i, tracker_set=TrackerSet.parse(TABLE_SETS[n]))
+        got: dict[str, list[np.ndarray]] = {n: [] for n in names}
+        for t in range(40):
+            for i, n in enumerate(names):
+                f = _walk(t, i * 2.0)
+                f.pos[0, 1] -= 0.3
+                e.push(n, f)
+            for p in e.tick().poses:
+                got[p.player].append(p.positions[0])
+        pelvis[drop] = {n: np.stack(v) for n, v in got.items()}
+    moved = {n: pelvis[True][n][:, 1] - pelvis[False][n][:, 1] for n in names}
+    assert moved["3p"][-10:].max() < -0.01
+    np.testing.assert_array_equal(moved["3p+2i"], 0.0)

@@ -19,10 +19,12 @@ from posecast.online.engine.types import PoseOut, TrackerFrame
 from posecast.online.engine.upper_ik import (
     ARM_REACH_M,
     HAND_REACH_SOFTNESS_M,
+    HEAD_DROP_SHARE,
     LEAN_MOST_RAD,
     LEAN_SHARE,
     NECK_SHARE,
     REACH_EASE,
+    REACH_JOINTS,
     SPINE_REACH_M,
     WRIST_ELBOW_SHARE,
     ease_reach,
@@ -375,7 +377,7 @@ def test_a_guessed_pelvis_follows_a_controller_beyond_the_arms_reach() -> None:
         tp[e, TrackerSlot.RIGHT_HAND] += out * 0.3
     tp[0, TrackerSlot.HEAD] += out * 0.3
     tp[1, TrackerSlot.LEFT_HAND] = pos[1, Joint.LEFT_UPPER_ARM] - [0.0, ARM_REACH_M + 0.3, 0.0]
-    shift = reach_root(pos, tp)
+    shift = reach_root(pos, tp, drop=0.0)  # the drop: the test after this one
     assert shift.shape == (E, 3) and shift.dtype == np.float64
     head_start = 2.0 * np.log(2.0) * HAND_REACH_SOFTNESS_M
     assert 0.3 <= shift[0, 0] <= 0.3 + head_start and np.abs(shift[0, 1:]).max() < 1e-3
@@ -395,11 +397,42 @@ def test_a_guessed_pelvis_follows_a_controller_beyond_the_arms_reach() -> None:
         miss.append(np.linalg.norm(hand, axis=-1))
         assert limited[1] and limited[3]
     assert miss[0][0] > 0.2 and miss[1][0] < 0.33 * miss[0][0]
-    # Only the spine and the shoulders are read: the other rows may be anything.
+    # Only the spine, the shoulders and the head are read: the others may be anything.
     partial = np.full_like(pos, np.nan)
-    keep = [int(Joint.SPINE), int(Joint.LEFT_UPPER_ARM), int(Joint.RIGHT_UPPER_ARM)]
+    keep = list(REACH_JOINTS)
     partial[:, keep] = pos[:, keep]
-    np.testing.assert_array_equal(reach_root(partial, tp), shift)
+    np.testing.assert_array_equal(reach_root(partial, tp, drop=0.0), shift)
+    np.testing.assert_array_equal(reach_root(partial, tp), reach_root(pos, tp))
+
+
+def test_a_guessed_body_drops_by_a_share_of_its_heads_height_above_the_headset() -> None:
+    """``reach_root``'s drop: a headset 10 cm under the network's head lowers the body
+    by ``HEAD_DROP_SHARE`` of that (nothing else moves: controllers where the hands are),
+    a headset above the head lowers nothing, ``drop=0`` lowers nothing; and the
+    upper-body pass then turns the chest less away from the network's than on the
+    body left where it was (the chain folds the rest)."""
+    E = 3
+    pos, quat = random_poses(E, seed=5)
+    tp, tq = trackers(pos, np.zeros((E, 4, 3)), quat)
+    down = np.array([0.0, 0.1, 0.0])
+    tp[0, TrackerSlot.HEAD] -= down
+    tp[1, TrackerSlot.HEAD] += 0.5 * down  # above the head, within the spine's reach
+    tp[2, TrackerSlot.HEAD] -= down
+    shift = reach_root(pos, tp)
+    assert shift[0, 1] == pytest.approx(-HEAD_DROP_SHARE * 0.1, abs=1e-9)
+    assert shift[1, 1] >= 0.0
+    assert reach_root(pos[2:], tp[2:], drop=0.0)[0, 1] == 0.0
+    np.testing.assert_allclose(shift[[0, 2], 1], shift[0, 1])
+    np.testing.assert_array_less(np.abs(shift[:, [0, 2]]), 0.03)  # the softplus's start
+    free = np.ones(E, np.bool_)
+    turned = []
+    for body in (pos, pos + shift[:, None]):
+        _, rot, _ = solve_upper_body(body, quat, tp, tq, free)
+        chest = quat2mat(rot[:, Joint.CHEST].astype(np.float64))
+        net = quat2mat(quat[:, Joint.CHEST].astype(np.float64))
+        cos = (np.trace(np.swapaxes(chest, -1, -2) @ net, axis1=-2, axis2=-1) - 1.0) / 2.0
+        turned.append(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+    assert turned[1][0] < turned[0][0] - 1.0 and turned[1][2] < turned[0][2] - 1.0
 
 
 # --- the engine -----------------------------------------------------------------------

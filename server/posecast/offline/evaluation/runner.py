@@ -228,7 +228,8 @@ def evaluate(
                     rot, root_mat = np.asarray(leant), np.asarray(turned, np.float64)
                 wm, wp = pose_from_rotations(rot, root_mat, root_pos)
                 if name.endswith("_ik") and not root_from_waist and engine_cfg.reaches:
-                    wp = wp + ease_reach_clip(reach_root(wp, tr.values))[:, None]
+                    drop = None if engine_cfg.head_drop and not legs_sensed else 0.0
+                    wp = wp + ease_reach_clip(reach_root(wp, tr.values, drop))[:, None]
                 if name.endswith("_ik"):
                     contact_ik(wm, wp, con, engine_cfg.ik_release_frames, engine_cfg.ik_max_drift_m)
                     if engine_cfg.floor_ik:

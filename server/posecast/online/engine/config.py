@@ -47,6 +47,12 @@ class EngineConfig:
             toward a controller beyond the arm's reach, horizontally, before the feet
             are planted (:func:`posecast.online.engine.upper_ik.reach_root`; default
             on, with ``upper_body_ik``).
+        head_drop: lower a body whose pelvis is the decoder's guess by
+            :data:`~posecast.online.engine.upper_ik.HEAD_DROP_SHARE` of the height its
+            head stands above the headset, so that the spine chain need not fold it
+            away, as part of the hand reach's move (:func:`posecast.online.engine.
+            upper_ik.reach_root`; default on, with ``hand_reach``; chosen on the
+            validation split).
         pelvis_lean: turn a pelvis that is the decoder's guess (no waist tracker)
             about itself so that the line from it to the network's head points at the
             headset, the upper body with it and the legs following the hips, before
@@ -93,6 +99,7 @@ class EngineConfig:
     elbow_hinge: bool = True
     wrist_elbow: float = WRIST_ELBOW_SHARE
     hand_reach: bool = True
+    head_drop: bool = True
     pelvis_lean: bool = True
     pelvis_smoothing: bool = True
     floor_select: bool = True

@@ -69,6 +69,7 @@ from posecast.online.engine.selectors import (
 from posecast.online.engine.slots import SlotArrays
 from posecast.online.engine.types import EngineEvent, PoseOut, TickResult, TrackerFrame
 from posecast.online.engine.upper_ik import (
+    HEAD_DROP_SHARE,
     LEAN_JOINTS,
     ease_reach,
     lean_root,
@@ -564,11 +565,13 @@ class Engine:
             rows = np.flatnonzero(free)
             _, near32 = fk32(rot[rows], root_mat[rows], root_pos[rows], False, LEAN_JOINTS)
             near: NDArray[np.floating] = near32
+            # A set that senses its legs keeps its hips as they are and its height.
+            sensed = senses_legs(s["kinds"][slots[rows]]) if self._sites else None
             if self.cfg.leans:
                 head = near[:, Joint.HEAD]
                 turn = lean_root(root_pos[rows], head, pos[rows, TrackerSlot.HEAD])
-                if self._sites:  # a set that senses its legs keeps its hips as they are
-                    turn[senses_legs(s["kinds"][slots[rows]])] = np.eye(3)
+                if sensed is not None:
+                    turn[sensed] = np.eye(3)
                 root_mat = root_mat.copy()
                 rot[rows], root_mat[rows] = turn_pelvis(rot[rows], root_mat[rows], turn)
                 pivot = root_pos[rows, None].astype(np.float64)
@@ -580,7 +583,8 @@ class Engine:
                 leant[:, lean] = pivot + np.einsum("eab,ekb->eka", turn, near[:, lean] - pivot)
                 near = leant
             if self.cfg.reaches:
-                target = reach_root(near, pos[rows])
+                drop = None if sensed is None else np.where(sensed, 0.0, HEAD_DROP_SHARE)
+                target = reach_root(near, pos[rows], drop if self.cfg.head_drop else 0.0)
                 root_pos = root_pos.copy()
                 for r, i in enumerate(rows.tolist()):
                     p = emit[i][0]
