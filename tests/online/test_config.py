@@ -106,31 +106,25 @@ def test_no_upper_ik_reaches_the_engine() -> None:
         assert all(e.cfg.upper_body_ik is on for e in multi.engines.values())
 
 
-def test_no_floor_select_reaches_the_engine() -> None:
-    """``POSECAST_NO_FLOOR_SELECT`` (and ``--no-floor-select``) lets SSI keep samples whose
-    feet sink below the floor pass's reach; SSI leaves them out by default."""
+@pytest.mark.parametrize(
+    ("option", "attr"),
+    [
+        # SSI keeps samples whose feet sink below the floor pass's reach.
+        ("no_floor_select", "floor_select"),
+        # A guessed body stays at its height, not lowered toward a headset under its head.
+        ("no_head_drop", "head_drop"),
+    ],
+)
+def test_a_no_option_turns_its_engine_step_off(option: str, attr: str) -> None:
+    """``POSECAST_NO_*`` and its ``--no-*`` flag (the override) reach every engine;
+    the step is on by default."""
     from posecast.online.shell.app import PosecastServer
 
     base = {"POSECAST_TOKEN_SECRET": SECRET}
     for cfg, on in (
         (ServerConfig.from_sources(base), True),
-        (ServerConfig.from_sources({**base, "POSECAST_NO_FLOOR_SELECT": "1"}), False),
-        (ServerConfig.from_sources(base, {"no_floor_select": True}), False),
+        (ServerConfig.from_sources({**base, "POSECAST_" + option.upper(): "1"}), False),
+        (ServerConfig.from_sources(base, {option: True}), False),
     ):
         multi = PosecastServer(cfg)._default_engine()
-        assert all(e.cfg.floor_select is on for e in multi.engines.values())
-
-
-def test_no_head_drop_reaches_the_engine() -> None:
-    """``POSECAST_NO_HEAD_DROP`` (and ``--no-head-drop``) leaves a guessed body at its
-    height; it is lowered toward a headset under its head by default."""
-    from posecast.online.shell.app import PosecastServer
-
-    base = {"POSECAST_TOKEN_SECRET": SECRET}
-    for cfg, on in (
-        (ServerConfig.from_sources(base), True),
-        (ServerConfig.from_sources({**base, "POSECAST_NO_HEAD_DROP": "1"}), False),
-        (ServerConfig.from_sources(base, {"no_head_drop": True}), False),
-    ):
-        multi = PosecastServer(cfg)._default_engine()
-        assert all(e.cfg.head_drop is on for e in multi.engines.values())
+        assert all(getattr(e.cfg, attr) is on for e in multi.engines.values())
