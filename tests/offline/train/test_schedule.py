@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import dataclasses
 import itertools
 
 import pytest
@@ -31,13 +32,16 @@ def test_a_budget_plans_the_steps_that_fit() -> None:
     assert plan_steps(cfg, 100, 60.0, 0.1) == 100 + 4860
     assert plan_steps(cfg, 100, 60.0, 0.001) == 20000  # never more than asked
     assert plan_steps(cfg, 100, 900.0, 0.1) == 101  # over budget: stop at the next step
+    # A plan lowered while the machine was slow rises again, up to the steps asked for.
+    slow = dataclasses.replace(cfg, steps=2000)
+    assert plan_steps(slow, 1000, 60.0, 0.05, most=20000) == 1000 + 9720
+    assert plan_steps(slow, 1000, 60.0, 0.05) == 2000
 
 
 def test_a_budgeted_run_ends_inside_its_budget(prepared_dir, tmp_path) -> None:
     """The run re-plans its steps from its measured speed and stops long before the
     steps asked for, its learning rate decayed (the checkpoint keeps the steps it ran).
     How long it took is not asserted: that depends on the machine's load."""
-    import dataclasses
 
     from posecast.offline.nets.cvae import CVAEConfig
     from posecast.offline.train.checkpoint import load_checkpoint

@@ -226,6 +226,7 @@ def train_cvae(
 
     t_log = time.perf_counter()
     frames_since = 0
+    asked = cfg.steps  # a budget's plan may lower the steps, and raise them back to this
     model.train()
     while step < cfg.steps:
         for group in opt.param_groups:
@@ -249,7 +250,8 @@ def train_cvae(
             }
             rec["frames_per_s"] = frames_since / dt
             if cfg.budget_s > 0 and step < cfg.decay_from * cfg.steps:
-                planned = plan_steps(cfg, step, time.perf_counter() - t0, dt / cfg.log_every)
+                spent = time.perf_counter() - t0
+                planned = plan_steps(cfg, step, spent, dt / cfg.log_every, asked)
                 if planned != cfg.steps:
                     cfg = replace(cfg, steps=planned)
                     rec["planned_steps"] = planned
@@ -265,13 +267,17 @@ def train_cvae(
     return ckpt_path
 
 
-def plan_steps(cfg: CVAETrainConfig, step: int, spent_s: float, step_s: float) -> int:
+def plan_steps(
+    cfg: CVAETrainConfig, step: int, spent_s: float, step_s: float, most: int | None = None
+) -> int:
     """The steps a run with ``cfg.budget_s`` can finish: ``step`` done after ``spent_s``
     seconds, ``step_s`` seconds a step lately; 10 % of what is left is kept for the
-    validation passes and checkpoints. Never more than ``cfg.steps``, never fewer than
-    ``step + 1``."""
+    validation passes and checkpoints. Never more than ``most`` (default ``cfg.steps``:
+    the steps asked for, which an earlier, slower plan may have lowered), never fewer
+    than ``step + 1``."""
     left = max(0.0, cfg.budget_s - spent_s) * 0.9
-    return max(step + 1, min(cfg.steps, step + int(left / max(step_s, 1e-9))))
+    cap = cfg.steps if most is None else most
+    return max(step + 1, min(cap, step + int(left / max(step_s, 1e-9))))
 
 
 def learning_rate(cfg: CVAETrainConfig, step: int) -> float:
