@@ -601,6 +601,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         elbow_hinge=not args.no_elbow_hinge,
         hand_reach=not args.no_hand_reach,
         head_drop=not args.no_head_drop,
+        legs_apart=not args.no_legs_apart,
         pelvis_lean=not args.no_pelvis_lean,
         pelvis_smoothing=not args.no_pelvis_smoothing,
         floor_select=not args.no_floor_select,
@@ -1105,6 +1106,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="headset-only and sites players without a waist: leave the guessed body at "
         "its height when its head stands above the headset, not lowered by half of that",
+    )
+    ev.add_argument(
+        "--no-legs-apart",
+        action="store_true",
+        help="let the contact IK hold a foot where the other leg passes through it, "
+        "not give way just as far as keeps the legs apart",
     )
     ev.add_argument(
         "--no-pelvis-lean",

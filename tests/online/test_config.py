@@ -113,6 +113,8 @@ def test_no_upper_ik_reaches_the_engine() -> None:
         ("no_floor_select", "floor_select"),
         # A guessed body stays at its height, not lowered toward a headset under its head.
         ("no_head_drop", "head_drop"),
+        # A held foot stays where the other leg passes through it.
+        ("no_legs_apart", "legs_apart"),
     ],
 )
 def test_a_no_option_turns_its_engine_step_off(option: str, attr: str) -> None:

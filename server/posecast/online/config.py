@@ -88,6 +88,12 @@ class ServerConfig:
         "the height the network gave it when its head stands above the headset, the "
         "spine chain folding that height away, instead of lowering it by half of it",
     )
+    no_legs_apart: bool = _opt(
+        False,
+        "let the contact IK hold a planted foot where the other leg swings through it, "
+        "instead of letting that foot give way toward the network's own just as far as "
+        "keeps the legs apart",
+    )
     no_pelvis_lean: bool = _opt(
         False,
         "leave a guessed pelvis (a headset-only player, a tracker set without a waist) "

@@ -22,6 +22,7 @@ from posecast.offline.evaluation.reconstruct import (
     pose_from_rotations,
 )
 from posecast.online.engine.anomaly import AnomalyScorer
+from posecast.online.engine.apart import keep_apart
 from posecast.online.engine.clearance import clearance_lift, clip_toe_speed
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.hinge import hinge_elbows, hinge_knees
@@ -231,7 +232,10 @@ def evaluate(
                     drop = None if engine_cfg.head_drop and not legs_sensed else 0.0
                     wp = wp + ease_reach_clip(reach_root(wp, tr.values, drop))[:, None]
                 if name.endswith("_ik"):
+                    net_mat, net_pos = wm.copy(), wp.copy()
                     contact_ik(wm, wp, con, engine_cfg.ik_release_frames, engine_cfg.ik_max_drift_m)
+                    if engine_cfg.legs_apart:
+                        keep_apart(wm, wp, net_mat, net_pos)
                     if engine_cfg.floor_ik:
                         lift = floor_lift(wp)
                         if engine_cfg.swing_clearance:

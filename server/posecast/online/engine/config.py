@@ -53,6 +53,12 @@ class EngineConfig:
             away, as part of the hand reach's move (:func:`posecast.online.engine.
             upper_ik.reach_root`; default on, with ``hand_reach``; chosen on the
             validation split).
+        legs_apart: where the display contact IK draws one leg into the other (a
+            held foot the other leg swings past), the held foot gives way toward the
+            network's own ankle just as far as keeps the legs apart
+            (:mod:`posecast.online.engine.apart`; default on, off for research
+            evaluation; chosen on the validation split, docs/evaluation.md, "Legs
+            apart").
         pelvis_lean: turn a pelvis that is the decoder's guess (no waist tracker)
             about itself so that the line from it to the network's head points at the
             headset, the upper body with it and the legs following the hips, before
@@ -100,6 +106,7 @@ class EngineConfig:
     wrist_elbow: float = WRIST_ELBOW_SHARE
     hand_reach: bool = True
     head_drop: bool = True
+    legs_apart: bool = True
     pelvis_lean: bool = True
     pelvis_smoothing: bool = True
     floor_select: bool = True

@@ -51,6 +51,7 @@ from numpy.typing import NDArray
 
 from posecast.geometry.fk import fk_positions
 from posecast.geometry.rotations import mat2quat, quat2mat
+from posecast.online.engine.apart import MAX_OVERLAP_M, keep_apart, overlap
 from posecast.online.engine.backend import Decoder, Pool, PoolIK
 from posecast.online.engine.batch_fk import fk32, pelvis_from_head32
 from posecast.online.engine.calibration import Calibration, WaistFilter, apply_all, orient_all
@@ -603,6 +604,8 @@ class Engine:
         wp, rotations = self.pool.emit(rot, con, root_mat, root_pos, ik)
         for n in _DISPLAY_IK:
             s[n][slots] = state[n]
+        if self.cfg.legs_apart:
+            _apart(wp, rotations, rot, root_mat, root_pos)
         if self.cfg.floor_ik:
             lift = floor_lift(wp)
             if self.cfg.swing_clearance:
@@ -733,6 +736,29 @@ def _floor(wp: F32, rotations: F32, lift: NDArray[np.floating]) -> None:
     rotations[np.ix_(rows, _THIGHS_SHINS)] = mat2quat(mat[:, _THIGHS_SHINS])
 
 
+def _apart(wp: F32, rotations: F32, rot: F32, root_mat: F32, root_pos: F32) -> None:
+    """:func:`~posecast.online.engine.apart.keep_apart` on shown poses after the display
+    contact IK, in place: positions ``(E, 19, 3)`` and world rotations ``(E, 19, 4)``
+    (the thighs' and shins' change); the network's own legs come from the decoder's
+    ``rot`` on the same pelvis, for the poses whose legs meet."""
+    deep = overlap(wp)
+    rows = np.flatnonzero(deep > MAX_OVERLAP_M)
+    if not len(rows):
+        return
+    mat32, pos32 = fk32(rot[rows], root_mat[rows], root_pos[rows], True, _LEG_JOINTS)
+    assert mat32 is not None
+    # Only the legs' rows of fk32's output are defined (and all keep_apart reads).
+    legs = list(_LEG_JOINTS)
+    net_mat, net_pos = np.zeros((len(rows), NUM_JOINTS, 3, 3)), np.zeros((len(rows), NUM_JOINTS, 3))
+    net_mat[:, legs], net_pos[:, legs] = mat32[:, legs], pos32[:, legs]
+    pos = wp[rows].astype(np.float64)
+    mat = quat2mat(rotations[rows].astype(np.float64))
+    keep_apart(mat, pos, net_mat, net_pos, deep=deep[rows])
+    wp[rows] = pos
+    rotations[np.ix_(rows, _THIGHS_SHINS)] = mat2quat(mat[:, _THIGHS_SHINS])
+
+
+_LEG_JOINTS = tuple(int(j) for leg in LEGS for j in leg)
 _THIGHS_SHINS = np.array([int(j) for leg in LEGS for j in leg[:2]])  # what floor_ik turns
 
 

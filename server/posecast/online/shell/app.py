@@ -103,6 +103,7 @@ class PosecastServer:
             elbow_hinge=not self.cfg.no_elbow_hinge,
             hand_reach=not self.cfg.no_hand_reach,
             head_drop=not self.cfg.no_head_drop,
+            legs_apart=not self.cfg.no_legs_apart,
             pelvis_lean=not self.cfg.no_pelvis_lean,
             pelvis_smoothing=not self.cfg.no_pelvis_smoothing,
             floor_select=not self.cfg.no_floor_select,

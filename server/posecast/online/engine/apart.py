@@ -1,0 +1,136 @@
+"""Legs apart: the display contact IK never draws one leg through the other.
+
+A foot held where its contact began (``ik.ContactIK``), or blending back from there,
+is where the network's foot was some frames ago. When the other leg swings past it
+(a narrow walk, a dancer's crossing step) the held leg and the swinging one can meet:
+the network's own legs kept clear of each other on every validation frame, and the
+contact IK alone put them through each other on 0.5 % of them (docs/evaluation.md,
+"Legs apart"). A foot cannot stay planted where the other leg passes, so such a foot
+gives way: its ankle target moves from the contact IK's back toward the network's own
+ankle, by the least share ``s`` in ``[0, 1]`` that keeps the legs as far apart as the
+network had them (or at most :data:`MAX_OVERLAP_M` into each other). ``s`` is 0 when
+nothing meets, and it grows continuously as the legs draw together, so nothing jumps.
+
+The legs are capsules around thigh, shin and foot (hip-knee, knee-ankle, ankle-toe)
+of :data:`RADII_M`. Pure numpy on world positions and rotations ``(B, 19, ...)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from posecast.online.engine.ik import LEGS, apply_leg_ik, two_bone_ik
+
+F64 = NDArray[np.float64]
+
+# Capsule radii of thigh, shin and foot (metres, the reference body).
+RADII_M = (0.05, 0.04, 0.03)
+# How far two capsules may run into each other before a held foot gives way (when the
+# network's own legs stood further apart): legs may touch, not pass. 0.02 m, chosen on
+# the validation split among 0, 0.02 and 0.04 (docs/evaluation.md, "Legs apart").
+MAX_OVERLAP_M = 0.02
+SHARES = 17  # shares tried: 0, 1/16, ..., 1 of the way back to the network's ankles
+
+_CHAINS = np.array([[int(j) for j in leg] for leg in LEGS])  # (2, 4): hip, knee, ankle, toe
+# The nine pairs (left segment i, right segment k) and the radii they sum to.
+_PAIRS_I = np.repeat(np.arange(3), 3)
+_PAIRS_K = np.tile(np.arange(3), 3)
+_RSUM = np.asarray(RADII_M)[_PAIRS_I] + np.asarray(RADII_M)[_PAIRS_K]
+_ANKLES = [int(leg[2]) for leg in LEGS]
+
+
+def overlap(pos: NDArray[np.floating]) -> F64:
+    """How deep the two legs' capsules run into each other, per pose: the largest
+    ``r_i + r_k - distance`` over the nine segment pairs (metres; negative when
+    apart). ``(..., 19, 3)`` -> ``(...,)``."""
+    p = np.asarray(pos, np.float64)
+    return _overlap_legs(p[..., _CHAINS[0], :], p[..., _CHAINS[1], :])
+
+
+def _overlap_legs(left: F64, right: F64) -> F64:
+    """:func:`overlap` of the legs' joints alone: hip, knee, ankle, toe ``(..., 4, 3)``
+    of each leg."""
+    a0, a1 = left[..., _PAIRS_I, :], left[..., _PAIRS_I + 1, :]  # (..., 9, 3)
+    b0, b1 = right[..., _PAIRS_K, :], right[..., _PAIRS_K + 1, :]
+    out: F64 = np.max(_RSUM - _segments_apart(a0, a1, b0, b1), axis=-1)
+    return out
+
+
+def _segments_apart(a0: F64, a1: F64, b0: F64, b1: F64) -> F64:
+    """Closest distance between segments ``a0-a1`` and ``b0-b1``, ``(..., 3)`` -> ``(...,)``
+    (the clamped closest-point parameters of both lines)."""
+    u, v, w = a1 - a0, b1 - b0, a0 - b0
+    uu, vv, uv = (u * u).sum(-1), (v * v).sum(-1), (u * v).sum(-1)
+    uw, vw = (u * w).sum(-1), (v * w).sum(-1)
+    tiny = 1e-12
+    det = uu * vv - uv * uv
+    s = np.clip(np.where(det > tiny, (uv * vw - vv * uw) / np.maximum(det, tiny), 0.0), 0, 1)
+    t = np.clip((uv * s + vw) / np.maximum(vv, tiny), 0.0, 1.0)
+    # With t clamped, the best s on a's segment for that t.
+    s = np.clip((uv * t - uw) / np.maximum(uu, tiny), 0.0, 1.0)
+    gap = (a0 + u * s[..., None]) - (b0 + v * t[..., None])
+    return np.asarray(np.sqrt((gap * gap).sum(-1)), np.float64)
+
+
+def keep_apart(
+    world_mat: F64,
+    world_pos: F64,
+    net_mat: NDArray[np.floating],
+    net_pos: NDArray[np.floating],
+    max_overlap_m: float = MAX_OVERLAP_M,
+    deep: NDArray[np.floating] | None = None,
+) -> NDArray[np.bool_]:
+    """Where the contact IK's pose ``world_mat (B, 19, 3, 3)``, ``world_pos (B, 19, 3)``
+    has its legs deeper into each other than ``max(overlap(net_pos), max_overlap_m)``,
+    solve its held legs again from the network's own legs (``net_mat``, ``net_pos``:
+    the pose before the contact IK, whose hips are the same) toward ankle targets moved
+    from the contact IK's back toward the network's ankles by the least share that
+    keeps them apart, in place. The same solve as the contact IK's
+    (:func:`~posecast.online.engine.ik.apply_leg_ik`, knees bent toward the network's
+    thighs' forward axes), so a share of 0 is the contact IK's pose and 1 the
+    network's legs. The share: the first of :data:`SHARES` evenly spaced ones that
+    keeps the legs apart, refined linearly between it and the one before (all tried
+    in one batch). ``deep``: :func:`overlap` of ``world_pos``, when the caller has it.
+    Returns which poses moved."""
+    deep = overlap(world_pos) if deep is None else np.asarray(deep, np.float64)
+    rows = np.flatnonzero(deep > max_overlap_m)
+    allowed = np.maximum(overlap(net_pos[rows]), max_overlap_m)
+    meet = deep[rows] > allowed
+    rows, allowed = rows[meet], allowed[meet]
+    moved = np.zeros(len(world_pos), np.bool_)
+    if not len(rows):
+        return moved
+    n_pos = np.asarray(net_pos, np.float64)[rows]
+    n_mat = np.asarray(net_mat, np.float64)[rows]
+    ik_ankles = world_pos[rows][:, _ANKLES]
+    toward = n_pos[:, _ANKLES] - ik_ankles  # (R, 2, 3)
+    held = np.linalg.norm(toward, axis=-1) > 1e-6  # feet the contact IK moved
+    grid = np.linspace(0.0, 1.0, SHARES)
+    legs = n_pos[:, _CHAINS]  # (R, 2, 4, 3): hip, knee, ankle, toe of each leg
+    trial = np.repeat(legs[:, None], SHARES, axis=1)  # (R, S, 2, 4, 3)
+    for side in np.flatnonzero(held.any(axis=0)).tolist():  # the legs some pose holds
+        hip, knee, ankle, toe = (legs[:, None, side, k] for k in range(4))  # (R, 1, 3)
+        hint = n_mat[:, None, _CHAINS[side, 0], :, 2]  # the thigh's forward axis
+        target = ik_ankles[:, None, side] + grid[None, :, None] * toward[:, None, side]
+        h, k, a, t, d = np.broadcast_arrays(hip, knee, ankle, target, hint)
+        k2, a2 = two_bone_ik(h, k, a, t, d)
+        on = held[:, side, None, None]
+        trial[:, :, side, 1] = np.where(on, k2, knee)
+        trial[:, :, side, 2] = np.where(on, a2, ankle)
+        trial[:, :, side, 3] = np.where(on, a2 + (toe - ankle), toe)
+    over = _overlap_legs(trial[:, :, 0], trial[:, :, 1]) - allowed[:, None]  # (R, S)
+    clear = over <= 0.0
+    hi = np.where(clear.any(axis=1), np.argmax(clear, axis=1), SHARES - 1)
+    lo = np.maximum(hi - 1, 0)
+    r = np.arange(len(rows))
+    f_lo, f_hi = over[r, lo], over[r, hi]
+    frac = np.where(f_lo > f_hi, np.clip(f_lo / np.maximum(f_lo - f_hi, 1e-12), 0, 1), 1.0)
+    share = np.where(hi > 0, grid[lo] + frac * (grid[hi] - grid[lo]), 0.0)
+    pos, mat = world_pos[rows], world_mat[rows]
+    joints = _CHAINS.reshape(-1)
+    pos[:, joints], mat[:, joints] = n_pos[:, joints], n_mat[:, joints]
+    apply_leg_ik(mat, pos, ik_ankles + share[:, None, None] * toward, held)
+    world_pos[rows], world_mat[rows] = pos, mat
+    moved[rows] = held.any(axis=1)
+    return moved
