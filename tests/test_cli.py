@@ -256,6 +256,8 @@ def test_a_bug_keeps_its_traceback(monkeypatch) -> None:
         ("cvae", ["--rot-weight", "nan"], "CONFIG_INVALID"),
         ("cvae", ["--vel-weight", "-1"], "CONFIG_INVALID"),
         ("anomaly", ["--vel-weight", "1"], "CONFIG_INVALID"),
+        ("cvae", ["--lower-weight", "0"], "CONFIG_INVALID"),
+        ("anomaly", ["--lower-weight", "2"], "CONFIG_INVALID"),
         ("cvae", ["--threads", "0"], "CONFIG_INVALID"),
         ("cvae", ["--seed", "-1"], "CONFIG_INVALID"),
         ("cvae", ["--no-orientation"], "CONFIG_INVALID"),  # the 4-point layout has none

@@ -403,6 +403,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     _at_least("--seed", args.seed, 0, cmd)
     _finite("--rot-weight", args.rot_weight, cmd)
     _finite("--vel-weight", args.vel_weight, cmd)
+    _finite("--lower-weight", args.lower_weight, cmd, positive=True)
     _finite("--kl-weight", args.kl_weight, cmd)
     _finite("--budget-min", args.budget_min, cmd)
     for option, value, low in (("--hidden", args.hidden, 64), ("--window", args.window, 2)):
@@ -418,6 +419,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         layout != Layout.HMD3_WAIST
         or args.rot_weight
         or args.vel_weight
+        or args.lower_weight != 1.0
         or args.no_orientation
         or args.kl_weight != _KL_WEIGHT
         or args.hidden != _HIDDEN
@@ -429,8 +431,9 @@ def _cmd_train(args: argparse.Namespace) -> int:
     if args.network == "anomaly":
         if sequence_only:
             raise _config(
-                "--layout, --rot-weight, --vel-weight, --kl-weight, --hidden, --window, "
-                "--batch, --budget-min, --device and --no-orientation apply to cvae and ae only",
+                "--layout, --rot-weight, --vel-weight, --lower-weight, --kl-weight, --hidden, "
+                "--window, --batch, --budget-min, --device and --no-orientation apply to cvae "
+                "and ae only",
                 "the anomaly AE reads poses, not trackers: drop those options",
             )
     elif args.network == "ae" and layout != Layout.HMD3_WAIST:
@@ -467,6 +470,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
             seed=args.seed,
             rot_weight=args.rot_weight,
             vel_weight=args.vel_weight,
+            lower_weight=args.lower_weight,
             kl_weight=args.kl_weight,
             window=args.window,
             batch=args.batch,
@@ -945,6 +949,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=0.0,
         help="weight of the local-rotation loss (0: positions only, as the shipped 4-point "
         "model; the headset-only model uses 10)",
+    )
+    train.add_argument(
+        "--lower-weight",
+        type=float,
+        default=1.0,
+        help="weight of the leg joints in the position loss against 1 for the others "
+        "(1: all alike, as the shipped weights; docs/model-card.md)",
     )
     train.add_argument(
         "--vel-weight",

@@ -109,6 +109,31 @@ def test_the_velocity_term_scores_frame_to_frame_motion_only() -> None:
     assert float(velocity_mse_cm2(jitter, truth)) == pytest.approx(1.0 / 3.0)
 
 
+def test_the_lower_weight_weighs_the_legs_against_the_rest() -> None:
+    """Weights normalised to their mean: all 1 is the plain mean; an error on the legs
+    alone costs ``w / mean(w)`` times as much, one on the rest ``1 / mean(w)``."""
+    import torch
+
+    from posecast.offline.train.cvae_trainer import _joint_weights
+    from posecast.offline.train.losses import position_mse_cm2
+    from posecast.skeleton import LOWER_BODY
+
+    truth = torch.zeros(2, 5, 19, 3, dtype=torch.float64)
+    legs = [int(j) for j in LOWER_BODY]
+    on_legs, elsewhere = truth.clone(), truth.clone()
+    on_legs[..., legs, 0] = 0.01  # 1 cm on each leg joint
+    elsewhere[..., [j for j in range(19) if j not in legs], 0] = 0.01
+    assert _joint_weights(1.0, truth) is None
+    w = _joint_weights(3.0, truth)
+    assert w is not None and float(w.mean()) == pytest.approx((3 * 8 + 11) / 19)
+    plain_legs = float(position_mse_cm2(on_legs, truth))
+    assert plain_legs == pytest.approx(8 / (19 * 3))  # 1 cm^2 on one of 3 axes
+    assert float(position_mse_cm2(on_legs, truth, w)) == pytest.approx(plain_legs * 3 / w.mean())
+    plain_rest = float(position_mse_cm2(elsewhere, truth))
+    assert float(position_mse_cm2(elsewhere, truth, w)) == pytest.approx(plain_rest / w.mean())
+    assert len(legs) == 8
+
+
 def test_the_velocity_term_is_logged_and_falls(prepared_dir: Path, tmp_path: Path) -> None:
     import dataclasses
 

@@ -25,6 +25,7 @@ from posecast.offline.train.checkpoint import load_checkpoint, save_checkpoint
 from posecast.offline.train.data import Normalisation, TrainArrays, compose_sites, load_train_val
 from posecast.offline.train.losses import PoseFK, position_mse_cm2, split_root, velocity_mse_cm2
 from posecast.offline.train.masks import add_inertial_noise, cycle_table_kinds, sample_kinds
+from posecast.skeleton import LOWER_BODY, NUM_JOINTS
 from posecast.tracking.layouts import spec
 from posecast.tracking.sites import IMU_ACC_BIAS, IMU_ACC_NOISE, SITE_ROW, Kind, Site
 
@@ -48,6 +49,11 @@ class CVAETrainConfig:
     # network's own frame-to-frame noise (jitter) costs here and nowhere else, since
     # every other term scores each frame alone. 0 for the weights trained before it.
     vel_weight: float = 0.0
+    # Weight of the leg joints (posecast.skeleton.LOWER_BODY) in the position term against
+    # 1 for the others, the term normalised to the mean weight: the serving passes put
+    # head and hands on their trackers, so the network's legs are most of what is shown
+    # of its positions. 1 for the shipped weights.
+    lower_weight: float = 1.0
     # Ablation (docs/evaluation.md): zero the headset-only model's orientation inputs,
     # leaving it the positions and velocities a 4-point model reads.
     no_orientation: bool = False
@@ -123,7 +129,7 @@ def _losses(
     out, logits, kl = model(b["x"], b["pose_in"], sample=sample)
     rot, root_mat, root_pos = _roots(out, b)
     pred = fk(rot, root_mat, root_pos)  # (B, T, 19, 3)
-    mse = position_mse_cm2(pred, b["pos"])
+    mse = position_mse_cm2(pred, b["pos"], _joint_weights(cfg.lower_weight, pred))
     bce = torch.nn.functional.binary_cross_entropy_with_logits(logits, b["contacts"])
     klm = kl.mean()
     total = mse + cfg.kl_weight * klm + cfg.contact_weight * bce
@@ -143,6 +149,16 @@ def _losses(
         parts["vel_mse_cm2"] = vel
     mpjpe = ((pred - b["pos"]).norm(dim=-1).mean() * 100.0).detach()
     return {"loss": total, **parts, "mpjpe_cm": mpjpe}
+
+
+def _joint_weights(lower_weight: float, like: torch.Tensor) -> torch.Tensor | None:
+    """Per-joint weights ``(19,)`` of the position term: ``lower_weight`` for the legs,
+    1 elsewhere, or ``None`` when all are 1."""
+    if lower_weight == 1.0:
+        return None
+    w = torch.ones(NUM_JOINTS, dtype=like.dtype, device=like.device)
+    w[[int(j) for j in LOWER_BODY]] = lower_weight
+    return w
 
 
 def _roots(

@@ -40,9 +40,16 @@ def split_root(
     return out[..., :108], r6d2mat(out[..., 108:114]), out[..., 114:117]
 
 
-def position_mse_cm2(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """Mean squared joint position error in cm^2 (positions given in metres)."""
-    return ((pred - target) * 100.0).pow(2).mean()
+def position_mse_cm2(
+    pred: torch.Tensor, target: torch.Tensor, joint_weights: torch.Tensor | None = None
+) -> torch.Tensor:
+    """Mean squared joint position error in cm^2 (positions ``(..., J, 3)`` in metres);
+    with ``joint_weights (J,)`` each joint's squared error weighted, normalised to the
+    weights' mean (all 1: the plain mean)."""
+    sq = ((pred - target) * 100.0).pow(2)
+    if joint_weights is None:
+        return sq.mean()
+    return (sq * joint_weights[:, None]).mean() / joint_weights.mean()
 
 
 def velocity_mse_cm2(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
