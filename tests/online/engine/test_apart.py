@@ -112,10 +112,78 @@ def test_legs_that_do_not_meet_are_left_as_they_are() -> None:
 
 
 def test_the_network_own_overlap_is_allowed() -> None:
-    """Legs the network itself put into each other stay as deep as it put them."""
-    net_mat, net_pos, mat, pos = held_into_other_leg(0.9)
-    keep_apart(mat, pos, net_mat, net_pos, max_overlap_m=-1.0)  # any overlap over the net's
-    assert overlap(pos)[0] <= max(overlap(net_pos)[0], -1.0) + 1e-9
+    """Legs the network itself put into each other deeper than the allowance may stay
+    as deep as it put them: a held foot that leaves them less deep than that is left
+    alone, one that takes them deeper gives way to the network's depth, no further."""
+    net_mat, net_pos = stance()
+    # The network's right leg swung across, its ankle 3 cm from the left one.
+    across = np.stack([net_pos[:, LEFT[2]], net_pos[:, LEFT[2]] + [-0.03, 0.0, 0.0]], 1)
+    apply_leg_ik(net_mat, net_pos, across, np.array([[False, True]]))
+    own = float(overlap(net_pos)[0])
+    assert own > MAX_OVERLAP_M + 0.01
+    for shift, deeper in ((0.01, False), (-0.02, True)):  # held 1 cm out, or 2 cm in
+        mat, pos = net_mat.copy(), net_pos.copy()
+        target = np.stack([net_pos[:, LEFT[2]] + [shift, 0.0, 0.0], net_pos[:, RIGHT[2]]], 1)
+        apply_leg_ik(mat, pos, target, np.array([[True, False]]))
+        deep = float(overlap(pos)[0])
+        assert (deep > own) is deeper and deep > MAX_OVERLAP_M
+        before = pos.copy()
+        assert keep_apart(mat, pos, net_mat, net_pos).tolist() == [deeper]
+        if deeper:
+            assert own - 1e-3 <= overlap(pos)[0] <= own + 1e-3
+        else:
+            assert np.array_equal(pos, before)
+
+
+def test_a_free_leg_keeps_what_the_contact_ik_made_of_it() -> None:
+    """Only held feet are solved again: a leg whose ankle the contact IK left where the
+    network put it (its knee turned, say) stays as the contact IK left it."""
+    net_mat, net_pos, mat, pos = held_into_other_leg(0.8)
+    pos[0, RIGHT[1]] += [0.0, 0.0, 0.01]  # the contact IK's knee, not the network's
+    free_before = pos[0, list(RIGHT)].copy()
+    keep_apart(mat, pos, net_mat, net_pos)
+    assert np.array_equal(pos[0, list(RIGHT)], free_before)
+
+
+def test_random_crossings_end_apart_within_a_millimetre() -> None:
+    """Random legs, one foot (some poses both) held most of the way into the other leg:
+    each pose ends no deeper than the allowance (or the network's own depth) by more
+    than a millimetre (the share's refinement is linear, the knee's path is not), its
+    bones kept."""
+    rng = np.random.default_rng(1)
+    offsets = reference_offsets()
+    checked = 0
+    for _ in range(300):
+        local = np.broadcast_to(np.eye(3), (NUM_JOINTS, 3, 3)).copy()
+        for thigh, shin in ((LEFT[0], LEFT[1]), (RIGHT[0], RIGHT[1])):
+            local[thigh] = axis_mat("X", -rng.uniform(0, 0.8)) @ axis_mat(
+                "Z", rng.uniform(-0.2, 0.2)
+            )
+            local[shin] = axis_mat("X", rng.uniform(0, 1.2))
+        wm, wp = fk_mat(local, np.array([0.0, 0.9, 0.0]), offsets)
+        net_mat, net_pos = wm[None], wp[None]
+        mat, pos = net_mat.copy(), net_pos.copy()
+        side = int(rng.integers(2))
+        mine, other = (LEFT, RIGHT) if side == 0 else (RIGHT, LEFT)
+        target = np.stack([pos[:, LEFT[2]], pos[:, RIGHT[2]]], 1)
+        near = pos[0, other[2]] + rng.normal(scale=0.05, size=3)
+        target[0, side] = pos[0, mine[2]] + rng.uniform(0.5, 1.0) * (near - pos[0, mine[2]])
+        held = np.zeros((1, 2), np.bool_)
+        held[0, side] = True
+        if rng.uniform() < 0.3:
+            held[0, 1 - side] = True
+            target[0, 1 - side] += rng.normal(scale=0.03, size=3)
+        apply_leg_ik(mat, pos, target, held)
+        allowed = max(float(overlap(net_pos)[0]), MAX_OVERLAP_M)
+        if overlap(pos)[0] <= allowed:
+            continue
+        checked += 1
+        keep_apart(mat, pos, net_mat, net_pos)
+        assert overlap(pos)[0] <= allowed + 1e-3
+        for a, b in zip(LEFT[:-1] + RIGHT[:-1], LEFT[1:] + RIGHT[1:], strict=True):
+            bone = np.linalg.norm(pos[0, b] - pos[0, a])
+            assert bone == pytest.approx(np.linalg.norm(net_pos[0, b] - net_pos[0, a]), abs=1e-9)
+    assert checked > 50
 
 
 def test_giving_way_is_continuous_as_the_foot_is_drawn_in() -> None:
@@ -133,16 +201,25 @@ def test_giving_way_is_continuous_as_the_foot_is_drawn_in() -> None:
 
 def test_the_engine_step_reads_the_network_legs_from_the_decoder_output() -> None:
     """``ssi._apart`` rebuilds the network's legs from the decoder's rotations and the
-    pelvis (float32, as the engine holds them) and moves the shown pose like
-    ``keep_apart`` on float64 arrays."""
-    net_mat, net_pos, mat, pos = held_into_other_leg(0.8)
+    pelvis (float32, as the engine holds them) and moves the shown poses like
+    ``keep_apart`` on float64 arrays: a batch of three, the middle one crossing, the
+    others untouched."""
+    rows = [held_into_other_leg(t) for t in (0.1, 0.8, 0.2)]
+    net_mat = np.concatenate([r[0] for r in rows])
+    net_pos = np.concatenate([r[1] for r in rows])
+    mat = np.concatenate([r[2] for r in rows])
+    pos = np.concatenate([r[3] for r in rows])
     local = np.broadcast_to(np.eye(3), (NUM_JOINTS, 3, 3)).copy()
     for thigh, shin in ((LEFT[0], LEFT[1]), (RIGHT[0], RIGHT[1])):
         local[thigh], local[shin] = axis_mat("X", -0.3), axis_mat("X", 0.6)
-    rot6d = mat2r6d(local[1:]).astype(np.float32)
+    rot6d = np.repeat(mat2r6d(local[1:]).reshape(1, -1), 3, axis=0).astype(np.float32)
     wp, quats = pos.astype(np.float32), mat2quat(mat).astype(np.float32)
+    before_wp, before_q = wp.copy(), quats.copy()
     root_mat, root_pos = net_mat[:, 0].astype(np.float32), net_pos[:, 0].astype(np.float32)
-    ssi._apart(wp, quats, rot6d.reshape(1, -1), root_mat, root_pos)
-    keep_apart(mat, pos, net_mat, net_pos)
+    ssi._apart(wp, quats, rot6d, root_mat, root_pos)
+    assert keep_apart(mat, pos, net_mat, net_pos).tolist() == [False, True, False]
     assert np.allclose(wp, pos, atol=1e-4)
     assert np.allclose(quat2mat(quats.astype(np.float64)), mat, atol=1e-4)
+    assert not np.allclose(wp[1], before_wp[1], atol=1e-3)
+    for i in (0, 2):
+        assert np.array_equal(wp[i], before_wp[i]) and np.array_equal(quats[i], before_q[i])

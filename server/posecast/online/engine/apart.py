@@ -8,8 +8,10 @@ contact IK alone put them through each other on 0.5 % of them (docs/evaluation.m
 "Legs apart"). A foot cannot stay planted where the other leg passes, so such a foot
 gives way: its ankle target moves from the contact IK's back toward the network's own
 ankle, by the least share ``s`` in ``[0, 1]`` that keeps the legs as far apart as the
-network had them (or at most :data:`MAX_OVERLAP_M` into each other). ``s`` is 0 when
+network had them (or at most :data:`MAX_OVERLAP_M` into each other), to within a
+millimetre (the refinement of ``s`` is linear, the knee's path is not). ``s`` is 0 when
 nothing meets, and it grows continuously as the legs draw together, so nothing jumps.
+A leg the contact IK does not hold keeps what the contact IK made of it.
 
 The legs are capsules around thigh, shin and foot (hip-knee, knee-ankle, ankle-toe)
 of :data:`RADII_M`. Pure numpy on world positions and rotations ``(B, 19, ...)``.
@@ -31,6 +33,9 @@ RADII_M = (0.05, 0.04, 0.03)
 # the validation split among 0, 0.02 and 0.04 (docs/evaluation.md, "Legs apart").
 MAX_OVERLAP_M = 0.02
 SHARES = 17  # shares tried: 0, 1/16, ..., 1 of the way back to the network's ankles
+# A foot whose shown ankle is further than this from the network's is one the contact
+# IK holds (the network's legs are rebuilt in float32 far from the origin: 1e-6 m off).
+HELD_M = 1e-4
 
 _CHAINS = np.array([[int(j) for j in leg] for leg in LEGS])  # (2, 4): hip, knee, ankle, toe
 # The nine pairs (left segment i, right segment k) and the radii they sum to.
@@ -89,37 +94,38 @@ def keep_apart(
     keeps them apart, in place. The same solve as the contact IK's
     (:func:`~posecast.online.engine.ik.apply_leg_ik`, knees bent toward the network's
     thighs' forward axes), so a share of 0 is the contact IK's pose and 1 the
-    network's legs. The share: the first of :data:`SHARES` evenly spaced ones that
-    keeps the legs apart, refined linearly between it and the one before (all tried
-    in one batch). ``deep``: :func:`overlap` of ``world_pos``, when the caller has it.
-    Returns which poses moved."""
+    network's legs (knees forward). The share: the first of :data:`SHARES` evenly
+    spaced ones that keeps the legs apart (all tried in one batch), refined linearly
+    between it and the one before, then by one step of false position. A held foot is
+    one whose ankle is more than :data:`HELD_M` from the network's; a leg not held
+    keeps what the contact IK made of it. ``deep``: :func:`overlap` of ``world_pos``,
+    when the caller has it. Returns which poses moved."""
     deep = overlap(world_pos) if deep is None else np.asarray(deep, np.float64)
     rows = np.flatnonzero(deep > max_overlap_m)
     allowed = np.maximum(overlap(net_pos[rows]), max_overlap_m)
-    meet = deep[rows] > allowed
-    rows, allowed = rows[meet], allowed[meet]
+    ik_ankles = world_pos[rows][:, _ANKLES]
+    toward = np.asarray(net_pos, np.float64)[rows][:, _ANKLES] - ik_ankles  # (R, 2, 3)
+    held = np.linalg.norm(toward, axis=-1) > HELD_M  # (R, 2): feet the contact IK moved
+    meet = (deep[rows] > allowed) & held.any(axis=1)
+    rows, allowed, ik_ankles, toward, held = (
+        rows[meet],
+        allowed[meet],
+        ik_ankles[meet],
+        toward[meet],
+        held[meet],
+    )
     moved = np.zeros(len(world_pos), np.bool_)
     if not len(rows):
         return moved
     n_pos = np.asarray(net_pos, np.float64)[rows]
     n_mat = np.asarray(net_mat, np.float64)[rows]
-    ik_ankles = world_pos[rows][:, _ANKLES]
-    toward = n_pos[:, _ANKLES] - ik_ankles  # (R, 2, 3)
-    held = np.linalg.norm(toward, axis=-1) > 1e-6  # feet the contact IK moved
+    pos, mat = world_pos[rows], world_mat[rows]
+
     grid = np.linspace(0.0, 1.0, SHARES)
-    legs = n_pos[:, _CHAINS]  # (R, 2, 4, 3): hip, knee, ankle, toe of each leg
-    trial = np.repeat(legs[:, None], SHARES, axis=1)  # (R, S, 2, 4, 3)
-    for side in np.flatnonzero(held.any(axis=0)).tolist():  # the legs some pose holds
-        hip, knee, ankle, toe = (legs[:, None, side, k] for k in range(4))  # (R, 1, 3)
-        hint = n_mat[:, None, _CHAINS[side, 0], :, 2]  # the thigh's forward axis
-        target = ik_ankles[:, None, side] + grid[None, :, None] * toward[:, None, side]
-        h, k, a, t, d = np.broadcast_arrays(hip, knee, ankle, target, hint)
-        k2, a2 = two_bone_ik(h, k, a, t, d)
-        on = held[:, side, None, None]
-        trial[:, :, side, 1] = np.where(on, k2, knee)
-        trial[:, :, side, 2] = np.where(on, a2, ankle)
-        trial[:, :, side, 3] = np.where(on, a2 + (toe - ankle), toe)
-    over = _overlap_legs(trial[:, :, 0], trial[:, :, 1]) - allowed[:, None]  # (R, S)
+    trial = _legs_at(
+        n_pos, n_mat, pos, ik_ankles, toward, held, np.broadcast_to(grid, (len(rows), SHARES))
+    )
+    over = _overlap_legs(trial[..., 0, :, :], trial[..., 1, :, :]) - allowed[:, None]  # (R, S)
     clear = over <= 0.0
     hi = np.where(clear.any(axis=1), np.argmax(clear, axis=1), SHARES - 1)
     lo = np.maximum(hi - 1, 0)
@@ -127,10 +133,55 @@ def keep_apart(
     f_lo, f_hi = over[r, lo], over[r, hi]
     frac = np.where(f_lo > f_hi, np.clip(f_lo / np.maximum(f_lo - f_hi, 1e-12), 0, 1), 1.0)
     share = np.where(hi > 0, grid[lo] + frac * (grid[hi] - grid[lo]), 0.0)
-    pos, mat = world_pos[rows], world_mat[rows]
-    joints = _CHAINS.reshape(-1)
-    pos[:, joints], mat[:, joints] = n_pos[:, joints], n_mat[:, joints]
-    apply_leg_ik(mat, pos, ik_ankles + share[:, None, None] * toward, held)
+    # The refinement is linear, the knee's path is not: where the refined share leaves
+    # the legs past the allowance, one more step of false position between it and the
+    # grid's share that cleared (continuous in the pose, unlike falling back to it).
+    refined = _legs_at(n_pos, n_mat, pos, ik_ankles, toward, held, share[:, None])[:, 0]
+    f_mid = _overlap_legs(refined[:, 0], refined[:, 1]) - allowed
+    past = (f_mid > 0.0) & (f_hi <= 0.0) & (hi > 0)
+    step = f_mid / np.maximum(f_mid - f_hi, 1e-12)
+    share = np.where(past, share + np.clip(step, 0.0, 1.0) * (grid[hi] - share), share)
+    for side in range(2):
+        on = held[:, side]
+        if not on.any():
+            continue
+        joints = _CHAINS[side]
+        p, m = pos[on], mat[on]
+        p[:, joints], m[:, joints] = n_pos[on][:, joints], n_mat[on][:, joints]
+        target = ik_ankles[on] + share[on, None, None] * toward[on]
+        only = np.zeros((int(on.sum()), 2), np.bool_)
+        only[:, side] = True
+        apply_leg_ik(m, p, target, only)
+        pos[on], mat[on] = p, m
     world_pos[rows], world_mat[rows] = pos, mat
-    moved[rows] = held.any(axis=1)
+    moved[rows] = True
     return moved
+
+
+def _legs_at(
+    n_pos: F64,
+    n_mat: F64,
+    pos: F64,
+    ik_ankles: F64,
+    toward: F64,
+    held: NDArray[np.bool_],
+    share: F64,
+) -> F64:
+    """Both legs' hip, knee, ankle and toe ``(R, S, 2, 4, 3)`` at each share ``(R, S)``:
+    a held leg solved from the network's (``n_pos``, its thigh's forward axis from
+    ``n_mat``) toward the contact IK's ankle moved ``share`` of the way to the
+    network's, positions only; a free leg as the contact IK left it (``pos``)."""
+    legs = np.repeat(pos[:, None][:, :, _CHAINS], share.shape[1], axis=1)  # (R, S, 2, 4, 3)
+    net = n_pos[:, _CHAINS]  # (R, 2, 4, 3)
+    for side in np.flatnonzero(held.any(axis=0)).tolist():
+        hip, knee, ankle, toe = (net[:, None, side, k] for k in range(4))  # (R, 1, 3)
+        hint = n_mat[:, None, _CHAINS[side, 0], :, 2]  # the thigh's forward axis
+        target = ik_ankles[:, None, side] + share[..., None] * toward[:, None, side]
+        h, k, a, t, d = np.broadcast_arrays(hip, knee, ankle, target, hint)
+        k2, a2 = two_bone_ik(h, k, a, t, d)
+        on = held[:, side, None, None]
+        legs[:, :, side, 0] = np.where(on, hip, legs[:, :, side, 0])
+        legs[:, :, side, 1] = np.where(on, k2, legs[:, :, side, 1])
+        legs[:, :, side, 2] = np.where(on, a2, legs[:, :, side, 2])
+        legs[:, :, side, 3] = np.where(on, a2 + (toe - ankle), legs[:, :, side, 3])
+    return legs
