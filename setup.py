@@ -14,6 +14,7 @@ SOURCES = [
     "server/native/pc_isa_avx2.c",
     "server/native/pc_isa_avx512.c",
     "server/native/pc_isa_avx512bf16.c",
+    "server/native/pc_upper.c",
 ]
 
 setup(
@@ -21,7 +22,7 @@ setup(
         Extension(
             "posecast._native",
             sources=SOURCES,
-            depends=["server/native/pc_kernels.h", "server/native/pc_impl.h"],
+            depends=["server/native/pc_kernels.h", "server/native/pc_impl.h", "server/native/pc_upper.h"],
             include_dirs=["server/native"],
             extra_compile_args=["-O3", "-std=gnu11", "-fno-math-errno", "-Wall", "-Wextra",
                                 "-Wno-unused-parameter", "-Wno-missing-field-initializers"],

@@ -19,6 +19,7 @@
 #include <string.h>
 
 #include "pc_kernels.h"
+#include "pc_upper.h"
 
 /* --- levels ---------------------------------------------------------------------- */
 
@@ -569,6 +570,96 @@ static PyObject *py_pool(PyObject *self, PyObject *args) {
     return run_pool(cap, o, group, release_frames, max_drift, 0);
 }
 
+/* --- the shown pose's passes ------------------------------------------------------- */
+
+/* The shown poses' positions (E, 19, 3) float32 in b; E, or -1 with the error set. */
+static Py_ssize_t get_poses(PyObject *o, Buf *b) {
+    if (get_buf(o, b, "positions", F32, -1, 0)) return -1;
+    Py_ssize_t E = b->view.len / 4 / 57;
+    if (E * 57 * 4 != b->view.len) {
+        PyErr_SetString(PyExc_ValueError, "positions: not (E, 19, 3)");
+        return -1;
+    }
+    return E;
+}
+
+static PyObject *py_upper_body(PyObject *self, PyObject *args) {
+    PyObject *o[9], *free_obj;
+    PcUpperArgs a;
+    if (!PyArg_ParseTuple(args, "OOOOOdddddOOOO", &o[0], &o[1], &o[2], &o[3], &free_obj, &a.wrist_share,
+                          &a.lean_share, &a.neck_share, &a.spine_reach, &a.reach_tol, &o[4], &o[5], &o[6],
+                          &o[7]))
+        return NULL;
+    Buf b[9];
+    memset(b, 0, sizeof(b));
+    Py_ssize_t E = get_poses(o[0], &b[0]);
+    if (E < 0) goto fail;
+    if (get_buf(o[1], &b[1], "rotations", F32, E * 76, 0) || get_buf(o[2], &b[2], "tracker_pos", F64, -1, 0))
+        goto fail;
+    a.slots = E ? b[2].view.len / 8 / 3 / E : 3;
+    if (a.slots < 3 || a.slots * 3 * E * 8 != b[2].view.len) {
+        PyErr_SetString(PyExc_ValueError, "tracker_pos: not (E, slots >= 3, 3)");
+        goto fail;
+    }
+    if (get_buf(o[3], &b[3], "tracker_quat", F64, E * a.slots * 4, 0) ||
+        (free_obj != Py_None && get_buf(free_obj, &b[8], "free_root", BOOL, E, 0)) ||
+        get_buf(o[4], &b[4], "offsets", F64, 57, 0) || get_buf(o[5], &b[5], "positions_out", F32, E * 57, 1) ||
+        get_buf(o[6], &b[6], "rotations_out", F32, E * 76, 1) || get_buf(o[7], &b[7], "reach_limited", BOOL, E, 1))
+        goto fail;
+    a.pos_in = b[0].view.buf;
+    a.quat_in = b[1].view.buf;
+    a.tp = b[2].view.buf;
+    a.tq = b[3].view.buf;
+    a.free = free_obj != Py_None ? b[8].view.buf : NULL;
+    a.offsets = b[4].view.buf;
+    a.pos_out = b[5].view.buf;
+    a.quat_out = b[6].view.buf;
+    a.limited = b[7].view.buf;
+    Py_BEGIN_ALLOW_THREADS;
+    pc_upper_rows(&a, 0, E);
+    Py_END_ALLOW_THREADS;
+    release(b, 9);
+    Py_RETURN_NONE;
+fail:
+    release(b, 9);
+    return NULL;
+}
+
+static PyObject *py_hinge(PyObject *self, PyObject *args) {
+    PyObject *o[3];
+    PcHingeArgs h;
+    if (!PyArg_ParseTuple(args, "OOOdddd", &o[0], &o[1], &o[2], &h.straight, &h.span, &h.flip, &h.flip_span))
+        return NULL;
+    Buf b[3];
+    memset(b, 0, sizeof(b));
+    Py_ssize_t E = get_poses(o[0], &b[0]);
+    if (E < 0) goto fail;
+    if (get_buf(o[1], &b[1], "rotations", F32, E * 76, 1) || get_buf(o[2], &b[2], "limbs", F64, -1, 0)) goto fail;
+    h.limbs = b[2].view.len / 8 / 9;
+    if (h.limbs * 9 * 8 != b[2].view.len) {
+        PyErr_SetString(PyExc_ValueError, "limbs: not (L, 9)");
+        goto fail;
+    }
+    const double *spec = b[2].view.buf;
+    for (Py_ssize_t l = 0; l < h.limbs; l++)
+        for (int k = 0; k < 3; k++)
+            if (!(spec[9 * l + k] >= 0 && spec[9 * l + k] < 19)) {
+                PyErr_SetString(PyExc_ValueError, "limbs: joints outside 0..18");
+                goto fail;
+            }
+    h.pos = b[0].view.buf;
+    h.quat = b[1].view.buf;
+    h.spec = spec;
+    Py_BEGIN_ALLOW_THREADS;
+    pc_hinge_rows(&h, 0, E);
+    Py_END_ALLOW_THREADS;
+    release(b, 3);
+    Py_RETURN_NONE;
+fail:
+    release(b, 3);
+    return NULL;
+}
+
 /* --- control ---------------------------------------------------------------------- */
 
 static PyObject *py_isa(PyObject *self, PyObject *noargs) { return PyUnicode_FromString(LEVELS[g_level].name); }
@@ -634,6 +725,8 @@ static PyMethodDef METHODS[] = {
     {"decode", py_decode, METH_VARARGS, "One decoder step for R rows."},
     {"pool", py_pool, METH_VARARGS, "FK, contact IK and anomaly error of R rows."},
     {"emit", py_emit, METH_VARARGS, "The shown poses: FK, display IK, quaternions."},
+    {"upper_body", py_upper_body, METH_VARARGS, "Head and hands onto their trackers (upper_ik)."},
+    {"hinge", py_hinge, METH_VARARGS, "Limbs onto their hinges, in place (hinge)."},
     {NULL, NULL, 0, NULL},
 };
 

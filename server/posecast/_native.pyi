@@ -54,6 +54,33 @@ def pool(
     scores: Any,
     /,
 ) -> None: ...
+def upper_body(
+    positions: Any,
+    rotations: Any,
+    tracker_pos: Any,
+    tracker_quat: Any,
+    free_root: Any,
+    wrist_share: float,
+    lean_share: float,
+    neck_share: float,
+    spine_reach: float,
+    reach_tol: float,
+    offsets: Any,
+    positions_out: Any,
+    rotations_out: Any,
+    reach_limited: Any,
+    /,
+) -> None: ...
+def hinge(
+    positions: Any,
+    rotations: Any,
+    limbs: Any,
+    straight: float,
+    span: float,
+    flip: float,
+    flip_span: float,
+    /,
+) -> None: ...
 def emit(
     packed: object,
     rotations: Any,

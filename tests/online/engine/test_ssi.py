@@ -61,6 +61,12 @@ class RecordingPool:
     def emit(self, *args: Any) -> tuple[np.ndarray, np.ndarray]:
         return self.pool.emit(*args)
 
+    def upper_body(self, *args: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self.pool.upper_body(*args)
+
+    def hinge(self, *args: Any) -> None:
+        self.pool.hinge(*args)
+
 
 class NoContacts:
     """The backend's decoder with its foot contacts forced to 0, so no contact IK runs

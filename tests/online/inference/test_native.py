@@ -17,10 +17,14 @@ import warnings
 import numpy as np
 import pytest
 
-from posecast.geometry.rotations import mat2quat
+from posecast.geometry.fk import fk_mat
+from posecast.geometry.rotations import aa2mat, mat2quat
 from posecast.online.engine.backend import PoolIK
 from posecast.online.engine.batch_fk import fk32
+from posecast.online.engine.hinge import ELBOW_LIMBS, KNEE_LIMBS, hinge_quat
 from posecast.online.engine.ik import ContactIK
+from posecast.online.inference.onnx_backend import NumpyPool
+from posecast.skeleton import Joint, reference_offsets
 from tests.online.inference import reference64 as ref
 
 native = pytest.importorskip("posecast.online.inference.native")
@@ -316,3 +320,78 @@ def test_a_forked_child_runs_the_kernels_on_new_workers() -> None:
     got = os.read(read, 1)
     _, status = os.waitpid(pid, 0)
     assert got == b"1" and status == 0
+
+
+def _upper_inputs(E: int, seed: int) -> dict[str, np.ndarray]:
+    """Shown poses and trackers for the upper-body pass: trackers near their joints,
+    far beyond reach, or exactly on them; some hints on the shoulder-target line (the
+    two-bone solve's fallbacks), some headsets on the head (no swing)."""
+    rng = np.random.default_rng(seed)
+    local = aa2mat(rng.normal(0.0, 0.4, (E, 19, 3)))
+    root = np.array([0.0, 1.0, 0.0]) + rng.normal(0.0, 0.3, (E, 3))
+    wm, wp = fk_mat(local, root, reference_offsets())
+    tp = wp[:, [Joint.HEAD, Joint.LEFT_HAND, Joint.RIGHT_HAND, Joint.PELVIS]].copy()
+    scale = rng.choice([0.0, 0.03, 0.2, 1.5], (E, 1, 1))
+    tp += scale * rng.normal(0.0, 1.0, tp.shape)
+    # A left hand straight out along its arm's line: the elbow hint on that line.
+    straight = rng.random(E) < 0.1
+    sh = wp[straight, Joint.LEFT_UPPER_ARM]
+    tp[straight, 1] = sh + 2.0 * (wp[straight, Joint.LEFT_FOREARM] - sh)
+    return {
+        "pos": wp.astype(np.float32),
+        "quat": mat2quat(wm).astype(np.float32),
+        "tp": tp,
+        "tq": mat2quat(aa2mat(rng.normal(0.0, 1.0, (E, 4, 3)))),
+        "free": rng.random(E) < 0.5,
+    }
+
+
+@pytest.mark.parametrize("wrist_share", [0.0, 0.75, 1.0])
+@pytest.mark.parametrize("free", [False, True])
+def test_upper_body_matches_the_numpy_reference(wrist_share: float, free: bool) -> None:
+    """The C port of the upper-body pass (pc_upper.c) against upper_ik.solve_upper_body,
+    the numpy reference, on 1,000 poses: every position, rotation and reach flag."""
+    _, pool = native.load_native("cvae_decoder", "anomaly", None, 1, 10, 0.2)
+    ref_pool = NumpyPool.__new__(NumpyPool)  # its upper_body needs no scorer
+    inp = _upper_inputs(1000, seed=11)
+    roots = inp["free"] if free else None
+    args = (inp["pos"], inp["quat"], inp["tp"], inp["tq"], roots, wrist_share)
+    pos, quat, limited = pool.upper_body(*args)
+    want_pos, want_quat, want_limited = ref_pool.upper_body(*args)
+    assert 0.1 < want_limited.mean() < 0.95  # both reached and out-of-reach rows
+    np.testing.assert_array_equal(limited, want_limited)
+    assert np.abs(pos - want_pos).max() < 1e-6
+    dq = np.minimum(np.abs(quat - want_quat).max(-1), np.abs(quat + want_quat).max(-1))
+    assert dq.max() < 1e-6
+    assert pos.dtype == np.float32 and quat.dtype == np.float32
+
+
+def test_upper_body_bad_buffers_raise_value_errors() -> None:
+    _, pool = native.load_native("cvae_decoder", "anomaly", None, 1, 10, 0.2)
+    inp = _upper_inputs(4, seed=1)
+    with pytest.raises(ValueError, match="tracker_pos"):
+        pool.upper_body(inp["pos"], inp["quat"], inp["tp"][:, :2], inp["tq"], None, 0.5)
+    with pytest.raises(ValueError, match="rotations"):
+        pool.upper_body(inp["pos"], inp["quat"][:2], inp["tp"], inp["tq"], None, 0.5)
+    with pytest.raises(ValueError, match="free_root"):
+        pool.upper_body(inp["pos"], inp["quat"], inp["tp"], inp["tq"], inp["free"][:2], 0.5)
+
+
+@pytest.mark.parametrize("limbs", ["knees", "elbows"])
+def test_hinge_matches_the_numpy_reference(limbs: str) -> None:
+    """The C port of the hinges against hinge.hinge_quat on 2,000 random poses: limbs
+    bent every way (forward, backward past the fade, nearly straight)."""
+    _, pool = native.load_native("cvae_decoder", "anomaly", None, 1, 10, 0.2)
+    table = KNEE_LIMBS if limbs == "knees" else ELBOW_LIMBS
+    rng = np.random.default_rng(5)
+    local = aa2mat(rng.normal(0.0, 0.8, (2000, 19, 3)))
+    local[:100, [Joint.LEFT_SHIN, Joint.RIGHT_SHIN, Joint.LEFT_FOREARM]] = np.eye(3)  # straight
+    wm, wp = fk_mat(local, rng.normal(0.0, 1.0, (2000, 3)), reference_offsets())
+    pos, quat = wp.astype(np.float32), mat2quat(wm).astype(np.float32)
+    got, want = quat.copy(), quat.copy()
+    pool.hinge(pos, got, table)
+    hinge_quat(pos, want, table)
+    moved = (np.abs(want - quat).max(-1) > 1e-4).any(-1)
+    assert moved.mean() > 0.5  # the reference turned most poses' limbs
+    dq = np.minimum(np.abs(got - want).max(-1), np.abs(got + want).max(-1))
+    assert dq.max() < 1e-6

@@ -2,7 +2,8 @@
 
 A tick needs two things done for all ``R = P * N`` candidate rows: the decoder step
 (:class:`Decoder`) and the candidate pool's FK, contact IK and anomaly error
-(:class:`Pool`), and then the shown pose of each player (``Pool.emit``). A backend
+(:class:`Pool`), and then the shown pose of each player (``Pool.emit``, and the
+upper-body pass and the hinges on it, ``Pool.upper_body`` and ``Pool.hinge``). A backend
 supplies both; the engine calls nothing else. Backends:
 
 * ``native``: the C extension ``posecast._native`` (fused GRU step, FK, IK and scoring
@@ -23,6 +24,8 @@ from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
+
+from posecast.online.engine.hinge import Limbs
 
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
@@ -102,4 +105,23 @@ class Pool(Protocol):
         ``root_pos (E, 3)``, then the players' own display IK (``ik``, stepped in
         place; the thighs and shins swing with the feet). Returns world positions
         ``(E, 19, 3)`` and world rotations ``(E, 19, 4)`` xyzw, float32."""
+        ...
+
+    def upper_body(
+        self,
+        positions: F32,
+        rotations: F32,
+        tracker_pos: F64,
+        tracker_quat: F64,
+        free_root: NDArray[np.bool_] | None,
+        wrist_share: float,
+    ) -> tuple[F32, F32, NDArray[np.bool_]]:
+        """Head and hands of the ``E`` shown poses onto their trackers: exactly
+        :func:`posecast.online.engine.upper_ik.solve_upper_body` (the reference, which
+        documents the arguments), in whatever this backend runs it in."""
+        ...
+
+    def hinge(self, positions: F32, rotations: F32, limbs: Limbs) -> None:
+        """The limbs ``limbs`` of the ``E`` shown poses onto their hinges, rotations
+        changed in place: exactly :func:`posecast.online.engine.hinge.hinge_quat`."""
         ...

@@ -21,8 +21,6 @@ backward is left as it is.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 from numpy.typing import NDArray
 
@@ -32,6 +30,9 @@ from posecast.online.engine.upper_ik import _wrap
 from posecast.skeleton import NUM_JOINTS, Joint
 
 F64 = NDArray[np.float64]
+# Per limb: the upper, lower and end joint, the hinge axis and the flexed direction,
+# both in the upper joint's frame.
+Limbs = tuple[tuple[int, int, int, F64, F64], ...]
 
 # (thigh, shin, foot) per leg; the thigh's bone along its local -y, the knee's hinge
 # axis its local +x (a positive turn moves the shin backward).
@@ -39,10 +40,9 @@ KNEES = (
     (int(Joint.LEFT_THIGH), int(Joint.LEFT_SHIN), int(Joint.LEFT_FOOT)),
     (int(Joint.RIGHT_THIGH), int(Joint.RIGHT_SHIN), int(Joint.RIGHT_FOOT)),
 )
-HINGE_JOINTS = [j for leg in KNEES for j in leg[:2]]
 _AXIS = np.array([1.0, 0.0, 0.0])
 _BEHIND = np.array([0.0, 0.0, -1.0])  # where a flexed shin points, in the thigh's frame
-_KNEE_LIMBS = tuple((*leg, _AXIS, _BEHIND) for leg in KNEES)
+KNEE_LIMBS: Limbs = tuple((*leg, _AXIS, _BEHIND) for leg in KNEES)
 
 # (upper arm, forearm, hand) per arm and the elbow's hinge axis in the upper arm's frame
 # (a positive turn flexes the elbow), as the validation split's ground truth has it: the
@@ -53,11 +53,10 @@ ELBOWS = (
     (int(Joint.LEFT_UPPER_ARM), int(Joint.LEFT_FOREARM), int(Joint.LEFT_HAND)),
     (int(Joint.RIGHT_UPPER_ARM), int(Joint.RIGHT_FOREARM), int(Joint.RIGHT_HAND)),
 )
-ELBOW_JOINTS = [j for arm in ELBOWS for j in arm[:2]]
 _LEFT_AXIS, _RIGHT_AXIS = np.array([0.0, -0.868, 0.497]), np.array([0.0, 0.867, -0.499])
 ELBOW_AXES = (_LEFT_AXIS / np.linalg.norm(_LEFT_AXIS), _RIGHT_AXIS / np.linalg.norm(_RIGHT_AXIS))
 _BONES = (np.array([1.0, 0.0, 0.0]), np.array([-1.0, 0.0, 0.0]))  # the upper arms' own
-_ELBOW_LIMBS = tuple(
+ELBOW_LIMBS: Limbs = tuple(
     (*arm, axis, np.cross(axis, bone))
     for arm, axis, bone in zip(ELBOWS, ELBOW_AXES, _BONES, strict=True)
 )
@@ -85,7 +84,7 @@ def _twist_angle(rot: F64, axis: F64) -> F64:
 def hinge_knees(mat: F64, pos: F64) -> None:
     """Both knees of ``B`` poses onto their hinges, in place: world rotations
     ``mat (B, 19, 3, 3)`` change, positions ``pos (B, 19, 3)`` are read only."""
-    _hinge(mat, pos, _KNEE_LIMBS)
+    _hinge(mat, pos, KNEE_LIMBS)
 
 
 def hinge_elbows(mat: F64, pos: F64) -> None:
@@ -93,10 +92,10 @@ def hinge_elbows(mat: F64, pos: F64) -> None:
     each upper arm turns about its bone so that the forearm lies in its hinge plane,
     the forearm's rotation becomes the upper arm's turned about the hinge axis, and the
     hand keeps its world rotation (the controller's)."""
-    _hinge(mat, pos, _ELBOW_LIMBS)
+    _hinge(mat, pos, ELBOW_LIMBS)
 
 
-def _hinge(mat: F64, pos: F64, limbs: tuple[tuple[int, int, int, F64, F64], ...]) -> None:
+def _hinge(mat: F64, pos: F64, limbs: Limbs) -> None:
     """Every limb of ``limbs`` (upper, lower, end joint, the hinge axis and the flexed
     direction in the upper joint's frame) onto its hinge, all limbs in one batch."""
     B, L = len(pos), len(limbs)
@@ -127,25 +126,38 @@ def _hinge(mat: F64, pos: F64, limbs: tuple[tuple[int, int, int, F64, F64], ...]
     mat[:, lower] = (axis_angle_mat(f, beta * weight) @ Rs).reshape(B, L, 3, 3)
 
 
+def hinge_quat(
+    positions: NDArray[np.floating], rotations: NDArray[np.floating], limbs: Limbs
+) -> None:
+    """The limbs ``limbs`` (:data:`KNEE_LIMBS` or :data:`ELBOW_LIMBS`) of the engine's
+    shown poses onto their hinges: world rotations ``(E, 19, 4)`` xyzw (float32,
+    changed in place on each limb's upper and lower joint) and positions, read only.
+    The reference the backends' ``Pool.hinge`` runs (``native``: in C)."""
+    joints = sorted({j for limb in limbs for j in limb[:2]})
+    mat = quat2mat(np.asarray(rotations[:, joints], np.float64))
+    full = np.zeros((len(mat), NUM_JOINTS, 3, 3))
+    full[:, joints] = mat
+    _hinge(full, np.asarray(positions, np.float64), limbs)
+    rotations[:, joints] = mat2quat(full[:, joints])
+
+
+def limb_table(limbs: Limbs) -> F64:
+    """``limbs`` as one ``(L, 9)`` float64 table (the three joints, the axis, the flexed
+    direction): what the C port reads, with :data:`FADES`."""
+    table = np.array([[u, lo, e, *axis, *behind] for u, lo, e, axis, behind in limbs], np.float64)
+    return table
+
+
+# The fades' constants, for the C port: straight, span, flip, flip span.
+FADES = (float(_STRAIGHT), float(_SPAN), float(_FLIP), float(_FLIP_SPAN))
+
+
 def hinge_knees_quat(positions: NDArray[np.floating], rotations: NDArray[np.floating]) -> None:
     """:func:`hinge_knees` on the engine's shown poses: world rotations ``(E, 19, 4)``
     xyzw (float32, changed in place on the thighs and shins) and positions."""
-    _hinge_quat(positions, rotations, HINGE_JOINTS, hinge_knees)
+    hinge_quat(positions, rotations, KNEE_LIMBS)
 
 
 def hinge_elbows_quat(positions: NDArray[np.floating], rotations: NDArray[np.floating]) -> None:
     """:func:`hinge_elbows` on the engine's shown poses (upper arms and forearms change)."""
-    _hinge_quat(positions, rotations, ELBOW_JOINTS, hinge_elbows)
-
-
-def _hinge_quat(
-    positions: NDArray[np.floating],
-    rotations: NDArray[np.floating],
-    joints: list[int],
-    solve: Callable[[F64, F64], None],
-) -> None:
-    mat = quat2mat(np.asarray(rotations[:, joints], np.float64))
-    full = np.zeros((len(mat), NUM_JOINTS, 3, 3))
-    full[:, joints] = mat
-    solve(full, np.asarray(positions, np.float64))
-    rotations[:, joints] = mat2quat(full[:, joints])
+    hinge_quat(positions, rotations, ELBOW_LIMBS)

@@ -19,7 +19,8 @@ Per tick, for all ``P`` players x ``N`` samples at once:
    display IK, the floor pass (with the swing clearance,
    :mod:`posecast.online.engine.clearance`), a tracker set's leg pass, the knees
    onto their hinges (:mod:`posecast.online.engine.hinge`), then the upper-body pass
-   (:mod:`posecast.online.engine.upper_ik`: head and hands on their trackers) and the
+   (:mod:`posecast.online.engine.upper_ik`, run by the backend, ``Pool.upper_body``:
+   head and hands on their trackers) and the
    elbows onto their hinges
 
 The engine is pure: frames go in with :meth:`Engine.push`, :meth:`Engine.tick`
@@ -57,7 +58,7 @@ from posecast.online.engine.batch_fk import fk32, pelvis_from_head32
 from posecast.online.engine.calibration import Calibration, WaistFilter, apply_all, orient_all
 from posecast.online.engine.clearance import TOES, clearance_lift, toe_speed
 from posecast.online.engine.config import EngineConfig
-from posecast.online.engine.hinge import hinge_elbows_quat, hinge_knees_quat
+from posecast.online.engine.hinge import ELBOW_LIMBS, KNEE_LIMBS
 from posecast.online.engine.ik import LEGS, floor_ik, floor_lift
 from posecast.online.engine.leg_ik import senses_legs, solve_legs, tracks_legs
 from posecast.online.engine.pelvis import smooth_pelvis
@@ -75,7 +76,6 @@ from posecast.online.engine.upper_ik import (
     ease_reach,
     lean_root,
     reach_root,
-    solve_upper_body,
     turn_pelvis,
 )
 from posecast.skeleton import NUM_JOINTS, REST_PELVIS_HEIGHT_M, Joint, reference_offsets
@@ -622,16 +622,16 @@ class Engine:
                     wp[legs], rotations[legs], pos[legs], quat[legs], kinds[legs]
                 )
         if self.cfg.knee_hinge:
-            hinge_knees_quat(wp, rotations)
+            self.pool.hinge(wp, rotations, KNEE_LIMBS)
         if self.cfg.upper_body_ik:
             # Head and hands onto their (calibrated) trackers, before the user's scale
             # (a pelvis from the decoder may follow the head).
-            wp, rotations, upper_limited = solve_upper_body(
+            wp, rotations, upper_limited = self.pool.upper_body(
                 wp, rotations, pos, quat, free, self.cfg.wrist_elbow
             )
             reach_limited |= upper_limited
         if self.cfg.elbow_hinge:
-            hinge_elbows_quat(wp, rotations)
+            self.pool.hinge(wp, rotations, ELBOW_LIMBS)
         limited = reach_limited.tolist()
         scale = np.array([p.calibration.scale for p, _, _ in emit], np.float32)
         positions = wp / scale[:, None, None]

@@ -26,6 +26,13 @@ from numpy.typing import NDArray
 
 from posecast.errors import ModelError
 from posecast.online.engine.backend import PoolIK
+from posecast.online.engine.hinge import FADES, Limbs, limb_table
+from posecast.online.engine.upper_ik import (
+    LEAN_SHARE,
+    NECK_SHARE,
+    REACH_TOLERANCE_M,
+    SPINE_REACH_M,
+)
 from posecast.online.inference.artifact import read_sidecar
 from posecast.skeleton import PARENTS, reference_offsets
 
@@ -38,6 +45,8 @@ F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
 
 _NATIVE_PARENTS = (-1, 0, 1, 2, 3, 2, 5, 6, 2, 8, 9, 0, 11, 12, 13, 0, 15, 16, 17)
+# The reference bones, for the upper-body pass.
+_OFFSETS = np.ascontiguousarray(reference_offsets(), dtype=np.float64)
 
 
 def native_isa() -> str:
@@ -162,7 +171,7 @@ class NativeDecoder:
 
 
 class NativePool:
-    """FK, contact IK and anomaly error of every candidate row, in C."""
+    """FK, contact IK and anomaly error of every candidate row, and the upper-body pass, in C."""
 
     def __init__(
         self,
@@ -254,6 +263,46 @@ class NativePool:
             quats,
         )
         return positions, quats
+
+    def upper_body(
+        self,
+        positions: F32,
+        rotations: F32,
+        tracker_pos: F64,
+        tracker_quat: F64,
+        free_root: NDArray[np.bool_] | None,
+        wrist_share: float,
+    ) -> tuple[F32, F32, NDArray[np.bool_]]:
+        """:func:`~posecast.online.engine.upper_ik.solve_upper_body` in C (``pc_upper.c``,
+        one pose at a time in double precision; the same figures to float32's last bit
+        on the parity tests, at a few microseconds a pose against the reference's
+        2-3 ms of numpy call overhead a tick)."""
+        E = len(positions)
+        pos_out = np.empty((E, 19, 3), np.float32)
+        quat_out = np.empty((E, 19, 4), np.float32)
+        limited = np.empty(E, np.bool_)
+        _native.upper_body(
+            np.ascontiguousarray(positions, dtype=np.float32),
+            np.ascontiguousarray(rotations, dtype=np.float32),
+            np.ascontiguousarray(tracker_pos, dtype=np.float64),
+            np.ascontiguousarray(tracker_quat, dtype=np.float64),
+            None if free_root is None else np.ascontiguousarray(free_root, dtype=np.bool_),
+            float(wrist_share),
+            LEAN_SHARE,
+            NECK_SHARE,
+            SPINE_REACH_M,
+            REACH_TOLERANCE_M,
+            _OFFSETS,
+            pos_out,
+            quat_out,
+            limited,
+        )
+        return pos_out, quat_out, limited
+
+    def hinge(self, positions: F32, rotations: F32, limbs: Limbs) -> None:
+        """:func:`~posecast.online.engine.hinge.hinge_quat` in C (``pc_upper.c``), in place."""
+        pos = np.ascontiguousarray(positions, dtype=np.float32)
+        _native.hinge(pos, rotations, limb_table(limbs), *FADES)
 
 
 _checked: set[str] = set()

@@ -5,7 +5,9 @@ into the engine's ring rows; its latent cache is ``eps`` itself. :class:`NumpyPo
 the candidate pool of every backend that has no pool of its own (``torch`` too): the
 float32 FK of :mod:`posecast.online.engine.batch_fk`, the contact IK of
 :mod:`posecast.online.engine.ik` and the anomaly error of
-:class:`posecast.online.engine.anomaly.AnomalyScorer` (whose network ONNX Runtime runs).
+:class:`posecast.online.engine.anomaly.AnomalyScorer` (whose network ONNX Runtime
+runs), the upper-body pass of :mod:`posecast.online.engine.upper_ik` and the hinges of
+:mod:`posecast.online.engine.hinge`.
 """
 
 from __future__ import annotations
@@ -15,12 +17,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from posecast.geometry.rotations import mat2quat
 from posecast.online.engine.anomaly import AnomalyScorer
 from posecast.online.engine.backend import F32, F64, PoolIK
 from posecast.online.engine.batch_fk import fk32
+from posecast.online.engine.hinge import Limbs, hinge_quat
 from posecast.online.engine.ik import MAX_DRIFT_M, RELEASE_FRAMES, ContactIK
+from posecast.online.engine.upper_ik import solve_upper_body
 from posecast.online.inference.artifact import Artifact, load_artifact
 
 
@@ -95,6 +100,22 @@ class NumpyPool:
         ).step(wm, wp, contacts)
         quats: F32 = mat2quat(wm).astype(np.float32)
         return wp, quats
+
+    def upper_body(
+        self,
+        positions: F32,
+        rotations: F32,
+        tracker_pos: F64,
+        tracker_quat: F64,
+        free_root: NDArray[np.bool_] | None,
+        wrist_share: float,
+    ) -> tuple[F32, F32, NDArray[np.bool_]]:
+        return solve_upper_body(
+            positions, rotations, tracker_pos, tracker_quat, free_root, wrist_share
+        )
+
+    def hinge(self, positions: F32, rotations: F32, limbs: Limbs) -> None:
+        hinge_quat(positions, rotations, limbs)
 
 
 def load_onnx(
