@@ -60,8 +60,8 @@ def _passes_alone(pool: Any, E: int, repeats: int = 200) -> tuple[float, float]:
         shown = eng.tick().poses
     wp = np.stack([s.positions for s in shown]).astype(np.float32)
     rot = np.stack([s.rotations for s in shown]).astype(np.float32)
-    k = rng.integers(len(pos), size=len(wp))
-    tp, tq = pos[k].astype(np.float64), quat[k].astype(np.float64)
+    picks = rng.integers(len(pos), size=len(wp))
+    tp, tq = pos[picks].astype(np.float64), quat[picks].astype(np.float64)
     out = []
     for passes in (pool, NumpyPasses(pool)):
 

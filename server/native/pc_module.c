@@ -640,13 +640,27 @@ static PyObject *py_hinge(PyObject *self, PyObject *args) {
         PyErr_SetString(PyExc_ValueError, "limbs: not (L, 9)");
         goto fail;
     }
-    const double *spec = b[2].view.buf;
+    /* A copy, checked while the GIL is held: joints in 0..18, and no joint turned by two
+     * limbs (the C turns limb by limb; the reference reads every limb before writing). */
+    if (h.limbs > PC_MAX_LIMBS) {
+        PyErr_Format(PyExc_ValueError, "limbs: at most %d", PC_MAX_LIMBS);
+        goto fail;
+    }
+    double spec[PC_MAX_LIMBS * 9];
+    memcpy(spec, b[2].view.buf, (size_t)h.limbs * 9 * sizeof(double));
+    int used[19] = {0};
     for (Py_ssize_t l = 0; l < h.limbs; l++)
-        for (int k = 0; k < 3; k++)
-            if (!(spec[9 * l + k] >= 0 && spec[9 * l + k] < 19)) {
+        for (int k = 0; k < 3; k++) {
+            double j = spec[9 * l + k];
+            if (!(j >= 0 && j < 19 && j == (int)j)) {
                 PyErr_SetString(PyExc_ValueError, "limbs: joints outside 0..18");
                 goto fail;
             }
+            if (k < 2 && used[(int)j]++) {
+                PyErr_SetString(PyExc_ValueError, "limbs: a joint in two limbs");
+                goto fail;
+            }
+        }
     h.pos = b[0].view.buf;
     h.quat = b[1].view.buf;
     h.spec = spec;

@@ -23,7 +23,10 @@ void pc_upper_rows(const PcUpperArgs *a, int64_t r0, int64_t r1);
 
 /* The hinges (hinge._hinge): per pose, each limb (upper, lower, end joint, the hinge
  * axis and the flexed direction in the upper joint's frame: 9 doubles) onto its hinge;
- * the upper and lower joints' rotations change in place. */
+ * the upper and lower joints' rotations change in place. No joint may be the upper or
+ * lower joint of two limbs (the binding checks). */
+#define PC_MAX_LIMBS 8
+
 typedef struct {
     const float *pos; /* (E, 19, 3) */
     float *quat;      /* (E, 19, 4) in place */

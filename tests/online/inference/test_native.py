@@ -13,21 +13,29 @@ import shutil
 import subprocess
 import sys
 import warnings
+from typing import Any
 
 import numpy as np
 import pytest
 
 from posecast.geometry.fk import fk_mat
 from posecast.geometry.rotations import aa2mat, mat2quat
+from posecast.offline.train.masks import TABLE_SETS
 from posecast.online.engine.backend import PoolIK
 from posecast.online.engine.batch_fk import fk32
-from posecast.online.engine.hinge import ELBOW_LIMBS, KNEE_LIMBS, hinge_quat
+from posecast.online.engine.config import EngineConfig
+from posecast.online.engine.hinge import ELBOW_LIMBS, FADES, KNEE_LIMBS, hinge_quat, limb_table
 from posecast.online.engine.ik import ContactIK
+from posecast.online.engine.ssi import _rest_frame
+from posecast.online.engine.types import TrackerFrame
+from posecast.online.inference.loader import load_engine
 from posecast.online.inference.onnx_backend import NumpyPool
 from posecast.skeleton import Joint, reference_offsets
+from posecast.tracking.sites import TrackerSet
 from tests.online.inference import reference64 as ref
 
 native = pytest.importorskip("posecast.online.inference.native")
+from posecast import _native  # noqa: E402  (built, since the import above did not skip)
 
 LEVELS = native.native_isas()
 FP32_LEVELS = [lv for lv in LEVELS if lv != "avx512bf16"]
@@ -348,14 +356,17 @@ def _upper_inputs(E: int, seed: int) -> dict[str, np.ndarray]:
 
 @pytest.mark.parametrize("wrist_share", [0.0, 0.75, 1.0])
 @pytest.mark.parametrize("free", [False, True])
-def test_upper_body_matches_the_numpy_reference(wrist_share: float, free: bool) -> None:
+@pytest.mark.parametrize("rows", [3, 4, 10])
+def test_upper_body_matches_the_numpy_reference(wrist_share: float, free: bool, rows: int) -> None:
     """The C port of the upper-body pass (pc_upper.c) against upper_ik.solve_upper_body,
-    the numpy reference, on 1,000 poses: every position, rotation and reach flag."""
+    the numpy reference, on 1,000 poses: every position, rotation and reach flag, with
+    the tracker rows of ``hmd3`` (3), the waist layout (4) and a tracker set (10)."""
     _, pool = native.load_native("cvae_decoder", "anomaly", None, 1, 10, 0.2)
     ref_pool = NumpyPool.__new__(NumpyPool)  # its upper_body needs no scorer
     inp = _upper_inputs(1000, seed=11)
     roots = inp["free"] if free else None
-    args = (inp["pos"], inp["quat"], inp["tp"], inp["tq"], roots, wrist_share)
+    tp, tq = _tracker_rows(inp["tp"], rows), _tracker_rows(inp["tq"], rows)
+    args = (inp["pos"], inp["quat"], tp, tq, roots, wrist_share)
     pos, quat, limited = pool.upper_body(*args)
     want_pos, want_quat, want_limited = ref_pool.upper_body(*args)
     assert 0.1 < want_limited.mean() < 0.95  # both reached and out-of-reach rows
@@ -364,6 +375,52 @@ def test_upper_body_matches_the_numpy_reference(wrist_share: float, free: bool) 
     dq = np.minimum(np.abs(quat - want_quat).max(-1), np.abs(quat + want_quat).max(-1))
     assert dq.max() < 1e-6
     assert pos.dtype == np.float32 and quat.dtype == np.float32
+
+
+def _tracker_rows(a: np.ndarray, rows: int) -> np.ndarray:
+    """``a (E, 4, k)`` cut or padded (with other values) to ``rows`` tracker rows."""
+    if rows <= a.shape[1]:
+        return np.ascontiguousarray(a[:, :rows])
+    extra = np.random.default_rng(rows).normal(0.0, 1.0, (len(a), rows - a.shape[1], a.shape[2]))
+    return np.concatenate([a, extra], axis=1)
+
+
+def test_the_passes_in_c_take_no_poses_and_in_place_outputs() -> None:
+    _, pool = native.load_native("cvae_decoder", "anomaly", None, 1, 10, 0.2)
+    inp = _upper_inputs(0, seed=2)
+    pos, quat, limited = pool.upper_body(inp["pos"], inp["quat"], inp["tp"], inp["tq"], None, 0.5)
+    assert pos.shape == (0, 19, 3) and quat.shape == (0, 19, 4) and limited.shape == (0,)
+    pool.hinge(inp["pos"], inp["quat"], KNEE_LIMBS)
+
+
+def test_hinge_bad_buffers_and_limbs_raise_value_errors() -> None:
+    inp = _upper_inputs(4, seed=1)
+    pos, quat = inp["pos"], inp["quat"].copy()
+    table = limb_table(KNEE_LIMBS)
+
+    def hinge(positions: np.ndarray, rotations: np.ndarray, limbs: np.ndarray) -> None:
+        _native.hinge(positions, rotations, limbs, *FADES)
+
+    read_only = quat.copy()
+    read_only.flags.writeable = False
+    for bad, match in (
+        (read_only, "writable"),
+        (quat.astype(np.float64), "dtype"),
+        (np.asfortranarray(quat), "C-contiguous"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            hinge(pos, bad, table)
+    for joint in (np.nan, 19.0, -1.0, 2.5):
+        odd = table.copy()
+        odd[1, 0] = joint
+        with pytest.raises(ValueError, match="outside"):
+            hinge(pos, quat, odd)
+    shared = np.concatenate([table, table[:1]])  # the left knee twice
+    with pytest.raises(ValueError, match="two limbs"):
+        hinge(pos, quat, shared)
+    with pytest.raises(ValueError, match="at most"):
+        hinge(pos, quat, np.zeros((9, 9)))
+    np.testing.assert_array_equal(quat, inp["quat"])  # nothing written on an error
 
 
 def test_upper_body_bad_buffers_raise_value_errors() -> None:
@@ -385,7 +442,8 @@ def test_hinge_matches_the_numpy_reference(limbs: str) -> None:
     table = KNEE_LIMBS if limbs == "knees" else ELBOW_LIMBS
     rng = np.random.default_rng(5)
     local = aa2mat(rng.normal(0.0, 0.8, (2000, 19, 3)))
-    local[:100, [Joint.LEFT_SHIN, Joint.RIGHT_SHIN, Joint.LEFT_FOREARM]] = np.eye(3)  # straight
+    straight = [Joint.LEFT_SHIN, Joint.RIGHT_SHIN, Joint.LEFT_FOREARM, Joint.RIGHT_FOREARM]
+    local[:100, straight] = np.eye(3)
     wm, wp = fk_mat(local, rng.normal(0.0, 1.0, (2000, 3)), reference_offsets())
     pos, quat = wp.astype(np.float32), mat2quat(wm).astype(np.float32)
     got, want = quat.copy(), quat.copy()
@@ -395,3 +453,52 @@ def test_hinge_matches_the_numpy_reference(limbs: str) -> None:
     assert moved.mean() > 0.5  # the reference turned most poses' limbs
     dq = np.minimum(np.abs(got - want).max(-1), np.abs(got + want).max(-1))
     assert dq.max() < 1e-6
+
+
+class _NumpyPasses:
+    """The native pool with the shown pose's passes as the numpy references."""
+
+    def __init__(self, pool: Any) -> None:
+        self.pool, self.threshold_m = pool, pool.threshold_m
+        self.step, self.emit = pool.step, pool.emit
+
+    def upper_body(self, *args: Any) -> Any:
+        return NumpyPool.upper_body(self, *args)  # type: ignore[arg-type]
+
+    def hinge(self, *args: Any) -> None:
+        NumpyPool.hinge(self, *args)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("layout", ["hmd3+waist", "hmd3", "sites"])
+def test_the_engine_streams_the_same_poses_with_the_passes_in_c_or_numpy(layout: str) -> None:
+    """Two native engines, the passes in C and in numpy, on a walk of 40 frames (sites:
+    3, 4, 6 and 8 points and 3 + 2 IMUs in one batch): the same poses, rotations and
+    reach flags."""
+    names = ("3p", "4p", "6p", "8p", "3p+2i") if layout == "sites" else ("a", "b")
+    runs = []
+    for numpy_passes in (False, True):
+        e = load_engine(EngineConfig(samples=8), None, 1, layout, "native")
+        if numpy_passes:
+            e.pool = _NumpyPasses(e.pool)
+        for i, n in enumerate(names):
+            e.add_player(
+                n,
+                seed=i,
+                tracker_set=TrackerSet.parse(TABLE_SETS[n]) if layout == "sites" else None,
+            )
+        rows = e.layout.rows
+        out = []
+        for t in range(40):
+            for i, n in enumerate(names):
+                rest = _rest_frame(rows)
+                pos = rest.pos.copy()
+                pos[:, 0] += 2.0 * i + 0.05 * np.sin(0.3 * t + i)
+                pos[:, 2] += 0.01 * t
+                pos[1:3, 1] += 0.2 * np.sin(0.2 * t)  # the hands move
+                e.push(n, TrackerFrame(t, pos, rest.quat))
+            out += [(p.positions, p.rotations, p.reach_limited) for p in e.tick().poses]
+        runs.append(out)
+    assert len(runs[0]) == len(runs[1]) > 20 * len(names)
+    for (p, r, lim), (p2, r2, lim2) in zip(*runs, strict=True):
+        assert np.abs(p - p2).max() < 1e-5 and lim == lim2
+        assert np.minimum(np.abs(r - r2).max(-1), np.abs(r + r2).max(-1)).max() < 1e-5

@@ -123,5 +123,9 @@ class Pool(Protocol):
 
     def hinge(self, positions: F32, rotations: F32, limbs: Limbs) -> None:
         """The limbs ``limbs`` of the ``E`` shown poses onto their hinges, rotations
-        changed in place: exactly :func:`posecast.online.engine.hinge.hinge_quat`."""
+        changed in place: exactly :func:`posecast.online.engine.hinge.hinge_quat`.
+        ``rotations`` must be a writable C-contiguous float32 array (the engine's, as
+        ``emit`` and ``upper_body`` return them; ``native`` raises ``ValueError`` on
+        any other rather than write into a copy), ``positions`` float32, and no joint
+        may belong to two limbs."""
         ...

@@ -132,7 +132,8 @@ def hinge_quat(
     """The limbs ``limbs`` (:data:`KNEE_LIMBS` or :data:`ELBOW_LIMBS`) of the engine's
     shown poses onto their hinges: world rotations ``(E, 19, 4)`` xyzw (float32,
     changed in place on each limb's upper and lower joint) and positions, read only.
-    The reference the backends' ``Pool.hinge`` runs (``native``: in C)."""
+    The reference the backends' ``Pool.hinge`` runs (``native``: in C, which turns
+    limb by limb and so refuses tables whose limbs share a joint)."""
     joints = sorted({j for limb in limbs for j in limb[:2]})
     mat = quat2mat(np.asarray(rotations[:, joints], np.float64))
     full = np.zeros((len(mat), NUM_JOINTS, 3, 3))
