@@ -22,7 +22,8 @@ setup(
         Extension(
             "posecast._native",
             sources=SOURCES,
-            depends=["server/native/pc_kernels.h", "server/native/pc_impl.h", "server/native/pc_upper.h"],
+            depends=["server/native/pc_kernels.h", "server/native/pc_impl.h", "server/native/pc_upper.h",
+                     "server/native/pc_geom.h"],
             include_dirs=["server/native"],
             extra_compile_args=["-O3", "-std=gnu11", "-fno-math-errno", "-Wall", "-Wextra",
                                 "-Wno-unused-parameter", "-Wno-missing-field-initializers"],

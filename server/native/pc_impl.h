@@ -18,6 +18,7 @@
 #include <stdint.h>
 #include <string.h>
 
+#include "pc_geom.h"
 #include "pc_kernels.h"
 
 typedef float vf __attribute__((vector_size(PC_VW * 4)));
@@ -468,29 +469,12 @@ static void swing(const double *a, const double *b, double *m) {
         }
 }
 
-static void dmat_mul(const double *a, const double *b, double *c) {
-    for (int i = 0; i < 3; i++)
-        for (int k = 0; k < 3; k++)
-            c[i * 3 + k] = a[i * 3] * b[k] + a[i * 3 + 1] * b[3 + k] + a[i * 3 + 2] * b[6 + k];
-}
-
-/* rotations.mat2quat (Shepperd, w >= 0), xyzw. */
+/* rotations.mat2quat (pc_geom.h) of a float matrix, as floats. */
 static void mat_quat(const float *mf, float *q) {
-    double m[9];
+    double m[9], qd[4];
     for (int i = 0; i < 9; i++) m[i] = mf[i];
-    double tr = m[0] + m[4] + m[8], c[4];
-    int best = 0;
-    double key[4] = {tr, m[0], m[4], m[8]};
-    for (int i = 1; i < 4; i++)
-        if (key[i] > key[best]) best = i;
-    if (best == 0) c[0] = m[7] - m[5], c[1] = m[2] - m[6], c[2] = m[3] - m[1], c[3] = 1 + tr;
-    else if (best == 1) c[0] = 1 + m[0] - m[4] - m[8], c[1] = m[1] + m[3], c[2] = m[2] + m[6], c[3] = m[7] - m[5];
-    else if (best == 2) c[0] = m[1] + m[3], c[1] = 1 - m[0] + m[4] - m[8], c[2] = m[5] + m[7], c[3] = m[2] - m[6];
-    else c[0] = m[2] + m[6], c[1] = m[5] + m[7], c[2] = 1 - m[0] - m[4] + m[8], c[3] = m[3] - m[1];
-    double n = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2] + c[3] * c[3]);
-    n = n > 1e-12 ? n : 1e-12;
-    double sgn = c[3] / n < 0 ? -1.0 : 1.0;
-    for (int i = 0; i < 4; i++) q[i] = (float)(sgn * c[i] / n);
+    pc_mat2quat(m, qd);
+    for (int i = 0; i < 4; i++) q[i] = (float)qd[i];
 }
 
 /* One shown pose: positions (57) and world rotations as quaternions (76), after the
@@ -529,10 +513,10 @@ static void emit_row(const PcPool *w, const PcPoolArgs *a, int64_t row, float *q
         for (int i = 0; i < 3; i++) dir[i] = st[i * 3] * d3[0] + st[i * 3 + 1] * d3[1] + st[i * 3 + 2] * d3[2];
         for (int k = 0; k < 3; k++) d4[k] = a2[k] - k2[k];
         swing(dir, d4, sw);
-        dmat_mul(sw, st, ss);
+        pc_mm(sw, st, ss);
         for (int i = 0; i < 9; i++) wt[i] = wm[thigh][i], ws[i] = wm[shin][i];
-        dmat_mul(st, wt, t);
-        dmat_mul(ss, ws, u);
+        pc_mm(st, wt, t);
+        pc_mm(ss, ws, u);
         for (int i = 0; i < 9; i++) wm[thigh][i] = (float)t[i], wm[shin][i] = (float)u[i];
     }
     for (int j = 0; j < PC_J; j++) mat_quat(wm[j], quat + 4 * j);

@@ -14,6 +14,7 @@
 #include <math.h>
 #include <string.h>
 
+#include "pc_geom.h"
 #include "pc_upper.h"
 
 enum { PELVIS, SPINE, CHEST, NECK, HEAD, L_UPPER, L_FORE, L_HAND, R_UPPER, R_FORE, R_HAND, NJ = 19 };
@@ -62,12 +63,6 @@ static void mv(const double *m, const double *v, double *o) {
     o[1] = y;
     o[2] = z;
 }
-static void mm(const double *a, const double *b, double *o) { /* o = a b (o may alias b) */
-    M3 t;
-    for (int r = 0; r < 3; r++)
-        for (int c = 0; c < 3; c++) t[3 * r + c] = a[3 * r] * b[c] + a[3 * r + 1] * b[3 + c] + a[3 * r + 2] * b[6 + c];
-    memcpy(o, t, sizeof(M3));
-}
 static void mtm(const double *a, const double *b, double *o) { /* o = a^T b */
     M3 t;
     for (int r = 0; r < 3; r++)
@@ -98,25 +93,6 @@ static void quat2mat(const double *qi, double *m) {
     m[6] = 2 * (xz - wy);
     m[7] = 2 * (yz + wx);
     m[8] = 1 - 2 * (xx + yy);
-}
-
-/* rotations.mat2quat: Shepperd's method, w >= 0. */
-static void mat2quat(const double *R, double *q) {
-    double m00 = R[0], m11 = R[4], m22 = R[8], tr = m00 + m11 + m22;
-    double c[4][4] = {
-        {R[7] - R[5], R[2] - R[6], R[3] - R[1], 1 + tr},
-        {1 + m00 - m11 - m22, R[1] + R[3], R[2] + R[6], R[7] - R[5]},
-        {R[1] + R[3], 1 - m00 + m11 - m22, R[5] + R[7], R[2] - R[6]},
-        {R[2] + R[6], R[5] + R[7], 1 - m00 - m11 + m22, R[3] - R[1]},
-    };
-    double key[4] = {tr, m00, m11, m22};
-    int k = 0; /* argmax, the first of equals */
-    for (int i = 1; i < 4; i++)
-        if (key[i] > key[k]) k = i;
-    double n = sqrt(c[k][0] * c[k][0] + c[k][1] * c[k][1] + c[k][2] * c[k][2] + c[k][3] * c[k][3]);
-    double d = n > QEPS ? n : QEPS, s = 1.0;
-    if (c[k][3] / d < 0) s = -1.0;
-    for (int i = 0; i < 4; i++) q[i] = s * (c[k][i] / d);
 }
 
 /* rotations.axis_angle_mat: about the unit axis u by t radians (Rodrigues). */
@@ -179,7 +155,7 @@ static void part_of_swing(const double *a, const double *b, double share, double
 /* upper_ik._part_of_turn: share of the rotation R0, about its axis. */
 static void part_of_turn(const double *R0, double share, double *R) {
     double q[4];
-    mat2quat(R0, q);
+    pc_mat2quat(R0, q);
     if (q[3] < 0.0)
         for (int i = 0; i < 4; i++) q[i] = -q[i];
     double s = norm3(q), d = s > EPS ? s : EPS;
@@ -203,8 +179,8 @@ static void turn(Pose *p, int joint, const double *R) {
         p->pos[*s][1] = pivot[1] + d[1];
         p->pos[*s][2] = pivot[2] + d[2];
     }
-    mm(R, p->mat[joint], p->mat[joint]);
-    for (const int *s = SUBTREE[joint]; *s >= 0; s++) mm(R, p->mat[*s], p->mat[*s]);
+    pc_mm(R, p->mat[joint], p->mat[joint]);
+    for (const int *s = SUBTREE[joint]; *s >= 0; s++) pc_mm(R, p->mat[*s], p->mat[*s]);
 }
 
 /* upper_ik._point_bone: swing `joint` so its bone to `child` points at `target`. */
@@ -256,18 +232,17 @@ static void two_bone(const double *sh, const double *elbow, const double *target
 static void neck_rot(const double *chest, const double *neck_local, const double *head_local,
                      const double *head_mat, double share, double *out) {
     M3 held, rest, part;
-    mm(chest, neck_local, held);
+    pc_mm(chest, neck_local, held);
     mtm(held, head_mat, rest);
     mmt(rest, head_local, rest);
     part_of_turn(rest, share, part);
-    mm(held, part, out);
+    pc_mm(held, part, out);
 }
 
-static void solve_one(const PcUpperArgs *a, int64_t e) {
+/* One pose; `bone` the length of each joint's bone (from a->offsets). */
+static void solve_one(const PcUpperArgs *a, const double *bone, int64_t e) {
     Pose p;
     const double *off = a->offsets;
-    double bone[NJ];
-    for (int j = 0; j < NJ; j++) bone[j] = norm3(off + 3 * j);
     const float *pi = a->pos_in + e * NJ * 3, *qi = a->quat_in + e * NJ * 4;
     const double *tp = a->tp + e * a->slots * 3, *tq = a->tq + e * a->slots * 4;
     for (int j = 0; j < NJ; j++) {
@@ -376,15 +351,15 @@ static void solve_one(const PcUpperArgs *a, int64_t e) {
             mv(R, x, x);
             for (int c = 0; c < 3; c++) p.pos[carried[i]][c] = shoulder[c] + x[c];
         }
-        mm(R, p.mat[upper[k]], p.mat[upper[k]]);
-        mm(R, p.mat[fore[k]], p.mat[fore[k]]);
+        pc_mm(R, p.mat[upper[k]], p.mat[upper[k]]);
+        pc_mm(R, p.mat[fore[k]], p.mat[fore[k]]);
         sub3(p.pos[hand[k]], p.pos[fore[k]], x);
         sub3(wrist, p.pos[fore[k]], y);
         swing(x, y, R);
         sub3(p.pos[hand[k]], p.pos[fore[k]], x);
         mv(R, x, x);
         for (int c = 0; c < 3; c++) p.pos[hand[k]][c] = p.pos[fore[k]][c] + x[c];
-        mm(R, p.mat[fore[k]], p.mat[fore[k]]);
+        pc_mm(R, p.mat[fore[k]], p.mat[fore[k]]);
         memcpy(p.mat[hand[k]], tm, sizeof(M3));
     }
 
@@ -402,7 +377,7 @@ static void solve_one(const PcUpperArgs *a, int64_t e) {
         for (int i = 0; i < 3; i++) po[3 * j + i] = (float)p.pos[j][i];
         if (j >= SPINE && j <= R_HAND) {
             double q[4];
-            mat2quat(p.mat[j], q);
+            pc_mat2quat(p.mat[j], q);
             for (int i = 0; i < 4; i++) qo[4 * j + i] = (float)q[i];
         } else {
             for (int i = 0; i < 4; i++) qo[4 * j + i] = qi[4 * j + i];
@@ -411,7 +386,9 @@ static void solve_one(const PcUpperArgs *a, int64_t e) {
 }
 
 void pc_upper_rows(const PcUpperArgs *a, int64_t r0, int64_t r1) {
-    for (int64_t e = r0; e < r1; e++) solve_one(a, e);
+    double bone[NJ];
+    for (int j = 0; j < NJ; j++) bone[j] = norm3(a->offsets + 3 * j);
+    for (int64_t e = r0; e < r1; e++) solve_one(a, bone, e);
 }
 
 /* --- the hinges (posecast.online.engine.hinge._hinge on quaternions) ------------------ */
@@ -465,17 +442,17 @@ static void hinge_one(const PcHingeArgs *h, int64_t e) {
         fade = fade < 1.0 ? fade : 1.0;
         w = w * fade;
         axis_angle(a, alpha * w, R);
-        mm(R, Rt, Rt);
+        pc_mm(R, Rt, Rt);
         axis_angle(axis, acos(c), R);
-        mm(Rt, R, hinged);
+        pc_mm(Rt, R, hinged);
         mmt(hinged, Rs, R); /* hinge._twist_angle of hinged Rs^T about f */
         V3 v = {R[7] - R[5], R[2] - R[6], R[3] - R[1]};
         double beta = wrap_angle(2.0 * atan2(dot3(v, f), 1.0 + R[0] + R[4] + R[8]));
         axis_angle(f, beta * w, R);
-        mm(R, Rs, Rs);
-        mat2quat(Rt, q);
+        pc_mm(R, Rs, Rs);
+        pc_mat2quat(Rt, q);
         for (int i = 0; i < 4; i++) qf[4 * upper + i] = (float)q[i];
-        mat2quat(Rs, q);
+        pc_mat2quat(Rs, q);
         for (int i = 0; i < 4; i++) qf[4 * lower + i] = (float)q[i];
     }
 }
