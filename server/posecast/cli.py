@@ -604,7 +604,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         wrist_elbow=wrist,
         elbow_hinge=not args.no_elbow_hinge,
         hand_reach=not args.no_hand_reach,
-        head_drop=not args.no_head_drop,
+        torso_span=not args.no_torso_span,
         legs_apart=not args.no_legs_apart,
         pelvis_lean=not args.no_pelvis_lean,
         pelvis_smoothing=not args.no_pelvis_smoothing,
@@ -1113,10 +1113,11 @@ def build_parser() -> argparse.ArgumentParser:
         "where the headset puts it, not moved toward a controller beyond the arm",
     )
     ev.add_argument(
-        "--no-head-drop",
+        "--no-torso-span",
         action="store_true",
-        help="headset-only and sites players without a waist: leave the guessed body at "
-        "its height when its head stands above the headset, not lowered by half of that",
+        help="headset-only and sites players without a waist: leave the guessed body "
+        "where the reach put it, the spine chain folding to the headset, not moved along "
+        "the line to the headset until the network's torso spans it",
     )
     ev.add_argument(
         "--no-legs-apart",

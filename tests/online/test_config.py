@@ -112,7 +112,7 @@ def test_no_upper_ik_reaches_the_engine() -> None:
         # SSI keeps samples whose feet sink below the floor pass's reach.
         ("no_floor_select", "floor_select"),
         # A guessed body stays at its height, not lowered toward a headset under its head.
-        ("no_head_drop", "head_drop"),
+        ("no_torso_span", "torso_span"),
         # A held foot stays where the other leg passes through it.
         ("no_legs_apart", "legs_apart"),
     ],

@@ -82,11 +82,12 @@ class ServerConfig:
         "where the headset puts it, after the feet are planted, instead of moving it "
         "beforehand, horizontally toward a controller beyond the arm's reach too",
     )
-    no_head_drop: bool = _opt(
+    no_torso_span: bool = _opt(
         False,
-        "leave a guessed body (a headset-only player, a tracker set without a waist) at "
-        "the height the network gave it when its head stands above the headset, the "
-        "spine chain folding that height away, instead of lowering it by half of it",
+        "leave a guessed body (a headset-only player, a tracker set without a waist) "
+        "where the reach put it, the spine chain folding or stretching to the headset, "
+        "instead of moving it along the line to the headset until the network's torso "
+        "spans the distance",
     )
     no_legs_apart: bool = _opt(
         False,

@@ -25,7 +25,7 @@ from posecast.offline.train.export import build_decoder, sidecar
 from posecast.online.engine.multi import MultiEngine
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
-from posecast.online.engine.upper_ik import lean_root, reach_root
+from posecast.online.engine.upper_ik import ease_reach_clip, lean_root, reach_root
 from posecast.online.inference.artifact import Artifact, default_models_dir, load_artifact
 from posecast.skeleton import Joint
 from posecast.tracking.features import TrackerSlot
@@ -180,9 +180,10 @@ def test_a_guessed_pelvis_follows_a_controller_held_out_of_reach(
     pelvis, miss = {}, {}
     for reach in (True, False):
         # Without the lean, which may already turn this random decoder's shoulder
-        # toward the far controller, and the drop (the next test): the reach alone.
+        # toward the far controller, and the torso's span (the next test): the reach
+        # alone.
         e = hmd3_engine(
-            samples=4, lookahead=2, hand_reach=reach, pelvis_lean=False, head_drop=False
+            samples=4, lookahead=2, hand_reach=reach, pelvis_lean=False, torso_span=False
         )
         e.add_player("a", seed=0)
         poses = []
@@ -206,14 +207,15 @@ def test_a_guessed_pelvis_follows_a_controller_held_out_of_reach(
     assert miss[True].mean() < miss[False].mean() - 0.05
 
 
-def test_a_guessed_body_drops_toward_a_headset_under_its_head(
+def test_a_guessed_body_keeps_the_networks_torso_to_a_headset_under_its_head(
     hmd3_decoder: Artifact, hmd3_engine: Callable[..., Engine], walk_frames: WalkFrames
 ) -> None:
     """The headset 1.2 m lower than the walk's head, under the head of the random decoder
     (whose pelvis stands 0.9 m up and whose spine hangs): one sample, no look-ahead,
-    no lean. With ``head_drop`` (the default) the streamed body is lower than with
-    ``head_drop=False``, eased like the reach, by what ``reach_root`` adds for the drop
-    on the decoder's pose (FK, offline on ONNX Runtime); the drop's arithmetic is
+    no lean. With ``torso_span`` (the default) the streamed body is moved, against
+    ``torso_span=False``, by what ``reach_root`` adds for the torso's span on the
+    decoder's pose (FK, offline on ONNX Runtime), eased like the reach: down, the
+    headset being nearer the spine than the network's head; the arithmetic is
     ``test_upper_ik``'s."""
     frames = []
     for f in walk_frames(0)[:40]:
@@ -225,21 +227,21 @@ def test_a_guessed_body_drops_toward_a_headset_under_its_head(
     tp = np.stack([f.pos for f in frames])
     above = fk[:, Joint.HEAD, 1] - tp[:, TrackerSlot.HEAD, 1]
     assert above.min() > 0.05  # the precondition: the decoder's head over the headset
-    want = (reach_root(fk, tp) - reach_root(fk, tp, drop=0.0))[:, 1]
-    assert want.max() < -0.05
+    want = ease_reach_clip(reach_root(fk, tp)) - ease_reach_clip(reach_root(fk, tp, span=0.0))
+    assert want[:, 1].max() < -0.05
     pelvis = {}
-    for drop in (True, False):
-        e = hmd3_engine(samples=1, lookahead=0, pelvis_lean=False, head_drop=drop)
+    for span in (True, False):
+        e = hmd3_engine(samples=1, lookahead=0, pelvis_lean=False, torso_span=span)
         e.add_player("a", seed=0)
         got = []
         for f in frames:
             e.push("a", f)
             (pose,) = e.tick().poses
             got.append(pose.positions[Joint.PELVIS])
-        pelvis[drop] = np.stack(got)
-    moved = (pelvis[True] - pelvis[False])[:, 1]
-    assert np.all(moved < 0.0)
-    np.testing.assert_allclose(moved[20:], want[20:], atol=0.01)  # eased: caught up
+        pelvis[span] = np.stack(got)
+    moved = pelvis[True] - pelvis[False]
+    assert np.all(moved[:, 1] < 0.0)
+    np.testing.assert_allclose(moved, want, atol=0.01)
 
 
 def test_a_players_eased_reach_is_its_own(

@@ -86,13 +86,14 @@ def test_a_sites_engine_needs_the_set_and_the_multi_engine_routes_sets() -> None
 
 def test_a_set_that_senses_its_legs_keeps_its_height() -> None:
     """The headset 30 cm under the rest frame's head (a crouch the network does not
-    see): the 3-point player's guessed body drops toward it (``head_drop``), the
-    player with two foot IMUs keeps the height its legs give (the leg pass would sink
-    its feet again), the drop switched off or not."""
+    see): the 3-point player's guessed body drops toward it (``torso_span``: its
+    spine kept as far from the headset as the network's head is), the player with two
+    foot IMUs keeps the height its legs give (the leg pass would sink its feet again),
+    the move switched off or not."""
     names = ("3p", "3p+2i")
     pelvis: dict[bool, dict[str, np.ndarray]] = {}
     for drop in (True, False):
-        e = load_engine(EngineConfig(samples=8, head_drop=drop), None, 1, "sites", "onnx")
+        e = load_engine(EngineConfig(samples=8, torso_span=drop), None, 1, "sites", "onnx")
         for i, n in enumerate(names):
             e.add_player(n, seed=i, tracker_set=TrackerSet.parse(TABLE_SETS[n]))
         got: dict[str, list[np.ndarray]] = {n: [] for n in names}

@@ -19,7 +19,6 @@ from posecast.online.engine.types import PoseOut, TrackerFrame
 from posecast.online.engine.upper_ik import (
     ARM_REACH_M,
     HAND_REACH_SOFTNESS_M,
-    HEAD_DROP_SHARE,
     LEAN_MOST_RAD,
     LEAN_SHARE,
     NECK_SHARE,
@@ -377,7 +376,7 @@ def test_a_guessed_pelvis_follows_a_controller_beyond_the_arms_reach() -> None:
         tp[e, TrackerSlot.RIGHT_HAND] += out * 0.3
     tp[0, TrackerSlot.HEAD] += out * 0.3
     tp[1, TrackerSlot.LEFT_HAND] = pos[1, Joint.LEFT_UPPER_ARM] - [0.0, ARM_REACH_M + 0.3, 0.0]
-    shift = reach_root(pos, tp, drop=0.0)  # the drop: the test after this one
+    shift = reach_root(pos, tp, span=0.0)  # the torso's span: the test after this one
     assert shift.shape == (E, 3) and shift.dtype == np.float64
     head_start = 2.0 * np.log(2.0) * HAND_REACH_SOFTNESS_M
     assert 0.3 <= shift[0, 0] <= 0.3 + head_start and np.abs(shift[0, 1:]).max() < 1e-3
@@ -401,32 +400,41 @@ def test_a_guessed_pelvis_follows_a_controller_beyond_the_arms_reach() -> None:
     partial = np.full_like(pos, np.nan)
     keep = list(REACH_JOINTS)
     partial[:, keep] = pos[:, keep]
-    np.testing.assert_array_equal(reach_root(partial, tp, drop=0.0), shift)
+    np.testing.assert_array_equal(reach_root(partial, tp, span=0.0), shift)
     np.testing.assert_array_equal(reach_root(partial, tp), reach_root(pos, tp))
 
 
-def test_a_guessed_body_drops_by_a_share_of_its_heads_height_above_the_headset() -> None:
-    """``reach_root``'s drop: a headset 10 cm under the network's head lowers the body
-    by ``HEAD_DROP_SHARE`` of that (nothing else moves: controllers where the hands are),
-    a headset above the head lowers nothing, ``drop=0`` lowers nothing; and the
-    upper-body pass then turns the chest less away from the network's than on the
-    body left where it was (the chain folds the rest)."""
+def test_a_guessed_body_keeps_the_networks_torso_span_to_the_headset() -> None:
+    """``reach_root``'s last move: a headset 10 cm nearer the spine than the network's
+    head (pose 0), 5 cm further (pose 1, within the spine's reach), or 10 cm down
+    (pose 2; controllers where the hands are, so the hand reach moves little): the body
+    moves along the line from its spine to the headset until the spine is exactly as
+    far from the headset as the network's head was (``span=0.5``: half the gap;
+    ``span=0``: no move along it); the upper-body pass then turns the chest less away
+    from the network's than on the body left where it was (the chain folds the rest)."""
     E = 3
     pos, quat = random_poses(E, seed=5)
     tp, tq = trackers(pos, np.zeros((E, 4, 3)), quat)
-    down = np.array([0.0, 0.1, 0.0])
-    tp[0, TrackerSlot.HEAD] -= down
-    tp[1, TrackerSlot.HEAD] += 0.5 * down  # above the head, within the spine's reach
-    tp[2, TrackerSlot.HEAD] -= down
+    spine, head = pos[:, Joint.SPINE], pos[:, Joint.HEAD]
+    torso = np.linalg.norm(head - spine, axis=-1)
+    line = (head - spine) / torso[:, None]
+    tp[0, TrackerSlot.HEAD] -= 0.1 * line[0]
+    tp[1, TrackerSlot.HEAD] += 0.05 * line[1]
+    tp[2, TrackerSlot.HEAD, 1] -= 0.1
     shift = reach_root(pos, tp)
-    assert shift[0, 1] == pytest.approx(-HEAD_DROP_SHARE * 0.1, abs=1e-9)
-    assert shift[1, 1] >= 0.0
-    assert reach_root(pos[2:], tp[2:], drop=0.0)[0, 1] == 0.0
-    np.testing.assert_allclose(shift[[0, 2], 1], shift[0, 1])
-    np.testing.assert_array_less(np.abs(shift[:, [0, 2]]), 0.03)  # the softplus's start
+    kept = np.linalg.norm(tp[:, TrackerSlot.HEAD] - (spine + shift), axis=-1)
+    np.testing.assert_allclose(kept, torso, atol=1e-9)
+    none = reach_root(pos, tp, span=0.0)
+    np.testing.assert_array_less(np.abs(none[[0, 2]]), 0.03)  # the softplus's start
+    half = np.linalg.norm(
+        tp[:, TrackerSlot.HEAD] - (spine + reach_root(pos, tp, span=0.5)), axis=-1
+    )
+    before = np.linalg.norm(tp[:, TrackerSlot.HEAD] - (spine + none), axis=-1)
+    np.testing.assert_allclose(half, 0.5 * (before + torso), atol=1e-9)
+    assert shift[0] @ line[0] < -0.09 and shift[1] @ line[1] > 0.04 and shift[2, 1] < -0.05
     free = np.ones(E, np.bool_)
     turned = []
-    for body in (pos, pos + shift[:, None]):
+    for body in (pos + none[:, None], pos + shift[:, None]):
         _, rot, _ = solve_upper_body(body, quat, tp, tq, free)
         chest = quat2mat(rot[:, Joint.CHEST].astype(np.float64))
         net = quat2mat(quat[:, Joint.CHEST].astype(np.float64))

@@ -229,8 +229,8 @@ def evaluate(
                     rot, root_mat = np.asarray(leant), np.asarray(turned, np.float64)
                 wm, wp = pose_from_rotations(rot, root_mat, root_pos)
                 if name.endswith("_ik") and not root_from_waist and engine_cfg.reaches:
-                    drop = None if engine_cfg.head_drop and not legs_sensed else 0.0
-                    wp = wp + ease_reach_clip(reach_root(wp, tr.values, drop))[:, None]
+                    span = None if engine_cfg.torso_span and not legs_sensed else 0.0
+                    wp = wp + ease_reach_clip(reach_root(wp, tr.values, span))[:, None]
                 if name.endswith("_ik"):
                     net_mat, net_pos = wm.copy(), wp.copy()
                     contact_ik(wm, wp, con, engine_cfg.ik_release_frames, engine_cfg.ik_max_drift_m)

@@ -47,12 +47,13 @@ class EngineConfig:
             toward a controller beyond the arm's reach, horizontally, before the feet
             are planted (:func:`posecast.online.engine.upper_ik.reach_root`; default
             on, with ``upper_body_ik``).
-        head_drop: lower a body whose pelvis is the decoder's guess by
-            :data:`~posecast.online.engine.upper_ik.HEAD_DROP_SHARE` of the height its
-            head stands above the headset, so that the spine chain need not fold it
-            away, as part of the hand reach's move (:func:`posecast.online.engine.
-            upper_ik.reach_root`; default on, with ``hand_reach``; chosen on the
-            validation split).
+        torso_span: move a body whose pelvis is the decoder's guess along the line
+            from its spine to the headset until the spine is as far from the headset
+            as the network's own head is from it (:data:`~posecast.online.engine.
+            upper_ik.SPAN_SHARE` of that gap), so that the spine chain reaches the
+            headset with the network's torso instead of folding it, as part of the
+            hand reach's move (:func:`posecast.online.engine.upper_ik.reach_root`;
+            default on, with ``hand_reach``; chosen on the validation split).
         legs_apart: where the display contact IK draws one leg into the other (a
             held foot the other leg swings past), the held foot gives way toward the
             network's own ankle just as far as keeps the legs apart
@@ -105,7 +106,7 @@ class EngineConfig:
     elbow_hinge: bool = True
     wrist_elbow: float = WRIST_ELBOW_SHARE
     hand_reach: bool = True
-    head_drop: bool = True
+    torso_span: bool = True
     legs_apart: bool = True
     pelvis_lean: bool = True
     pelvis_smoothing: bool = True

@@ -71,8 +71,8 @@ from posecast.online.engine.selectors import (
 from posecast.online.engine.slots import SlotArrays
 from posecast.online.engine.types import EngineEvent, PoseOut, TickResult, TrackerFrame
 from posecast.online.engine.upper_ik import (
-    HEAD_DROP_SHARE,
     LEAN_JOINTS,
+    SPAN_SHARE,
     ease_reach,
     lean_root,
     reach_root,
@@ -584,8 +584,8 @@ class Engine:
                 leant[:, lean] = pivot + np.einsum("eab,ekb->eka", turn, near[:, lean] - pivot)
                 near = leant
             if self.cfg.reaches:
-                drop = None if sensed is None else np.where(sensed, 0.0, HEAD_DROP_SHARE)
-                target = reach_root(near, pos[rows], drop if self.cfg.head_drop else 0.0)
+                span = None if sensed is None else np.where(sensed, 0.0, SPAN_SHARE)
+                target = reach_root(near, pos[rows], span if self.cfg.torso_span else 0.0)
                 root_pos = root_pos.copy()
                 for r, i in enumerate(rows.tolist()):
                     p = emit[i][0]

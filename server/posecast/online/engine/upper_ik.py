@@ -181,34 +181,41 @@ HAND_REACH_SOFTNESS_M = 0.05
 _REACH_ROUNDS = 2  # the move toward the controllers, again from where the first put it
 
 
-# The share of the height by which the network's head stands above the headset that a
-# body whose pelvis is a guess drops (reach_root), rather than leave the spine chain to
-# fold that height away: a nearly straight chain shortened by a centimetre bends by tens
-# of degrees (headset-only chest rotations 34 degrees off the truth on the validation
-# split, against 13 for the network's own). The feet it sinks are lifted by the floor
-# pass, knees bent: a crouch. Not for a tracker set that senses its legs, whose leg
-# pass turns the legs as its trackers say after the floor pass (it would sink the feet
-# again: 0.7 % of frames with feet under the floor on val with two foot IMUs), as it
-# keeps such a set's hips from leaning. Chosen on the validation split
-# (docs/evaluation.md, "A guessed body drops to the headset").
-HEAD_DROP_SHARE = 0.5
+# The share of the gap between where a body whose pelvis is a guess holds its spine
+# and where the network's own torso would (the spine's distance from the headset
+# against the network's spine-to-head distance) that the body moves along the line
+# from its spine to the headset (reach_root), rather than leave the spine chain to
+# fold or stretch that gap away: a nearly straight chain shortened by a centimetre
+# bends by tens of degrees (headset-only chest rotations 34 degrees off the truth on
+# the validation split, against 13 for the network's own). A body so moved keeps the
+# network's torso, its spine's bends, and the headset decides where the guessed pelvis
+# stands. The feet it sinks are lifted by the floor pass, knees bent: a crouch. Not for
+# a tracker set that senses its legs, whose leg pass turns the legs as its trackers say
+# after the floor pass (it would sink the feet again: 0.7 % of frames with feet under
+# the floor on val with two foot IMUs), as it keeps such a set's hips from leaning.
+# Chosen on the validation split among 0.5, 0.75 and 1 (docs/evaluation.md, "A guessed
+# body keeps the network's torso"); it replaced lowering the body by half the height
+# its network head stood above the headset.
+SPAN_SHARE = 1.0
 
 
 def reach_root(
     positions: NDArray[np.floating],
     tracker_pos: NDArray[np.floating],
-    drop: float | NDArray[np.floating] | None = None,
+    span: float | NDArray[np.floating] | None = None,
 ) -> F64:
     """Per pose ``(E, 3)``, the move of a whole body whose pelvis is a guess that brings
-    the headset within the spine's reach (:func:`reach_shift`), lowers the body by
-    ``drop`` (default :data:`HEAD_DROP_SHARE`; one share, or one per pose ``(E,)``) of
-    the height its head still stands above the headset, and brings each controller,
+    the headset within the spine's reach (:func:`reach_shift`), brings each controller,
     horizontally, within its arm's reach (the controllers of a player who reaches for
     something: a person steps or leans toward it, and the network, which does not know
-    how far the arms are, left the body behind). Vertical overreach stays with the arms
-    (a person crouches rather than sinks), so the feet stay on the floor, and the
-    headset wins: the body moves toward a controller only as far as the spine still
-    reaches the headset from there.
+    how far the arms are, left the body behind), and last moves the body along the
+    line from its spine to the headset by ``span`` (default :data:`SPAN_SHARE`; one
+    share, or one per pose ``(E,)``) of the difference between the spine's distance
+    from the headset and the network's own spine-to-head distance, so that the spine
+    chain reaches the headset with the network's torso instead of folding it.
+    Vertical overreach of the controllers stays with the arms (a person crouches
+    rather than sinks), and the headset wins: the body moves toward a controller only
+    as far as the spine still reaches the headset from there.
 
     Reads only the spine, shoulder and head rows of ``positions (E, 19, 3)`` (FK of
     the network's pose: :data:`REACH_JOINTS`); ``tracker_pos (E, >=3, 3)`` in slot
@@ -219,10 +226,6 @@ def reach_root(
     tp = np.asarray(tracker_pos, np.float64)
     head = tp[:, TrackerSlot.HEAD]
     shift = _spine_shift(spine, head)
-    share = np.asarray(HEAD_DROP_SHARE if drop is None else drop, np.float64)
-    if np.any(share > 0.0):
-        above = np.asarray(positions[:, Joint.HEAD, 1], np.float64) + shift[:, 1] - head[:, 1]
-        shift[:, 1] -= share * np.maximum(above, 0.0)
     w = HAND_REACH_SOFTNESS_M
     for _ in range(_REACH_ROUNDS):
         v = tp[:, _HAND_SLOTS] - (shoulders + shift[:, None])  # (E, 2, 3)
@@ -231,6 +234,12 @@ def reach_root(
         step = (v * (over / np.maximum(d, _EPS))[..., None]).sum(axis=1)
         step[:, 1] = 0.0  # its horizontal part
         shift = shift + _within(head - (spine + shift), step, SPINE_REACH_M)[:, None] * step
+    share = np.asarray(SPAN_SHARE if span is None else span, np.float64)
+    if np.any(share > 0.0):
+        v = head - (spine + shift)
+        d = _norm(v)
+        torso = _norm(np.asarray(positions[:, Joint.HEAD], np.float64) - spine)
+        shift = shift + (share * (d - torso) / np.maximum(d, _EPS))[:, None] * v
     return shift
 
 

@@ -102,7 +102,7 @@ class PosecastServer:
             wrist_elbow=self.cfg.wrist_elbow,
             elbow_hinge=not self.cfg.no_elbow_hinge,
             hand_reach=not self.cfg.no_hand_reach,
-            head_drop=not self.cfg.no_head_drop,
+            torso_span=not self.cfg.no_torso_span,
             legs_apart=not self.cfg.no_legs_apart,
             pelvis_lean=not self.cfg.no_pelvis_lean,
             pelvis_smoothing=not self.cfg.no_pelvis_smoothing,
