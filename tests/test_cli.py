@@ -492,3 +492,26 @@ def test_train_device_auto_takes_cuda_only_where_torch_sees_one(monkeypatch) -> 
         cli._train_device("cuda")
     monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
     assert cli._train_device("auto") == cli._train_device("cuda") == "cuda"
+
+
+@pytest.mark.parametrize(
+    ("argv", "command", "says"),
+    [
+        (["serve", "--no-such-flag"], "posecast serve", "unrecognized arguments: --no-such-flag"),
+        (["serve", "--port", "abc"], "posecast serve", "invalid int value: 'abc'"),
+        (["data", "prepare", "--bvh", "x"], "posecast data prepare", "required: --out"),
+        (["eval", "--data", "d", "--samples"], "posecast eval", "expected one argument"),
+        ([], "posecast", "required: command"),
+    ],
+)
+def test_a_command_line_mistake_is_a_config_error_naming_its_command(
+    capsys, argv: list[str], command: str, says: str
+) -> None:
+    """What argparse refuses (an unknown option, a malformed or missing value, no
+    command) prints the CLI's own error, code and a hint naming the command's help,
+    never a bare argparse message."""
+    with pytest.raises(SystemExit) as exit_:
+        main(argv)
+    err = user_error(capsys, int(exit_.value.code or 0), "CONFIG_INVALID")
+    assert says in err, err
+    assert f"hint: see `{command} --help` for the options" in err, err

@@ -39,7 +39,7 @@ import socket
 import sys
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, NoReturn, TypeVar
 
 from posecast.errors import (
     AcclaimError,
@@ -876,8 +876,26 @@ def _cmd_token(args: argparse.Namespace) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with the CLI's error format: a mistake on the command line (an unknown
+    option, a missing or malformed value, no command) prints the usage, then
+    ``posecast: error [CONFIG_INVALID]: ...`` and a hint, and exits 2, as every other
+    user error does. Subcommand parsers are made of this class too (argparse's
+    ``add_subparsers`` takes the parent's class)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.print_usage(sys.stderr)
+        _usage_error(self.prog, message)
+
+
+def _usage_error(prog: str, message: str) -> NoReturn:
+    print(f"posecast: error [{ConfigError.code}]: {message}", file=sys.stderr)
+    print(f"{_HINT}see `{prog} --help` for the options", file=sys.stderr)
+    raise SystemExit(2)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="posecast", description=__doc__.splitlines()[0])
+    parser = _Parser(prog="posecast", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
 
     data = sub.add_parser("data", help="motion data tools")
@@ -1269,7 +1287,9 @@ def _hint_for(exc: PosecastError, command: str) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    args, extra = build_parser().parse_known_args(argv)
+    if extra:  # named for the command they were given to, not for posecast's top level
+        _usage_error(f"posecast {_command(args)}", f"unrecognized arguments: {' '.join(extra)}")
     try:
         return int(args.func(args))
     except PosecastError as exc:
