@@ -150,8 +150,51 @@ def test_sim_churns_players_and_prints_progress(
     assert all(x["active"] <= 3 for x in lines) and lines[-1]["active"] >= 2
 
 
-def test_sim_rejects_bad_churn_options() -> None:
-    with pytest.raises(SystemExit, match="must not be negative"):
-        sim.main(["--secret", "s" * 32, "--churn-every", "-1"])
-    with pytest.raises(SystemExit, match="fresh token per player"):
-        sim.main(["--token", "t", "--players", "1", "--churn-every", "1"])
+def _mistake(capsys: pytest.CaptureFixture[str], main: object, argv: list[str]) -> str:
+    """Run a tool's ``main`` on a command-line mistake: exit 2, no traceback, the
+    server CLI's ``error [CONFIG_INVALID]`` line and a hint under it; returns stderr."""
+    with pytest.raises(SystemExit) as exit_:
+        main(argv)  # type: ignore[operator]
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2, err
+    assert "Traceback" not in err, err
+    lines = err.splitlines()
+    at = [i for i, ln in enumerate(lines) if ": error [CONFIG_INVALID]: " in ln]
+    assert at, err
+    assert lines[at[0] + 1].startswith("hint: ") and len(lines[at[0] + 1]) > 10, err
+    return err
+
+
+def test_sim_rejects_bad_churn_options(capsys: pytest.CaptureFixture[str]) -> None:
+    err = _mistake(capsys, sim.main, ["--secret", "s" * 32, "--churn-every", "-1"])
+    assert "posecast-sim: error [CONFIG_INVALID]: " in err and "must not be negative" in err
+    err = _mistake(capsys, sim.main, ["--token", "t", "--players", "1", "--churn-every", "1"])
+    assert "fresh token per player" in err
+
+
+@pytest.mark.parametrize(
+    ("tool", "argv", "says"),
+    [
+        ("sim", ["--bogus"], "unrecognized arguments: --bogus"),
+        ("sim", ["--players", "many"], "invalid int value: 'many'"),
+        ("sim", ["--secret", "s" * 32, "--players", "0"], "must be positive"),
+        ("sim", ["--secret", "s" * 32, "--layout", "hmd9"], "--layout 'hmd9'"),
+        ("sim", ["--token", "t", "--players", "2"], "one --token is one player"),
+        ("sim", [], "neither a token nor a secret"),
+        ("record", ["--bogus"], "unrecognized arguments: --bogus"),
+        ("record", ["--secret", "s" * 32], "--room is required"),
+        ("record", ["--room", "r"], "neither a token nor a secret"),
+    ],
+)
+def test_a_command_line_mistake_prints_a_code_and_a_hint(
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    tool: str,
+    argv: list[str],
+    says: str,
+) -> None:
+    for name in ("POSECAST_TOKEN_SECRET", "POSECAST_TOKEN", "POSECAST_URL"):
+        monkeypatch.delenv(name, raising=False)
+    main = {"sim": sim.main, "record": record.main}[tool]
+    err = _mistake(capsys, main, argv)
+    assert f"posecast-{tool}: error [CONFIG_INVALID]: " in err and says in err, err

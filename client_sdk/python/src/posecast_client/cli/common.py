@@ -1,5 +1,7 @@
 """What the command-line tools share: server options (flags, then ``POSECAST_*``
-environment variables), token minting, signal handling and a patient connect."""
+environment variables), token minting, signal handling, a patient connect, and the
+error format of a command-line mistake (``PROG: error [CONFIG_INVALID]: ...`` and a
+``hint:`` line, exit 2: the server CLI's format)."""
 
 from __future__ import annotations
 
@@ -9,8 +11,9 @@ import contextlib
 import os
 import secrets
 import signal
+import sys
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, NoReturn
 
 from websockets.exceptions import InvalidStatus
 
@@ -18,6 +21,24 @@ from posecast_client.client import Client, connect
 from posecast_client.tokens import mint_token
 
 ENV_PREFIX = "POSECAST_"
+CONFIG_INVALID = "CONFIG_INVALID"  # the server's code for a bad configuration value
+
+
+def usage_error(prog: str, message: str, hint: str) -> NoReturn:
+    """Print ``prog: error [CONFIG_INVALID]: message`` and ``hint: hint`` on stderr and
+    exit 2, the status of a command-line mistake."""
+    print(f"{prog}: error [{CONFIG_INVALID}]: {message}", file=sys.stderr)
+    print(f"hint: {hint}", file=sys.stderr)
+    raise SystemExit(2)
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse whose refusals (an unknown option, a malformed or missing value) print
+    the usage and then :func:`usage_error`'s format."""
+
+    def error(self, message: str) -> NoReturn:
+        self.print_usage(sys.stderr)
+        usage_error(self.prog, message, f"see `{self.prog} --help` for the options")
 
 
 def add_server_arguments(parser: argparse.ArgumentParser) -> None:
@@ -34,14 +55,22 @@ def add_server_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ttl", type=int, default=3600, help="minted tokens' lifetime, s (3600)")
 
 
-def resolve_server(args: argparse.Namespace, env: Mapping[str, str] = os.environ) -> None:
-    """Fill ``url``/``secret``/``token`` from the environment where flags left them out."""
+def resolve_server(
+    args: argparse.Namespace, prog: str, env: Mapping[str, str] = os.environ
+) -> None:
+    """Fill ``url``/``secret``/``token`` from the environment where flags left them out
+    (neither anywhere: ``prog``'s :func:`usage_error`)."""
     args.url = args.url or env.get(ENV_PREFIX + "URL") or "ws://127.0.0.1:8765/"
     if not args.secret and not args.token:
         args.secret = env.get(ENV_PREFIX + "TOKEN_SECRET") or None
         args.token = env.get(ENV_PREFIX + "TOKEN") or None
     if not args.secret and not args.token:
-        raise SystemExit("posecast: pass --secret or --token (or set POSECAST_TOKEN_SECRET)")
+        usage_error(
+            prog,
+            "no way to join: neither a token nor a secret to mint one",
+            "pass --secret (what `posecast serve --dev` prints) or --token, or set "
+            "POSECAST_TOKEN_SECRET or POSECAST_TOKEN",
+        )
 
 
 def token_for(args: argparse.Namespace, room: str, player: str, role: str = "player") -> str:

@@ -23,20 +23,24 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from posecast_client.cli.common import (
+    Parser,
     add_server_arguments,
     connect_patiently,
     resolve_server,
     stop_on_signals,
     token_for,
     unique_suffix,
+    usage_error,
 )
 from posecast_client.protocol import Error, Pose, Presence, Welcome
 from posecast_client.recording import RecordingWriter, export_bvh, read_recording
 from posecast_client.session import Reconnecting
 
+P = "posecast-record"  # the program, as its errors name it
+
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="posecast-record", description=__doc__.splitlines()[0])
+    p = Parser(prog=P, description=__doc__.splitlines()[0])
     add_server_arguments(p)
     p.add_argument("--room", help="the room to record")
     p.add_argument("--out", type=Path, help="recording file to write (ROOM.pcrec)")
@@ -78,11 +82,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.export is not None:
         path = args.export
         if args.bvh is None:
-            raise SystemExit("posecast-record: --export needs --bvh DIR")
+            usage_error(P, "--export needs --bvh DIR", "name where the BVH files go")
     else:
-        resolve_server(args)
+        resolve_server(args, P)
         if not args.room:
-            raise SystemExit("posecast-record: --room is required to record")
+            usage_error(P, "--room is required to record", "pass the room to listen to")
         path = asyncio.run(record(args))
     if args.bvh is not None:
         for player, bvh in export_bvh(read_recording(path), args.bvh).items():

@@ -44,12 +44,14 @@ from typing import Any
 import numpy as np
 
 from posecast_client.cli.common import (
+    Parser,
     add_server_arguments,
     connect_patiently,
     resolve_server,
     stop_on_signals,
     token_for,
     unique_suffix,
+    usage_error,
 )
 from posecast_client.protocol import Error, Layout, Pose
 from posecast_client.session import Reconnecting
@@ -89,8 +91,11 @@ class Slot:
     leave: asyncio.Event = field(default_factory=asyncio.Event)  # the current player's
 
 
+P = "posecast-sim"  # the program, as its errors name it
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="posecast-sim", description=__doc__.splitlines()[0])
+    p = Parser(prog=P, description=__doc__.splitlines()[0])
     add_server_arguments(p)
     p.add_argument("--players", type=int, default=2, help="simulated headsets (2)")
     p.add_argument("--rooms", type=int, default=1, help="rooms to deal them over (1)")
@@ -385,22 +390,22 @@ async def run(args: argparse.Namespace) -> dict[str, Any]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    resolve_server(args)
+    resolve_server(args, P)
     if args.token and args.players > 1:
-        raise SystemExit("posecast-sim: one --token is one player; use --secret for several")
+        usage_error(P, "one --token is one player", "use --secret for several players")
     if args.players < 1 or args.rooms < 1 or args.duration <= 0:
-        raise SystemExit("posecast-sim: --players, --rooms and --duration must be positive")
+        usage_error(P, "--players, --rooms and --duration must be positive", "e.g. --players 4")
     if args.churn_every < 0 or args.progress_every < 0:
-        raise SystemExit("posecast-sim: --churn-every and --progress-every must not be negative")
+        usage_error(
+            P, "--churn-every and --progress-every must not be negative", "0 turns either off"
+        )
     if args.token and args.churn_every > 0:
-        raise SystemExit("posecast-sim: churn needs a fresh token per player; use --secret")
+        usage_error(P, "churn needs a fresh token per player", "use --secret instead of --token")
     for layout in args.layout or ():
         try:
             tracker_set(layout)
         except ValueError as exc:
-            raise SystemExit(
-                f"posecast-sim: --layout {layout!r}: {exc} (hmd3+waist, hmd3, or a tracker set)"
-            ) from None
+            usage_error(P, f"--layout {layout!r}: {exc}", "hmd3+waist, hmd3, or a tracker set")
     summary = asyncio.run(run(args))
     print_summary(summary)
     if args.json is not None:
