@@ -877,21 +877,19 @@ def _cmd_token(args: argparse.Namespace) -> int:
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with the CLI's error format: a mistake on the command line (an unknown
-    option, a missing or malformed value, no command) prints the usage, then
-    ``posecast: error [CONFIG_INVALID]: ...`` and a hint, and exits 2, as every other
-    user error does. Subcommand parsers are made of this class too (argparse's
-    ``add_subparsers`` takes the parent's class)."""
+    """argparse whose refusals (an unknown option, a missing or malformed value, no
+    command) print the usage and raise a :class:`ConfigError` hinted with the
+    command's ``--help``, which :func:`main` prints as every other user error.
+    Subcommand parsers are made of this class too (argparse's ``add_subparsers`` takes
+    the parent's class)."""
 
     def error(self, message: str) -> NoReturn:
         self.print_usage(sys.stderr)
-        _usage_error(self.prog, message)
+        raise _usage_error(self.prog, message)
 
 
-def _usage_error(prog: str, message: str) -> NoReturn:
-    print(f"posecast: error [{ConfigError.code}]: {message}", file=sys.stderr)
-    print(f"{_HINT}see `{prog} --help` for the options", file=sys.stderr)
-    raise SystemExit(2)
+def _usage_error(prog: str, message: str) -> ConfigError:
+    return _config(message, f"see `{prog} --help` for the options")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -1287,14 +1285,17 @@ def _hint_for(exc: PosecastError, command: str) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args, extra = build_parser().parse_known_args(argv)
-    if extra:  # named for the command they were given to, not for posecast's top level
-        _usage_error(f"posecast {_command(args)}", f"unrecognized arguments: {' '.join(extra)}")
+    args: argparse.Namespace | None = None
     try:
+        args, extra = build_parser().parse_known_args(argv)
+        if extra:  # named for the command they were given to, not for posecast's top level
+            prog = f"posecast {_command(args)}"
+            raise _usage_error(prog, f"unrecognized arguments: {' '.join(extra)}")
         return int(args.func(args))
     except PosecastError as exc:
         print(f"posecast: error [{exc.code}]: {exc}", file=sys.stderr)
-        print(_HINT + _hint_for(exc, _command(args)), file=sys.stderr)
+        command = "" if args is None else _command(args)
+        print(_HINT + _hint_for(exc, command), file=sys.stderr)
         return 2
 
 
