@@ -116,3 +116,26 @@ def test_inertial_sites_read_accelerations_with_seeded_noise() -> None:
     np.testing.assert_allclose(clean.values[1:-1, foot], second, atol=1e-3)
     assert 0.2 < np.std(a.values[:, foot] - clean.values[:, foot]) < 1.0
     np.testing.assert_array_equal(a.values[:, 0], clean.values[:, 0])  # positional head
+
+
+@pytest.mark.parametrize("layout", ["hmd3+waist", "hmd3", TABLE_SETS["3p"], TABLE_SETS["6p"]])
+def test_cvae_ik_is_the_engine_with_one_sample(layout: str) -> None:
+    """``cvae_ik`` (the clip pipeline: pelvis smoothing, lean, reach, contact IK, legs
+    apart, floor pass, leg pass, hinges, upper-body pass) is what the engine streams
+    with its one sample, the prior's mean: so ``cvae_ik_ssi`` against ``cvae_ik``
+    measures SSI alone. The two differ only by the engine's float32 arithmetic."""
+    clips = [derive_frames(walk_clip(3.0, 60.0, seed=s)) for s in (0, 1)]
+    lay = layout if "," not in layout else TrackerSet.parse(layout)
+    clip = evaluate(clips, 60.0, ["cvae_ik"], layout=lay)["variants"]["cvae_ik"]
+    engine = evaluate(clips, 60.0, ["cvae_ik_ssi"], layout=lay, engine_cfg=EngineConfig(samples=1))
+    streamed = engine["variants"]["cvae_ik_ssi"]
+    assert streamed["transitions_per_min"] == 0.0
+    keys = sorted(set(clip) - {"seconds"})
+    assert set(METRIC_KEYS) - {"transitions_per_min"} <= set(keys)
+    np.testing.assert_allclose(
+        [streamed[k] for k in keys],
+        [clip[k] for k in keys],
+        rtol=1e-3,
+        atol=1e-3,
+        err_msg=str(keys),
+    )
