@@ -33,4 +33,31 @@ static inline void pc_mat2quat(const double *R, double *q) {
     for (int i = 0; i < 4; i++) q[i] = s * (c[k][i] / d);
 }
 
+/* ik.swing_mat: the smallest rotation taking direction a onto b (Rodrigues' formula,
+ * R = c I + [v]x + v v^T / (1 + c) with v = a x b, c = a . b, on the directions
+ * v / max(|v|, 1e-9), ik.unit3); opposite directions turn half a turn about a
+ * perpendicular (a x x, or a x y where a is near x). */
+static inline void pc_swing(const double *a, const double *b, double *R) {
+    double na = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+    double nb = sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
+    na = na > 1e-9 ? na : 1e-9, nb = nb > 1e-9 ? nb : 1e-9;
+    const double ua[3] = {a[0] / na, a[1] / na, a[2] / na}, ub[3] = {b[0] / nb, b[1] / nb, b[2] / nb};
+    const double x = ua[1] * ub[2] - ua[2] * ub[1], y = ua[2] * ub[0] - ua[0] * ub[2],
+                 z = ua[0] * ub[1] - ua[1] * ub[0], c = ua[0] * ub[0] + ua[1] * ub[1] + ua[2] * ub[2];
+    if (c < -1.0 + 1e-9) {
+        const double h[3] = {fabs(ua[0]) < 0.9 ? 1.0 : 0.0, fabs(ua[0]) < 0.9 ? 0.0 : 1.0, 0.0};
+        double p[3] = {ua[1] * h[2] - ua[2] * h[1], ua[2] * h[0] - ua[0] * h[2], ua[0] * h[1] - ua[1] * h[0]};
+        double n = sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+        n = n > 1e-9 ? n : 1e-9;
+        for (int k = 0; k < 3; k++) p[k] /= n;
+        for (int r = 0; r < 3; r++)
+            for (int k = 0; k < 3; k++) R[3 * r + k] = 2.0 * p[r] * p[k] - (r == k ? 1.0 : 0.0);
+        return;
+    }
+    const double h = 1.0 / (1.0 + c), xh = x * h, yh = y * h, zh = z * h;
+    R[0] = c + x * xh, R[1] = y * xh - z, R[2] = z * xh + y;
+    R[3] = y * xh + z, R[4] = c + y * yh, R[5] = z * yh - x;
+    R[6] = z * xh - y, R[7] = z * yh + x, R[8] = c + z * zh;
+}
+
 #endif

@@ -436,39 +436,6 @@ static void pool_tile(const PcPool *w, const PcPoolArgs *a, int64_t r0, int64_t 
 
 /* --- the shown pose: FK with rotations, the display IK, quaternions ------------------ */
 
-/* ik.swing_mat for one pair: the smallest rotation turning a onto b (row-major). */
-static void swing(const double *a, const double *b, double *m) {
-    double na = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
-    double nb = sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
-    na = na > 1e-9 ? na : 1e-9, nb = nb > 1e-9 ? nb : 1e-9;
-    double ua[3] = {a[0] / na, a[1] / na, a[2] / na}, ub[3] = {b[0] / nb, b[1] / nb, b[2] / nb};
-    double v[3] = {ua[1] * ub[2] - ua[2] * ub[1], ua[2] * ub[0] - ua[0] * ub[2], ua[0] * ub[1] - ua[1] * ub[0]};
-    double c = ua[0] * ub[0] + ua[1] * ub[1] + ua[2] * ub[2];
-    if (c < -0.999) { /* near-opposite: the quaternion construction (rotations.vecs2quat) */
-        double q[4] = {v[0], v[1], v[2], 1.0 + c};
-        if (1.0 + c < 1e-9) {
-            double hlp[3] = {fabs(ua[0]) < 0.9 ? 1.0 : 0.0, fabs(ua[0]) < 0.9 ? 0.0 : 1.0, 0.0};
-            double p[3] = {ua[1] * hlp[2] - ua[2] * hlp[1], ua[2] * hlp[0] - ua[0] * hlp[2],
-                           ua[0] * hlp[1] - ua[1] * hlp[0]};
-            double pn = sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
-            pn = pn > 1e-9 ? pn : 1e-9;
-            q[0] = p[0] / pn, q[1] = p[1] / pn, q[2] = p[2] / pn, q[3] = 0.0;
-        }
-        double qn = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
-        double x = q[0] / qn, y = q[1] / qn, z = q[2] / qn, w = q[3] / qn;
-        m[0] = 1 - 2 * (y * y + z * z), m[1] = 2 * (x * y - w * z), m[2] = 2 * (x * z + w * y);
-        m[3] = 2 * (x * y + w * z), m[4] = 1 - 2 * (x * x + z * z), m[5] = 2 * (y * z - w * x);
-        m[6] = 2 * (x * z - w * y), m[7] = 2 * (y * z + w * x), m[8] = 1 - 2 * (x * x + y * y);
-        return;
-    }
-    double vx[9] = {0, -v[2], v[1], v[2], 0, -v[0], -v[1], v[0], 0};
-    for (int i = 0; i < 3; i++)
-        for (int k = 0; k < 3; k++) {
-            double sq = vx[i * 3] * vx[k] + vx[i * 3 + 1] * vx[3 + k] + vx[i * 3 + 2] * vx[6 + k];
-            m[i * 3 + k] = (i == k ? 1.0 : 0.0) + vx[i * 3 + k] + sq / (1.0 + c);
-        }
-}
-
 /* rotations.mat2quat (pc_geom.h) of a float matrix, as floats. */
 static void mat_quat(const float *mf, float *q) {
     double m[9], qd[4];
@@ -508,11 +475,11 @@ static void emit_row(const PcPool *w, const PcPoolArgs *a, int64_t row, float *q
             d1[k] = knee[k] - hip[k], d2[k] = k2[k] - hip[k];
         }
         double st[9], ss[9], sw[9], t[9], u[9], wt[9], ws[9], dir[3];
-        swing(d1, d2, st);
+        pc_swing(d1, d2, st);
         for (int k = 0; k < 3; k++) d3[k] = ankle[k] - knee[k];
         for (int i = 0; i < 3; i++) dir[i] = st[i * 3] * d3[0] + st[i * 3 + 1] * d3[1] + st[i * 3 + 2] * d3[2];
         for (int k = 0; k < 3; k++) d4[k] = a2[k] - k2[k];
-        swing(dir, d4, sw);
+        pc_swing(dir, d4, sw);
         pc_mm(sw, st, ss);
         for (int i = 0; i < 9; i++) wt[i] = wm[thigh][i], ws[i] = wm[shin][i];
         pc_mm(st, wt, t);

@@ -109,34 +109,6 @@ static void axis_angle(const double *u, double t, double *m) {
     m[8] = c + k * (z * z);
 }
 
-/* ik.swing_mat: the smallest rotation taking direction a onto b. */
-static void swing(const double *a, const double *b, double *R) {
-    V3 ua, ub, v;
-    unit3(a, ua);
-    unit3(b, ub);
-    cross3(ua, ub, v);
-    double x = v[0], y = v[1], z = v[2], c = dot3(ua, ub);
-    if (c < -1.0 + 1e-9) { /* opposite: half a turn about a perpendicular */
-        V3 helper = {0, 0, 0}, p, t;
-        helper[fabs(ua[0]) < 0.9 ? 0 : 1] = 1.0;
-        cross3(ua, helper, t);
-        unit3(t, p);
-        for (int r = 0; r < 3; r++)
-            for (int cc = 0; cc < 3; cc++) R[3 * r + cc] = 2.0 * p[r] * p[cc] - (r == cc ? 1.0 : 0.0);
-        return;
-    }
-    double h = 1.0 / (1.0 + c), xh = x * h, yh = y * h, zh = z * h;
-    R[0] = c + x * xh;
-    R[1] = y * xh - z;
-    R[2] = z * xh + y;
-    R[3] = y * xh + z;
-    R[4] = c + y * yh;
-    R[5] = z * yh - x;
-    R[6] = z * xh - y;
-    R[7] = z * yh + x;
-    R[8] = c + z * zh;
-}
-
 /* upper_ik._part_of_swing: share of the swing from a to b, at most `most` radians. */
 static void part_of_swing(const double *a, const double *b, double share, double most, double *R) {
     V3 ua, ub, v, axis;
@@ -189,7 +161,7 @@ static void point_bone(Pose *p, int joint, int child, const double *target) {
     M3 R;
     sub3(p->pos[child], p->pos[joint], a);
     sub3(target, p->pos[joint], b);
-    swing(a, b, R);
+    pc_swing(a, b, R);
     turn(p, joint, R);
 }
 
@@ -344,7 +316,7 @@ static void solve_one(const PcUpperArgs *a, const double *bone, int64_t e) {
         two_bone(shoulder, hint, target, bone[L_FORE], bone[L_HAND], down, elbow, wrist);
         sub3(p.pos[fore[k]], shoulder, x);
         sub3(elbow, shoulder, y);
-        swing(x, y, R);
+        pc_swing(x, y, R);
         const int carried[2] = {fore[k], hand[k]};
         for (int i = 0; i < 2; i++) {
             sub3(p.pos[carried[i]], shoulder, x);
@@ -355,7 +327,7 @@ static void solve_one(const PcUpperArgs *a, const double *bone, int64_t e) {
         pc_mm(R, p.mat[fore[k]], p.mat[fore[k]]);
         sub3(p.pos[hand[k]], p.pos[fore[k]], x);
         sub3(wrist, p.pos[fore[k]], y);
-        swing(x, y, R);
+        pc_swing(x, y, R);
         sub3(p.pos[hand[k]], p.pos[fore[k]], x);
         mv(R, x, x);
         for (int c = 0; c < 3; c++) p.pos[hand[k]][c] = p.pos[fore[k]][c] + x[c];
