@@ -40,6 +40,7 @@ Glossary as in :mod:`posecast.geometry.rotations` (``mat`` acts on column vector
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -160,10 +161,15 @@ def reach_shift(positions: F64, head_target: F64) -> F64:
 
 
 def _spine_shift(spine: F64, head_target: F64) -> F64:
-    v = head_target - spine
+    return _along(spine, head_target, lambda d: np.maximum(d - SPINE_REACH_M, 0.0))
+
+
+def _along(origin: F64, target: F64, gap: Callable[[F64], F64]) -> F64:
+    """The move ``(E, 3)`` of ``origin`` along the line to ``target`` (both ``(E, 3)``)
+    by ``gap(d)`` metres, ``d (E,)`` their distance (a negative gap: away)."""
+    v = target - origin
     d = _norm(v)
-    over = np.maximum(d - SPINE_REACH_M, 0.0)
-    out: F64 = v * (over / np.maximum(d, _EPS))[:, None]
+    out: F64 = v * (gap(d) / np.maximum(d, _EPS))[:, None]
     return out
 
 
@@ -236,10 +242,8 @@ def reach_root(
         shift = shift + _within(head - (spine + shift), step, SPINE_REACH_M)[:, None] * step
     share = np.asarray(SPAN_SHARE if span is None else span, np.float64)
     if np.any(share > 0.0):
-        v = head - (spine + shift)
-        d = _norm(v)
         torso = _norm(np.asarray(positions[:, Joint.HEAD], np.float64) - spine)
-        shift = shift + (share * (d - torso) / np.maximum(d, _EPS))[:, None] * v
+        shift = shift + _along(spine + shift, head, lambda d: share * (d - torso))
     return shift
 
 
