@@ -14,7 +14,7 @@ from posecast.online.engine.calibration import Calibration
 from posecast.online.engine.selectors import AnomalySelector, Selector
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import EngineEvent, PoseOut, TrackerFrame
-from posecast.skeleton import NUM_JOINTS
+from posecast.skeleton import NUM_JOINTS, Joint
 from tests.online.engine.conftest import BackendLoader
 
 MakeEngine = Callable[..., Engine]
@@ -602,6 +602,79 @@ def test_missing_frames_are_held_then_stale_then_active(
     }
 
 
+def test_a_frame_after_missing_ones_reads_its_velocity_over_the_gap(
+    make_engine: MakeEngine, walk_frames: WalkFrames
+) -> None:
+    """``p`` misses frames 10-24 of the walk: the frame it resumes on moved over all 16
+    frame times since frame 9, so its velocities are the mean velocity over the gap
+    (before the fix: 16 times that, 17 m/s for a walk's hands), its positions the frame's."""
+    from posecast.tracking.layouts import Layout, spec
+
+    frames = walk_frames(0)
+    engine = make_engine(samples=10, lookahead=3)
+    engine.add_player("p", seed=1)
+    for t in range(26):
+        if not 10 <= t < 25:
+            engine.push("p", frames[t])
+        engine.tick()
+        if t == 9:
+            _, before, _ = engine.newest_inputs("p")
+    x, pos, quat = engine.newest_inputs("p")
+    prev = pos - (pos - before) / 16
+    want = spec(Layout.HMD3_WAIST).features(pos[None], prev[None], quat[None], 60.0, None)[0]
+    np.testing.assert_allclose(x, want, atol=1e-5)
+    assert np.abs(x).max() < 3.0  # a walk
+
+
+def test_the_waist_filter_starts_on_the_first_real_frame(
+    make_engine: MakeEngine, walk_frames: WalkFrames
+) -> None:
+    """A player joined five ticks before its first frame (rest frames stand in, facing
+    +Z): its filtered waist is the same as a player's whose frames came at once, not
+    dragged from the rest frame's heading (100 degrees off on a walk facing away)."""
+    from posecast.geometry.rotations import quat_mul, yaw2quat
+    from posecast.tracking.features import TrackerSlot
+
+    turn = yaw2quat(np.pi * 0.9)
+    frames = [TrackerFrame(f.seq, f.pos, quat_mul(turn, f.quat)) for f in walk_frames(0)[:6]]
+    waists = []
+    for rest in (0, 5):
+        engine = make_engine(samples=4, lookahead=2, waist_filter_hz=4.0)
+        engine.add_player("p", seed=1)
+        for _ in range(rest):
+            engine.tick()
+        got = []
+        for f in frames:
+            engine.push("p", f)
+            engine.tick()
+            got.append(engine.newest_inputs("p")[2][TrackerSlot.WAIST])
+        waists.append(np.array(got))
+    np.testing.assert_allclose(waists[1], waists[0], atol=1e-12)
+
+
+def test_the_last_rest_frame_is_not_smoothed_toward_the_first_real_one(
+    make_engine: MakeEngine, walk_frames: WalkFrames
+) -> None:
+    """A player joined before its first frame stands at the origin until that frame,
+    3 m away, is shown: the pelvis smoothing does not pull the last rest pose a
+    quarter of the way there (0.75 m before the fix)."""
+    frames = [
+        TrackerFrame(f.seq, f.pos + np.array([3.0, 0.0, 0.0]), f.quat) for f in walk_frames(0)
+    ]
+    engine = make_engine(samples=4, lookahead=2)
+    engine.add_player("p", seed=1)
+    shown = []
+    for t in range(8):
+        if t >= 4:
+            engine.push("p", frames[t - 4])
+        shown += [(pose.seq, pose.positions[0, 0]) for pose in engine.tick().poses]
+    rest = [x for seq, x in shown if seq < 0]
+    real = [x for seq, x in shown if seq >= 0]
+    assert len(rest) == 4 and len(real) == 2
+    assert max(abs(x) for x in rest) < 1e-6
+    assert min(real) > 2.9
+
+
 def test_a_player_without_any_frame_stands_at_the_origin(make_engine: MakeEngine) -> None:
     engine = make_engine(samples=10, lookahead=0, stale_after_frames=3)
     engine.add_player("p", seed=0)
@@ -631,3 +704,33 @@ def test_output_is_at_the_users_own_scale(make_engine: MakeEngine, walk_frames: 
     np.testing.assert_allclose(positions(got), 0.5 * positions(ref), atol=1e-6)
     engine.set_calibration("p", Calibration())
     assert engine.players["p"].calibration == Calibration()
+
+
+def test_a_new_calibration_reaches_the_frames_already_in_the_look_ahead(
+    make_engine: MakeEngine, walk_frames: WalkFrames
+) -> None:
+    """A player walking 3 m from the origin is calibrated anew mid-stream (another
+    scale, then a waist offset too): the frames already waiting in the look-ahead are
+    shown in the new calibration as every later one, so the head stays on the headset
+    on every frame (before the fix the four waiting frames were divided by the new
+    scale with the old one in them: 9 cm off), and the next frame's velocities are
+    measured from the same calibration (a walk's speed, not a jump)."""
+    frames = [
+        TrackerFrame(f.seq, f.pos + np.array([3.0, 0.0, 0.0]), f.quat) for f in walk_frames(0)
+    ]
+    engine = make_engine(samples=4, lookahead=4)
+    engine.add_player("p", seed=1)
+    shown = []
+    for t in range(40):
+        if t == 15:
+            engine.set_calibration("p", Calibration(scale=0.97))
+        if t == 25:
+            engine.set_calibration("p", Calibration(scale=0.97, waist_offset_m=(0.0, -0.01, 0.01)))
+        engine.push("p", frames[t])
+        shown += engine.tick().poses
+        assert np.abs(engine.newest_inputs("p")[0]).max() < 3.0, t
+    assert [p.seq for p in shown] == list(range(36))
+    head = np.array([p.positions[Joint.HEAD] for p in shown])
+    headset = np.array([frames[p.seq].pos[0] for p in shown])
+    assert np.linalg.norm(head - headset, axis=-1).max() < 1e-3
+    assert [p.scale for p in shown] == [1.0] * 11 + [pytest.approx(0.97)] * 25

@@ -51,7 +51,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from posecast.geometry.fk import fk_positions
-from posecast.geometry.rotations import mat2quat, quat2mat
+from posecast.geometry.rotations import (
+    mat2quat,
+    quat2mat,
+    quat_apply,
+    quat_conj,
+    quat_mul,
+    quat_normalize,
+)
 from posecast.online.engine.apart import MAX_OVERLAP_M, keep_apart, overlap
 from posecast.online.engine.backend import Decoder, Pool, PoolIK
 from posecast.online.engine.batch_fk import fk32, pelvis_from_head32
@@ -257,7 +264,36 @@ class Engine:
         self.players[player].selector = selector
 
     def set_calibration(self, player: str, calibration: Calibration) -> None:
-        self.players[player].calibration = calibration
+        """Calibrate ``player`` anew from its next frame on. The frames already in its
+        look-ahead, and every tracker-space state of its shown pose (contact locks,
+        the clearance's toes, the reach move), are re-expressed in the new calibration,
+        so the poses still to come are divided by the scale their positions carry and
+        the next frame's velocities are measured from the same calibration."""
+        p = self.players[player]
+        old, p.calibration = p.calibration, calibration
+        if old == calibration:
+            return
+        s, k = self.slots, p.slot
+        ratio = calibration.scale / old.scale
+        q = s["ring_quat"][:, k]  # (L, rows, 4), oriented by the old offsets
+        if old.rot_offsets or calibration.rot_offsets:
+            rows = q.shape[1]
+            before = np.asarray(old.rot_offsets or [_IDENT] * rows)
+            after = np.asarray(calibration.rot_offsets or [_IDENT] * rows)
+            q = quat_normalize(quat_mul(quat_mul(q, quat_conj(before)), after))
+        pos = s["ring_pos"][:, k] * ratio
+        w = TrackerSlot.WAIST  # calibration.apply_all's waist offset, taken off and put on
+        pos[:, w] += quat_apply(s["ring_quat"][:, k, w], np.asarray(old.waist_offset_m)) * ratio
+        pos[:, w] -= quat_apply(q[:, w], np.asarray(calibration.waist_offset_m))
+        if not self.layout.predicts_root:  # the pelvis is the waist tracker's
+            s["ring_rootm"][:, k] = quat2mat(q[:, w])
+        s["ring_pos"][:, k], s["ring_quat"][:, k] = pos, q
+        for name in ("ik_lock_pos", "disp_lock_pos"):
+            s[name][k] *= ratio
+        if p.toe_xz is not None:
+            p.toe_xz = p.toe_xz * ratio
+        if p.reach is not None:
+            p.reach = p.reach * ratio
 
     def push(self, player: str, frame: TrackerFrame) -> None:
         """Offer the newest frame; a newer push before the tick replaces it."""
@@ -364,6 +400,20 @@ class Engine:
             )
         return mats, places, 1
 
+    def newest_inputs(
+        self, player: str
+    ) -> tuple[NDArray[np.float32], NDArray[np.float64], NDArray[np.float64]]:
+        """What the last tick fed the decoder for ``player``'s newest frame (copies):
+        its features ``(F,)``, calibrated tracker positions ``(rows, 3)`` and
+        orientations ``(rows, 4)``."""
+        k, slot = (self._tick - 1) % self._ring, self.players[player].slot
+        s = self.slots
+        return (
+            s["ring_x"][k, slot].copy(),
+            s["ring_pos"][k, slot].copy(),
+            s["ring_quat"][k, slot].copy(),
+        )
+
     def hidden_state(self, player: str) -> NDArray[np.float32]:
         """The GRU states ``(N, 128)`` the next tick decodes from (a writable view)."""
         out: NDArray[np.float32] = self.slots["ring_h"][
@@ -383,6 +433,7 @@ class Engine:
         fresh: list[tuple[_Player, TrackerFrame]] = []
         held: list[int] = []  # slots without a new frame (a rest frame stands in too)
         kept: list[int] = []  # slots whose inputs stay those of the frame before
+        gaps: dict[int, int] = {}  # per fresh row: the frames held since its last one
         for pid in self._order:
             p = self.players[pid]
             frame = p.pending
@@ -399,6 +450,8 @@ class Engine:
                 else:
                     kept.append(p.slot)
                 continue
+            if p.missing and p.last is not None:
+                gaps[len(fresh)] = p.missing
             p.missing = 0
             if p.stale:
                 p.stale = False
@@ -414,8 +467,8 @@ class Engine:
         players = [p for p, _ in fresh]
         idx = [p.slot for p in players]
         q = np.array([f.quat for _, f in fresh], dtype=np.float64)  # (M, rows, 4)
-        for i, p in enumerate(players):
-            if p.waist_filter is not None:
+        for i, (p, f) in enumerate(fresh):
+            if p.waist_filter is not None and f is not self._rest:  # not the stand-in
                 q[i, TrackerSlot.WAIST] = p.waist_filter(q[i, TrackerSlot.WAIST])
         calibrations = [p.calibration for p in players]
         q = orient_all(calibrations, q)
@@ -424,10 +477,13 @@ class Engine:
             # No waist: keep the unused slot finite whatever the client sent.
             raw[:, TrackerSlot.WAIST], q[:, TrackerSlot.WAIST] = raw[:, TrackerSlot.HEAD], _IDENT
         cal = apply_all(calibrations, raw, q)
-        # Velocities from the frame before; a player's first frame has none.
+        # Velocities from the frame before; a player's first frame has none, and one
+        # after missing frames moved over all of them (the ring held the last one).
         first = [i for i, p in enumerate(players) if p.last is None]
         prev = s["ring_pos"][kp, idx]
         prev[first] = cal[first]
+        for i, gap in gaps.items():
+            prev[i] = cal[i] - (cal[i] - prev[i]) / (gap + 1)
         s["ring_pos"][k, idx] = cal
         s["ring_quat"][k, idx] = q
         if not self.layout.predicts_root:  # the pelvis is the waist tracker's, per frame
@@ -699,9 +755,12 @@ class Engine:
                 waist,
             )
             own = (m, p)
-        # Both neighbours in one call: frame e - 1 (or e, on a first frame), then e + 1.
+        # Both neighbours in one call: frame e - 1 (or e, on a first frame), then e + 1
+        # (or e, on the last rest frame before a player's first real one).
         E = len(slots)
-        rows = np.concatenate([np.where(first, k, (k - 1) % L), np.full(E, (k + 1) % L)])
+        nxt = (k + 1) % L
+        last_rest = (s["ring_seq"][k, slots] < 0) & (s["ring_seq"][nxt, slots] >= 0)
+        rows = np.concatenate([np.where(first, k, (k - 1) % L), np.where(last_rest, k, nxt)])
         at = np.concatenate([slots, slots])
         m, p, _ = self._roots(
             s["ring_pos"][rows, at],
