@@ -734,3 +734,26 @@ def test_a_new_calibration_reaches_the_frames_already_in_the_look_ahead(
     headset = np.array([frames[p.seq].pos[0] for p in shown])
     assert np.linalg.norm(head - headset, axis=-1).max() < 1e-3
     assert [p.scale for p in shown] == [1.0] * 11 + [pytest.approx(0.97)] * 25
+
+
+def test_a_new_calibration_reorients_the_frames_already_held(
+    make_engine: MakeEngine, walk_frames: WalkFrames
+) -> None:
+    """Device rotation offsets that change mid-stream turn the held frames' orientations
+    as the new calibration would have turned them on arrival, and a scale the
+    positions."""
+    from posecast.geometry.rotations import quat_mul, quat_normalize, yaw2quat
+
+    frames = walk_frames(0)
+    engine = make_engine(samples=4, lookahead=2)
+    engine.add_player("p", seed=1)
+    for f in frames[:5]:
+        engine.push("p", f)
+        engine.tick()
+    offsets = tuple(tuple(map(float, yaw2quat(0.3 * (i + 1)))) for i in range(4))
+    cal = Calibration(scale=1.1, rot_offsets=offsets)  # type: ignore[arg-type]
+    engine.set_calibration("p", cal)
+    _, pos, quat = engine.newest_inputs("p")
+    np.testing.assert_allclose(pos, cal.apply(frames[4].pos, quat), atol=1e-12)
+    want = quat_normalize(quat_mul(frames[4].quat, np.asarray(offsets)))
+    np.testing.assert_allclose(np.abs((quat * want).sum(-1)), 1.0, atol=1e-12)
