@@ -99,7 +99,59 @@ def test_sim_reports_refused_players(
     code = sim.main(["--url", dev_server.url, "--secret", "wrong-secret-xxxxxxxx", "--players", "1",
                      "--duration", "1"])  # fmt: skip
     assert code == 1
-    assert "UnauthenticatedError" in capsys.readouterr().out
+    out, err = capsys.readouterr()
+    assert "UnauthenticatedError" in out
+    assert "posecast-sim: error [UNAUTHENTICATED]: 1 of 1 player sessions failed" in err, err
+    assert "hint: the token does not verify" in err and "Traceback" not in err
+
+
+def _failure(capsys: pytest.CaptureFixture[str], main: object, argv: list[str], code: str) -> str:
+    """Run a tool's ``main`` into a failure met while running: exit 1, no traceback, an
+    ``error [CODE]`` line with a hint under it; returns stderr."""
+    with pytest.raises(SystemExit) as exit_:
+        main(argv)  # type: ignore[operator]
+    err = capsys.readouterr().err
+    assert exit_.value.code == 1, err
+    assert "Traceback" not in err, err
+    lines = err.splitlines()
+    at = [i for i, ln in enumerate(lines) if f": error [{code}]: " in ln]
+    assert at, err
+    assert lines[at[0] + 1].startswith("hint: ") and len(lines[at[0] + 1]) > 10, err
+    return err
+
+
+def test_record_failures_print_a_code_and_a_hint(
+    dev_server: DevServer, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """What a recorder meets while running: the server refusing its token or its room,
+    no server at the URL, a file to export that is missing or not a recording."""
+    out = ["--out", str(tmp_path / "r.pcrec"), "--seconds", "1"]
+    server = ["--url", dev_server.url, *out]
+    err = _failure(capsys, record.main, [*server, "--secret", "w" * 20, "--room", "r"],
+                   "UNAUTHENTICATED")  # fmt: skip
+    assert "token signature does not verify" in err
+    err = _failure(capsys, record.main, [*server, "--secret", dev_server.secret, "--room", "a b!"],
+                   "BAD_FIELD")  # fmt: skip
+    assert "room" in err
+    err = _failure(capsys, record.main, ["--url", "ws://127.0.0.1:9/", "--secret", "s" * 20,
+                                         "--room", "r", *out], "UNREACHABLE")  # fmt: skip
+    assert "ws://127.0.0.1:9/" in err and "posecast serve --dev" in err
+    export = ["--bvh", str(tmp_path / "bvh"), "--export"]
+    err = _failure(capsys, record.main, [*export, str(tmp_path / "none.pcrec")], "FILE_INVALID")
+    assert "none.pcrec" in err
+    bogus = tmp_path / "notes.txt"
+    bogus.write_text("not msgpack at all\n", encoding="utf-8")
+    err = _failure(capsys, record.main, [*export, str(bogus)], "FILE_INVALID")
+    assert "recording" in err
+
+
+def test_sim_failures_print_a_code_and_a_hint(capsys: pytest.CaptureFixture[str]) -> None:
+    code = sim.main(["--url", "ws://127.0.0.1:9/", "--secret", "s" * 20, "--duration", "0.5",
+                     "-q"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 1 and "Traceback" not in err
+    assert "posecast-sim: error [UNREACHABLE]: 2 of 2 player sessions failed" in err, err
+    assert "hint: is a server running there?" in err
 
 
 def test_record_exports_an_existing_recording(
@@ -165,6 +217,21 @@ def _mistake(capsys: pytest.CaptureFixture[str], main: object, argv: list[str]) 
     return err
 
 
+def test_sim_refuses_a_bvh_it_cannot_read(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """Before connecting: a missing file or one that is not BVH, with the server
+    CLI's code for a BVH that cannot be read."""
+    text = tmp_path / "notes.txt"
+    text.write_text("hello\n", encoding="utf-8")
+    for path in (tmp_path / "none.bvh", text):
+        with pytest.raises(SystemExit) as exit_:
+            sim.main(["--secret", "s" * 32, "--bvh", str(path)])
+        err = capsys.readouterr().err
+        assert exit_.value.code == 2 and "Traceback" not in err, err
+        assert f"posecast-sim: error [BVH_INVALID]: {path}" in err and "\nhint: " in err, err
+
+
 def test_sim_rejects_bad_churn_options(capsys: pytest.CaptureFixture[str]) -> None:
     err = _mistake(capsys, sim.main, ["--secret", "s" * 32, "--churn-every", "-1"])
     assert "posecast-sim: error [CONFIG_INVALID]: " in err and "must not be negative" in err
@@ -181,7 +248,20 @@ def test_sim_rejects_bad_churn_options(capsys: pytest.CaptureFixture[str]) -> No
         ("sim", ["--secret", "s" * 32, "--layout", "hmd9"], "--layout 'hmd9'"),
         ("sim", ["--token", "t", "--players", "2"], "one --token is one player"),
         ("sim", [], "neither a token nor a secret"),
+        ("sim", ["--secret", "s" * 32, "--rate", "0"], "--rate 0.0 is not in [1, 1000]"),
+        ("sim", ["--secret", "s" * 32, "--dropout", "2"], "--dropout 2.0 is not a share"),
+        ("sim", ["--secret", "s" * 32, "--noise-m", "-1"], "must be finite and not negative"),
+        ("sim", ["--secret", "s" * 32, "--noise-deg", "nan"], "must be finite and not negative"),
+        ("sim", ["--secret", "s" * 32, "--json", "/nonexistent/d/x.json"], "no directory"),
+        ("sim", ["--secret", "short"], "the secret has 5 characters"),
+        ("sim", ["--secret", "s" * 32, "--ttl", "0"], "--ttl 0 is not in"),
         ("record", ["--bogus"], "unrecognized arguments: --bogus"),
+        ("record", ["--secret", "s" * 32, "--room", "r", "--seconds", "-1"], "positive number"),
+        (
+            "record",
+            ["--secret", "s" * 32, "--room", "r", "--out", "/nonexistent/d/x.pcrec"],
+            "no directory",
+        ),
         ("record", ["--secret", "s" * 32], "--room is required"),
         ("record", ["--room", "r"], "neither a token nor a secret"),
     ],

@@ -44,6 +44,7 @@ from posecast_client.errors import (
     ConnectionLostError,
     PosecastClientError,
     ProtocolError,
+    RecordingError,
 )
 from posecast_client.interp import (
     DEFAULT_INTERP,
@@ -144,6 +145,7 @@ __all__ = [
     "Presence",
     "ProtocolError",
     "Reconnecting",
+    "RecordingError",
     "ReplaySource",
     "Resync",
     "Selector",

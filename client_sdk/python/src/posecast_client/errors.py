@@ -9,6 +9,7 @@ refuses) are :class:`ProtocolError` subclasses, exactly one per code of
     ├── ClientClosedError             the client was closed; it sends nothing more
     ├── ConnectionLostError           the connection dropped without an error  retryable
     ├── BvhError                      a BVH file cannot be read (file, line)
+    ├── RecordingError                a file is not a posecast recording (also a ValueError)
     └── ProtocolError                 one per wire code: code, fatal, field, ref_seq
         ├── MalformedError            MALFORMED            fatal   decoder
         ├── TooLargeError             TOO_LARGE            fatal   decoder
@@ -69,6 +70,12 @@ class ConnectionLostError(PosecastClientError):
     """
 
     retryable: ClassVar[bool] = True
+
+
+class RecordingError(PosecastClientError, ValueError):
+    """A file is not a posecast recording, or one cut short or corrupt (a
+    ``ValueError`` too, as :func:`~posecast_client.recording.read_recording` raised
+    before this class)."""
 
 
 class BvhError(PosecastClientError):

@@ -36,6 +36,7 @@ import numpy as np
 
 from posecast_client.bvh import write_bvh
 from posecast_client.codec import decode, encode
+from posecast_client.errors import PosecastClientError, RecordingError
 from posecast_client.protocol import Message, Pose, Welcome
 from posecast_client.rotations import F64, kabsch, mat2quat, quat2mat, vecs2mat
 from posecast_client.skeleton import JOINT_NAMES, PARENTS, children, reference_offsets
@@ -91,18 +92,26 @@ class Recording:
 
 
 def read_recording(path: str | Path) -> Recording:
-    """Read a whole recording (messages decoded)."""
+    """Read a whole recording (messages decoded). A file that is not one, or is cut
+    short or corrupt: :class:`~posecast_client.errors.RecordingError`."""
     with Path(path).open("rb") as f:
-        items = _unpack(f)
-        header = next(items, None)
-        if not isinstance(header, dict) or header.get("format") != FORMAT:
-            raise ValueError(f"{path}: not a posecast recording")
-        if header.get("version") != VERSION:
-            raise ValueError(f"{path}: recording version {header.get('version')} is not 1")
-        rec = Recording(header)
-        for item in items:
-            t, data = item
-            rec.messages.append((float(t), decode(data)))
+        try:
+            items = _unpack(f)
+            header = next(items, None)
+            if not isinstance(header, dict) or header.get("format") != FORMAT:
+                raise RecordingError(f"{path}: not a posecast recording")
+            if header.get("version") != VERSION:
+                raise RecordingError(
+                    f"{path}: recording version {header.get('version')} is not {VERSION}"
+                )
+            rec = Recording(header)
+            for item in items:
+                t, data = item
+                rec.messages.append((float(t), decode(data)))
+        except (msgpack.UnpackException, ValueError, TypeError, PosecastClientError) as exc:
+            if isinstance(exc, RecordingError):
+                raise
+            raise RecordingError(f"{path}: a corrupt posecast recording ({exc})") from exc
     return rec
 
 

@@ -23,6 +23,7 @@ from typing import Any
 from posecast_client.protocol import ROLES
 
 MAX_TTL_S = 7 * 24 * 3600  # what the server's minting tool allows
+MIN_SECRET_CHARS = 16  # the server refuses shorter secrets (posecast.online.config)
 
 
 def _b64(raw: bytes) -> str:

@@ -1,7 +1,9 @@
 """What the command-line tools share: server options (flags, then ``POSECAST_*``
 environment variables), token minting, signal handling, a patient connect, and the
-error format of a command-line mistake (``PROG: error [CONFIG_INVALID]: ...`` and a
-``hint:`` line, exit 2: the server CLI's format)."""
+error format (the server CLI's): a command-line mistake prints ``PROG: error
+[CONFIG_INVALID]: ...`` and a ``hint:`` line and exits 2; a failure met while running
+(:func:`describe`: the server refused, could not be reached, a file could not be read)
+prints the same two lines with its own code and exits 1."""
 
 from __future__ import annotations
 
@@ -15,21 +17,74 @@ import sys
 from collections.abc import Mapping
 from typing import Any, NoReturn
 
-from websockets.exceptions import InvalidStatus
+from websockets.exceptions import InvalidHandshake, InvalidStatus, InvalidURI
 
 from posecast_client.client import Client, connect
-from posecast_client.tokens import mint_token
+from posecast_client.errors import BvhError, ConnectionLostError, ProtocolError, RecordingError
+from posecast_client.tokens import MAX_TTL_S, MIN_SECRET_CHARS, mint_token
 
 ENV_PREFIX = "POSECAST_"
 CONFIG_INVALID = "CONFIG_INVALID"  # the server's code for a bad configuration value
 
 
-def usage_error(prog: str, message: str, hint: str) -> NoReturn:
-    """Print ``prog: error [CONFIG_INVALID]: message`` and ``hint: hint`` on stderr and
-    exit 2, the status of a command-line mistake."""
-    print(f"{prog}: error [{CONFIG_INVALID}]: {message}", file=sys.stderr)
+# Codes of failures met at run time that are not the server's wire codes (those keep
+# theirs: UNAUTHENTICATED, TOKEN_EXPIRED, BAD_FIELD, ...).
+UNREACHABLE = "UNREACHABLE"  # no WebSocket session with the server at the URL
+FILE_INVALID = "FILE_INVALID"  # a file to read or write: missing, unreadable, not the format
+BVH_INVALID = "BVH_INVALID"  # a BVH file to replay (the server CLI's code for the same)
+
+_WIRE_HINTS = {
+    "UNAUTHENTICATED": "the token does not verify: use the secret the server was started "
+    "with (`posecast serve --dev` prints it), or a token minted with it",
+    "TOKEN_EXPIRED": "mint a new token, or pass --secret and let the tool mint them",
+    "FORBIDDEN": "the token is for another room or role",
+    "BAD_FIELD": "the server refused a value the tool sent (the message names it); a room "
+    "name holds only letters, digits and _ . : -",
+    "OUT_OF_RANGE": "a value sent was refused as out of range: see proto/README.md",
+    "ROOM_FULL": "the room has no seat left: use another room or fewer players",
+    "LAYOUT_UNSUPPORTED": "the server does not serve this layout: see its --layouts",
+}
+
+
+def usage_error(prog: str, message: str, hint: str, code: str = CONFIG_INVALID) -> NoReturn:
+    """Print ``prog: error [CODE]: message`` and ``hint: hint`` on stderr and exit 2,
+    the status of a command-line mistake (``code``: CONFIG_INVALID, or a file's)."""
+    print(f"{prog}: error [{code}]: {message}", file=sys.stderr)
     print(f"hint: {hint}", file=sys.stderr)
     raise SystemExit(2)
+
+
+def describe(exc: BaseException, url: str) -> tuple[str, str, str]:
+    """``(code, message, hint)`` of a failure a tool met while running: a refusal by
+    the server (its wire code), no session with the server at ``url``
+    (:data:`UNREACHABLE`), a BVH that cannot be read (:data:`BVH_INVALID`), a file
+    that cannot be read or written (:data:`FILE_INVALID`); anything else is a bug,
+    re-raised."""
+    if isinstance(exc, ProtocolError):
+        hint = _WIRE_HINTS.get(exc.code, "see proto/README.md for what the code means")
+        return exc.code, exc.message, hint
+    if isinstance(exc, BvhError):
+        return BVH_INVALID, exc.message, "pass a BVH file (posecast-sim replays .bvh motion)"
+    if isinstance(exc, OSError) and exc.filename is not None:
+        return FILE_INVALID, f"{exc.filename}: {exc.strerror}", "check the path"
+    if isinstance(exc, RecordingError):
+        return FILE_INVALID, exc.message, "pass a file posecast-record wrote"
+    unreachable = OSError | InvalidURI | InvalidHandshake | ConnectionLostError | TimeoutError
+    if isinstance(exc, unreachable):
+        return (
+            UNREACHABLE,
+            f"no session with the server at {url}: {exc!r}",
+            "is a server running there? start one with `posecast serve --dev`, or pass --url",
+        )
+    raise exc
+
+
+def failure(prog: str, exc: BaseException, url: str) -> NoReturn:
+    """Print :func:`describe`'s code, message and hint for ``exc`` and exit 1."""
+    code, message, hint = describe(exc, url)
+    print(f"{prog}: error [{code}]: {message}", file=sys.stderr)
+    print(f"hint: {hint}", file=sys.stderr)
+    raise SystemExit(1)
 
 
 class Parser(argparse.ArgumentParser):
@@ -71,6 +126,15 @@ def resolve_server(
             "pass --secret (what `posecast serve --dev` prints) or --token, or set "
             "POSECAST_TOKEN_SECRET or POSECAST_TOKEN",
         )
+    if args.secret and len(args.secret) < MIN_SECRET_CHARS:
+        usage_error(
+            prog,
+            f"the secret has {len(args.secret)} characters; a server takes none under "
+            f"{MIN_SECRET_CHARS}, so no server verifies tokens minted with it",
+            "pass the secret the server was started with (`posecast serve --dev` prints it)",
+        )
+    if not 0 < args.ttl <= MAX_TTL_S:
+        usage_error(prog, f"--ttl {args.ttl} is not in (0, {MAX_TTL_S}] seconds", "e.g. 3600")
 
 
 def token_for(args: argparse.Namespace, room: str, player: str, role: str = "player") -> str:

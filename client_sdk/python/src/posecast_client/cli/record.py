@@ -26,6 +26,7 @@ from posecast_client.cli.common import (
     Parser,
     add_server_arguments,
     connect_patiently,
+    failure,
     resolve_server,
     stop_on_signals,
     token_for,
@@ -87,9 +88,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         resolve_server(args, P)
         if not args.room:
             usage_error(P, "--room is required to record", "pass the room to listen to")
-        path = asyncio.run(record(args))
+        if args.seconds is not None and not 0 < args.seconds < float("inf"):
+            usage_error(P, f"--seconds {args.seconds} must be a positive number", "e.g. 60")
+        out = args.out or Path(f"{args.room}.pcrec")
+        if not out.parent.is_dir():
+            usage_error(P, f"--out {out}: no directory {out.parent}", "create it first")
+        try:
+            path = asyncio.run(record(args))
+        except Exception as exc:  # the server's refusal, no server, a file: code and hint
+            failure(P, exc, args.url)
     if args.bvh is not None:
-        for player, bvh in export_bvh(read_recording(path), args.bvh).items():
+        try:
+            exported = export_bvh(read_recording(path), args.bvh)
+        except Exception as exc:
+            failure(P, exc, getattr(args, "url", None) or "")
+        for player, bvh in exported.items():
             print(f"{player}: {bvh}")
     return 0
 

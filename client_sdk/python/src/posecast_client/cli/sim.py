@@ -32,8 +32,10 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import itertools
 import json
+import math
 import sys
 import time
 from collections.abc import AsyncIterator, Iterator, Sequence
@@ -43,16 +45,19 @@ from typing import Any
 
 import numpy as np
 
+from posecast_client.bvh import read_bvh
 from posecast_client.cli.common import (
     Parser,
     add_server_arguments,
     connect_patiently,
+    describe,
     resolve_server,
     stop_on_signals,
     token_for,
     unique_suffix,
     usage_error,
 )
+from posecast_client.errors import BvhError
 from posecast_client.protocol import Error, Layout, Pose
 from posecast_client.session import Reconnecting
 from posecast_client.sites import tracker_set
@@ -76,6 +81,8 @@ class PlayerReport:
     first_pose_s: float | None = None  # from connecting to receiving its own first pose
     clock_offset_s: float | None = None
     rtt_s: float | None = None
+    failure_code: str = "INTERNAL"  # and that failure's code and hint (common.describe)
+    failure_hint: str = ""
     failure: str | None = None
     pose_bytes: int = 0  # payload bytes of the messages that carried poses
     version: int = 0  # the protocol the server chose
@@ -92,6 +99,7 @@ class Slot:
 
 
 P = "posecast-sim"  # the program, as its errors name it
+MAX_RATE_HZ = 1000.0  # the most a hello's rate_hz may say (proto/README.md)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -265,6 +273,8 @@ def summarise(
         "errors": sum(len(r.errors) for r in reports),
         "error_codes": sorted({code for r in reports for code in r.errors}),
         "failed": {r.player: r.failure for r in reports if r.failure},
+        "failure_codes": {r.player: r.failure_code for r in reports if r.failure},
+        "failure_hints": {r.failure_code: r.failure_hint for r in reports if r.failure},
         "poses_from": {r.player: dict(sorted(r.poses_from.items())) for r in reports},
     }
 
@@ -323,6 +333,8 @@ async def run_slot(
             await run_player(args, i, report, source, stop, leave=slot.leave, seconds=left)
         except Exception as exc:
             report.failure = repr(exc)
+            with contextlib.suppress(Exception):  # an unforeseen one stays INTERNAL
+                report.failure_code, _, report.failure_hint = describe(exc, args.url)
             return
         if not slot.leave.is_set():
             return
@@ -393,8 +405,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     resolve_server(args, P)
     if args.token and args.players > 1:
         usage_error(P, "one --token is one player", "use --secret for several players")
-    if args.players < 1 or args.rooms < 1 or args.duration <= 0:
+    if args.players < 1 or args.rooms < 1 or not 0 < args.duration < math.inf:
         usage_error(P, "--players, --rooms and --duration must be positive", "e.g. --players 4")
+    if not 1 <= args.rate <= MAX_RATE_HZ:
+        usage_error(
+            P,
+            f"--rate {args.rate} is not in [1, {MAX_RATE_HZ:g}] frames per second",
+            "e.g. 60 (a server takes up to its max_rate_hz, 120 by default)",
+        )
+    if not (0 <= args.noise_m < math.inf and 0 <= args.noise_deg < math.inf):
+        usage_error(P, "--noise-m and --noise-deg must be finite and not negative", "e.g. 0.002")
+    if not 0 <= args.dropout < 1:
+        usage_error(P, f"--dropout {args.dropout} is not a share in [0, 1)", "e.g. 0.05")
     if args.churn_every < 0 or args.progress_every < 0:
         usage_error(
             P, "--churn-every and --progress-every must not be negative", "0 turns either off"
@@ -406,10 +428,27 @@ def main(argv: Sequence[str] | None = None) -> int:
             tracker_set(layout)
         except ValueError as exc:
             usage_error(P, f"--layout {layout!r}: {exc}", "hmd3+waist, hmd3, or a tracker set")
+    for path in args.bvh or ():
+        try:
+            read_bvh(path)
+        except (BvhError, OSError) as exc:
+            code, message, hint = describe(exc, args.url)
+            usage_error(P, message, hint, code)
+    if args.json is not None and not args.json.parent.is_dir():
+        usage_error(P, f"--json {args.json}: no directory {args.json.parent}", "create it first")
     summary = asyncio.run(run(args))
     print_summary(summary)
     if args.json is not None:
         args.json.write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
+    codes = list(summary["failure_codes"].values())
+    if codes:  # the commonest failure, with its code and hint
+        code = max(set(codes), key=codes.count)
+        print(
+            f"{P}: error [{code}]: {len(codes)} of {summary['sessions']} player sessions failed",
+            file=sys.stderr,
+        )
+        hint = summary["failure_hints"][code] or "see the failures above"
+        print(f"hint: {hint}", file=sys.stderr)
     return 1 if summary["failed"] else 0
 
 
