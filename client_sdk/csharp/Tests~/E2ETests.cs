@@ -260,7 +260,7 @@ namespace Posecast.Client.Tests
                     var lib = typeof(PosecastClient).Assembly.Location;
                     T.Equal(0, Exec("mcs", "-langversion:7.2 -nologo -r:" + lib + " -out:" + Path.Combine(dir, "ReadmeExample.exe") + " "
                                     + Path.Combine(dir, "ReadmeExample.cs"), null, 60).Item1, "compiles");
-                    var env = new Dictionary<string, string> { { "POSECAST_URL", server.Url }, { "POSECAST_SECRET", server.Secret } };
+                    var env = new Dictionary<string, string> { { "POSECAST_URL", server.Url }, { "POSECAST_TOKEN_SECRET", server.Secret } };
                     var run = Exec("mono", Path.Combine(dir, "ReadmeExample.exe"), env, 60);
                     T.Equal(0, run.Item1, "exit status: " + run.Item2);
                     T.True(run.Item2.Contains("joined as ada on v2"), "joined: " + run.Item2);

@@ -26,7 +26,7 @@ def test_quick_start_runs(
     dev_server: DevServer, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     monkeypatch.setenv("POSECAST_URL", dev_server.url)
-    monkeypatch.setenv("POSECAST_SECRET", dev_server.secret)
+    monkeypatch.setenv("POSECAST_TOKEN_SECRET", dev_server.secret)
     exec(compile(quick_start(), str(README), "exec"), {"__name__": "__readme__"})
     out = capsys.readouterr().out.splitlines()
     assert out[0] == "joined as ada"
