@@ -108,3 +108,22 @@ def test_a_set_that_senses_its_legs_keeps_its_height() -> None:
     moved = {n: pelvis[True][n][:, 1] - pelvis[False][n][:, 1] for n in names}
     assert moved["3p"][-10:].max() < -0.01
     np.testing.assert_array_equal(moved["3p+2i"], 0.0)
+
+
+def test_a_set_waiting_for_its_first_frame_reads_no_acceleration() -> None:
+    """Before its first frame a player stands on the rest frame; its inertial sites'
+    features (accelerations) are zero, not the rest pose's joint positions."""
+    e = load_engine(EngineConfig(samples=4), None, 1, "sites", "onnx")
+    e.add_player(
+        "p",
+        0,
+        tracker_set=TrackerSet.parse(
+            "head,left_hand,right_hand,waist:imu,left_foot:imu,right_foot:imu"
+        ),
+    )
+    e.tick()
+    x, pos, _ = e.newest_inputs("p")
+    inertial = [3, 4, 5]  # waist, left foot, right foot: their rows of the frame
+    assert np.all(pos[inertial] == 0.0)
+    assert np.any(pos[[0, 1, 2]] != 0.0)  # the positional sites stand in the rest pose
+    assert np.all(np.isfinite(x))

@@ -473,6 +473,11 @@ class Engine:
         calibrations = [p.calibration for p in players]
         q = orient_all(calibrations, q)
         raw = np.array([f.pos for _, f in fresh], dtype=np.float64)  # (M, rows, 3)
+        if self._sites:  # the rest frame's inertial rows read no acceleration
+            rest = [i for i, (_, f) in enumerate(fresh) if f is self._rest]
+            if rest:
+                still = s["kinds"][[players[i].slot for i in rest]] == Kind.INERTIAL
+                raw[rest] = np.where(still[..., None], 0.0, raw[rest])
         if self.layout.layout is Layout.HMD3:
             # No waist: keep the unused slot finite whatever the client sent.
             raw[:, TrackerSlot.WAIST], q[:, TrackerSlot.WAIST] = raw[:, TrackerSlot.HEAD], _IDENT
@@ -834,7 +839,8 @@ _IK_SHAPES: dict[str, tuple[int, ...]] = {
 def _rest_frame(rows: int) -> TrackerFrame:
     """What a player that never sent a frame stands on (seq -1: never kept as its
     last): the reference body in its rest pose at the origin, tracked on ``rows`` rows
-    (4 tracker slots, or every site; an inertial site reads no acceleration)."""
+    (4 tracker slots, or every site; ``_gather_inputs`` zeroes an inertial site's row,
+    so it reads no acceleration)."""
     eye = np.broadcast_to(np.eye(3), (NUM_JOINTS, 3, 3))
     pos = fk_positions(eye, np.array([0.0, REST_PELVIS_HEIGHT_M, 0.0]), reference_offsets())
     joints = TRACKER_JOINT_INDEX if rows == len(TRACKER_JOINT_INDEX) else SITE_JOINT_INDEX
