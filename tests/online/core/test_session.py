@@ -103,8 +103,9 @@ def test_backend_watches_only_rooms_in_its_token() -> None:
     tok = token(role="backend", rooms=("r2", "r3"))
     join = _session().handle(Hello(1, tok, "r1", "B", watch=("r2", "r3")), time.time())
     assert isinstance(join, Join) and join.rooms == ("r1", "r2", "r3")
-    with pytest.raises(ForbiddenError):
+    with pytest.raises(ForbiddenError) as refused:
         _session().handle(Hello(1, tok, "r1", "B", watch=("r4",)), time.time())
+    assert refused.value.fatal  # FORBIDDEN at hello ends the connection (proto/README.md)
 
 
 def test_frames_in_order_pass_and_others_are_dropped() -> None:

@@ -222,7 +222,9 @@ class Session:
             raise ForbiddenError("only a backend may watch rooms", field="watch", fatal=True)
         for room in hello.watch:
             if not claims.allows_room(room):
-                raise ForbiddenError(f"the token does not admit room {room!r}", field="watch")
+                raise ForbiddenError(
+                    f"the token does not admit room {room!r}", field="watch", fatal=True
+                )
         rooms = tuple(dict.fromkeys((hello.room, *hello.watch)))
         return Join(claims, hello, rooms)
 
