@@ -46,3 +46,27 @@ def test_with_a_queue_of_one_the_newest_frame_wins() -> None:
     frames = h.hub.take_tick_input().frames
     assert frames["a"].seq == 2 and h.hub.take_tick_input().frames == {}
     assert h.hub.metrics.value("posecast_frames_dropped_total", {"reason": "superseded"}) == 2
+
+
+def test_no_pose_of_a_player_goes_out_after_its_leave() -> None:
+    """A pose of A waits unsent in a spectator's outbox when A disconnects: the
+    spectator gets A's leave and no pose of A after it (which would bring back an avatar
+    it has just removed)."""
+    import numpy as np
+
+    from posecast.online.core.tick import TickOutput
+    from posecast.online.protocol import encode
+    from posecast.online.protocol.messages import Pose, Presence
+
+    h = Harness()
+    spectator = h.join("s", role="spectator")
+    a = h.join("a")
+    h.inbox(spectator)
+    pos = np.zeros((19, 3))
+    pos[:, 1] = np.linspace(0.1, 1.7, 19)
+    rot = np.tile([0.0, 0.0, 0.0, 1.0], (19, 1))
+    h.hub.deliver(TickOutput(poses=[("a", encode(Pose("a", 7, h.now, pos, rot)))]), h.now)
+    h.hub.disconnect(a, h.now)
+    got = h.inbox(spectator)
+    assert [(type(m).__name__, getattr(m, "event", None)) for m in got] == [("Presence", "leave")]
+    assert isinstance(got[0], Presence) and got[0].player == "a"

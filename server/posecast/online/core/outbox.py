@@ -71,6 +71,11 @@ class Outbox:
         self._mark(now)
         self.closed = True
 
+    def drop_pose(self, player: str) -> None:
+        """Forget ``player``'s unsent pose (it left: a pose sent after its ``leave``
+        would bring back an avatar the client has just removed)."""
+        self._poses.pop(player, None)
+
     def held(self, player: str) -> bool:
         """Whether an unsent pose of ``player`` waits in its slot."""
         return player in self._poses

@@ -91,6 +91,8 @@ class Router:
             c = self.conns.of_player(member) if member != skip else None
             if c is None:
                 continue
+            if p.event == "leave":  # no pose of the player after its leave
+                c.outbox.drop_pose(p.player)
             stream = c.outbox.stream
             if stream is None:
                 v1 = v1 or encode(p.v1())
