@@ -127,3 +127,56 @@ def test_poses_whose_trackers_are_out_of_reach_are_counted(worker: EngineWorker)
         out = worker.step(TickInput(ops, {"a": thrown(seq), "b": _frame(seq)}), 0.0)
         counts.append((len(out.poses), out.reach_limited))
     assert counts[2:] == [(2, 1)] * 3  # tau = 2; only player a
+
+
+def test_a_failing_op_does_not_drop_the_others_of_its_tick(
+    worker: EngineWorker, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    e = worker.engine
+    worker.step(TickInput([EngineOp("add", "a"), EngineOp("add", "b")], {}), 0.0)
+
+    def broken(player: str, selector: object) -> None:
+        raise RuntimeError("a bug")
+
+    monkeypatch.setattr(e, "set_selector", broken)
+    ops = [EngineOp("selector", "a", selector=AnomalySelector(5.0)), EngineOp("remove", "b")]
+    worker.step(TickInput(ops, {}), 0.0)
+    assert set(e.players) == {"a"}  # b's removal, after the failed op, was applied
+    assert "engine op selector for player 'a' failed" in caplog.text
+
+
+@pytest.mark.timeout(10)
+def test_a_failing_delivery_does_not_stop_the_ticks(worker: EngineWorker) -> None:
+    calls: list[int] = []
+
+    def deliver(out: TickOutput, now: float) -> None:
+        calls.append(1)
+        if len(calls) == 1:
+            raise RuntimeError("a bug")
+
+    def after(now: float) -> None:
+        if len(calls) == 2:
+            raise RuntimeError("another")
+
+    async def main() -> None:
+        stop = asyncio.Event()
+        with ThreadPoolExecutor(1, thread_name_prefix="engine") as pool:
+            task = asyncio.create_task(
+                run_ticks(
+                    period_s=1 / 60,
+                    executor=pool,
+                    worker=worker,
+                    take_input=lambda: TickInput([], {}),
+                    deliver=deliver,
+                    after=after,
+                    overrun=lambda: None,
+                    stop=stop,
+                )
+            )
+            while len(calls) < 4 and not task.done():
+                await asyncio.sleep(0.01)
+            stop.set()
+            await task  # a failure that ended the ticks raises here
+
+    asyncio.run(main())
+    assert len(calls) >= 4

@@ -46,7 +46,10 @@ class EngineWorker:
         t0 = time.perf_counter()
         e = self.engine
         for op in inp.ops:
-            self._apply(op)
+            try:
+                self._apply(op)
+            except Exception:  # a bug in one op must not drop the others of the tick
+                log.exception("engine op %s for player %r failed", op.kind, op.player)
         for player, frame in inp.frames.items():
             if player in e.players:
                 e.push(player, frame)
@@ -128,8 +131,14 @@ async def run_ticks(
         except Exception:  # a bug in one step must not stop the server
             log.exception("engine step failed")
             out = TickOutput([])
-        deliver(out, time.monotonic())
-        after(time.monotonic())
+        try:
+            deliver(out, time.monotonic())
+        except Exception:  # nor one delivery or housekeeping pass stop the ticks
+            log.exception("delivering a tick failed")
+        try:
+            after(time.monotonic())
+        except Exception:
+            log.exception("the after-tick pass failed")
         next_t += period_s
         delay = next_t - loop.time()
         if delay < -period_s:
