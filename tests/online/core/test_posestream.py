@@ -136,3 +136,42 @@ def test_clients_that_joined_apart_fall_into_step_at_the_shared_keyframe_tick() 
         if tick >= 60:
             assert early.stream.refs["a"] is late.stream.refs["a"]  # one shared keyframe on
     assert early.stream.keyframes == 3 and late.stream.keyframes == 3  # 1 (or 11), 60, 120
+
+
+def test_records_past_one_message_go_out_in_several_within_the_limit() -> None:
+    """A backend watching 160 avatars gets their first (keyframe) records in more than
+    one ``poses`` message, each within a server message's 16384 bytes (one message of
+    21 kB before, which the client's own decoder refused), cut between records: every
+    avatar's record arrives, and decodes."""
+    from posecast.online.protocol.messages import MAX_SERVER_MESSAGE_BYTES_V2
+
+    box = Outbox(8, PoseStream())
+    stream = box.stream
+    assert stream is not None
+    client = Client()
+    rng = np.random.default_rng(1)
+    for handle in range(160):
+        stream.announce(f"p{handle}", handle)
+        client.refs[handle] = None
+    for seq in (1, 2):
+        for handle in range(160):
+            items = records.rotvec2quat(rng.normal(size=(19, 3)) * 0.5)
+            pos = np.zeros((19, 3))
+            pos[0] = (0.1 * handle, 0.95, 0.0)
+            world = records.items2world(items)
+            state = PoseState.from_engine(f"p{handle}", seq, seq / 60, pos, world)
+            (slot,) = prepare([(stream, state)], seq / 60)
+            assert slot is not None
+            box.put_pose(state.player, slot, seq / 60)
+        if seq == 1:
+            data = box.take(seq / 60)
+            box.sent(seq / 60)
+            assert len(data) >= 2, [len(d) for d in data]
+            assert max(len(d) for d in data) <= MAX_SERVER_MESSAGE_BYTES_V2
+            for d in data:
+                msg = decode(d, version=2)
+                assert isinstance(msg, Poses)
+                client.got += records.decode_records(msg.data, client.refs)
+        else:
+            client.read(box, seq / 60)
+    assert [r.recon.seq for r in client.got] == [1] * 160 + [2] * 160

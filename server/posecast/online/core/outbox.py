@@ -11,7 +11,8 @@ sends what it got, then calls :meth:`sent`. Times are passed in.
 
 A v2 client's outbox has a :class:`~posecast.online.core.posestream.PoseStream`: its
 slots hold prepared records instead of pose messages, and :meth:`take` turns the
-slots taken into ONE ``poses`` message, moving the client's references on.
+slots taken into ONE ``poses`` message (more only where one would pass 16384 bytes: a
+backend watching many full rooms), moving the client's references on.
 """
 
 from __future__ import annotations
@@ -86,9 +87,8 @@ class Outbox:
         out = list(self._reliable)
         if self.stream is not None:
             slots = [(p, s) for p, s in self._poses.items() if isinstance(s, Slot)]
-            message = self.stream.message(slots, now) if slots else None
-            if message is not None:
-                out.append(message)
+            if slots:
+                out.extend(self.stream.messages(slots, now))
         else:
             out.extend(self._poses.values())  # type: ignore[arg-type]  # v1 slots hold bytes
         self._reliable.clear()

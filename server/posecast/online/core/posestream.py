@@ -1,6 +1,7 @@
 """Protocol v2 pose streams (pure): handles, skeletons, and each client's references.
 
-A v2 client gets one ``poses`` message per tick holding a record per avatar, each a
+A v2 client gets one ``poses`` message per tick (more only where the records would
+pass 16384 bytes) holding a record per avatar, each a
 keyframe or a delta against the last record of that avatar **this client was sent**
 (``docs/broadcast.md``, "v2: deltas under latest-wins"). Two objects keep that true:
 
@@ -33,7 +34,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from posecast.online.protocol.codec import encode
-from posecast.online.protocol.messages import POSE_RATES_HZ, Member, Poses, Presence, Skeleton
+from posecast.online.protocol.messages import (
+    MAX_SERVER_MESSAGE_BYTES_V2,
+    POSE_RATES_HZ,
+    Member,
+    Poses,
+    Presence,
+    Skeleton,
+)
 from posecast.online.protocol.records import (
     PoseState,
     Recon,
@@ -43,6 +51,9 @@ from posecast.online.protocol.records import (
     write_leb128,
 )
 
+# The most record bytes one poses message carries: a server message's 16384 bytes
+# (proto/README.md, Limits) less the map around the bin (type, t, the bin header).
+MAX_POSES_DATA_BYTES = MAX_SERVER_MESSAGE_BYTES_V2 - 64
 KEYFRAME_EVERY_TICKS = 60  # every avatar's keyframe tick comes once in this many ticks
 KEYFRAME_EVERY_S = 1.1  # and no client goes longer than this without one (a safety net)
 _TICK_HZ = 60.0
@@ -162,8 +173,10 @@ class PoseStream:
             ref is None or self.resync or now - self.last_key.get(player, -1e18) >= KEYFRAME_EVERY_S
         )
 
-    def message(self, slots: list[tuple[str, Slot]], now: float) -> bytes | None:
-        """The ``poses`` message of what the writer took; the references move on."""
+    def messages(self, slots: list[tuple[str, Slot]], now: float) -> list[bytes]:
+        """The ``poses`` messages of what the writer took (one, unless the records
+        overflow a message's 16384 bytes: then as many as they need, cut between
+        records, all with the tick's time); the references move on."""
         parts: list[bytes] = []
         t = 0.0
         for player, slot in slots:
@@ -181,9 +194,18 @@ class PoseStream:
             self.records += 1
             t = max(t, slot.state.t)
         self.resync = False
-        if not parts:
-            return None
-        return encode(Poses(t, b"".join(parts)))
+        out: list[bytes] = []
+        batch: list[bytes] = []
+        size = 0
+        for part in parts:
+            if batch and size + len(part) > MAX_POSES_DATA_BYTES:
+                out.append(encode(Poses(t, b"".join(batch))))
+                batch, size = [], 0
+            batch.append(part)
+            size += len(part)
+        if batch:
+            out.append(encode(Poses(t, b"".join(batch))))
+        return out
 
 
 def prepare(
