@@ -268,9 +268,13 @@ def test_a_sets_frames_land_on_model_rows_and_a_lost_imu_keeps_no_acceleration()
 def test_a_sets_rows_must_match_it(frame: object, field: str) -> None:
     from posecast.errors import BadFieldError
 
+    s = _set_player()
     with pytest.raises(BadFieldError) as e:
-        _set_player().handle(frame(), time.time())  # type: ignore[operator]
+        s.handle(frame(), time.time())  # type: ignore[operator]
     assert e.value.field == field and not e.value.fatal
+    # A refused frame counts for nothing: the same seq, put right, is taken.
+    assert s.last_seq is None and s.frames == 0
+    assert isinstance(s.handle(_sites_frame(1), time.time()), FrameIn)
 
 
 def test_a_named_layout_may_not_send_sites() -> None:

@@ -250,11 +250,11 @@ class Session:
                 raise OutOfOrderError(
                     f"seq {msg.seq} after {self.last_seq}", ref_seq=msg.seq, field="seq"
                 )
+        tracker_set = self.layout if isinstance(self.layout, TrackerSet) else None
+        _check_rows(msg.sites, len(msg.pos), tracker_set, msg.seq)  # refused: nothing counts
         self.last_seq = msg.seq
         self.frames += 1
         self.clock.add(now, msg.t)
-        tracker_set = self.layout if isinstance(self.layout, TrackerSet) else None
-        _check_rows(msg.sites, len(msg.pos), tracker_set, msg.seq)
         pos, quat = msg.pos, msg.quat
         if msg.valid != (1 << len(pos)) - 1 and self._held is not None:
             # A lost tracker holds its last pose rather than jumping to the origin (a
