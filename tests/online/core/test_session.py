@@ -30,7 +30,7 @@ from posecast.online.core.session import (
     SelectorIn,
     Session,
 )
-from posecast.online.engine.selectors import AnomalySelector, ObstacleSelector, TargetSelector
+from posecast.online.engine.selectors import DefaultSelector, ObstacleSelector, TargetSelector
 from posecast.online.protocol.messages import Bye, Calibrate, Hello, Kick, Ping, Pong, Selector
 from posecast.skeleton import Joint
 from tests.online.conftest import make_cfg, token, walk_frame
@@ -202,7 +202,8 @@ def test_backend_selectors_and_kicks() -> None:
     assert isinstance(obs, SelectorIn)
     assert obs.selector == ObstacleSelector(Joint.HEAD, (0, 2, 0), 0.5)
     anomaly = s.handle(Selector("p2", "anomaly", factor=3.0), now)
-    assert isinstance(anomaly, SelectorIn) and anomaly.selector == AnomalySelector(3.0)
+    # The engine's own anomaly selector (its configured baseline and home), factor 3.
+    assert isinstance(anomaly, SelectorIn) and anomaly.selector == DefaultSelector(3.0)
     kick = s.handle(Kick("p2"), now)
     assert isinstance(kick, KickIn) and kick.player == "p2"
 

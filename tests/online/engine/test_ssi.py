@@ -757,3 +757,21 @@ def test_a_new_calibration_reorients_the_frames_already_held(
     np.testing.assert_allclose(pos, cal.apply(frames[4].pos, quat), atol=1e-12)
     want = quat_normalize(quat_mul(frames[4].quat, np.asarray(offsets)))
     np.testing.assert_allclose(np.abs((quat * want).sum(-1)), 1.0, atol=1e-12)
+
+
+def test_a_default_selector_is_the_engines_configured_one(make_engine: MakeEngine) -> None:
+    """What a backend's ``selector`` of kind ``anomaly`` asks for: the anomaly selector
+    the engine gives every player (its baseline and its ``home``, sample 0), with the
+    message's factor; not the class's bare defaults, which turned ``home`` off."""
+    from posecast.online.engine.selectors import DefaultSelector
+
+    engine = make_engine(samples=4, outlier_factor=2.5, home_factor=1.0, outlier_baseline="min")
+    engine.add_player("p", seed=0)
+    first = engine.players["p"].selector
+    assert first == AnomalySelector(2.5, "min", 1.0)
+    engine.set_selector("p", DefaultSelector(3.0))
+    assert engine.players["p"].selector == AnomalySelector(3.0, "min", 1.0)
+    engine.set_selector("p", DefaultSelector(0.5))  # home never above the factor
+    assert engine.players["p"].selector == AnomalySelector(0.5, "min", 0.5)
+    engine.set_selector("p", DefaultSelector())
+    assert engine.players["p"].selector == first

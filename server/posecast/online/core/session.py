@@ -39,7 +39,7 @@ from posecast.online.config import ServerConfig
 from posecast.online.core.clock import ClockEstimator
 from posecast.online.core.ratelimit import TokenBucket
 from posecast.online.engine.calibration import Calibration
-from posecast.online.engine.selectors import AnomalySelector, ObstacleSelector, TargetSelector
+from posecast.online.engine.selectors import DefaultSelector, ObstacleSelector, TargetSelector
 from posecast.online.engine.selectors import Selector as EngineSelector
 from posecast.online.engine.types import TrackerFrame
 from posecast.online.protocol.messages import (
@@ -322,8 +322,8 @@ def _calibration(msg: Calibrate, layout: PlayerLayout) -> Calibration:
 
 
 def _selector(msg: Selector) -> EngineSelector:
-    if msg.kind == "anomaly":
-        return AnomalySelector(msg.factor) if msg.factor is not None else AnomalySelector()
+    if msg.kind == "anomaly":  # the engine's own, as configured (factor: the message's)
+        return DefaultSelector(msg.factor)
     assert msg.joint is not None and msg.point is not None
     joint = Joint[msg.joint]
     if msg.kind == "target":

@@ -162,6 +162,20 @@ def off_the_floor(scores: F64, positions: F64) -> F64:
 
 
 @dataclass(frozen=True)
+class DefaultSelector:
+    """A request for the engine's own :class:`AnomalySelector` (its configured
+    baseline and ``home``), with ``factor`` in place of the configured one where
+    given: what a backend's ``selector`` of kind ``anomaly`` asks for.
+    :meth:`~posecast.online.engine.ssi.Engine.set_selector` resolves it; it never
+    chooses itself."""
+
+    factor: float | None = None
+
+    def choose(self, current: int, scores: F64, positions: F64) -> int | None:
+        raise TypeError("DefaultSelector is resolved by Engine.set_selector")
+
+
+@dataclass(frozen=True)
 class TargetSelector:
     """Hit ``target_m`` (world, metres) with ``joint``; switch when another sample is
     closer by more than ``margin_m`` (hysteresis, so near-ties don't flap)."""

@@ -71,6 +71,7 @@ from posecast.online.engine.leg_ik import senses_legs, solve_legs, tracks_legs
 from posecast.online.engine.pelvis import smooth_pelvis
 from posecast.online.engine.selectors import (
     AnomalySelector,
+    DefaultSelector,
     Selector,
     choose_anomaly_rows,
     off_the_floor,
@@ -228,14 +229,7 @@ class Engine:
         self.players[player] = _Player(
             player,
             slot,
-            selector
-            or AnomalySelector(
-                self.cfg.outlier_factor,
-                self.cfg.outlier_baseline,
-                None
-                if self.cfg.home_factor is None
-                else min(self.cfg.home_factor, self.cfg.outlier_factor),
-            ),
+            self._resolve(selector or DefaultSelector()),
             calibration or Calibration(),
             wf,
         )
@@ -261,7 +255,18 @@ class Engine:
         self.slots["zc"][slot, samples] = self.decoder.cache_latents(rows).reshape(shape)
 
     def set_selector(self, player: str, selector: Selector) -> None:
-        self.players[player].selector = selector
+        """``player`` selects with ``selector`` from the next tick (a
+        :class:`~.selectors.DefaultSelector`: the engine's configured anomaly selector)."""
+        self.players[player].selector = self._resolve(selector)
+
+    def _resolve(self, selector: Selector) -> Selector:
+        if not isinstance(selector, DefaultSelector):
+            return selector
+        factor = self.cfg.outlier_factor if selector.factor is None else selector.factor
+        home = self.cfg.home_factor
+        return AnomalySelector(
+            factor, self.cfg.outlier_baseline, None if home is None else min(home, factor)
+        )
 
     def set_calibration(self, player: str, calibration: Calibration) -> None:
         """Calibrate ``player`` anew from its next frame on. The frames already in its
