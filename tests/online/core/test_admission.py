@@ -156,6 +156,22 @@ def test_room_full() -> None:
     assert h.codes(b) == ["ROOM_FULL"]
 
 
+def test_a_player_of_a_full_room_may_join_it_again_with_another_layout() -> None:
+    """Its seat is its own: the new connection replaces the old one (REPLACED there),
+    rather than being refused as ROOM_FULL for a seat it holds."""
+    from posecast.online.protocol.messages import Welcome
+    from tests.online.conftest import token
+
+    h = Harness(max_players_per_room=1)
+    old = h.join("a")
+    h.inbox(old)
+    new = h.hub.connect("10.0.0.1", h.now)
+    h.send(new, Hello(1, token(room="r1", player="a"), "r1", "A", layout="hmd3"))
+    assert any(isinstance(m, Welcome) for m in h.inbox(new))
+    assert h.codes(old) == ["REPLACED"]
+    assert h.codes(h.join("b")) == ["ROOM_FULL"]  # and the room is still full
+
+
 def test_non_fatal_error_replies_are_budgeted_but_all_counted() -> None:
     h = Harness(error_rate_hz=5.0)
     a = h.join("a")

@@ -251,9 +251,11 @@ class Admission:
         )
         if not takeover:  # ROOM_FULL before anyone is displaced
             if claims.role == "player":
-                self.rooms.check_join(room, as_player=True)
+                # A player of this room joining it again (another layout) has its seat.
+                again = claims.player if self.rooms.room_of(claims.player) == room else ""
+                self.rooms.check_join(room, as_player=True, rejoining=again)
                 if (
-                    len(self.rooms.members(room)) + self.remote.count(room)
+                    len(self.rooms.members(room)) - bool(again) + self.remote.count(room)
                     >= self.limits.max_players
                 ):
                     raise RoomFullError(f"room {room!r} is full across nodes", field="room")

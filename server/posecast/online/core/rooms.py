@@ -50,14 +50,18 @@ class Rooms:
     _player_room: dict[str, str] = field(default_factory=dict)
     _watching: dict[str, tuple[str, ...]] = field(default_factory=dict)
 
-    def check_join(self, room: str, watch: tuple[str, ...] = (), *, as_player: bool) -> None:
-        """Raise ROOM_FULL if joining ``room`` (plus watching ``watch``) would break a limit."""
+    def check_join(
+        self, room: str, watch: tuple[str, ...] = (), *, as_player: bool, rejoining: str = ""
+    ) -> None:
+        """Raise ROOM_FULL if joining ``room`` (plus watching ``watch``) would break a limit;
+        ``rejoining``: a player of ``room`` joining it again, whose seat is its own."""
         wanted = {room, *watch}
         new_rooms = len(wanted - self.rooms.keys())
         if new_rooms and len(self.rooms) + new_rooms > self.max_rooms:
             raise RoomFullError(f"this server already has {self.max_rooms} rooms open")
         r = self.rooms.get(room)
-        if as_player and r is not None and len(r.players) >= self.max_players:
+        seated = r is not None and rejoining in r.players
+        if as_player and r is not None and len(r.players) - seated >= self.max_players:
             raise RoomFullError(f"room {room!r} has {self.max_players} players", field="room")
         if not as_player:
             for name in wanted:
