@@ -177,9 +177,9 @@ def verdict(data: bytes | str, peer: Peer) -> Verdict:
                 return Verdict("DUPLICATE", False, "seq")
             if d < 0:
                 return Verdict("OUT_OF_ORDER", False, "seq")
-        peer.last_seq = msg.seq
         if msg.sites:  # the attackers join with a named layout: trackers, never sites
-            return Verdict("BAD_FIELD", False, "sites")
+            return Verdict("BAD_FIELD", False, "sites")  # refused: its seq counts for nothing
+        peer.last_seq = msg.seq
         return Verdict(None)
     if isinstance(msg, Bye):
         return Verdict(None, bye=True)

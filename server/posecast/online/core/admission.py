@@ -160,7 +160,6 @@ class Admission:
                 limits=self.limits,
                 max_bytes=self.limits.max_message_bytes,
                 version=c.session.version,
-                from_client=True,
             )
             action = c.session.handle(incoming, now)
             if action is not None:

@@ -73,7 +73,6 @@ def decode(
     max_bytes: int | None = None,
     limits: Limits = DEFAULT_LIMITS,
     version: int = PROTOCOL_VERSION,
-    from_client: bool = False,
 ) -> Message:
     """Parse and validate one WebSocket message.
 
@@ -83,9 +82,6 @@ def decode(
         limits: the limits in force (string lengths, rates, ...); defaults to the v1
             maxima, which is what a client should use before its ``welcome``.
         version: the connection's protocol version, 1 or 2.
-        from_client: the server decoding what a client sent: v2's larger bound on a
-            bin (16384 bytes, for ``poses.data`` only) does not apply, a bin stays
-            within 256 bytes as in v1.
 
     Raises:
         ProtocolError: the subclass for the first rule broken, with ``field`` (and
@@ -102,7 +98,7 @@ def decode(
             raw=False,
             strict_map_key=True,
             max_str_len=MAX_STR_BYTES,
-            max_bin_len=MAX_SERVER_MESSAGE_BYTES_V2 if v2 and not from_client else MAX_BIN_BYTES,
+            max_bin_len=MAX_SERVER_MESSAGE_BYTES_V2 if v2 else MAX_BIN_BYTES,
             max_array_len=MAX_ARRAY_LEN,
             max_map_len=MAX_MAP_LEN,
             max_ext_len=0,
