@@ -215,3 +215,23 @@ def test_a_remote_players_calibration_reaches_v2_clients_as_its_skeleton() -> No
     assert isinstance(poses, Poses)
     (rec,) = records.decode_records(poses.data, refs)
     assert np.abs(rec.recon.positions(bones) - pos).max() < 0.002
+
+
+def test_a_node_forgets_the_avatars_of_a_room_it_stops_watching() -> None:
+    """B watches r1 only while a client of its own is there; each time the last one
+    leaves, the remote players it knew of there give back their handles (200 rounds of
+    a v2 client coming and going beside a player of A held 200 handles before)."""
+    broker = MemoryBroker()
+    a, b = Node(broker, "A"), Node(broker, "B")
+    for i in range(50):
+        pa = a.join(f"pa{i}")
+        a.inbox(pa)
+        conn = b.hub.connect("10.0.0.1", b.now, 2)
+        b.hub.receive(conn, encode(Hello(2, token(room="r1", player="pv"), "r1", "PV")), b.now)
+        box = b.hub.outbox(conn)
+        assert box is not None
+        box.take(b.now)
+        b.hub.disconnect(conn, b.now)  # B's last client in r1 leaves: B stops watching it
+        a.hub.disconnect(pa, a.now)
+    assert b.hub.remote.total == 0
+    assert len(b.hub.router.avatars) == 0  # every handle given back (50 held before)

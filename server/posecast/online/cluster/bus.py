@@ -109,13 +109,25 @@ def decode_message(data: bytes) -> BusMessage | None:
             return None
         kind, node = str(body["k"]), str(body["n"])
         if kind == "tick":
-            poses = tuple((str(p), bytes(d)) for p, d in body["p"])
-            return BusMessage(kind, node, poses=poses, events=tuple(body.get("e", ())))
+            # Poses and events are encoded wire messages: bytes, nothing else (an int
+            # here once made bytes(d) allocate d zero bytes).
+            pairs, events = body["p"], body.get("e", [])
+            if not isinstance(pairs, list) or not isinstance(events, list):
+                return None
+            poses = tuple((str(p), d) for p, d in pairs)
+            if not all(isinstance(d, bytes) for _, d in poses):
+                return None
+            if not all(isinstance(e, bytes) for e in events):
+                return None
+            return BusMessage(kind, node, poses=poses, events=tuple(events))
         if kind in ("join", "leave"):
             return BusMessage(kind, node, str(body["p"]), str(body.get("m", "")))
         if kind == "burn":
-            return BusMessage(kind, node, str(body["p"]), exp=int(body["x"]))
-    except (ValueError, KeyError, TypeError, msgpack.UnpackException):
+            exp = body["x"]
+            if type(exp) is not int:
+                return None
+            return BusMessage(kind, node, str(body["p"]), exp=exp)
+    except (ValueError, KeyError, TypeError, OverflowError, msgpack.UnpackException):
         pass
     return None
 

@@ -139,7 +139,13 @@ class ClusterSink:
         new, gone, self._watched = rooms - self._watched, self._watched - rooms, rooms
         for room in gone:
             self.bus.unwatch(room)
-            self.remote.drop_room(room)
+            for player in self.remote.drop_room(room):
+                # Its avatar (handle, skeleton) goes too, unless it is still seen here.
+                held = self.rooms.room_of(player) is not None or any(
+                    self.remote.get(r, player) is not None for r in self.remote.rooms
+                )
+                if not held:
+                    self.router.avatars.release(player)
         for room in new:
             self.bus.watch(room)  # may report the room's remote members at once
         self.metrics.remote_players.set(self.remote.total)

@@ -70,6 +70,10 @@ class Avatars:
     _skeleton: dict[str, bytes] = field(default_factory=dict)
     _default: bytes = field(default_factory=lambda: skeleton2bytes(skeleton_offsets(1.0)))
 
+    def __len__(self) -> int:
+        """How many players hold a handle now."""
+        return len(self._handles)
+
     def handle(self, player: str) -> int:
         """``player``'s handle, assigned on first use (the smallest free one)."""
         h = self._handles.get(player)

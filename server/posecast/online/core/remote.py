@@ -88,11 +88,13 @@ class RemoteRooms:
             del self._left[key]  # older than a read that saw the room after it
         return joined, left
 
-    def drop_room(self, room: str) -> None:
-        """No local audience left in ``room``: stop tracking it."""
-        self._rooms.pop(room, None)
+    def drop_room(self, room: str) -> tuple[str, ...]:
+        """No local audience left in ``room``: stop tracking it; returns the players
+        it held."""
+        members = self._rooms.pop(room, {})
         for key in [k for k in self._left if k[0] == room]:
             del self._left[key]
+        return tuple(members)
 
     def get(self, room: str, player: str) -> RemoteMember | None:
         return self._rooms.get(room, {}).get(player)
