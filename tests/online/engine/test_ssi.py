@@ -658,9 +658,7 @@ def test_the_last_rest_frame_is_not_smoothed_toward_the_first_real_one(
     """A player joined before its first frame stands at the origin until that frame,
     3 m away, is shown: the pelvis smoothing does not pull the last rest pose a
     quarter of the way there (0.75 m before the fix)."""
-    frames = [
-        TrackerFrame(f.seq, f.pos + np.array([3.0, 0.0, 0.0]), f.quat) for f in walk_frames(0)
-    ]
+    frames = _three_metres_away(walk_frames(0))
     engine = make_engine(samples=4, lookahead=2)
     engine.add_player("p", seed=1)
     shown = []
@@ -715,9 +713,7 @@ def test_a_new_calibration_reaches_the_frames_already_in_the_look_ahead(
     on every frame (before the fix the four waiting frames were divided by the new
     scale with the old one in them: 9 cm off), and the next frame's velocities are
     measured from the same calibration (a walk's speed, not a jump)."""
-    frames = [
-        TrackerFrame(f.seq, f.pos + np.array([3.0, 0.0, 0.0]), f.quat) for f in walk_frames(0)
-    ]
+    frames = _three_metres_away(walk_frames(0))
     engine = make_engine(samples=4, lookahead=4)
     engine.add_player("p", seed=1)
     shown = []
@@ -775,3 +771,8 @@ def test_a_default_selector_is_the_engines_configured_one(make_engine: MakeEngin
     assert engine.players["p"].selector == AnomalySelector(0.5, "min", 0.5)
     engine.set_selector("p", DefaultSelector())
     assert engine.players["p"].selector == first
+
+
+def _three_metres_away(frames: list[TrackerFrame]) -> list[TrackerFrame]:
+    """A walk 3 m along +X from the origin, where a misplaced pose shows."""
+    return [TrackerFrame(f.seq, f.pos + np.array([3.0, 0.0, 0.0]), f.quat) for f in frames]

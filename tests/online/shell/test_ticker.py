@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import threading
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -87,27 +87,18 @@ def test_tick_loop_runs_engine_work_in_one_dedicated_thread(worker: EngineWorker
 
     worker.step = spy  # type: ignore[method-assign]
 
-    async def main() -> None:
-        stop = asyncio.Event()
-        inputs = iter([TickInput([EngineOp("add", "a")], {})] + [TickInput([], {})] * 1000)
-        with ThreadPoolExecutor(1, thread_name_prefix="engine") as pool:
-            task = asyncio.create_task(
-                run_ticks(
-                    period_s=1 / 60,
-                    executor=pool,
-                    worker=worker,
-                    take_input=lambda: next(inputs),
-                    deliver=lambda out, now: delivered.append(out),
-                    after=lambda now: None,
-                    overrun=lambda: None,
-                    stop=stop,
-                )
-            )
-            await asyncio.sleep(0.25)
-            stop.set()
-            await task
+    inputs = iter([TickInput([EngineOp("add", "a")], {})] + [TickInput([], {})] * 1000)
 
-    asyncio.run(main())
+    async def quarter_second(task: asyncio.Task[None]) -> None:
+        await asyncio.sleep(0.25)
+
+    _tick(
+        worker,
+        lambda: next(inputs),
+        lambda out, now: delivered.append(out),
+        lambda now: None,
+        quarter_second,
+    )
     assert len(threads) == 1 and next(iter(threads)).startswith("engine")
     assert 8 <= len(delivered) <= 20  # about 60 Hz for a quarter of a second
 
@@ -158,6 +149,24 @@ def test_a_failing_delivery_does_not_stop_the_ticks(worker: EngineWorker) -> Non
         if len(calls) == 2:
             raise RuntimeError("another")
 
+    async def four_deliveries(task: asyncio.Task[None]) -> None:
+        while len(calls) < 4 and not task.done():
+            await asyncio.sleep(0.01)
+
+    _tick(worker, lambda: TickInput([], {}), deliver, after, four_deliveries)
+    assert len(calls) >= 4
+
+
+def _tick(
+    worker: EngineWorker,
+    take_input: Callable[[], TickInput],
+    deliver: Callable[[TickOutput, float], None],
+    after: Callable[[float], None],
+    wait: Callable[[asyncio.Task[None]], Awaitable[None]],
+) -> None:
+    """Run the 60 Hz tick loop on one engine thread until ``wait(task)`` returns, then
+    stop it (a failure that ended the loop raises here)."""
+
     async def main() -> None:
         stop = asyncio.Event()
         with ThreadPoolExecutor(1, thread_name_prefix="engine") as pool:
@@ -166,17 +175,15 @@ def test_a_failing_delivery_does_not_stop_the_ticks(worker: EngineWorker) -> Non
                     period_s=1 / 60,
                     executor=pool,
                     worker=worker,
-                    take_input=lambda: TickInput([], {}),
+                    take_input=take_input,
                     deliver=deliver,
                     after=after,
                     overrun=lambda: None,
                     stop=stop,
                 )
             )
-            while len(calls) < 4 and not task.done():
-                await asyncio.sleep(0.01)
+            await wait(task)
             stop.set()
-            await task  # a failure that ended the ticks raises here
+            await task
 
     asyncio.run(main())
-    assert len(calls) >= 4
