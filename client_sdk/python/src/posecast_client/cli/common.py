@@ -46,11 +46,17 @@ _WIRE_HINTS = {
 }
 
 
-def usage_error(prog: str, message: str, hint: str, code: str = CONFIG_INVALID) -> NoReturn:
-    """Print ``prog: error [CODE]: message`` and ``hint: hint`` on stderr and exit 2,
-    the status of a command-line mistake (``code``: CONFIG_INVALID, or a file's)."""
+def print_error(prog: str, code: str, message: str, hint: str) -> None:
+    """``prog: error [CODE]: message`` and ``hint: hint`` on stderr: the format of
+    every error the tools report (the server CLI's)."""
     print(f"{prog}: error [{code}]: {message}", file=sys.stderr)
     print(f"hint: {hint}", file=sys.stderr)
+
+
+def usage_error(prog: str, message: str, hint: str, code: str = CONFIG_INVALID) -> NoReturn:
+    """:func:`print_error` and exit 2, the status of a command-line mistake (``code``:
+    CONFIG_INVALID, or a file's)."""
+    print_error(prog, code, message, hint)
     raise SystemExit(2)
 
 
@@ -81,9 +87,7 @@ def describe(exc: BaseException, url: str) -> tuple[str, str, str]:
 
 def failure(prog: str, exc: BaseException, url: str) -> NoReturn:
     """Print :func:`describe`'s code, message and hint for ``exc`` and exit 1."""
-    code, message, hint = describe(exc, url)
-    print(f"{prog}: error [{code}]: {message}", file=sys.stderr)
-    print(f"hint: {hint}", file=sys.stderr)
+    print_error(prog, *describe(exc, url))
     raise SystemExit(1)
 
 

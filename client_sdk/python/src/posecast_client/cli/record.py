@@ -101,7 +101,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         try:
             exported = export_bvh(read_recording(path), args.bvh)
         except Exception as exc:
-            failure(P, exc, getattr(args, "url", None) or "")
+            failure(P, exc, args.url or "")
         for player, bvh in exported.items():
             print(f"{player}: {bvh}")
     return 0

@@ -51,6 +51,7 @@ from posecast_client.cli.common import (
     add_server_arguments,
     connect_patiently,
     describe,
+    print_error,
     resolve_server,
     stop_on_signals,
     token_for,
@@ -443,12 +444,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     codes = list(summary["failure_codes"].values())
     if codes:  # the commonest failure, with its code and hint
         code = max(set(codes), key=codes.count)
-        print(
-            f"{P}: error [{code}]: {len(codes)} of {summary['sessions']} player sessions failed",
-            file=sys.stderr,
-        )
-        hint = summary["failure_hints"][code] or "see the failures above"
-        print(f"hint: {hint}", file=sys.stderr)
+        failed = f"{len(codes)} of {summary['sessions']} player sessions failed"
+        print_error(P, code, failed, summary["failure_hints"][code] or "see the failures above")
     return 1 if summary["failed"] else 0
 
 
