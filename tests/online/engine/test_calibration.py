@@ -192,3 +192,25 @@ def test_calibrating_all_players_at_once_gives_each_ones_bits(rng: np.random.Gen
         np.testing.assert_array_equal(oriented[i], c.orient(quat[i]))
         np.testing.assert_array_equal(placed[i], c.apply(raw[i], oriented[i]))
     assert not np.array_equal(oriented, quat) and not np.array_equal(placed, raw)
+
+
+def test_recalibrate_gives_what_the_new_calibration_gives_raw_frames() -> None:
+    """Frames calibrated by one calibration, re-expressed in another, are what the other
+    makes of the raw frames (scale, waist offset and device rotation offsets alike)."""
+    from posecast.geometry.rotations import quat_normalize
+    from posecast.online.engine.calibration import apply_all, orient_all, recalibrate
+
+    rng = np.random.default_rng(4)
+    raw_pos = rng.normal(size=(6, 4, 3))
+    raw_q = quat_normalize(rng.normal(size=(6, 4, 4)))
+
+    def offsets() -> tuple[tuple[float, float, float, float], ...]:
+        return tuple(tuple(map(float, q)) for q in quat_normalize(rng.normal(size=(4, 4))))
+
+    old = Calibration(1.1, (0.01, -0.02, 0.03), offsets())
+    for new in (Calibration(0.9, (0.0, 0.05, -0.01), offsets()), Calibration(), old):
+        q_old = orient_all([old] * 6, raw_q)
+        pos, q = recalibrate(old, new, apply_all([old] * 6, raw_pos, q_old), q_old)
+        q_new = orient_all([new] * 6, raw_q)
+        np.testing.assert_allclose(np.abs((q * q_new).sum(-1)), 1.0, atol=1e-12)
+        np.testing.assert_allclose(pos, apply_all([new] * 6, raw_pos, q_new), atol=1e-12)

@@ -156,6 +156,24 @@ def apply_all(calibrations: Sequence[Calibration], pos: F64, quat: F64) -> F64:
     return out
 
 
+def recalibrate(old: Calibration, new: Calibration, pos: F64, quat: F64) -> tuple[F64, F64]:
+    """Frames ``pos (F, rows, 3)`` / ``quat (F, rows, 4)`` that ``old`` calibrated
+    (:func:`orient_all`, then :func:`apply_all`), as ``new`` calibrates them: ``old``
+    taken off, then ``new`` applied by the same two functions."""
+    raw_q = quat
+    if old.rot_offsets:
+        raw_q = quat_mul(quat, quat_conj(np.asarray(old.rot_offsets)))
+    raw = np.array(pos, dtype=np.float64, copy=True)
+    if any(old.waist_offset_m):
+        raw[:, TrackerSlot.WAIST] += quat_apply(
+            quat[:, TrackerSlot.WAIST], np.asarray(old.waist_offset_m)
+        )
+    raw /= old.scale
+    news = [new] * len(pos)
+    q = orient_all(news, raw_q)
+    return apply_all(news, raw, q), q
+
+
 @dataclass
 class WaistFilter:
     """One-pole low-pass on the waist orientation, by slerp toward each new sample.

@@ -51,18 +51,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from posecast.geometry.fk import fk_positions
-from posecast.geometry.rotations import (
-    mat2quat,
-    quat2mat,
-    quat_apply,
-    quat_conj,
-    quat_mul,
-    quat_normalize,
-)
+from posecast.geometry.rotations import mat2quat, quat2mat
 from posecast.online.engine.apart import MAX_OVERLAP_M, keep_apart, overlap
 from posecast.online.engine.backend import Decoder, Pool, PoolIK
 from posecast.online.engine.batch_fk import fk32, pelvis_from_head32
-from posecast.online.engine.calibration import Calibration, WaistFilter, apply_all, orient_all
+from posecast.online.engine.calibration import (
+    Calibration,
+    WaistFilter,
+    apply_all,
+    orient_all,
+    recalibrate,
+)
 from posecast.online.engine.clearance import TOES, clearance_lift, toe_speed
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.hinge import ELBOW_LIMBS, KNEE_LIMBS
@@ -280,18 +279,9 @@ class Engine:
             return
         s, k = self.slots, p.slot
         ratio = calibration.scale / old.scale
-        q = s["ring_quat"][:, k]  # (L, rows, 4), oriented by the old offsets
-        if old.rot_offsets or calibration.rot_offsets:
-            rows = q.shape[1]
-            before = np.asarray(old.rot_offsets or [_IDENT] * rows)
-            after = np.asarray(calibration.rot_offsets or [_IDENT] * rows)
-            q = quat_normalize(quat_mul(quat_mul(q, quat_conj(before)), after))
-        pos = s["ring_pos"][:, k] * ratio
-        w = TrackerSlot.WAIST  # calibration.apply_all's waist offset, taken off and put on
-        pos[:, w] += quat_apply(s["ring_quat"][:, k, w], np.asarray(old.waist_offset_m)) * ratio
-        pos[:, w] -= quat_apply(q[:, w], np.asarray(calibration.waist_offset_m))
+        pos, q = recalibrate(old, calibration, s["ring_pos"][:, k], s["ring_quat"][:, k])
         if not self.layout.predicts_root:  # the pelvis is the waist tracker's
-            s["ring_rootm"][:, k] = quat2mat(q[:, w])
+            s["ring_rootm"][:, k] = quat2mat(q[:, TrackerSlot.WAIST])
         s["ring_pos"][:, k], s["ring_quat"][:, k] = pos, q
         for name in ("ik_lock_pos", "disp_lock_pos"):
             s[name][k] *= ratio
