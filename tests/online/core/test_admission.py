@@ -101,6 +101,33 @@ def test_reconnect_with_the_same_player_takes_over_silently() -> None:
     assert h.hub.rooms.room_of("a") == "r1" and h.hub.connections.by_player["a"] == a2
 
 
+@pytest.mark.parametrize(
+    ("name", "rate_hz"), [("Ann", None), ("A", 90.0)], ids=["new name", "new input rate"]
+)
+def test_a_reconnect_with_another_name_or_input_rate_leaves_and_joins_again(
+    name: str, rate_hz: float | None
+) -> None:
+    """The room learns the new name from a fresh join; the engine takes the new rate's
+    frame queue. The same name and rate take over silently (the test above)."""
+    h = Harness()
+    a1, b = h.join("a"), h.join("b")
+    h.send(a1, walk_frame(0))
+    h.inbox(a1), h.inbox(b)
+    assert [op.kind for op in h.hub.take_tick_input().ops] == ["add"]
+    a2 = h.hub.connect("10.0.0.1", h.now)
+    h.send(a2, Hello(1, token(room="r1", player="a"), "r1", name, rate_hz=rate_hz))
+    assert h.codes(a1) == ["REPLACED"]
+    assert isinstance(h.inbox(a2)[0], Welcome)
+    assert h.inbox(b) == [Presence("leave", "r1", "a", "A"), Presence("join", "r1", "a", name)]
+    assert h.hub.rooms.name_of("a") == name
+    for seq in (1, 2):  # two frames in one tick: a fast sender keeps only its newest
+        h.send(a2, walk_frame(seq))
+    ops = h.hub.take_tick_input().ops
+    assert [(op.kind, op.player) for op in ops] == [("remove", "a"), ("add", "a")]
+    superseded = {"reason": "superseded"}
+    assert h.hub.metrics.value("posecast_frames_dropped_total", superseded) == (rate_hz == 90)
+
+
 def test_bye_burns_the_token() -> None:
     h = Harness()
     tok = token(player="a")

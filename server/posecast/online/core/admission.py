@@ -241,12 +241,14 @@ class Admission:
         claims, room = join.claims, join.rooms[0]
         self.replay.check(claims, now + self.wall_offset_s)
         old = self.conns.of_player(claims.player)
-        takeover = (
+        takeover = (  # the same seat as it was: the room sees nothing
             old is not None
             and claims.role == "player"
             and old.session.role == "player"
             and self.rooms.room_of(claims.player) == room
             and old.session.layout == join.layout
+            and old.session.name == join.hello.name
+            and self._fast(old.session.rate_hz) == self._fast(join.hello.rate_hz)
         )
         if not takeover:  # ROOM_FULL before anyone is displaced
             if claims.role == "player":
@@ -277,9 +279,9 @@ class Admission:
             if moved is not None:  # it was in this room on a node that failed: now here
                 self.remote.leave(room, claims.player, moved.node, now)
             self.rooms.add_player(room, claims.player, join.hello.name)
-            fast = (join.hello.rate_hz or 60.0) > self.cfg.tick_hz  # see core/tick.py
             seed = zlib.crc32(claims.player.encode())
-            self.inbox.joined(claims.player, seed, join.layout, queue=1 if fast else None)
+            queue = 1 if self._fast(join.hello.rate_hz) else None
+            self.inbox.joined(claims.player, seed, join.layout, queue=queue)
             self.bus.joined(room, claims.player, join.hello.name)
             join_msg = Presence("join", room, claims.player, join.hello.name)
             self.router.to_room(room, join_msg, now, skip=claims.player)
@@ -295,6 +297,10 @@ class Admission:
             extra={"player": claims.player, "role": claims.role, "room": room,
                    "takeover": takeover, "ip": c.session.ip},
         )  # fmt: skip
+
+    def _fast(self, rate_hz: float | None) -> bool:
+        """A player sending faster than the tick keeps only its newest frame (core/tick.py)."""
+        return (rate_hz or 60.0) > self.cfg.tick_hz
 
     def _welcome(self, s: Session, room: str, now: float) -> Welcome:
         return Welcome(  # the router adds the v2 fields for a v2 client

@@ -147,6 +147,7 @@ class Session:
     phase: Phase = Phase.AWAIT_HELLO
     claims: Claims | None = None
     name: str = ""
+    rate_hz: float | None = None  # the hello's input rate (absent: 60)
     rooms: tuple[str, ...] = ()
     layout: PlayerLayout = Layout.HMD3_WAIST  # the hello's tracker layout or set, once joined
     last_seq: int | None = None
@@ -234,6 +235,7 @@ class Session:
         self.claims = join.claims
         self.layout = join.layout
         self.name = join.hello.name
+        self.rate_hz = join.hello.rate_hz
         self.rooms = join.rooms
 
     def _frame(self, msg: Frame, now: float) -> FrameIn:
