@@ -43,3 +43,34 @@ def test_a_keep_snapshot_adds_members_but_removes_none() -> None:
     assert {m.player for m in h.hub.remote.members("r1")} == {"m", "q"}
     h.hub.sink.remote_snapshot("r1", {"q": ("node-c", "Q")}, h.now + 5, h.now + 5)  # grace over
     assert h.inbox(a) == [Presence("leave", "r1", "m", "M")]
+
+
+def test_a_tick_carries_stale_and_active_only_for_the_nodes_current_players() -> None:
+    """A ``stale`` batched on node B before its player's leave can be read here after
+    the leave: the room heard ``leave`` already and must not hear of the player again.
+    A tick's events are never joins or leaves (those are announcements), nor another
+    node's or room's players."""
+    from posecast.online.protocol import encode
+
+    h = Harness()
+    a = h.join("a")
+    h.inbox(a)
+    sink = h.hub.sink
+    sink.remote_snapshot("r1", {"m": ("node-b", "M")}, h.now, h.now)
+    h.inbox(a)
+    stale = encode(Presence("stale", "r1", "m", "M"))
+    sink.remote_tick("r1", "node-b", [], [stale], h.now)
+    assert h.inbox(a) == [Presence("stale", "r1", "m", "M")]
+    refused = [
+        ("node-c", stale),  # not node-c's player
+        ("node-b", encode(Presence("leave", "r1", "m", "M"))),
+        ("node-b", encode(Presence("active", "r2", "m", "M"))),
+        ("node-b", b"\xc1"),
+    ]
+    for node, data in refused:
+        sink.remote_tick("r1", node, [], [data], h.now)
+    sink.remote_leave("r1", "m", "node-b", h.now)
+    sink.remote_tick("r1", "node-b", [], [encode(Presence("active", "r1", "m", "M"))], h.now)
+    assert h.inbox(a) == [Presence("leave", "r1", "m", "M")]
+    dropped = {"reason": "unknown_player"}
+    assert h.hub.metrics.value("posecast_bus_dropped_total", dropped) == len(refused) + 1

@@ -12,13 +12,14 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING
 
-from posecast.errors import ReplacedError
+from posecast.errors import ProtocolError, ReplacedError
 from posecast.online.auth.tokens import Claims, ReplayGuard
 from posecast.online.cluster.bus import Bus
 from posecast.online.core.connections import Conn, Connections
 from posecast.online.core.remote import RemoteRooms
 from posecast.online.core.rooms import Rooms
 from posecast.online.core.routing import Router
+from posecast.online.protocol import decode
 from posecast.online.protocol.messages import Error, Presence
 
 if TYPE_CHECKING:
@@ -84,11 +85,27 @@ class ClusterSink:
                 continue
             superseded += self.router.pose_to_room(room, player, data, now)
         for data in events:
-            self.router.bytes_to_room(room, data, now)
+            if self._member_event(room, node, data):
+                self.router.bytes_to_room(room, data, now)
+            else:
+                unknown += 1
         if unknown:
             self.metrics.bus_dropped.labels("unknown_player").inc(unknown)
         if superseded:
             self.metrics.poses_superseded.inc(superseded)
+
+    def _member_event(self, room: str, node: str, data: bytes) -> bool:
+        """``data`` is a ``stale``/``active`` presence of a player ``node`` has in
+        ``room`` as this node sees it now (not one that has left meanwhile: its leave
+        was announced here already, and a client would not hear of it again)."""
+        try:
+            ev = decode(data)
+        except ProtocolError:
+            return False
+        if not isinstance(ev, Presence) or ev.event not in ("stale", "active") or ev.room != room:
+            return False
+        m = self.remote.get(room, ev.player)
+        return m is not None and m.node == node
 
     def remote_snapshot(
         self,
