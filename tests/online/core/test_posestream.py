@@ -13,7 +13,7 @@ from posecast.online.protocol.messages import Poses
 from posecast.online.protocol.records import PoseState
 
 
-def _walk(n: int, seed: int = 0) -> list[PoseState]:
+def _walk(n: int, seed: int = 0, player: str = "a") -> list[PoseState]:
     rng = np.random.default_rng(seed)
     axes = rng.normal(size=(19, 3))
     out = []
@@ -21,7 +21,7 @@ def _walk(n: int, seed: int = 0) -> list[PoseState]:
         items = records.rotvec2quat(axes * 0.3 * np.sin(k / 9.0 + np.arange(19))[:, None])
         pos = np.zeros((19, 3))
         pos[0] = (0.02 * k, 0.95, 0.0)
-        out.append(PoseState.from_engine("a", k, k / 60, pos, records.items2world(items)))
+        out.append(PoseState.from_engine(player, k, k / 60, pos, records.items2world(items)))
     return out
 
 
@@ -84,7 +84,7 @@ def test_clients_in_step_share_one_encoding_and_resync_gives_keyframes() -> None
         _put(boxes, state, k / 60)
         if k == 3:
             assert boxes[1].stream is not None
-            boxes[1].stream.resync = True
+            boxes[1].stream.request_resync()
         sent = [b.take(k / 60) for b in boxes]
         for c, data in zip(clients, sent, strict=True):
             msg = decode(data[0], version=2)
@@ -95,6 +95,32 @@ def test_clients_in_step_share_one_encoding_and_resync_gives_keyframes() -> None
         assert len(state._deltas) <= (1 if k <= 3 else 2)  # once per distinct reference
     assert [r.keyframe for r in clients[0].got] == [True] + [False] * 5
     assert [r.keyframe for r in clients[1].got] == [True, False, False, True, False, False]
+
+
+def test_after_a_resync_a_paused_avatar_resumes_with_a_keyframe() -> None:
+    """The client dropped every reference: an avatar with no pose in the next tick
+    (its frames paused) must not resume with a delta the client cannot apply."""
+    box = Outbox(8, PoseStream())
+    assert box.stream is not None
+    box.stream.announce("a", 0)
+    box.stream.announce("b", 1)
+    a, b = _walk(8), _walk(8, seed=1, player="b")
+    client = Client()
+    client.refs[1] = None
+    for k in range(3):
+        _put([box], a[k], k / 60)
+        _put([box], b[k], k / 60)
+        client.read(box, k / 60)
+    box.stream.request_resync()
+    client.refs = {0: None, 1: None}  # what a client that asked for it holds
+    for k in range(3, 8):
+        _put([box], a[k], k / 60)
+        if k >= 6:  # b was paused for three ticks
+            _put([box], b[k], k / 60)
+        client.read(box, k / 60)
+    got = [(r.handle, r.keyframe) for r in client.got[6:]]
+    assert got == [(0, True), (0, False), (0, False), (0, False), (1, True), (0, False),
+                   (1, False)]  # fmt: skip
 
 
 def test_pose_rate_takes_every_kth_tick_and_unknown_avatars_wait() -> None:

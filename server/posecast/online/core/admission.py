@@ -223,7 +223,7 @@ class Admission:
             if isinstance(action, PoseRateIn):
                 stream.set_rate(action.rate_hz)
             else:
-                stream.resync = True
+                stream.request_resync()
         elif isinstance(action, KickIn):
             target = self._watched_player(s, action.player)
             kicked = KickedError(action.reason[: self.limits.max_text_bytes])

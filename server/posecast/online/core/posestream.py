@@ -144,7 +144,7 @@ class PoseStream:
     """One v2 connection's view: announced avatars, pose rate, references."""
 
     pose_rate_hz: float = 60.0
-    resync: bool = False  # keyframes of every avatar with the next poses
+    resync: bool = False  # the next poses: keyframes, also of deltas already prepared
     known: dict[str, int] = field(default_factory=dict)  # player -> handle announced
     refs: dict[str, Recon] = field(default_factory=dict)  # what the client holds
     last_key: dict[str, float] = field(default_factory=dict)  # when each keyframe went
@@ -156,6 +156,12 @@ class PoseStream:
         assert rate_hz in POSE_RATES_HZ
         self.pose_rate_hz = rate_hz
         self.every = round(_TICK_HZ / rate_hz)
+
+    def request_resync(self) -> None:
+        """The client dropped its references: every avatar's next record is a keyframe,
+        in the next poses for those posing now and whenever a paused one resumes."""
+        self.resync = True
+        self.refs.clear()
 
     def accepts(self, tick: int) -> bool:
         """Whether tick number ``tick`` is one of this client's (every k-th tick)."""
