@@ -99,3 +99,38 @@ def test_backoff_doubles_with_jitter_up_to_the_cap() -> None:
         assert nominal / 2 <= d <= nominal
     assert is_retryable(OSError()) and is_retryable(TimeoutError())
     assert not is_retryable(ValueError())
+
+
+def test_a_bad_record_drops_every_reference_and_asks_for_a_resync_at_most_every_quarter_second() -> (
+    None
+):
+    """The records a bad one made the client skip moved the server's references on: a
+    later delta is refused until keyframes come, never decoded into a wrong pose."""
+    import json
+    from pathlib import Path
+
+    from posecast_client.codec import decode
+    from posecast_client.protocol import Poses
+
+    cases = json.loads((Path(__file__).parents[3] / "proto/vectors/poses.json").read_text())
+    c = next(c for c in cases if c.get("name") == "poses_stream_two_avatars")
+    s = ClientSession()
+    s.connected(2)
+    for a in c["avatars"]:
+        s.avatars.announce(a["player"], a["handle"], bytes.fromhex(a["skeleton"]["$bin"]))
+    msgs = [decode(bytes.fromhex(h), version=2) for h in c["messages"]]
+    assert all(isinstance(m, Poses) for m in msgs)
+    first, second = msgs[0], msgs[1]
+    assert isinstance(first, Poses) and isinstance(second, Poses)
+    good, _ = s.receive_all(first, 0.0)
+    assert len(good) >= 2 and not s.want_resync
+    bad, _ = s.receive_all(Poses(first.t, first.data + b"\x7f\x01"), 1.0)  # handle 127
+    assert bad == [] and s.want_resync and s.stats.bad_records == 1
+    s.want_resync = False  # the client sent it
+    refused, _ = s.receive_all(second, 1.1)  # deltas: no reference to apply them to
+    assert refused == [] and s.stats.bad_records == 2
+    assert not s.want_resync  # 0.1 s after the last request
+    s.receive_all(second, 1.3)
+    assert s.want_resync
+    keyed, _ = s.receive_all(first, 1.4)  # the resync's keyframes
+    assert [p.seq for p in keyed] == [p.seq for p in good]

@@ -102,9 +102,12 @@ export class AvatarTable {
       this.avatars.delete(old);
       this.states.delete(old);
     }
+    const known = this.avatars.get(handle);
     this.handles.set(player, handle);
     this.avatars.set(handle, { player, offsets: skeleton2offsets(skeleton) });
-    this.states.set(handle, null);
+    // A new avatar on this handle waits for a keyframe; the same one announced again
+    // keeps its reference (the server's PoseStream.announce keeps it and goes on with deltas).
+    if (known === undefined || known.player !== player) this.states.set(handle, null);
   }
 
   private pose(rec: DecodedRecord, t: number): Pose {

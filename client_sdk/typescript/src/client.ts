@@ -546,6 +546,9 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
         for (const pose of poses) this.onPose(pose);
         if (error !== undefined) {
           this.badRecordsNow++;
+          // The records after the bad one were skipped: their references are stale now.
+          // Drop every reference so no delta applies to a stale one (as the C# SDK does).
+          this.avatars.dropState();
           this.queue.push({ type: "error", error });
           if (this.now() - this.lastResyncT >= RESYNC_GAP_S) this.resync();
         }

@@ -72,6 +72,10 @@ export class EventQueue {
         return;
       }
     }
+    // A presence (leave, join) or a welcome orders a player's poses: a later pose must not
+    // replace an unread one queued before it, or it would be read before the presence.
+    if (ev.type === "presence") this.unreadPose.delete(ev.player);
+    else if (ev.type === "welcome") this.unreadPose.clear();
     const slot = { ev };
     this.items.push(slot);
     if (ev.type === "pose") this.unreadPose.set(ev.player, slot);

@@ -192,6 +192,30 @@ test("v2: a record that cannot be applied is an error event and a resync, never 
   }
 });
 
+test("v2: after a bad record every reference is dropped, so no later delta decodes against a stale one", async () => {
+  // The records the client skipped moved the server's references on: a delta after them
+  // is refused (BAD_FIELD) until the resync's keyframes, never shown as a wrong pose.
+  const stream = STREAMS.get("poses_stream_two_avatars")!;
+  const server = await new ScriptedServer(SUBPROTOCOL_V2, membersOf(stream)).ready();
+  try {
+    const client = await connect(server.url, "tok", OPTIONS);
+    await client.join("lobby", "Ada");
+    const first = fromHex(stream.messages[0]!);
+    const msg = decode(first, { version: 2 });
+    assert.ok(msg.type === "poses");
+    server.send({ ...msg, data: Uint8Array.from([...msg.data, 0x7f, 0x01]) }); // handle 127: bad
+    await until("the bad record", () => client.badRecords === 1);
+    const seqs = new Map([...client.poses].map(([p, pose]) => [p, pose.seq]));
+    server.sendRaw(fromHex(stream.messages[1]!)); // deltas against the first message's state
+    await until("the refused deltas", () => client.badRecords === 2);
+    assert.deepEqual(new Map([...client.poses].map(([p, pose]) => [p, pose.seq])), seqs);
+    await until("resync", () => server.received.some((m) => m.type === "resync"));
+    await client.close();
+  } finally {
+    await server.close();
+  }
+});
+
 test("v1 fallback: a server that selects posecast.v1 gets a v1 hello, and no pose rates", async () => {
   const server = await new ScriptedServer(SUBPROTOCOL, [{ player: "p1", name: "Ada" }]).ready();
   try {

@@ -4,13 +4,13 @@ import assert from "node:assert/strict";
 import { test } from "node:test";
 
 import { EventQueue } from "../src/events.js";
-import type { Pose, Presence } from "../src/messages.js";
+import type { Pose, Presence, Welcome } from "../src/messages.js";
 
 const pose = (player: string, seq: number): Pose => ({
   type: "pose", player, seq, t: seq, positions: new Float64Array(57),
 });
-const presence = (player: string): Presence => ({
-  type: "presence", event: "join", room: "r", player, name: player,
+const presence = (player: string, event: Presence["event"] = "join"): Presence => ({
+  type: "presence", event, room: "r", player, name: player,
 });
 
 async function drain(q: EventQueue): Promise<string[]> {
@@ -20,7 +20,8 @@ async function drain(q: EventQueue): Promise<string[]> {
     const r = await q.next();
     if (r.done) return out;
     const ev = r.value;
-    out.push(ev.type === "pose" ? `${ev.player}${ev.seq}` : ev.type === "presence" ? `+${ev.player}` : ev.type);
+    const sign = (e: Presence): string => (e.event === "join" ? "+" : e.event === "leave" ? "-" : `${e.event} `);
+    out.push(ev.type === "pose" ? `${ev.player}${ev.seq}` : ev.type === "presence" ? `${sign(ev)}${ev.player}` : ev.type);
   }
 }
 
@@ -32,6 +33,21 @@ test("an unread pose is replaced in place by the same player's newer pose", asyn
   q.push(pose("a", 2));
   q.push(pose("a", 3));
   assert.deepEqual(await drain(q), ["a3", "+b", "b1"]);
+});
+
+test("a player's pose after its leave and join stays after them", async () => {
+  // A rejoin (another name or layout) on the server: the new session's pose must not
+  // take the old unread pose's place, before the leave.
+  const q = new EventQueue(10);
+  q.push(pose("a", 1));
+  q.push(presence("a", "leave"));
+  q.push(presence("a"));
+  q.push(pose("a", 2));
+  q.push(pose("a", 3));
+  q.push(pose("b", 1));
+  q.push({ type: "welcome", welcome: {} as Welcome, resumed: true });
+  q.push(pose("b", 2));
+  assert.deepEqual(await drain(q), ["a1", "-a", "+a", "a3", "b1", "welcome", "b2"]);
 });
 
 test("a slow reader costs one pose per player plus the bound", async () => {

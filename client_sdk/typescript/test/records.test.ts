@@ -123,3 +123,23 @@ test("the records before a bad one are kept, and a keyframe starts afresh after 
   assert.equal(again.error, undefined);
   assert.deepEqual(again.poses.map((p) => p.positions), good.poses.map((p) => p.positions));
 });
+
+test("a join of a known player on its own handle keeps its reference; another player's does not", () => {
+  // Cluster failover: the player moved from another node to this one and is announced
+  // again on the same handle, and the server goes on with deltas against its reference.
+  const c = STREAMS.find((s) => s.name === "poses_stream_two_avatars")!;
+  const [first, second] = c.messages.map(dataOf);
+  const table = new AvatarTable();
+  const ms = members(c);
+  table.reset(ms);
+  assert.equal(table.poses({ type: "poses", t: 1, data: first! }).error, undefined);
+  const m = ms[0]!;
+  table.presence({ type: "presence", event: "join", room: "r", player: m.player, name: "again",
+    handle: m.handle!, skeleton: m.skeleton! });
+  const kept = table.poses({ type: "poses", t: 2, data: second! });
+  assert.equal(kept.error, undefined);
+  table.presence({ type: "presence", event: "join", room: "r", player: "someone-else", name: "x",
+    handle: m.handle!, skeleton: m.skeleton! });
+  const fresh = table.poses({ type: "poses", t: 3, data: c.messages.map(dataOf)[2]! });
+  assert.match(fresh.error?.message ?? "", /before its keyframe/);
+});

@@ -60,6 +60,8 @@ from posecast_client.records import (
 )
 from posecast_client.sites import TrackerSet
 
+RESYNC_GAP_S = 0.25  # at most one automatic resync this often (as the TypeScript SDK)
+
 
 @dataclass(frozen=True, slots=True)
 class Reconnecting:
@@ -131,6 +133,11 @@ class AvatarTable:
         self.players[handle] = player
         self.offsets[handle] = skeleton2offsets(skeleton)
 
+    def drop_states(self) -> None:
+        """Drop every reference: each avatar's next record must be a keyframe."""
+        for handle in self.states:
+            self.states[handle] = None
+
     def forget(self, handle: int) -> None:
         self.players.pop(handle, None)
         self.offsets.pop(handle, None)
@@ -142,8 +149,9 @@ class AvatarTable:
                 self.forget(h)
 
     def poses(self, msg: Poses) -> list[Pose]:
-        """The records of ``msg`` as poses (raises BadFieldError for a bad record; the
-        records before it are applied)."""
+        """The records of ``msg`` as poses. Raises BadFieldError for a bad record; the
+        caller then drops every reference (:meth:`drop_states`): some of the message's
+        records were not applied, so the server's references and these differ."""
         recs = decode_records(msg.data, self.states)
         if not recs:
             return []
@@ -183,6 +191,7 @@ class ClientSession:
     version: int = PROTOCOL_VERSION  # of the current connection
     avatars: AvatarTable = field(default_factory=AvatarTable)
     want_resync: bool = False  # a record could not be applied: ask for keyframes
+    _resync_at: float = -1e18  # when the last one was asked for
     last_seq: int | None = None
     last_t: float = 0.0
     # The player's tracker set (frames carry its rows as ``sites``), None: 4 slots.
@@ -293,6 +302,7 @@ class ClientSession:
         self.version = version
         self.avatars.clear()
         self.want_resync = False
+        self._resync_at = -1e18
 
     def receive_all(
         self, msg: Message, now: float, size: int = 0
@@ -305,8 +315,13 @@ class ClientSession:
             try:
                 poses = self.avatars.poses(msg)
             except ProtocolError:
+                # Skipped records moved the server's references on: no delta after them
+                # can be trusted until the resync's keyframes (as the other SDKs do).
+                self.avatars.drop_states()
                 self.stats.bad_records += 1
-                self.want_resync = True
+                if now - self._resync_at >= RESYNC_GAP_S:  # the server rate-limits them
+                    self._resync_at = now
+                    self.want_resync = True
                 return [], None
             self.stats.poses += len(poses)
             return list(poses), None
