@@ -211,8 +211,20 @@ def test_token_mints_a_token_the_server_verifies(capsys, monkeypatch) -> None:
         ["--ttl", str(10**9)],
         ["--rooms", "A,B"],  # extra rooms are for backends
         ["--secret", "short"],
+        ["--player", "a b"],  # not a wire id: every client's decoder would refuse it
+        ["--player", "p" * 65],
+        ["--room", "lob by"],
     ],
-    ids=["ttl-0", "ttl-negative", "ttl-too-long", "rooms-without-backend", "short-secret"],
+    ids=[
+        "ttl-0",
+        "ttl-negative",
+        "ttl-too-long",
+        "rooms-without-backend",
+        "short-secret",
+        "player-not-an-id",
+        "player-too-long",
+        "room-not-an-id",
+    ],
 )
 def test_token_user_error(capsys, monkeypatch, extra: list[str]) -> None:
     monkeypatch.setenv("POSECAST_TOKEN_SECRET", "e" * 32)
@@ -409,6 +421,7 @@ def test_eval_apps_user_error(bvh_dir: Path, tmp_path: Path, capsys) -> None:
         ["--backend", "onnx,onnx"],
         ["--backend", "native,"],
         ["--json", "/no/such/dir/bench.json"],
+        ["--threads", "65"],  # the engine's pool takes 1 to 64
     ],
 )
 def test_bench_engine_user_error(capsys, extra: list[str]) -> None:

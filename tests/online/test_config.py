@@ -61,6 +61,11 @@ def test_env_values_are_typed() -> None:
         {"log_level": "LOUD"},
         {"wrist_elbow": 1.5},
         {"wrist_elbow": float("nan")},
+        {"engine_threads": 65},  # the engine's pool takes 1 to 64
+        {"socket_sndbuf_bytes": 2**31},  # SO_SNDBUF is a C int
+        {"redis_node_ttl_s": float("nan")},
+        {"redis_node_ttl_s": float("inf")},
+        {"redis_url": "redis://127.0.0.1:notaport/0"},
     ],
 )
 def test_bad_values_are_refused_once_at_the_edge(change: dict[str, object]) -> None:

@@ -18,6 +18,7 @@ from posecast_client.cli import record, sim
 from posecast_client.protocol import Pose, Presence, Welcome
 from posecast_client.recording import read_recording
 from posecast_client.skeleton import JOINT_NAMES
+from posecast_client.tokens import mint_token
 from sdk_helpers import DevServer
 
 DATA = Path(__file__).resolve().parent / "data"
@@ -130,8 +131,9 @@ def test_record_failures_print_a_code_and_a_hint(
     err = _failure(capsys, record.main, [*server, "--secret", "w" * 20, "--room", "r"],
                    "UNAUTHENTICATED")  # fmt: skip
     assert "token signature does not verify" in err
-    err = _failure(capsys, record.main, [*server, "--secret", dev_server.secret, "--room", "a b!"],
-                   "BAD_FIELD")  # fmt: skip
+    token = mint_token(dev_server.secret, room="r", player="rec")
+    err = _failure(capsys, record.main, [*server, "--token", token, "--room", "other"],
+                   "FORBIDDEN")  # fmt: skip
     assert "room" in err
     err = _failure(capsys, record.main, ["--url", "ws://127.0.0.1:9/", "--secret", "s" * 20,
                                          "--room", "r", *out], "UNREACHABLE")  # fmt: skip
@@ -264,6 +266,10 @@ def test_sim_rejects_bad_churn_options(capsys: pytest.CaptureFixture[str]) -> No
         ),
         ("record", ["--secret", "s" * 32], "--room is required"),
         ("record", ["--room", "r"], "neither a token nor a secret"),
+        ("sim", ["--secret", "s" * 32, "--url", "notaurl"], "is not a WebSocket URL"),
+        ("record", ["--secret", "s" * 32, "--room", "r", "--url", "http://x/"], "WebSocket"),
+        ("sim", ["--secret", "s" * 32, "--room-prefix", "lob by"], "not an id"),
+        ("record", ["--secret", "s" * 32, "--room", "lob by"], "not an id"),
     ],
 )
 def test_a_command_line_mistake_prints_a_code_and_a_hint(

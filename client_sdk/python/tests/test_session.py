@@ -101,9 +101,7 @@ def test_backoff_doubles_with_jitter_up_to_the_cap() -> None:
     assert not is_retryable(ValueError())
 
 
-def test_a_bad_record_drops_every_reference_and_asks_for_a_resync_at_most_every_quarter_second() -> (
-    None
-):
+def test_a_bad_record_drops_every_reference_and_asks_for_a_resync_now_and_then() -> None:
     """The records a bad one made the client skip moved the server's references on: a
     later delta is refused until keyframes come, never decoded into a wrong pose."""
     import json

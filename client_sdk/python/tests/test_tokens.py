@@ -42,7 +42,18 @@ def test_the_server_verifies_minted_tokens() -> None:
 
 @pytest.mark.parametrize(
     "kw",
-    [{"secret": ""}, {"role": "admin"}, {"rooms": ("x",)}, {"ttl_s": 0}, {"ttl_s": 8 * 86400}],
+    [
+        {"secret": ""},
+        {"role": "admin"},
+        {"rooms": ("x",)},
+        {"ttl_s": 0},
+        {"ttl_s": 8 * 86400},
+        {"player": "a b"},
+        {"player": "p" * 65},
+        {"room": "lob by"},
+        {"room": ""},
+        {"role": "backend", "rooms": ("ok", "not ok")},
+    ],
 )
 def test_bad_requests_are_refused(kw: dict[str, object]) -> None:
     args: dict[str, object] = {"secret": SECRET, "room": "r", "player": "p", **kw}

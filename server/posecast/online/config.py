@@ -11,14 +11,16 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any
+from urllib.parse import urlsplit
 
 from posecast.errors import ConfigError
 from posecast.online.auth.tokens import new_secret
-from posecast.online.engine.backend import BACKENDS
+from posecast.online.engine.backend import BACKENDS, MAX_THREADS
 from posecast.online.engine.upper_ik import WRIST_ELBOW_SHARE
 from posecast.online.protocol.messages import Limits
 from posecast.tracking.layouts import Layout
@@ -26,6 +28,7 @@ from posecast.tracking.layouts import Layout
 ENV_PREFIX = "POSECAST_"
 _ID = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 MIN_SECRET_CHARS = 16
+MAX_SNDBUF_BYTES = 2**31 - 1  # SO_SNDBUF is a C int
 
 
 def _opt(default: Any, help: str, flags: tuple[str, ...] = (), **extra: Any) -> Any:
@@ -189,8 +192,10 @@ class ServerConfig:
         for name in seconds.split():
             if not getattr(self, name) > 0:
                 raise ConfigError(f"{name} must be > 0")
-        if self.socket_sndbuf_bytes < 0:
-            raise ConfigError("socket_sndbuf_bytes must be >= 0")
+        if self.engine_threads > MAX_THREADS:
+            raise ConfigError(f"engine_threads must be <= {MAX_THREADS}")
+        if not 0 <= self.socket_sndbuf_bytes <= MAX_SNDBUF_BYTES:
+            raise ConfigError(f"socket_sndbuf_bytes must be in [0, {MAX_SNDBUF_BYTES}]")
         if not 0.0 <= self.wrist_elbow <= 1.0:
             raise ConfigError("wrist_elbow must be a share between 0 and 1")
         if self.lookahead < 0:
@@ -199,10 +204,16 @@ class ServerConfig:
             raise ConfigError(f"backend {self.backend!r} unknown: one of {', '.join(BACKENDS)}")
         if self.log_level.upper() not in ("DEBUG", "INFO", "WARNING", "ERROR"):
             raise ConfigError(f"log_level {self.log_level!r} unknown")
+        if not math.isfinite(self.redis_node_ttl_s):
+            raise ConfigError("redis_node_ttl_s must be a finite number of seconds")
         if self.redis_node_ttl_s < 2 * self.redis_heartbeat_s:
             raise ConfigError("redis_node_ttl_s must be at least twice redis_heartbeat_s")
         if self.redis_url and not self.redis_url.startswith(("redis://", "rediss://", "unix://")):
             raise ConfigError("redis_url must start with redis://, rediss:// or unix://")
+        try:  # a port that is not a number fails here, not in the bus's endless retries
+            _ = urlsplit(self.redis_url).port
+        except ValueError as exc:
+            raise ConfigError(f"redis_url: {exc}") from None
         if not _ID.fullmatch(self.node_id or "x") or not _ID.fullmatch(self.redis_prefix):
             raise ConfigError("node_id and redis_prefix: 1 to 64 of A-Z a-z 0-9 _ . -")
         served = self._layout_names()

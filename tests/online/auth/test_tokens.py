@@ -75,6 +75,26 @@ def test_signed_but_bad_claims_are_unauthenticated() -> None:
         verify(SECRET, token, now=NOW)
 
 
+@pytest.mark.parametrize(
+    ("room", "player"), [("r", "a b"), ("r", "p" * 65), ("lob by", "p"), ("r", "é")]
+)
+def test_a_room_or_player_that_is_not_a_wire_id_is_refused(room: str, player: str) -> None:
+    """The player id goes out as is in welcome, presence and pose: one another client's
+    decoder refuses would break that client, so such a token never admits anyone."""
+    import hashlib
+    import hmac
+
+    with pytest.raises(ValueError, match="not an id"):
+        mint(SECRET, room=room, player=player, now=NOW)
+    claims = {"v": 1, "room": room, "player": player, "role": "player", "jti": "j",
+              "iat": int(NOW), "exp": int(NOW) + 60}  # fmt: skip
+    payload = base64.urlsafe_b64encode(json.dumps(claims).encode()).rstrip(b"=").decode()
+    mac = hmac.new(SECRET, payload.encode(), hashlib.sha256).digest()
+    token = payload + "." + base64.urlsafe_b64encode(mac).rstrip(b"=").decode()
+    with pytest.raises(UnauthenticatedError, match="not an id"):
+        verify(SECRET, token, now=NOW)
+
+
 def test_expired_and_not_yet_valid() -> None:
     token = _token(ttl_s=10)
     with pytest.raises(TokenExpiredError, match="expired"):

@@ -124,7 +124,7 @@ _SELECTOR_APPLIES = {
     "target": {"joint", "point", "margin_m"},
     "obstacle": {"joint", "point", "radius_m"},
 }
-_ID = re.compile(r"[A-Za-z0-9_.:-]+")
+ID_PATTERN = _ID = re.compile(r"[A-Za-z0-9_.:-]+")  # rooms, player and session ids
 _CODE = re.compile(r"[A-Z][A-Z0-9_]{0,31}")
 _CONTROL = re.compile(r"[\x00-\x1f\x7f]")
 _LEAVES = (type(None), bool, int, float, str, bytes)

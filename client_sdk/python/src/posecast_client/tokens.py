@@ -20,7 +20,8 @@ import secrets
 import time
 from typing import Any
 
-from posecast_client.protocol import ROLES
+from posecast_client.codec import ID_PATTERN as _ID
+from posecast_client.protocol import MAX_ID_BYTES, ROLES
 
 MAX_TTL_S = 7 * 24 * 3600  # what the server's minting tool allows
 MIN_SECRET_CHARS = 16  # the server refuses shorter secrets (posecast.online.config)
@@ -59,6 +60,12 @@ def mint_token(
         raise ValueError("only a backend token may list extra rooms")
     if not 0 < ttl_s <= MAX_TTL_S:
         raise ValueError(f"ttl_s must be in (0, {MAX_TTL_S}]")
+    for what, value in (("room", room), ("player", player), *(("rooms", r) for r in rooms)):
+        # The server refuses a token whose room or player is not a wire id (proto/README.md).
+        if len(value.encode()) > MAX_ID_BYTES or _ID.fullmatch(value) is None:
+            raise ValueError(
+                f"{what} {value!r} is not an id: 1 to {MAX_ID_BYTES} of A-Z a-z 0-9 _ . : -"
+            )
     iat = int(time.time() if now is None else now)
     claims: dict[str, Any] = {
         "v": 1,

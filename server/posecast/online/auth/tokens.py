@@ -36,11 +36,22 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from posecast.errors import TokenExpiredError, UnauthenticatedError
-from posecast.online.protocol.messages import ROLES
+from posecast.online.protocol.fields import ID_PATTERN
+from posecast.online.protocol.messages import MAX_ID_BYTES, ROLES
 
 TOKEN_VERSION = 1
 MAX_TOKEN_CHARS = 4096
 MAX_TTL_S = 7 * 24 * 3600  # the minting CLI refuses longer-lived tokens
+
+
+def _is_id(value: object) -> bool:
+    """A room or player claim must be a wire `id` (proto/README.md, Messages): the player
+    id goes out as is in welcome, presence and pose, where every client's decoder checks it."""
+    return (
+        isinstance(value, str)
+        and len(value.encode()) <= MAX_ID_BYTES
+        and ID_PATTERN.fullmatch(value) is not None
+    )
 
 
 @dataclass(frozen=True, slots=True)
@@ -92,6 +103,11 @@ def mint(
         raise ValueError("only a backend token may list extra rooms")
     if not 0 < ttl_s <= MAX_TTL_S:
         raise ValueError(f"ttl_s must be in (0, {MAX_TTL_S}]")
+    for what, value in (("room", room), ("player", player), *(("rooms", r) for r in rooms)):
+        if not _is_id(value):
+            raise ValueError(
+                f"{what} {value!r} is not an id: 1 to {MAX_ID_BYTES} of A-Z a-z 0-9 _ . : -"
+            )
     iat = int(now)
     claims: dict[str, Any] = {
         "v": TOKEN_VERSION,
@@ -147,6 +163,9 @@ def _claims(c: object) -> Claims:
     for key in ("room", "player", "role", "jti"):
         if not isinstance(c.get(key), str) or not c[key]:
             raise bad(f"{key} is missing or not a string")
+    for key in ("room", "player"):
+        if not _is_id(c[key]):
+            raise bad(f"{key} is not an id (1 to {MAX_ID_BYTES} of A-Z a-z 0-9 _ . : -)")
     for key in ("iat", "exp"):
         if type(c.get(key)) is not int:
             raise bad(f"{key} is missing or not an integer")

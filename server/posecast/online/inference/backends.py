@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from posecast.errors import ConfigError, ModelError
-from posecast.online.engine.backend import BACKENDS, Decoder, Pool
+from posecast.online.engine.backend import BACKENDS, MAX_THREADS, Decoder, Pool
 from posecast.online.engine.config import EngineConfig
 from posecast.tracking.layouts import Layout, spec
 
@@ -55,6 +55,10 @@ def load_backend(
     :class:`ModelError` for models it cannot load.
     """
     check_backend(name)
+    if not 1 <= threads <= MAX_THREADS:
+        exc = ConfigError(f"{threads} threads: the engine's pool takes 1 to {MAX_THREADS}")
+        exc.add_note(f"hint: pass --threads (posecast serve: --engine-threads) 1 to {MAX_THREADS}")
+        raise exc
     ls = spec(layout)
     cfg = cfg or EngineConfig()
     ik = (cfg.ik_release_frames, cfg.ik_max_drift_m)

@@ -20,7 +20,9 @@ from typing import Any, NoReturn
 from websockets.exceptions import InvalidHandshake, InvalidStatus, InvalidURI
 
 from posecast_client.client import Client, connect
+from posecast_client.codec import ID_PATTERN
 from posecast_client.errors import BvhError, ConnectionLostError, ProtocolError, RecordingError
+from posecast_client.protocol import MAX_ID_BYTES
 from posecast_client.tokens import MAX_TTL_S, MIN_SECRET_CHARS, mint_token
 
 ENV_PREFIX = "POSECAST_"
@@ -120,6 +122,12 @@ def resolve_server(
     """Fill ``url``/``secret``/``token`` from the environment where flags left them out
     (neither anywhere: ``prog``'s :func:`usage_error`)."""
     args.url = args.url or env.get(ENV_PREFIX + "URL") or "ws://127.0.0.1:8765/"
+    if not args.url.startswith(("ws://", "wss://")):
+        usage_error(
+            prog,
+            f"--url {args.url!r} is not a WebSocket URL",
+            "e.g. --url ws://127.0.0.1:8765/ (wss:// behind TLS)",
+        )
     if not args.secret and not args.token:
         args.secret = env.get(ENV_PREFIX + "TOKEN_SECRET") or None
         args.token = env.get(ENV_PREFIX + "TOKEN") or None
@@ -139,6 +147,16 @@ def resolve_server(
         )
     if not 0 < args.ttl <= MAX_TTL_S:
         usage_error(prog, f"--ttl {args.ttl} is not in (0, {MAX_TTL_S}] seconds", "e.g. 3600")
+
+
+def check_room(prog: str, flag: str, room: str) -> None:
+    """A room name must be a wire id, or the server refuses the join (and no token is minted)."""
+    if len(room.encode()) > MAX_ID_BYTES or ID_PATTERN.fullmatch(room) is None:
+        usage_error(
+            prog,
+            f"{flag} {room!r} is not an id: 1 to {MAX_ID_BYTES} of A-Z a-z 0-9 _ . : -",
+            "e.g. lobby, match-17",
+        )
 
 
 def token_for(args: argparse.Namespace, room: str, player: str, role: str = "player") -> str:

@@ -25,6 +25,7 @@ from pathlib import Path
 from posecast_client.cli.common import (
     Parser,
     add_server_arguments,
+    check_room,
     connect_patiently,
     failure,
     resolve_server,
@@ -88,6 +89,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         resolve_server(args, P)
         if not args.room:
             usage_error(P, "--room is required to record", "pass the room to listen to")
+        check_room(P, "--room", args.room)
         if args.seconds is not None and not 0 < args.seconds < float("inf"):
             usage_error(P, f"--seconds {args.seconds} must be a positive number", "e.g. 60")
         out = args.out or Path(f"{args.room}.pcrec")

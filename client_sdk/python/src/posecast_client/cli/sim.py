@@ -49,6 +49,7 @@ from posecast_client.bvh import read_bvh
 from posecast_client.cli.common import (
     Parser,
     add_server_arguments,
+    check_room,
     connect_patiently,
     describe,
     print_error,
@@ -408,6 +409,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         usage_error(P, "one --token is one player", "use --secret for several players")
     if args.players < 1 or args.rooms < 1 or not 0 < args.duration < math.inf:
         usage_error(P, "--players, --rooms and --duration must be positive", "e.g. --players 4")
+    check_room(P, "--room-prefix", f"{args.room_prefix}-{args.rooms - 1}")
     if not 1 <= args.rate <= MAX_RATE_HZ:
         usage_error(
             P,
