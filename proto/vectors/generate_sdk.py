@@ -108,10 +108,10 @@ class Reference:
 
     def snaps(self, a: dict[str, Any], b: dict[str, Any]) -> bool:
         root_jump = np.linalg.norm(np.subtract(b["positions"][0], a["positions"][0]))
-        seq_follows = (b["seq"] - a["seq"]) % 2**32 == 1
+        seq_newer = 0 < (b["seq"] - a["seq"]) % 2**32 < 2**31
         return bool(
             b["t"] - a["t"] > self.cfg["gap_s"]
-            or (b["keyframe"] and not seq_follows)
+            or (b["keyframe"] and not seq_newer)
             or root_jump > self.cfg["teleport_m"]
         )
 
@@ -348,14 +348,15 @@ def interp_cases() -> list[dict[str, Any]]:
             ],
         ),
         case(
-            "keyframe_after_seq_gap_snaps",
-            "a keyframe with seq 6 after seq 2 (no time gap): a snap; "
-            "a keyframe that follows its predecessor (seq 7 after 6) blends",
+            "keyframe_with_older_seq_snaps",
+            "a keyframe with seq 0 after seq 2 (no time gap: a new sequence, a rejoin): "
+            "a snap; a keyframe after a forward seq gap (seq 4 after 0, as at a 15 Hz "
+            "pose rate) blends",
             [
                 push(p[0]),
                 push(p[1]),
-                push(m.pose(6, ts[2]), keyframe=True),
-                push(m.pose(7, ts[3]), keyframe=True),
+                push(m.pose(0, ts[2]), keyframe=True),
+                push(m.pose(4, ts[3]), keyframe=True),
                 q(ts[1] + 0.5 * DT),
                 q(ts[2] + 0.5 * DT),
             ],

@@ -165,12 +165,13 @@ def test_arrival_jitter_under_the_delay_does_not_show() -> None:
 
 
 def test_feed_takes_a_v2_keyframe_as_a_resync_point() -> None:
-    """A keyframe after a seq gap starts a new segment (no blend across the gap) when it
-    arrives through ``feed``, exactly as ``push(..., keyframe=True)``."""
+    """A keyframe whose seq is not newer (a new sequence: a rejoin) starts a new segment
+    (no blend across it) when it arrives through ``feed``, exactly as
+    ``push(..., keyframe=True)``."""
     shown = {}
     for how in ("feed", "push", "plain"):
         interp = Interpolator()
-        first, after_gap = walk_pose("p", 0, 10.0), walk_pose("p", 5, 10.0 + 1 / 60)
+        first, after_gap = walk_pose("p", 500, 10.0), walk_pose("p", 0, 10.0 + 1 / 60)
         keyed = dataclasses.replace(after_gap, keyframe=True)
         if how == "feed":
             interp.feed(first)
@@ -187,3 +188,16 @@ def test_feed_takes_a_v2_keyframe_as_a_resync_point() -> None:
     assert shown["plain"].mode == "interpolate"
     assert shown["feed"].mode == shown["push"].mode != "interpolate"
     np.testing.assert_array_equal(shown["feed"].positions, shown["push"].positions)
+
+
+def test_a_keyframe_after_a_forward_seq_step_blends() -> None:
+    """At a 30 Hz pose rate (or from a 90-120 Hz sender) seq steps by 2 or more on every
+    pose, and the server's keyframe (one a second) comes on such a step: it blends like
+    any other pose instead of snapping once a second."""
+    interp = Interpolator()
+    for k in range(4):  # 30 Hz poses of a 60 Hz sender: seq 0, 2, 4, 6; 4 is a keyframe
+        pose = walk_pose("p", 2 * k, 10.0 + k / 30)
+        interp.feed(dataclasses.replace(pose, keyframe=k in (0, 2)))
+    got = interp.pose_at("p", 10.0 + 1.5 / 30 + interp.config.delay_s)
+    assert got is not None and got.mode == "interpolate"
+    assert got.positions[0, 0] == pytest.approx(10.0 + 1.5 / 30)

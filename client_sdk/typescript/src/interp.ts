@@ -23,7 +23,8 @@
  * 1. **interpolate**: positions lerp and rotations slerp (shortest arc) from a to b.
  * 2. **snap**: b starts a new segment when its pelvis moved more than `teleportM`
  *    from a, when it follows a by more than `gapS`, or when it was pushed as a
- *    `keyframe` and its `seq` does not follow a's. Until `tau` reaches `b.t`, a is
+ *    `keyframe` and its `seq` is not newer than a's (a new sequence: a rejoin; a
+ *    forward seq gap, as at a pose rate below 60 Hz, blends). Until `tau` reaches `b.t`, a is
  *    shown as if it were the newest pose (rule 3); from `b.t` on, b.
  * 3. **extrapolate**: past the newest pose, a moves on at the velocity from its
  *    predecessor for at most `maxExtrapolateS`, then **holds** there.
@@ -217,7 +218,8 @@ export class PoseBuffer {
   /**
    * Keep `pose`; false when it was dropped: a duplicate of a kept `t`, a non-finite
    * `t`, or older than everything kept while the buffer is full. `keyframe`: a resync
-   * point (a v2 keyframe); after a `seq` gap it snaps instead of being blended into.
+   * point (a v2 keyframe); when its `seq` is not newer than its predecessor's (a new
+   * sequence) it snaps instead of being blended into.
    */
   push(pose: PoseInput, keyframe = false): boolean {
     const t = pose.t;
@@ -316,7 +318,7 @@ export class PoseBuffer {
   /** Whether `b` starts a new segment after `a` (rule 2). */
   private snaps(a: Entry, b: Entry): boolean {
     if (b.t - a.t > this.options.gapS) return true;
-    if (b.keyframe && seqDelta(b.seq, a.seq) !== 1) return true;
+    if (b.keyframe && seqDelta(b.seq, a.seq) <= 0) return true;
     const [ax, ay, az] = a.positions; // joint 0, the pelvis
     const [bx, by, bz] = b.positions;
     return Math.hypot(bx! - ax!, by! - ay!, bz! - az!) > this.options.teleportM;

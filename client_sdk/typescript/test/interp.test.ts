@@ -277,17 +277,19 @@ test("a lossy link (20 % dropped, 0-40 ms hold) jumps at most 1.5x the clean one
   }
 });
 
-test("feed: a v2 keyframe after a seq gap snaps, a delta pose after the same gap blends", () => {
-  const shownX = (keyframe: boolean): number => {
+test("feed: a v2 keyframe with an older seq (a new sequence) snaps; after a forward seq gap it blends", () => {
+  const shownX = (keyframe: boolean, seq: number): number => {
     const buffers = new Interpolator({ delayS: 0 });
-    const at = (seq: number, t: number, x: number): Pose => ({
-      type: "pose", player: "p", seq, t, keyframe: seq === 5 && keyframe,
+    const at = (s: number, t: number, x: number, key: boolean): Pose => ({
+      type: "pose", player: "p", seq: s, t, keyframe: key,
       positions: Float64Array.from({ length: 57 }, (_, i) => (i % 3 === 0 ? x : 1)),
     });
-    buffers.feed(at(1, 0, 0));
-    buffers.feed(at(5, 4 / 60, 1)); // seqs 2..4 never came
+    buffers.feed(at(100, 0, 0, true));
+    buffers.feed(at(seq, 4 / 60, 1, keyframe));
     return buffers.poseAt("p", 2 / 60)!.positions[0]!;
   };
-  assert.equal(shownX(true), 0); // held until the keyframe's time, then snapped to
-  assert.ok(Math.abs(shownX(false) - 0.5) < 1e-9, `${shownX(false)}`);
+  assert.equal(shownX(true, 0), 0); // seq went back: held until the keyframe's time, then snapped to
+  assert.ok(Math.abs(shownX(false, 0) - 0.5) < 1e-9, `${shownX(false, 0)}`);
+  // seq 104 after 100 (a 15 Hz pose rate, or a skipped pose): the keyframe blends
+  assert.ok(Math.abs(shownX(true, 104) - 0.5) < 1e-9, `${shownX(true, 104)}`);
 });

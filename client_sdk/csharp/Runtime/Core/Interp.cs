@@ -6,7 +6,7 @@
 // With a the newest pose at or before tau and b the one after it:
 //   1. interpolate: positions lerp and rotations slerp (shortest arc) from a to b;
 //   2. snap: b starts a new segment when its pelvis moved more than TeleportM from a,
-//      follows a by more than GapS, or is a keyframe whose seq does not follow a's;
+//      follows a by more than GapS, or is a keyframe whose seq is not newer than a's;
 //      nothing is blended across a segment start;
 //   3. extrapolate: past the newest pose, a moves on at the velocity from its
 //      predecessor for at most MaxExtrapolateS, then holds there;
@@ -110,7 +110,8 @@ namespace Posecast.Client
 
         /// <summary>
         /// Keep a pose; false when dropped: a duplicate of a kept T, a non-finite T, or older
-        /// than everything kept while full. keyframe: a resync point that snaps after a seq gap.
+        /// than everything kept while full. keyframe: a resync point that snaps when its seq is
+        /// not newer than its predecessor's (a new sequence).
         /// </summary>
         public bool Push(IPose pose, bool keyframe)
         {
@@ -226,7 +227,7 @@ namespace Posecast.Client
         private bool Snaps(Entry a, Entry b)
         {
             if (b.T - a.T > Config.GapS) return true;
-            if (b.Keyframe && Protocol.SeqDelta(b.Seq, a.Seq) != 1) return true;
+            if (b.Keyframe && Protocol.SeqDelta(b.Seq, a.Seq) <= 0) return true;
             return (b.Positions[0] - a.Positions[0]).Length > Config.TeleportM;
         }
 

@@ -23,10 +23,12 @@ newest pose at or before ``tau`` and ``b`` the one after it:
 2. **snap**: ``b`` starts a new segment when its pelvis moved more than
    ``teleport_m`` from ``a`` (a teleport), when it follows ``a`` by more than
    ``gap_s`` (a stall or a rejoin), or when it was pushed as a ``keyframe`` and its
-   ``seq`` does not follow ``a``'s (a resync). Nothing is blended across a segment
-   start: until ``tau`` reaches ``b.t``, ``a`` is shown as if it were the newest
-   pose (rule 3), so what is on screen does not depend on whether ``b`` has
-   arrived yet; from ``b.t`` on, ``b``.
+   ``seq`` is not newer than ``a``'s (a new sequence: the player rejoined). A forward
+   ``seq`` gap is no snap: a pose rate below 60 Hz, a sender faster than 60 Hz or a
+   skipped pose steps it by more than 1 while the motion goes on. Nothing is
+   blended across a segment start: until ``tau`` reaches ``b.t``, ``a`` is shown as
+   if it were the newest pose (rule 3), so what is on screen does not depend on
+   whether ``b`` has arrived yet; from ``b.t`` on, ``b``.
 3. **extrapolate**: past the newest pose, ``a`` moves on at the velocity from its
    predecessor (positions linearly, rotations along the same great circle) for at
    most ``max_extrapolate_s``, then **holds** there (no jump when the bound is hit).
@@ -191,8 +193,9 @@ class PoseBuffer:
         """Keep ``pose``; ``False`` when it was dropped: a duplicate of a kept ``t``, a
         non-finite ``t``, or older than everything kept while the buffer is full.
 
-        ``keyframe``: the pose is a resync point (a v2 keyframe); after a ``seq`` gap
-        it snaps instead of being blended into.
+        ``keyframe``: the pose is a resync point (a v2 keyframe); when its ``seq`` is
+        not newer than its predecessor's (a new sequence) it snaps instead of being
+        blended into.
         """
         t = float(pose.t)
         if not math.isfinite(t):
@@ -298,7 +301,7 @@ class PoseBuffer:
         cfg = self.config
         if b.t - a.t > cfg.gap_s:
             return True
-        if b.keyframe and seq_delta(b.seq, a.seq) != 1:
+        if b.keyframe and seq_delta(b.seq, a.seq) <= 0:
             return True
         jump = float(np.linalg.norm(b.positions[ROOT] - a.positions[ROOT]))
         return jump > cfg.teleport_m
