@@ -16,11 +16,12 @@
 // for that avatar). It also reads the names on the page (player list, and the labels
 // over the heads).
 //
-// For the meshes, also: (a) with the page frozen on one frame (`posecastViewer.freeze`),
+// For the meshes, also (the page otherwise draws its jitter buffer's samples; frozen, it
+// draws the newest poses as streamed): (a) with the page frozen on one frame (`posecastViewer.freeze`),
 // a screenshot and the page's body pieces on the screen (`posecastViewer.screen`: each
 // piece's bone between the streamed joints, with its half-width plus 4 cm in pixels at
 // that depth): the pixels of each player's colour outside all of that player's pieces
-// are strays, a limb drawn off its joints; (b) over 20 frames, the page's CPU skinning
+// are strays, a limb drawn off its joints; (b) on 20 frozen frames, the page's CPU skinning
 // of the mesh (`posecastViewer.skin`: rings of the mesh at its joints and halfway along
 // each bone, against the streamed joint positions; see viewer/avatar.ts); (b') both
 // again with four bones turned away on purpose (`posecastViewer.tamper`), which they
@@ -251,11 +252,16 @@ try {
     bones: bones[player]?.length ?? 0,
   }));
 
-  // (b) The skinned mesh against the streamed joints, over 20 frames.
+  // (b) The skinned mesh against the streamed joints, on 20 frames (each frozen on the
+  // newest streamed poses: the jitter buffer's extrapolated samples are not FK-consistent).
   const skin = {};
   for (let k = 0; k < 20; k++) {
+    await page.evaluate(() => window.posecastViewer.freeze(true));
+    await frames(2);
+    const sampled = await page.evaluate(() => window.posecastViewer.skin());
+    await page.evaluate(() => window.posecastViewer.freeze(false));
     await frames(1);
-    for (const s of await page.evaluate(() => window.posecastViewer.skin())) {
+    for (const s of sampled) {
       const acc = (skin[s.player] ??= { samples: 0, max_m: 0, mean_m: 0, bone_max_m: 0, worst: "", scale: s.scale });
       acc.samples++;
       acc.mean_m += (s.mean_m - acc.mean_m) / acc.samples;

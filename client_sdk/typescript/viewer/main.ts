@@ -33,7 +33,7 @@ import {
 } from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
 
-import { connect, type PosecastClient, PosecastError, type Pose, type TokenSource } from "../src/index.js";
+import { connect, Interpolator, type PosecastClient, PosecastError, type TokenSource } from "../src/index.js";
 import { Joint, type JointName, NUM_JOINTS } from "../src/messages.js";
 import { avatarMaterials, buildAvatarGeometry, PIECES, SkinnedAvatar, stripeMaterial } from "./avatar.js";
 import { REFERENCE_OFFSETS_M } from "./bones.js";
@@ -205,7 +205,13 @@ interface Avatar {
   readonly item: HTMLLIElement;
   name: string;
   /** The pose last drawn, and as what (undefined: none yet). */
-  shown?: { readonly pose: Pose; readonly as: AvatarMode };
+  shown?: { readonly pose: Drawn; readonly as: AvatarMode };
+}
+
+/** What is drawn of a player: a pose sampled from the jitter buffer (or, before the first pong, the newest). */
+interface Drawn {
+  readonly positions: Float64Array;
+  readonly rotations?: Float64Array;
 }
 
 const avatars = new Map<string, Avatar>();
@@ -269,7 +275,7 @@ const tampered = new Map<number, Quaternion>();
 const tamperedRotations = new Float64Array(4 * NUM_JOINTS);
 const turned = new Quaternion();
 
-function place(avatar: Avatar, pose: Pose): void {
+function place(avatar: Avatar, pose: Drawn): void {
   const asMesh = mode === "mesh" && pose.rotations !== undefined;
   let rotations = pose.rotations;
   if (asMesh && tampered.size > 0) {
@@ -287,7 +293,16 @@ function place(avatar: Avatar, pose: Pose): void {
 // --- the frame loop -------------------------------------------------------------------------
 
 let client: PosecastClient | undefined;
+/** Every player's jitter buffer: poses arrive at 60 Hz or less, unevenly; frames come at the display's rate. */
+const buffers = new Interpolator();
 let frames = 0;
+
+/** Each player's pose for this frame: sampled at the server's time now once the clock is synced. */
+function posesNow(c: PosecastClient | undefined): ReadonlyMap<string, Drawn> {
+  if (c === undefined) return new Map();
+  if (c.clock.offsetS === undefined) return c.poses; // toServer throws until the first pong
+  return buffers.posesAt(c.clock.toServer(performance.now() / 1000));
+}
 const centroid = new Vector3();
 const follow = new Vector3();
 const head = new Vector3();
@@ -302,14 +317,22 @@ function resize(): void {
   }
 }
 
-/** Debug hook: while frozen, the page keeps drawing the poses it last drew (and the camera stays). */
+/**
+ * Debug hook: freezing draws the newest poses as they were streamed (not the jitter
+ * buffer's samples, whose positions and rotations part during an extrapolation) once,
+ * then keeps drawing them (and the camera stays), so checks compare the mesh with the
+ * streamed joints.
+ */
 let frozen = false;
+let freezing = false;
 
 function draw(): void {
   resize();
   let n = 0;
   centroid.set(0, 0, 0);
-  for (const [player, pose] of frozen ? [] : (client?.poses ?? [])) {
+  const poses = freezing ? (client?.poses ?? new Map<string, Drawn>()) : frozen ? new Map<string, Drawn>() : posesNow(client);
+  freezing = false;
+  for (const [player, pose] of poses) {
     const avatar = avatarFor(player, client?.members.get(player)?.name ?? player);
     place(avatar, pose);
     centroid.x += pose.positions[0]!;
@@ -329,7 +352,7 @@ function draw(): void {
   const w = canvas.clientWidth;
   const h = canvas.clientHeight;
   for (const avatar of avatars.values()) {
-    const pose = frozen ? avatar.shown?.pose : client?.poses.get(avatar.player);
+    const pose = frozen ? avatar.shown?.pose : poses.get(avatar.player);
     if (pose === undefined) {
       avatar.label.hidden = true;
       continue;
@@ -410,6 +433,7 @@ Object.assign(window, {
     },
     setMode,
     freeze(on: boolean) {
+      freezing = on && !frozen;
       frozen = on;
     },
     tamper(joint: JointName, q: [number, number, number, number] | null) {
@@ -456,6 +480,7 @@ async function run(): Promise<void> {
   const tick = setInterval(() => c.state === "joined" && describeStatus(c), 1000);
   try {
     for await (const ev of c) {
+      buffers.feed(ev); // poses, leaves, welcomes
       switch (ev.type) {
         case "welcome":
           for (const player of [...avatars.keys()]) if (!c.members.has(player)) removeAvatar(player);
