@@ -201,3 +201,24 @@ def test_records_past_one_message_go_out_in_several_within_the_limit() -> None:
         else:
             client.read(box, seq / 60)
     assert [r.recon.seq for r in client.got] == [1] * 160 + [2] * 160
+
+
+def test_a_record_that_waited_since_an_earlier_tick_keeps_that_ticks_time() -> None:
+    """A client one tick behind: avatar a has no pose at tick 1, b has; a's record from
+    tick 0 goes out in a message with tick 0's t, not under tick 1's (records have no
+    time of their own, and an interpolating client would show a's pose 16.7 ms late)."""
+    box = Outbox(8, PoseStream())
+    assert box.stream is not None
+    box.stream.announce("a", 0)
+    box.stream.announce("b", 1)
+    refs: dict[int, records.Recon | None] = {0: None, 1: None}
+    a, b = _walk(1, player="a"), _walk(2, seed=1, player="b")
+    _put([box], a[0], 0.0)
+    _put([box], b[0], 0.0)
+    _put([box], b[1], 1 / 60)  # the writer was still busy: b's slot is superseded, a's waits
+    got = []
+    for data in box.take(1 / 60):
+        msg = decode(data, version=2)
+        assert isinstance(msg, Poses)
+        got += [(msg.t, r.handle, r.recon.seq) for r in records.decode_records(msg.data, refs)]
+    assert got == [(0.0, 0, 0), (1 / 60, 1, 1)]

@@ -184,11 +184,12 @@ class PoseStream:
         )
 
     def messages(self, slots: list[tuple[str, Slot]], now: float) -> list[bytes]:
-        """The ``poses`` messages of what the writer took (one, unless the records
-        overflow a message's 16384 bytes: then as many as they need, cut between
-        records, all with the tick's time); the references move on."""
-        parts: list[bytes] = []
-        t = 0.0
+        """The ``poses`` messages of what the writer took (one per tick the records are
+        from, oldest first: a record has no time of its own, so a slot that waited
+        since an earlier tick must not go out under a later tick's ``t``; and more
+        where the records overflow a message's 16384 bytes, cut between records, all
+        with their tick's time); the references move on."""
+        parts: list[tuple[float, bytes]] = []
         for player, slot in slots:
             handle = self.known.get(player)
             if handle is None:
@@ -196,23 +197,24 @@ class PoseStream:
             body, recon, key = slot.body, slot.recon, slot.keyframe
             if self.resync and not key:
                 (body, recon), key = slot.state.keyframe(), True
-            parts.append(write_leb128(handle) + body)
+            parts.append((slot.state.t, write_leb128(handle) + body))
             self.refs[player] = recon
             if key:
                 self.last_key[player] = now
                 self.keyframes += 1
             self.records += 1
-            t = max(t, slot.state.t)
         self.resync = False
         out: list[bytes] = []
         batch: list[bytes] = []
         size = 0
-        for part in parts:
-            if batch and size + len(part) > MAX_POSES_DATA_BYTES:
+        t = 0.0
+        for part_t, part in sorted(parts, key=lambda p: p[0]):  # stable within a tick
+            if batch and (part_t != t or size + len(part) > MAX_POSES_DATA_BYTES):
                 out.append(encode(Poses(t, b"".join(batch))))
                 batch, size = [], 0
             batch.append(part)
             size += len(part)
+            t = part_t
         if batch:
             out.append(encode(Poses(t, b"".join(batch))))
         return out
