@@ -23,6 +23,7 @@ import pytest
 from posecast.testing.serve import ServeProcess
 from posecast.testing.serve import http_get as http_get  # re-exported
 from tests.online.conftest import SECRET
+from tests.scaleout.redis_proxy import RedisProxy
 
 HEARTBEAT_S = 1.0  # the defaults: the bound the tests check is the documented one
 NODE_TTL_S = 3.0
@@ -101,6 +102,16 @@ def redis_server(redis_server_bin: str, tmp_path: Path) -> Iterator[RedisServer]
         yield server
     finally:
         server.stop()
+
+
+@pytest.fixture
+def redis_proxy(redis_server: RedisServer) -> Iterator[RedisProxy]:
+    """A :class:`~tests.scaleout.redis_proxy.RedisProxy` in front of ``redis_server``."""
+    proxy = RedisProxy(redis_server.port)
+    try:
+        yield proxy
+    finally:
+        proxy.close()
 
 
 class Node(ServeProcess):

@@ -74,3 +74,27 @@ def test_a_tick_carries_stale_and_active_only_for_the_nodes_current_players() ->
     assert h.inbox(a) == [Presence("leave", "r1", "m", "M")]
     dropped = {"reason": "unknown_player"}
     assert h.hub.metrics.value("posecast_bus_dropped_total", dropped) == len(refused) + 1
+
+
+def test_a_snapshot_ends_a_local_player_only_when_the_bus_vouches_for_the_read() -> None:
+    """A snapshot listing a local player on another node may be a read that predates
+    the player's own join here (it just moved from that node): it must not end the
+    session. Only a player the bus reports ``replaced`` (read after this node's entry
+    was written: another node took it over while its join could not cross) ends here,
+    as the join would have ended it, and the room sees it move."""
+    h = Harness()
+    a, m = h.join("a"), h.join("m")
+    h.inbox(a)
+    assert isinstance(h.inbox(m)[0], Welcome)
+    sink = h.hub.sink
+    sink.remote_snapshot("r1", {"m": ("node-b", "M")}, h.now, h.now)  # a stale read
+    assert h.inbox(m) == [] and h.inbox(a) == []
+    assert h.hub.remote.get("r1", "m") is None
+    sink.remote_snapshot("r1", {"m": ("node-b", "M")}, h.now, h.now, replaced=["m"])
+    assert h.codes(m) == ["REPLACED"]
+    assert h.inbox(a) == [Presence("leave", "r1", "m", "M"), Presence("join", "r1", "m", "M")]
+    held = h.hub.remote.get("r1", "m")
+    assert held is not None and held.node == "node-b"
+    # A name the bus lists that is no local player (any more) changes nothing.
+    sink.remote_snapshot("r1", {"m": ("node-b", "M")}, h.now, h.now, replaced=["m", "zz"])
+    assert h.inbox(a) == []

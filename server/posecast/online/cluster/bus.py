@@ -24,7 +24,7 @@ from __future__ import annotations
 import os
 import secrets
 import socket
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -56,7 +56,12 @@ class BusSink(Protocol):
         issued_at: float,
         now: float,
         keep: bool = False,
-    ) -> None: ...
+        replaced: Collection[str] = (),
+    ) -> None:
+        """``room``'s members on other nodes as read at ``issued_at``. ``replaced``: local
+        players of ``room`` that ``live`` lists on another node, read after this node's
+        own entry for them was written (a takeover whose join could not cross)."""
+        ...
 
     def remote_lost(self, now: float) -> None: ...
 

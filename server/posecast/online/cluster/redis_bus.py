@@ -11,22 +11,30 @@ Three tasks per connection, under a supervisor that reconnects with jittered
 exponential backoff: ``_commands`` owns the command connection and sends, in
 order, everything the hub asked for (one pipelined round trip for all of it: pose
 batches are latest-wins per room while a round trip is in flight); ``_listen``
-owns the pub/sub connection; ``_heartbeat`` queues a full resync every
-``redis_heartbeat_s``: refresh the node key, re-assert every local player, read
-every watched room's hash, drop the entries of dead nodes (announcing their
-leave) and hand each room's live members to the hub. Any Redis error ends the
-connection; the hub keeps serving local play meanwhile, since nothing here is
-awaited by the tick.
+owns the pub/sub connection (and PINGs it when it has been quiet for a heartbeat:
+a connection that died silently never raises); ``_heartbeat`` queues a full resync
+every ``redis_heartbeat_s``: refresh the node key, re-assert every local player,
+read every watched room's hash, drop the entries of dead nodes (announcing their
+leave) and hand each room's live members to the hub. Any Redis error, and a PING
+unanswered for ``redis_timeout_s``, ends the connection; the hub keeps serving local
+play meanwhile, since nothing here is awaited by the tick.
+
+What a disconnected node could not send is made good after the reconnect: the
+joins of players admitted meanwhile are written and announced (they replace the same
+player on other nodes, as a join does), and the node's own burned tokens are
+announced again, every burn it knows written back (a Redis restarted empty lost them).
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import heapq
 import logging
 import random
 import time
 from collections import deque
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -51,11 +59,40 @@ class _Batch:
     events: list[bytes] = field(default_factory=list)
 
 
+class _Burns:
+    """Burned token ids and their expiry (Unix s), bounded like the replay guard: the
+    expired are forgotten, and past ``capacity`` the one expiring soonest."""
+
+    def __init__(self, capacity: int) -> None:
+        self.capacity = capacity
+        self._exp: dict[str, int] = {}
+        self._heap: list[tuple[int, str]] = []
+
+    def add(self, jti: str, exp: int, wall: float) -> None:
+        self._purge(wall)
+        if jti in self._exp or exp <= wall:
+            return
+        while len(self._exp) >= max(self.capacity, 1):
+            self._exp.pop(heapq.heappop(self._heap)[1], None)
+        self._exp[jti] = exp
+        heapq.heappush(self._heap, (exp, jti))
+
+    def live(self, wall: float) -> dict[str, int]:
+        self._purge(wall)
+        return dict(self._exp)
+
+    def _purge(self, wall: float) -> None:
+        while self._heap and self._heap[0][0] <= wall:
+            self._exp.pop(heapq.heappop(self._heap)[1], None)
+
+
 class RedisBus(Bus):
     def __init__(self, cfg: ServerConfig, metrics: Metrics, node: str) -> None:
         super().__init__(node)
         self.cfg, self.metrics = cfg, metrics
-        self.store = RedisStore(cfg.redis_prefix, node, cfg.redis_node_ttl_s, metrics)
+        self.store = RedisStore(
+            cfg.redis_prefix, node, cfg.redis_node_ttl_s, metrics, cfg.redis_heartbeat_s / 2
+        )
         self._watched: dict[str, bytes] = {}  # room -> its channel
         self._rooms: dict[bytes, str] = {}  # channel -> room
         self._ops: deque[tuple[Any, ...]] = deque()
@@ -72,6 +109,20 @@ class RedisBus(Bus):
         self._failures = 0  # connection attempts failed since the last success
         self._load_burned = False
         self._ctl = self.store.ctl_channel.encode()
+        # Every burn this node knows (its own, heard, loaded), and its own: a Redis
+        # restarted empty has lost the first, those burned while disconnected never went out.
+        self._burns = _Burns(cfg.replay_cache)
+        self._own = _Burns(cfg.replay_cache)
+        # Local players, (room, player) -> the number of the bus.joined() call that made
+        # them (one counter, so "joined before that moment" is a comparison).
+        self._seq = 0
+        self._players: dict[tuple[str, str], int] = {}
+        # Of those, the ones whose join is not known to have reached Redis (made while
+        # disconnected, or lost with a connection): announced after the reconnect.
+        self._unsent: dict[tuple[str, str], int] = {}
+        # Of those, the ones whose entry this connection has written (join queued, or
+        # claimed by a heartbeat), each before any read dequeued after it.
+        self._asserted: dict[tuple[str, str], int] = {}
 
     # --- what the hub calls (never blocks) -----------------------------------------------
 
@@ -94,13 +145,24 @@ class RedisBus(Bus):
             self._rooms.pop(ch, None)
 
     def joined(self, room: str, player: str, name: str) -> None:
-        self._queue(("join", room, player, name))
+        self._seq += 1
+        key = (room, player)
+        self._players[key] = self._unsent[key] = self._seq
+        if self._connected:  # else the heartbeat after the reconnect announces it
+            self._asserted[key] = self._seq
+            self._queue(("join", room, player, name, self._seq))
 
     def left(self, room: str, player: str) -> None:
+        key = (room, player)
+        for held in (self._players, self._unsent, self._asserted):
+            held.pop(key, None)
         self._queue(("leave", room, player, self.node))
 
     def burned(self, jti: str, exp: int) -> None:
-        self._queue(("burn", jti, exp))  # lost while disconnected: docs/scale-out.md
+        wall = time.time()
+        self._burns.add(jti, exp, wall)
+        self._own.add(jti, exp, wall)
+        self._queue(("burn", jti, exp))  # while disconnected: re-sent after the reconnect
 
     def publish(self, room: str, poses: list[tuple[str, bytes]], events: list[bytes]) -> None:
         if not self._connected:
@@ -176,6 +238,8 @@ class RedisBus(Bus):
             await pubsub.subscribe(self.store.ctl_channel)  # also opens the pub/sub connection
             self._load_burned = True
             await self.store.prepare(client)
+            if self._stopping:  # stop()'s cancel may have been swallowed: see _check_cancel
+                return
             self._set_connected(True)
             async with asyncio.TaskGroup() as tg:
                 tg.create_task(self._commands(client))
@@ -194,6 +258,7 @@ class RedisBus(Bus):
         self.metrics.bus_connected.set(int(up))
         self._ops.clear()
         self._ticks.clear()
+        self._asserted.clear()  # a new connection (and maybe an empty Redis): not yet
         self._full_sync_queued = False
         if self._lost is not None:
             self._lost.cancel()
@@ -227,6 +292,7 @@ class RedisBus(Bus):
     async def _commands(self, client: Redis) -> None:
         store = self.store
         while True:
+            _check_cancel()
             if not self._ops and not self._ticks:
                 self._idle = True  # what stop() waits for: everything queued is sent
                 await self._wake.wait()
@@ -234,14 +300,21 @@ class RedisBus(Bus):
             self._idle = False
             while self._ops or self._ticks:
                 pipe = client.pipeline(transaction=False)
+                joins: list[tuple[tuple[str, str], int]] = []
                 while self._ops:
                     op, *args = self._ops.popleft()
                     if op == "sync":
-                        await store.execute(pipe)  # what came before it, in order
-                        pipe = client.pipeline(transaction=False)
-                        await self._sync(client, *args)
+                        # Every join queued before this moment is written before the
+                        # sync's reads (one connection, in order): see _replaced.
+                        upto = self._seq
+                        await self._execute(pipe, joins)  # what came before it, in order
+                        pipe, joins = client.pipeline(transaction=False), []
+                        only, heartbeat = args
+                        await self._sync(client, only, heartbeat, upto)
                     elif op == "join":
-                        store.join(pipe, *args)
+                        room, player, name, seq = args
+                        store.join(pipe, room, player, name)
+                        joins.append(((room, player), seq))
                     elif op == "leave":
                         store.leave(pipe, *args)
                     elif op == "burn":
@@ -254,11 +327,25 @@ class RedisBus(Bus):
                     store.publish(
                         pipe, room, BusMessage("tick", self.node, poses=poses, events=events)
                     )
-                await store.execute(pipe)
+                await self._execute(pipe, joins)
 
-    async def _sync(self, client: Redis, only: tuple[str, ...], heartbeat: bool) -> None:
+    async def _execute(self, pipe: Any, joins: list[tuple[tuple[str, str], int]]) -> None:
+        await self.store.execute(pipe)
+        _check_cancel()
+        self._sent(joins)
+
+    def _sent(self, joins: Iterable[tuple[tuple[str, str], int]]) -> None:
+        """These joins reached Redis (unless the player left or joined again since)."""
+        for key, seq in joins:
+            if self._unsent.get(key) == seq:
+                del self._unsent[key]
+
+    async def _sync(
+        self, client: Redis, only: tuple[str, ...], heartbeat: bool, upto: int = 0
+    ) -> None:
         """Reconcile the watched rooms in ``only`` (all when empty) with Redis and report
-        each to the hub; a ``heartbeat`` also re-asserts this node and its players."""
+        each to the hub; a ``heartbeat`` also re-asserts this node and its players.
+        ``upto``: the joins numbered up to it were written before these reads."""
         sink = self.sink
         if sink is None:
             return
@@ -266,11 +353,23 @@ class RedisBus(Bus):
             self._full_sync_queued = False
         if heartbeat and self._load_burned:  # after a (re)connect: the burns made meanwhile
             self._load_burned = False
+            wall = time.time()
+            own = self._own.live(wall)
+            await self.store.reburn(client, self._burns.live(wall) | own, own)
             for jti, exp in await self.store.burns(client, self.cfg.replay_cache):
+                self._burns.add(jti, exp, wall)
                 sink.remote_burn(jti, exp, time.monotonic())
+        claim: dict[str, Mapping[str, str]] | None = None
+        announce: list[tuple[tuple[str, str], int]] = []
+        if heartbeat:
+            claim = {r: p for r, p in sink.local_rooms().items() if p}
+            announce = self._assert_all(claim)
         issued = time.monotonic()
         rooms = [r for r in (only or tuple(self._watched)) if r in self._watched]
-        live = await self.store.reconcile(client, rooms, sink.local_rooms, heartbeat=heartbeat)
+        live = await self.store.reconcile(
+            client, rooms, sink.local_rooms, claim=claim, announce={k for k, _ in announce}
+        )
+        self._sent(announce)
         now = time.monotonic()
         # Just after a (re)connect, Redis may have come back empty and the other nodes
         # not have re-registered yet: for one node TTL a read adds members, never
@@ -278,19 +377,64 @@ class RedisBus(Bus):
         # caught by the next reads).
         keep = now - self._connected_at < self.cfg.redis_node_ttl_s
         for room, members in live.items():
-            sink.remote_snapshot(room, members, issued, now, keep)
+            replaced = self._replaced(room, members, upto)
+            sink.remote_snapshot(room, members, issued, now, keep, replaced)
         self.after()
+
+    def _assert_all(
+        self, local: Mapping[str, Mapping[str, str]]
+    ) -> list[tuple[tuple[str, str], int]]:
+        """A heartbeat re-asserts every local player (``local``, the hub's own account):
+        the ones whose join never reached Redis are to be announced (returned), the
+        rest claimed. Either way their entry is written before the heartbeat's reads."""
+        keys = [(room, p) for room, players in local.items() for p in players]
+        players = {}
+        for key in keys:  # the hub's players are the truth: the bus's account follows it
+            seq = self._players.get(key)
+            if seq is None:
+                self._seq = seq = self._seq + 1
+                self._unsent[key] = seq
+            players[key] = seq
+        self._players = players
+        self._unsent = {k: s for k, s in self._unsent.items() if k in players}
+        announce = [(k, s) for k, s in self._unsent.items() if k not in self._asserted]
+        self._asserted.update(players)
+        return announce
+
+    def _replaced(self, room: str, members: Mapping[str, tuple[str, str]], upto: int) -> list[str]:
+        """The local players of ``room`` that the read ``members`` (entries of other live
+        nodes) lists elsewhere, although this connection wrote their own entry before
+        the read: another node has taken them over since, and its join could not reach
+        this node (e.g. a Redis outage). A local player whose entry was not written
+        before the read (one that just moved here: the read may predate its join) is
+        never among them."""
+        return [p for p in members if self._asserted.get((room, p), upto + 1) <= upto]
 
     async def _listen(self, pubsub: PubSub) -> None:
         subscribed: set[bytes] = set()
+        # A pub/sub connection that dies silently (a half-open TCP connection, a NAT or
+        # firewall that dropped it) never raises: once it has been quiet for a heartbeat,
+        # PING it, and give it up when nothing arrives within redis_timeout_s, as a
+        # command round trip would be.
+        period, limit = self.cfg.redis_heartbeat_s, self.cfg.redis_timeout_s
+        heard = pinged = time.monotonic()
         while True:
+            _check_cancel()
             want = set(self._rooms)
             if want - subscribed:
                 await pubsub.subscribe(*(want - subscribed))
             if subscribed - want:
                 await pubsub.unsubscribe(*(subscribed - want))
             subscribed = want
+            now = time.monotonic()
+            if pinged <= heard and now - heard >= period:
+                await pubsub.ping()
+                pinged = now
+            elif pinged > heard and now - pinged > limit:
+                raise TimeoutError(f"no reply on the pub/sub connection in {limit:g} s")
             msg = await pubsub.get_message(timeout=_POLL_S)
+            if msg is not None:
+                heard = time.monotonic()  # a pong, or anything else: it is alive
             delivered = False
             while msg is not None:
                 if msg["channel"] == self._ctl and msg["type"] == "message":
@@ -312,8 +456,22 @@ class RedisBus(Bus):
         if m.node == self.node or self.sink is None:
             return False  # our own publish, echoed by the channel
         self.store.count("in", m.kind, data)
+        if m.kind == "burn":
+            self._burns.add(m.player, m.exp, time.time())
         deliver(self.sink, room, m, time.monotonic())
         return True
+
+
+def _check_cancel() -> None:
+    """Raise CancelledError if this task (one of a connection's three) was cancelled.
+    The redis client can swallow a cancellation that reaches a task in a round trip:
+    its pipeline returns as if nothing happened. The task would then carry on, and the
+    TaskGroup that gave the connection up wait for it for ever, the node staying
+    "connected" to a dead connection. (Not for the supervisor's task: in Python 3.11
+    a TaskGroup can leave its parent's cancellation count raised.)"""
+    task = asyncio.current_task()
+    if task is not None and task.cancelling():
+        raise asyncio.CancelledError
 
 
 def _describe(exc: BaseException) -> str:

@@ -18,7 +18,7 @@ connection, its tasks and reconnects are :mod:`posecast.online.cluster.redis_bus
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from typing import Any
 
 from redis.asyncio import Redis
@@ -38,14 +38,39 @@ end
 return redis.call('PUBLISH', ARGV[3], ARGV[4])
 """
 
+# Re-assert this node's players (every heartbeat) without taking an entry that another
+# node holds: a join there since (a takeover whose announcement could not cross, e.g.
+# during a Redis outage) is newer, and this node ends its own session when it reads it.
+# ARGV: node, hash TTL in ms, then player, value pairs.
+CLAIM_LUA = """
+for i = 3, #ARGV, 2 do
+  local v = redis.call('HGET', KEYS[1], ARGV[i])
+  if not v or string.sub(v, 1, #ARGV[1] + 1) == ARGV[1] .. '\\t' then
+    redis.call('HSET', KEYS[1], ARGV[i], ARGV[i + 1])
+  end
+end
+return redis.call('PEXPIRE', KEYS[1], ARGV[2])
+"""
+_CHUNK = 1000  # commands per pipeline when re-sending many burns
+
 
 class RedisStore:
-    def __init__(self, prefix: str, node: str, node_ttl_s: float, metrics: Metrics) -> None:
+    def __init__(
+        self,
+        prefix: str,
+        node: str,
+        node_ttl_s: float,
+        metrics: Metrics,
+        refresh_every_s: float = 0.5,
+    ) -> None:
         self.prefix, self.node, self.metrics = prefix, node, metrics
         self.ttl_ms = int(node_ttl_s * 1000)
         self.ctl_channel = f"{prefix}:ctl"
         self.burned_key = f"{prefix}:burned"
-        self._leave_sha = ""
+        self._leave_sha = self._claim_sha = ""
+        self.refresh_every_s = refresh_every_s
+        self._registered = True  # the node key is ours to refresh (not after goodbye)
+        self._refreshed = float("-inf")  # when a round trip last carried the node key
 
     def channel(self, room: str) -> str:
         return f"{self.prefix}:room:{{{room}}}"
@@ -57,8 +82,9 @@ class RedisStore:
         return f"{self.prefix}:node:{node}"
 
     async def prepare(self, client: Redis) -> None:
-        """Once per connection: load the script (a restarted Redis has forgotten it)."""
+        """Once per connection: load the scripts (a restarted Redis has forgotten them)."""
         self._leave_sha = await client.script_load(LEAVE_LUA)
+        self._claim_sha = await client.script_load(CLAIM_LUA)
 
     # --- writes, queued into a pipeline ------------------------------------------------
 
@@ -74,14 +100,23 @@ class RedisStore:
         key, channel = self.members_key(room), self.channel(room)
         pipe.evalsha(self._leave_sha, 1, key, player, node, channel, data)
 
-    def burn(self, pipe: Any, jti: str, exp: int) -> None:
-        pipe.zadd(self.burned_key, {jti: exp})
+    def burn(self, pipe: Any, jti: str, exp: int, *, add: bool = True) -> None:
+        """Announce a burned token id (and ``add`` it to the burned set)."""
+        if add:
+            pipe.zadd(self.burned_key, {jti: exp})
         pipe.publish(
             self.ctl_channel, self._counted("burn", BusMessage("burn", self.node, jti, exp=exp))
         )
 
     def goodbye(self, pipe: Any) -> None:
+        self._registered = False
         pipe.delete(self.node_key(self.node))
+
+    def refresh(self, pipe: Any) -> None:
+        """Refresh this node's key (its heartbeat)."""
+        if self._registered:
+            self._refreshed = time.perf_counter()
+            pipe.set(self.node_key(self.node), b"1", px=self.ttl_ms)
 
     def publish(self, pipe: Any, room: str, m: BusMessage) -> None:
         pipe.publish(self.channel(room), self._counted(m.kind, m))
@@ -96,12 +131,34 @@ class RedisStore:
         self.metrics.bus_bytes.labels(direction).inc(len(data))
 
     async def execute(self, pipe: Any) -> list[Any]:
-        if not len(pipe):
+        """One round trip; its replies. Every round trip also refreshes the node key
+        when the last refresh is ``refresh_every_s`` old: a Redis slow but within
+        ``redis_timeout_s`` (a heartbeat's resync is several round trips, a burst of
+        room reads after a reconnect many) must not let a live node's key lapse."""
+        n = len(pipe)
+        if not n:
             return []
         t0 = time.perf_counter()
+        if t0 - self._refreshed >= self.refresh_every_s:
+            self.refresh(pipe)
         out: list[Any] = await pipe.execute()
         self.metrics.bus_roundtrip.observe(time.perf_counter() - t0)
-        return out
+        return out[:n]
+
+    async def reburn(self, client: Redis, known: Mapping[str, int], own: Mapping[str, int]) -> None:
+        """After a (re)connect: put back every burn this node knows (a Redis restarted
+        empty lost them) and announce its own again (those made while disconnected never
+        went out; a repeat is harmless)."""
+        known_items, own_items = list(known.items()), list(own.items())
+        for i in range(0, len(known_items), _CHUNK):
+            pipe = client.pipeline(transaction=False)
+            pipe.zadd(self.burned_key, dict(known_items[i : i + _CHUNK]))
+            await self.execute(pipe)
+        for i in range(0, len(own_items), _CHUNK):
+            pipe = client.pipeline(transaction=False)
+            for jti, exp in own_items[i : i + _CHUNK]:
+                self.burn(pipe, jti, exp, add=False)  # added above
+            await self.execute(pipe)
 
     # --- reads ---------------------------------------------------------------------------
 
@@ -111,22 +168,34 @@ class RedisStore:
         rooms: list[str],
         local_rooms: Callable[[], Mapping[str, Mapping[str, str]]],
         *,
-        heartbeat: bool,
+        claim: Mapping[str, Mapping[str, str]] | None = None,
+        announce: Collection[tuple[str, str]] = (),
     ) -> dict[str, Members]:
-        """Each room's live members in Redis, with dead nodes' entries reaped.
+        """Each room's live members on other nodes in Redis, dead nodes' entries reaped.
 
-        With ``heartbeat``, first refresh this node's key and re-assert every local
-        player (all a resync after an outage or a Redis restart needs). Entries of
+        With ``claim`` (a heartbeat: room -> this node's players), first refresh this
+        node's key and re-assert those players (all a resync after an outage or a Redis
+        restart needs), leaving an entry another node holds to that node (CLAIM_LUA);
+        the players in ``announce`` (room, player pairs: joins that never reached
+        Redis) are joined instead, written over any entry and announced. Entries of
         nodes whose key expired are deleted and their leave announced, as are this
         node's entries for players no longer here."""
         pipe = client.pipeline(transaction=False)
-        if heartbeat:
-            pipe.set(self.node_key(self.node), b"1", px=self.ttl_ms)
-            for room, players in local_rooms().items():
-                if players:
+        if claim is not None:
+            self.refresh(pipe)
+            for room, players in claim.items():
+                pairs = [
+                    x
+                    for p, n in players.items()
+                    if (room, p) not in announce
+                    for x in (p, f"{self.node}\t{n}")
+                ]
+                if pairs:
                     key = self.members_key(room)
-                    pipe.hset(key, mapping={p: f"{self.node}\t{n}" for p, n in players.items()})
-                    pipe.pexpire(key, 2 * self.ttl_ms)
+                    pipe.evalsha(self._claim_sha, 1, key, self.node, 2 * self.ttl_ms, *pairs)
+                for p, n in players.items():
+                    if (room, p) in announce:
+                        self.join(pipe, room, p, n)
         first = len(pipe)
         for room in rooms:
             pipe.hgetall(self.members_key(room))

@@ -9,7 +9,7 @@ this node has an audience in (:meth:`ClusterSink.refresh`), and the room gauges.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from typing import TYPE_CHECKING
 
 from posecast.errors import ProtocolError, ReplacedError
@@ -114,12 +114,31 @@ class ClusterSink:
         issued_at: float,
         now: float,
         keep: bool = False,
+        replaced: Collection[str] = (),
     ) -> None:
         """Reconcile ``room``'s remote members with ``live`` (player -> (node, name)).
         ``keep``: add, never remove (a read that other nodes may not have refilled
-        yet, e.g. just after Redis came back empty)."""
+        yet, e.g. just after Redis came back empty). ``replaced``: local players that
+        another node has taken over since this node's entry for them was written (the
+        bus vouches the read came after that write): their sessions end here."""
         if room not in self._watched:
             return
+        r = self.rooms.rooms.get(room)
+        for player in replaced:
+            c = self.conns.of_player(player)
+            if (
+                r is not None
+                and player in r.players
+                and player in live
+                and c is not None
+                and c.session.role == "player"
+            ):
+                # The join there could not reach this node (a Redis outage): it wins,
+                # as the join would have made it.
+                gone = ReplacedError("the same player joined on another node")
+                self._end(c, now, Error.from_exception(gone))
+        if room not in self._watched:
+            return  # that was the room's last local audience
         r = self.rooms.rooms.get(room)
         local = r.players if r is not None else {}
         others = {p: v for p, v in live.items() if p not in local}
