@@ -21,3 +21,27 @@ def test_offset_is_the_least_delayed_sample_and_drift_the_slope() -> None:
     # server - client = 3 s + 100 ppm of ~1030 s + the least delay (2 ms)
     assert clock.offset_s == pytest.approx(3.0 + 1e-4 * 1030 + 0.002, abs=0.005)
     assert clock.drift_ppm == pytest.approx(100.0, abs=20.0)
+
+
+def test_node_clocks_map_another_epoch_to_this_one() -> None:
+    from posecast.online.core.clock import FORGET_S, RESET_S, RISE_S_PER_S, NodeClocks
+
+    c = NodeClocks()
+    # Node B's clock is 1000 s ahead; delays 5, 3, 8 ms: the least one sets the offset,
+    # which may rise by RISE_S_PER_S a second (drift, a path slower for good).
+    assert c.local("b", 2000.0, 1000.005) == pytest.approx(1000.005, abs=1e-9)
+    assert c.local("b", 2001.0, 1001.003) == pytest.approx(1001.003, abs=1e-9)
+    rise = RISE_S_PER_S * 1.005
+    assert c.local("b", 2002.0, 1002.008) == pytest.approx(1002.003 + rise, abs=1e-9)
+    rise += RISE_S_PER_S * 10.012
+    assert c.local("b", 2012.0, 1012.020) == pytest.approx(1012.003 + rise, abs=1e-9)
+    # Node C is another node with its own offset.
+    assert c.local("c", 3.0, 1012.5) == pytest.approx(1012.5, abs=1e-9)
+    # B restarted: its clock jumped back; above the offset by more than RESET_S.
+    assert c.local("b", 10.0, 1013.0) == pytest.approx(1013.0)
+    assert c.local("b", 10.0 + RESET_S / 2, 1013.0 + RESET_S / 2) == pytest.approx(
+        1013.0 + RESET_S / 2
+    )
+    # A node silent for FORGET_S is dropped when another one appears.
+    c.local("d", 0.0, 1014.0 + FORGET_S + 1)
+    assert len(c) == 1

@@ -98,3 +98,45 @@ def test_a_snapshot_ends_a_local_player_only_when_the_bus_vouches_for_the_read()
     # A name the bus lists that is no local player (any more) changes nothing.
     sink.remote_snapshot("r1", {"m": ("node-b", "M")}, h.now, h.now, replaced=["m", "zz"])
     assert h.inbox(a) == []
+
+
+def _pose(player: str, seq: int, t: float) -> bytes:
+    import numpy as np
+
+    from posecast.online.protocol import encode
+    from posecast.online.protocol.messages import Pose
+    from posecast.skeleton import reference_offsets
+
+    positions = np.cumsum(reference_offsets(), axis=0)  # any body
+    return encode(Pose(player, seq, t, positions, None))
+
+
+def test_a_remote_pose_goes_out_on_this_nodes_clock() -> None:
+    """Node B's monotonic clock has another epoch (another host): its poses reach this
+    node's clients with ``t`` on this node's clock, about when they arrived over the
+    quickest path, and their spacing kept (clients interpolate on this clock)."""
+    from posecast.online.protocol.messages import Pose
+
+    h = Harness()
+    a = h.join("a")
+    h.inbox(a)
+    sink = h.hub.sink
+    sink.remote_snapshot("r1", {"m": ("node-b", "M")}, h.now, h.now)
+    h.inbox(a)
+    base, delays = 5.0e6, [0.004, 0.002, 0.009, 0.002, 0.030]  # B's clock; bus delays
+    got: list[float] = []
+    for k, delay in enumerate(delays):
+        t = base + k / 60
+        sink.remote_tick("r1", "node-b", [("m", _pose("m", k, t))], [], h.now + k / 60 + delay)
+        (pose,) = h.inbox(a)
+        assert isinstance(pose, Pose) and pose.seq == k
+        got.append(pose.t)
+    # The first two set the offset (4 then 2 ms of delay); after that it holds.
+    assert abs(got[0] - (h.now + 0.004)) < 1e-6
+    for k in range(1, len(delays)):
+        assert abs(got[k] - (h.now + k / 60 + 0.002)) < 1e-4, k
+    # Undecodable pose bytes from a node are dropped and counted, nothing more.
+    sink.remote_tick("r1", "node-b", [("m", b"\x81\xa4type\xa4pose")], [], h.now + 1)
+    assert h.inbox(a) == []
+    dropped = {"reason": "undecodable"}
+    assert h.hub.metrics.value("posecast_bus_dropped_total", dropped) == 1

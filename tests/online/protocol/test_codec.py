@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import msgpack
 import numpy as np
 import pytest
@@ -365,3 +367,32 @@ def test_bad_sites_frames(frame: dict[str, object], code: str, field: str) -> No
     with pytest.raises(ProtocolError) as err:
         decode(msgpack.packb({"type": "frame", "seq": 1, "t": 0.5, **frame}))
     assert err.value.code == code and err.value.field == field
+
+
+def test_pose_time_reads_and_with_time_rewrites_only_t(rng: np.random.Generator) -> None:
+    from posecast.errors import MalformedError
+    from posecast.online.protocol.codec import pose_time, with_time
+
+    poses = [s for s in _samples(rng) if isinstance(s, Pose)]
+    assert poses
+    for msg in poses:
+        data = encode(msg)
+        t, at = pose_time(data)
+        assert t == msg.t
+        moved = with_time(data, at, 1234.5)
+        back = decode(moved)
+        assert isinstance(back, Pose) and back.t == 1234.5
+        assert encode(replace(decode(data), t=1234.5)) == moved  # type: ignore[type-var]
+    good = encode(poses[0])
+    not_poses = [
+        encode(Ping(1.0)),
+        b"",
+        b"\xc1",
+        good[: pose_time(good)[1] + 4],  # cut inside t
+        msgpack.packb({"type": "pose", "player": "p", "t": 3}),  # t not a float64
+        msgpack.packb({"type": "pose", "player": "p"}),
+        msgpack.packb([1, 2]),
+    ]
+    for data in not_poses:
+        with pytest.raises(MalformedError):
+            pose_time(data)

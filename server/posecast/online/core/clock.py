@@ -6,6 +6,11 @@ one-way network delay. Delay only ever adds, so the minimum over a window is the
 best offset estimate (the sample that met the least queueing). Drift is the slope
 of those windowed minima over time, in parts per million: a client clock running
 50 ppm fast gains 3 ms a minute, which shows up as late-looking frames.
+
+:class:`NodeClocks` does the same for other nodes' server clocks: a pose another
+node computed carries that node's monotonic ``t``, which is this node's clock only
+when both run on one host. Its clients interpolate on this node's clock, so the
+pose's ``t`` is moved onto it before it goes out.
 """
 
 from __future__ import annotations
@@ -68,3 +73,43 @@ class ClockEstimator:
             return None
         cov = sum((t - t_mean) * (o - o_mean) for t, o in zip(ts, os_, strict=True))
         return cov / var * 1e6
+
+
+RISE_S_PER_S = 1e-3  # how fast a node's offset may grow (drift, a slower path)
+RESET_S = 1.0  # a sample this far above the offset: that node's clock started again
+FORGET_S = 60.0  # a node silent this long is forgotten (when another one appears)
+
+
+@dataclass
+class NodeClocks:
+    """Other nodes' monotonic clocks onto this node's, one offset per node.
+
+    The offset is the least ``now - t`` seen (offset plus the least bus delay), as
+    for clients. It may rise by :data:`RISE_S_PER_S` (clock drift between hosts, a
+    path that got slower for good) and starts over when a sample is above it by more
+    than :data:`RESET_S` (a new epoch). A pose's local time is then about when it
+    would have arrived over the quickest path: never later than it did arrive.
+    """
+
+    _nodes: dict[str, tuple[float, float]] = field(default_factory=dict)  # offset, last
+
+    def local(self, node: str, t: float, now: float) -> float:
+        """``t`` on ``node``'s clock, received at ``now`` on this one, as this node's time."""
+        sample = now - t
+        held = self._nodes.get(node)
+        if held is None:
+            self._forget(now)
+            offset = sample
+        else:
+            offset = held[0] + RISE_S_PER_S * max(0.0, now - held[1])
+            if sample < offset or sample - offset > RESET_S:
+                offset = sample
+        self._nodes[node] = (offset, now)
+        return max(0.0, t + offset)
+
+    def _forget(self, now: float) -> None:
+        for node in [n for n, (_, last) in self._nodes.items() if now - last > FORGET_S]:
+            del self._nodes[node]
+
+    def __len__(self) -> int:
+        return len(self._nodes)

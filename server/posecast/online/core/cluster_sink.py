@@ -3,8 +3,11 @@ node's rooms (:class:`~posecast.online.cluster.bus.BusSink`).
 
 Remote players are members of a room (``welcome``, presence, capacity) but no
 audience: their poses arrive as one batch per room per tick and go to the local
-audience's latest-wins slots. The sink also keeps the bus watching exactly the rooms
-this node has an audience in (:meth:`ClusterSink.refresh`), and the room gauges.
+audience's latest-wins slots, their ``t`` moved onto this node's clock
+(:class:`~posecast.online.core.clock.NodeClocks`: nodes on other hosts have other
+monotonic clocks, and clients interpolate on this one's). The sink also keeps the
+bus watching exactly the rooms this node has an audience in
+(:meth:`ClusterSink.refresh`), and the room gauges.
 """
 
 from __future__ import annotations
@@ -15,11 +18,13 @@ from typing import TYPE_CHECKING
 from posecast.errors import ProtocolError, ReplacedError
 from posecast.online.auth.tokens import Claims, ReplayGuard
 from posecast.online.cluster.bus import Bus
+from posecast.online.core.clock import NodeClocks
 from posecast.online.core.connections import Conn, Connections
 from posecast.online.core.remote import RemoteRooms
 from posecast.online.core.rooms import Rooms
 from posecast.online.core.routing import Router
 from posecast.online.protocol import decode
+from posecast.online.protocol.codec import pose_time, with_time
 from posecast.online.protocol.messages import Error, Presence
 
 if TYPE_CHECKING:
@@ -51,6 +56,7 @@ class ClusterSink:
         self.wall_offset_s = wall_offset_s
         self._end = end
         self._watched: set[str] = set()  # rooms the bus delivers to this node
+        self.clocks = NodeClocks()  # other nodes' clocks onto this one's
 
     def remote_join(self, room: str, player: str, name: str, node: str, now: float) -> None:
         local = self.conns.of_player(player)
@@ -77,12 +83,18 @@ class ClusterSink:
         events: Sequence[bytes],
         now: float,
     ) -> None:
-        unknown = superseded = 0
+        unknown = undecodable = superseded = 0
         for player, data in poses:
             m = self.remote.get(room, player)
             if m is None or m.node != node:
                 unknown += 1  # not (yet) a member here: its join or the snapshot comes first
                 continue
+            try:
+                t, at = pose_time(data)
+            except ProtocolError:
+                undecodable += 1
+                continue
+            data = with_time(data, at, self.clocks.local(node, t, now))
             superseded += self.router.pose_to_room(room, player, data, now)
         for data in events:
             if self._member_event(room, node, data):
@@ -91,6 +103,8 @@ class ClusterSink:
                 unknown += 1
         if unknown:
             self.metrics.bus_dropped.labels("unknown_player").inc(unknown)
+        if undecodable:
+            self.metrics.bus_dropped.labels("undecodable").inc(undecodable)
         if superseded:
             self.metrics.poses_superseded.inc(superseded)
 
