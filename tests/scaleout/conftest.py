@@ -4,25 +4,29 @@ Nothing is faked: ``redis-server`` comes from Debian's package. If it is missing
 we are root (CI is), the session fixture installs it with ``apt-get`` and says how
 long that took; otherwise the tests skip with a reason that says what to install.
 Each test gets its own Redis (a free port, a temporary directory, no persistence)
-and its own nodes.
+and its own nodes. The helpers at the end drive players on them.
 """
 
 from __future__ import annotations
 
+import asyncio
 import os
 import shutil
 import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Coroutine, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
+from posecast.online.protocol.messages import Pose, Welcome
 from posecast.testing.serve import ServeProcess
 from posecast.testing.serve import http_get as http_get  # re-exported
-from tests.online.conftest import SECRET
+from tests.online.conftest import SECRET, token
+from tests.online.wsclient import Client
 from tests.scaleout.redis_proxy import RedisProxy
 
 HEARTBEAT_S = 1.0  # the defaults: the bound the tests check is the documented one
@@ -150,3 +154,19 @@ def nodes(redis_server: RedisServer) -> Iterator[tuple[Node, Node]]:
     finally:
         for n in pair:
             n.close()
+
+
+def run(coro: Coroutine[Any, Any, None]) -> None:
+    asyncio.run(coro)
+
+
+async def player(node: Node, name: str, room: str = "r1", seed: int = 0) -> Client:
+    """A player joined on ``node``, streaming a synthetic walk."""
+    cl = await Client.open(node.port)
+    assert isinstance(await cl.hello(token(room, name), room=room, name=name.upper()), Welcome)
+    cl.stream(seed=seed)
+    return cl
+
+
+def pose_from(src: str) -> Callable[[Any], bool]:
+    return lambda m: isinstance(m, Pose) and m.player == src

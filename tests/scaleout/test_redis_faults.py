@@ -13,35 +13,27 @@ from __future__ import annotations
 
 import asyncio
 import time
-from collections.abc import Callable, Coroutine
-from typing import Any
+from collections.abc import Callable
 
 import pytest
 import redis
 
-from posecast.online.protocol.messages import Bye, Error, Pose, Presence, Welcome
+from posecast.online.protocol.messages import Bye, Error, Presence, Welcome
 from tests.online.conftest import token
 from tests.online.wsclient import Client
-from tests.scaleout.conftest import HEARTBEAT_S, NODE_TTL_S, Node, RedisServer
+from tests.scaleout.conftest import (
+    HEARTBEAT_S,
+    NODE_TTL_S,
+    Node,
+    RedisServer,
+    player,
+    pose_from,
+    run,
+)
 from tests.scaleout.redis_proxy import RedisProxy
 
 # Generous: the first test may also install redis-server with apt-get (session fixture).
 pytestmark = pytest.mark.timeout(300)
-
-
-def run(coro: Coroutine[Any, Any, None]) -> None:
-    asyncio.run(coro)
-
-
-async def player(node: Node, name: str, room: str = "r1", seed: int = 0) -> Client:
-    cl = await Client.open(node.port)
-    assert isinstance(await cl.hello(token(room, name), room=room, name=name.upper()), Welcome)
-    cl.stream(seed=seed)
-    return cl
-
-
-def pose_from(src: str) -> Callable[[Any], bool]:
-    return lambda m: isinstance(m, Pose) and m.player == src
 
 
 async def until(what: str, check: Callable[[], bool], timeout_s: float = 15.0) -> None:

@@ -12,15 +12,21 @@ import itertools
 import re
 import signal
 import time
-from collections.abc import Coroutine
-from typing import Any
 
 import pytest
 
 from posecast.online.protocol.messages import Bye, Error, Pose, Presence, Welcome
 from tests.online.conftest import token
 from tests.online.wsclient import Client
-from tests.scaleout.conftest import HEARTBEAT_S, NODE_TTL_S, Node, RedisServer
+from tests.scaleout.conftest import (
+    HEARTBEAT_S,
+    NODE_TTL_S,
+    Node,
+    RedisServer,
+    player,
+    pose_from,
+    run,
+)
 
 # Generous: the first test may also install redis-server with apt-get (session fixture).
 pytestmark = pytest.mark.timeout(300)
@@ -29,21 +35,6 @@ pytestmark = pytest.mark.timeout(300)
 # heartbeat, and a live node's next heartbeat (at most HEARTBEAT_S later) finds it
 # gone. The test allows one second more for a loaded CI machine.
 LEAVE_BOUND_S = NODE_TTL_S + HEARTBEAT_S + 1.0
-
-
-def run(coro: Coroutine[Any, Any, None]) -> None:
-    asyncio.run(coro)
-
-
-async def player(node: Node, name: str, room: str = "r1", seed: int = 0) -> Client:
-    cl = await Client.open(node.port)
-    assert isinstance(await cl.hello(token(room, name), room=room, name=name.upper()), Welcome)
-    cl.stream(seed=seed)
-    return cl
-
-
-def pose_from(src: str) -> Any:
-    return lambda m: isinstance(m, Pose) and m.player == src
 
 
 def test_players_on_two_nodes_see_each_other_and_other_rooms_nothing(

@@ -13,7 +13,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
-from collections.abc import Callable, Collection, Mapping, Sequence
+from collections.abc import Awaitable, Callable, Collection, Mapping, Sequence
 from typing import Any
 
 import pytest
@@ -94,6 +94,19 @@ async def stop(bus: RedisBus) -> None:
         await stopping
 
 
+def run_bus(bus: RedisBus, steps: Callable[[], Awaitable[None]]) -> None:
+    """Start ``bus``, run ``steps``, stop it (see :func:`stop`)."""
+
+    async def scenario() -> None:
+        await bus.start()
+        try:
+            await steps()
+        finally:
+            await stop(bus)
+
+    asyncio.run(scenario())
+
+
 async def until(what: str, check: Callable[[], bool], timeout_s: float = 15.0) -> None:
     deadline = time.monotonic() + timeout_s
     while not check():
@@ -123,13 +136,6 @@ def test_a_stale_read_never_ends_a_local_player_and_a_takeover_does(
         sink.local["r1"] = {"px": "PX"}
         bus.joined("r1", "px", "PX")
 
-    async def scenario() -> None:
-        await bus.start()
-        try:
-            await steps()
-        finally:
-            await stop(bus)
-
     async def steps() -> None:
         await until("the connect's heartbeat", lambda: bus.healthy and sink.calls >= 2)
         # px is admitted while a read of r1 is in flight: the read (issued before px's
@@ -147,7 +153,7 @@ def test_a_stale_read_never_ends_a_local_player_and_a_takeover_does(
         assert await read_r1() == ("r1", {"px": ("node-g", "PX")}, ["px"])
 
     try:
-        asyncio.run(scenario())
+        run_bus(bus, steps)
     finally:
         store.close()
 
@@ -218,14 +224,7 @@ def test_a_connection_is_given_up_even_if_a_round_trip_swallows_its_cancellation
         await until("a new connection", lambda: reconnects() >= 2)
         assert bus.healthy
 
-    async def scenario() -> None:
-        await bus.start()
-        try:
-            await steps()
-        finally:
-            await stop(bus)
-
     try:
-        asyncio.run(scenario())
+        run_bus(bus, steps)
     finally:
         store.close()
