@@ -45,6 +45,15 @@ def test_a_keep_snapshot_adds_members_but_removes_none() -> None:
     assert h.inbox(a) == [Presence("leave", "r1", "m", "M")]
 
 
+def _with_remote_m() -> tuple[Harness, int]:
+    """Player a here, and m of node-b in room r1 (a's inbox read)."""
+    h = Harness()
+    a = h.join("a")
+    h.hub.sink.remote_snapshot("r1", {"m": ("node-b", "M")}, h.now, h.now)
+    h.inbox(a)
+    return h, a
+
+
 def test_a_tick_carries_stale_and_active_only_for_the_nodes_current_players() -> None:
     """A ``stale`` batched on node B before its player's leave can be read here after
     the leave: the room heard ``leave`` already and must not hear of the player again.
@@ -52,12 +61,8 @@ def test_a_tick_carries_stale_and_active_only_for_the_nodes_current_players() ->
     node's or room's players."""
     from posecast.online.protocol import encode
 
-    h = Harness()
-    a = h.join("a")
-    h.inbox(a)
+    h, a = _with_remote_m()
     sink = h.hub.sink
-    sink.remote_snapshot("r1", {"m": ("node-b", "M")}, h.now, h.now)
-    h.inbox(a)
     stale = encode(Presence("stale", "r1", "m", "M"))
     sink.remote_tick("r1", "node-b", [], [stale], h.now)
     assert h.inbox(a) == [Presence("stale", "r1", "m", "M")]
@@ -117,12 +122,8 @@ def test_a_remote_pose_goes_out_on_this_nodes_clock() -> None:
     quickest path, and their spacing kept (clients interpolate on this clock)."""
     from posecast.online.protocol.messages import Pose
 
-    h = Harness()
-    a = h.join("a")
-    h.inbox(a)
+    h, a = _with_remote_m()
     sink = h.hub.sink
-    sink.remote_snapshot("r1", {"m": ("node-b", "M")}, h.now, h.now)
-    h.inbox(a)
     base, delays = 5.0e6, [0.004, 0.002, 0.009, 0.002, 0.030]  # B's clock; bus delays
     got: list[float] = []
     for k, delay in enumerate(delays):
