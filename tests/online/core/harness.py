@@ -20,12 +20,16 @@ class Harness:
     def __init__(self, **cfg: Any) -> None:
         self.hub = Hub(make_cfg(**cfg), Metrics())
         self.now = time.time()
+        self.versions: dict[int, int] = {}  # conn -> its protocol version
 
-    def join(self, player: str, room: str = "r1", role: str = "player", **kw: Any) -> int:
-        conn = self.hub.connect("10.0.0.1", self.now)
+    def join(
+        self, player: str, room: str = "r1", role: str = "player", version: int = 1, **kw: Any
+    ) -> int:
+        conn = self.hub.connect("10.0.0.1", self.now, version)
+        self.versions[conn] = version
         tok = kw.pop("tok", None) or token(room=room, player=player, role=role, **kw)
         watch = tuple(kw.get("rooms", ())) if role == "backend" else ()
-        self.send(conn, Hello(1, tok, room, player.upper(), watch=watch))
+        self.send(conn, Hello(version, tok, room, player.upper(), watch=watch))
         return conn
 
     def send(self, conn: int, msg: Message) -> None:
@@ -34,7 +38,7 @@ class Harness:
     def inbox(self, conn: int) -> list[Message]:
         box = self.hub.outbox(conn)
         assert box is not None
-        out = [decode(d) for d in box.take()]
+        out = [decode(d, version=self.versions.get(conn, 1)) for d in box.take()]
         box.sent(self.now)
         return out
 

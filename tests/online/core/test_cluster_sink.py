@@ -141,3 +141,22 @@ def test_a_remote_pose_goes_out_on_this_nodes_clock() -> None:
     assert h.inbox(a) == []
     dropped = {"reason": "undecodable"}
     assert h.hub.metrics.value("posecast_bus_dropped_total", dropped) == 1
+
+
+def test_a_player_that_moved_rooms_keeps_its_avatar_until_it_is_gone_from_all() -> None:
+    """Player m moves from room r1 (node B) to room r2 (node C), and this node hears of
+    the join in r2 before the leave in r1: m's handle must stay while r2 holds it (a
+    handle released there goes to the next player, whom r2's clients would take for m),
+    and go once m has left everywhere."""
+    h = Harness()
+    a, b = h.join("a", version=2), h.join("b", room="r2", version=2)
+    sink, avatars = h.hub.sink, h.hub.router.avatars
+    sink.remote_snapshot("r1", {"m": ("node-b", "M")}, h.now, h.now)
+    held = len(avatars)  # a, b and m
+    sink.remote_join("r2", "m", "M", "node-c", h.now)
+    sink.remote_leave("r1", "m", "node-b", h.now)
+    assert len(avatars) == held
+    sink.remote_leave("r2", "m", "node-c", h.now)
+    assert len(avatars) == held - 1
+    for conn in (a, b):
+        h.inbox(conn)

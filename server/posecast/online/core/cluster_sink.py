@@ -190,12 +190,7 @@ class ClusterSink:
         for room in gone:
             self.bus.unwatch(room)
             for player in self.remote.drop_room(room):
-                # Its avatar (handle, skeleton) goes too, unless it is still seen here.
-                held = self.rooms.room_of(player) is not None or any(
-                    self.remote.get(r, player) is not None for r in self.remote.rooms
-                )
-                if not held:
-                    self.router.avatars.release(player)
+                self.router.release_if_gone(player)
         for room in new:
             self.bus.watch(room)  # may report the room's remote members at once
         self.metrics.remote_players.set(self.remote.total)

@@ -99,6 +99,10 @@ class RemoteRooms:
     def get(self, room: str, player: str) -> RemoteMember | None:
         return self._rooms.get(room, {}).get(player)
 
+    def holds(self, player: str) -> bool:
+        """``player`` is a remote member of any room here."""
+        return any(player in members for members in self._rooms.values())
+
     def members(self, room: str) -> tuple[Member, ...]:
         return tuple(Member(p, m.name) for p, m in self._rooms.get(room, {}).items())
 

@@ -101,9 +101,15 @@ class Router:
                 mine = self._v2(stream, p)  # each client's own view: announce or forget
                 v2 = v2 or encode(mine)
                 self.conns.send(c, v2, now)
-        gone = self.rooms.room_of(p.player) is None and self.remote.get(room, p.player) is None
-        if p.event == "leave" and gone:
-            self.avatars.release(p.player)
+        if p.event == "leave":
+            self.release_if_gone(p.player)
+
+    def release_if_gone(self, player: str) -> None:
+        """``player``'s avatar (handle, skeleton) goes, unless it is still seen here: a
+        local player, or another node's in any room (one that moved between rooms may
+        be announced in its new room before it leaves the old one)."""
+        if self.rooms.room_of(player) is None and not self.remote.holds(player):
+            self.avatars.release(player)
 
     def bytes_to_room(self, room: str, data: bytes, now: float, skip: str | None = None) -> None:
         for member in self.rooms.audience(room):
