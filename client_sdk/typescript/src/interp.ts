@@ -13,9 +13,13 @@
  * const buffers = new Interpolator();                  // one PoseBuffer per player
  * for await (const ev of client) buffers.feed(ev);     // poses, leaves, welcomes
  * // each rendered frame:
- * const now = client.clock.toServer(performance.now() / 1000);
+ * const now = client.clock.displayTime(performance.now() / 1000); // throws before a pong
  * for (const [player, shown] of buffers.posesAt(now)) draw(player, shown);
  * ```
+ *
+ * The query time is the display clock (`ClockSync.displayTime`), not `toServer`: the
+ * clock estimate steps by up to tens of ms when its best ping leaves the window, and
+ * the display clock slews such steps instead of popping every avatar.
  *
  * At query time `time` the buffer shows `tau = time - delayS`. With `a` the newest
  * pose at or before `tau` and `b` the one after it:

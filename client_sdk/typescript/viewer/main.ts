@@ -297,11 +297,15 @@ let client: PosecastClient | undefined;
 const buffers = new Interpolator();
 let frames = 0;
 
-/** Each player's pose for this frame: sampled at the server's time now once the clock is synced. */
+/**
+ * Each player's pose for this frame: sampled at the server's time now once the clock is
+ * synced, on the display clock, which slews the offset estimate's steps (up to tens of
+ * ms when the best ping leaves the window) instead of moving every avatar by them.
+ */
 function posesNow(c: PosecastClient | undefined): ReadonlyMap<string, Drawn> {
   if (c === undefined) return new Map();
-  if (c.clock.offsetS === undefined) return c.poses; // toServer throws until the first pong
-  return buffers.posesAt(c.clock.toServer(performance.now() / 1000));
+  if (c.clock.offsetS === undefined) return c.poses; // displayTime throws until the first pong
+  return buffers.posesAt(c.clock.displayTime(performance.now() / 1000));
 }
 const centroid = new Vector3();
 const follow = new Vector3();

@@ -119,8 +119,14 @@ namespace Posecast.Client
         public string Player { get { var w = Session.Welcome; return w == null ? null : w.Player; } }
         public ClockSync Clock { get { return Session.Clock; } }
         public Stats Stats { get { return Session.Stats; } }
-        /// <summary>Server time now, by the clock sync (Now before the first pong).</summary>
-        public double ServerNow { get { lock (_lock) return Session.Clock.ToServer(Now); } }
+        /// <summary>
+        /// Server time now on the clock sync's display clock (Clock.DisplayTime(Now); Now before
+        /// the first pong): the time to sample the interpolator at each frame. It slews the offset
+        /// estimate's steps (tens of ms when the best ping leaves the window) at 5 ms a second
+        /// instead of moving every avatar by them; Clock.ToServer(PosecastClient.Now) is the
+        /// estimate itself.
+        /// </summary>
+        public double ServerNow { get { lock (_lock) return Session.Clock.DisplayTime(Now); } }
 
         // --- connecting and joining ----------------------------------------------------
 

@@ -11,9 +11,13 @@ never shows::
     async for event in client.events():
         buffers.feed(event)                           # poses, leaves, welcomes
     ...
-    now = client.clock.to_server(time.monotonic())    # each rendered frame
+    now = client.clock.display_time(time.monotonic())  # each rendered frame
     for player, shown in buffers.poses_at(now).items():
         draw(player, shown.positions, shown.rotations)
+
+The query time is the display clock (:meth:`ClockSync.display_time`), not
+``to_server``: the clock estimate steps by up to tens of ms when its best ping leaves
+the window, and the display clock slews such steps instead of popping every avatar.
 
 At query time ``time``, the buffer shows ``tau = time - delay_s``. With ``a`` the
 newest pose at or before ``tau`` and ``b`` the one after it:
