@@ -10,7 +10,8 @@ audience in. Key names and commands are :mod:`posecast.online.cluster.redis_stor
 Three tasks per connection, under a supervisor that reconnects with jittered
 exponential backoff: ``_commands`` owns the command connection and sends, in
 order, everything the hub asked for (one pipelined round trip for all of it: pose
-batches are latest-wins per room while a round trip is in flight); ``_listen``
+batches are latest-wins per room while a round trip is in flight, and every round
+trip, each of a resync's too, carries the latest); ``_listen``
 owns the pub/sub connection (and PINGs it when it has been quiet for a heartbeat:
 a connection that died silently never raises); ``_heartbeat`` queues a full resync
 every ``redis_heartbeat_s``: refresh the node key, re-assert every local player,
@@ -93,6 +94,7 @@ class RedisBus(Bus):
         self.store = RedisStore(
             cfg.redis_prefix, node, cfg.redis_node_ttl_s, metrics, cfg.redis_heartbeat_s / 2
         )
+        self.store.piggyback = self._piggyback
         self._watched: dict[str, bytes] = {}  # room -> its channel
         self._rooms: dict[bytes, str] = {}  # channel -> room
         self._ops: deque[tuple[Any, ...]] = deque()
@@ -304,9 +306,10 @@ class RedisBus(Bus):
                 while self._ops:
                     op, *args = self._ops.popleft()
                     if op == "sync":
-                        # Every join queued before this moment is written before the
-                        # sync's reads (one connection, in order): see _replaced.
-                        upto = self._seq
+                        # The joins queued ahead of the sync are written before its
+                        # reads (one connection, in order); one queued behind it (while
+                        # a round trip was in flight) is not: see _replaced.
+                        upto = self._written_upto()
                         await self._execute(pipe, joins)  # what came before it, in order
                         pipe, joins = client.pipeline(transaction=False), []
                         only, heartbeat = args
@@ -321,13 +324,33 @@ class RedisBus(Bus):
                         store.burn(pipe, *args)
                     elif op == "bye":
                         store.goodbye(pipe)
-                ticks, self._ticks = self._ticks, {}
-                for room, b in ticks.items():
-                    poses, events = tuple(b.poses.items()), tuple(b.events)
-                    store.publish(
-                        pipe, room, BusMessage("tick", self.node, poses=poses, events=events)
-                    )
+                self._add_ticks(pipe)  # after every join queued: a join precedes its poses
                 await self._execute(pipe, joins)
+
+    def _add_ticks(self, pipe: Any) -> None:
+        ticks, self._ticks = self._ticks, {}
+        for room, b in ticks.items():
+            poses, events = tuple(b.poses.items()), tuple(b.events)
+            self.store.publish(
+                pipe, room, BusMessage("tick", self.node, poses=poses, events=events)
+            )
+
+    def _piggyback(self, pipe: Any) -> None:
+        """Every round trip carries the pending pose batches, a resync's too: on a slow
+        Redis a resync is several long round trips, and the heartbeat queues the next
+        one before it ends, so batches sent only once nothing else is queued would never
+        go. Held back while a join that must precede its player's poses has yet to be
+        written ahead of them: one queued (behind the resync in progress), or one made
+        while disconnected that the heartbeat has not claimed yet (it announces it)."""
+        if not self._ticks or any(op[0] == "join" for op in self._ops):
+            return
+        if self._unsent.keys() <= self._asserted.keys():
+            self._add_ticks(pipe)
+
+    def _written_upto(self) -> int:
+        """The joins numbered up to this one are written before the next round trip's
+        reads: all but those still queued (in order, so from the first of them on)."""
+        return next((op[4] for op in self._ops if op[0] == "join"), self._seq + 1) - 1
 
     async def _execute(self, pipe: Any, joins: list[tuple[tuple[str, str], int]]) -> None:
         await self.store.execute(pipe)

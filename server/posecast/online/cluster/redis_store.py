@@ -69,6 +69,9 @@ class RedisStore:
         self.burned_key = f"{prefix}:burned"
         self._leave_sha = self._claim_sha = ""
         self.refresh_every_s = refresh_every_s
+        # Called with every pipeline about to go out that holds a command: adds what
+        # must not wait for a long series of round trips (the bus's pose batches).
+        self.piggyback: Callable[[Any], None] | None = None
         self._registered = True  # the node key is ours to refresh (not after goodbye)
         self._refreshed = float("-inf")  # when a round trip last carried the node key
 
@@ -131,13 +134,17 @@ class RedisStore:
         self.metrics.bus_bytes.labels(direction).inc(len(data))
 
     async def execute(self, pipe: Any) -> list[Any]:
-        """One round trip; its replies. Every round trip also refreshes the node key
-        when the last refresh is ``refresh_every_s`` old: a Redis slow but within
-        ``redis_timeout_s`` (a heartbeat's resync is several round trips, a burst of
-        room reads after a reconnect many) must not let a live node's key lapse."""
+        """One round trip; the replies of the commands queued by the caller. Every round
+        trip also refreshes the node key when the last refresh is ``refresh_every_s``
+        old: a Redis slow but within ``redis_timeout_s`` (a heartbeat's resync is
+        several round trips, a burst of room reads after a reconnect many) must not let
+        a live node's key lapse. For the same reason it carries what ``piggyback`` adds
+        (pose batches must not wait for a resync's round trips)."""
         n = len(pipe)
         if not n:
             return []
+        if self.piggyback is not None:
+            self.piggyback(pipe)
         t0 = time.perf_counter()
         if t0 - self._refreshed >= self.refresh_every_s:
             self.refresh(pipe)
