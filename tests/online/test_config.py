@@ -135,3 +135,12 @@ def test_a_no_option_turns_its_engine_step_off(option: str, attr: str) -> None:
     ):
         multi = PosecastServer(cfg)._default_engine()
         assert all(getattr(e.cfg, attr) is on for e in multi.engines.values())
+
+
+def test_the_node_key_must_outlive_the_slowest_round_trips() -> None:
+    """Refreshes reach Redis up to timeout + max(heartbeat / 2 + timeout, heartbeat)
+    apart (docs/scale-out.md, "A slow Redis"): a TTL not above that is refused."""
+    ServerConfig(token_secret=SECRET)  # the defaults: 1 + max(0.5 + 1, 1) = 2.5 s < 3 s
+    with pytest.raises(ConfigError, match=r"redis_node_ttl_s \(3 s\).* = 4\.5 s"):
+        ServerConfig(token_secret=SECRET, redis_timeout_s=2.0)
+    ServerConfig(token_secret=SECRET, redis_timeout_s=2.0, redis_node_ttl_s=4.6)

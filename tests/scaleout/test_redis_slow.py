@@ -47,15 +47,17 @@ def gaps(times: list[float]) -> list[float]:
 def test_tick_batches_keep_flowing_while_heartbeats_resync_on_a_slow_redis(
     redis_server: RedisServer, redis_proxy: RedisProxy
 ) -> None:
-    """Node B reaches Redis with 0.6 s round trips (slow, well within the 2 s
-    ``redis_timeout_s``). A heartbeat's resync is two round trips (claim and read,
-    then the liveness check), 1.2 s, longer than the 1 s heartbeat: a new resync is
-    queued before each ends. B's player's poses must still reach node A at one tick
-    batch per round trip of B (each round trip carries the latest batch). Before the
-    fix, pose batches went out only once no resync was queued: never, here, and A
-    heard nothing from B for as long as Redis stayed that slow."""
+    """Node B reaches Redis with 0.6 s round trips (slow, well within its
+    ``redis_timeout_s`` of 2 s here, with the TTL that timeout needs). A heartbeat's
+    resync is two round trips (claim and read, then the liveness check), 1.2 s, longer
+    than the 1 s heartbeat: a new resync is queued before each ends. B's player's poses
+    must still reach node A at one tick batch per round trip of B (each round trip
+    carries the latest batch). Before the fix, pose batches went out only once no
+    resync was queued: never, here, and A heard nothing from B for as long as Redis
+    stayed that slow."""
     round_trip_s, trips_measured = 0.6, 12
-    a, b = Node("node-a", redis_server.url), Node("node-b", redis_proxy.url)
+    slow = ("--redis-timeout-s", "2", "--redis-node-ttl-s", "5")
+    a, b = Node("node-a", redis_server.url), Node("node-b", redis_proxy.url, *slow)
     try:
         for n in (a, b):
             n.wait_ready()

@@ -173,7 +173,7 @@ def test_a_hung_redis_is_detected_and_the_tick_keeps_time(
     nodes: tuple[Node, Node], redis_server: RedisServer
 ) -> None:
     """SIGSTOP: Redis's sockets stay open and nothing answers, the silent failure mode.
-    A round trip times out after redis_timeout_s (2 s by default)."""
+    A round trip times out after redis_timeout_s (1 s by default)."""
     a, _ = nodes
     assert redis_server.proc is not None
 
@@ -186,7 +186,7 @@ def test_a_hung_redis_is_detected_and_the_tick_keeps_time(
     try:
         t0 = time.monotonic()
         while a.http("/readyz")[0] == 200:
-            assert time.monotonic() - t0 < 2.0 + HEARTBEAT_S + 2, "a hung Redis went unnoticed"
+            assert time.monotonic() - t0 < 1.0 + HEARTBEAT_S + 3, "a hung Redis went unnoticed"
             time.sleep(0.05)
         before, t1 = ticks(), time.monotonic()
         time.sleep(1.0)

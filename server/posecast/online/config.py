@@ -163,7 +163,7 @@ class ServerConfig:
     redis_prefix: str = _opt("posecast", "prefix of every Redis key and channel of this cluster")
     redis_heartbeat_s: float = _opt(1.0, "seconds between presence heartbeats and resyncs")
     redis_node_ttl_s: float = _opt(3.0, "seconds a silent node's players survive it")
-    redis_timeout_s: float = _opt(2.0, "seconds one Redis round trip may take before a reconnect")
+    redis_timeout_s: float = _opt(1.0, "seconds one Redis round trip may take before a reconnect")
     redis_backoff_max_s: float = _opt(5.0, "longest wait between Redis reconnect attempts")
 
     def __post_init__(self) -> None:
@@ -208,6 +208,17 @@ class ServerConfig:
             raise ConfigError("redis_node_ttl_s must be a finite number of seconds")
         if self.redis_node_ttl_s < 2 * self.redis_heartbeat_s:
             raise ConfigError("redis_node_ttl_s must be at least twice redis_heartbeat_s")
+        # The node key's refreshes reach Redis at most this far apart while every round
+        # trip answers within redis_timeout_s (docs/scale-out.md, "A slow Redis"): a
+        # shorter TTL lets a live node's key lapse, and other nodes reap its players.
+        hb, rt = self.redis_heartbeat_s, self.redis_timeout_s
+        gap = rt + max(hb / 2 + rt, hb)
+        if not self.redis_node_ttl_s > gap:
+            raise ConfigError(
+                f"redis_node_ttl_s ({self.redis_node_ttl_s:g} s) must be above redis_timeout_s"
+                f" + max(redis_heartbeat_s / 2 + redis_timeout_s, redis_heartbeat_s) ="
+                f" {gap:g} s: lower redis_timeout_s or raise redis_node_ttl_s"
+            )
         if self.redis_url and not self.redis_url.startswith(("redis://", "rediss://", "unix://")):
             raise ConfigError("redis_url must start with redis://, rediss:// or unix://")
         try:  # a port that is not a number fails here, not in the bus's endless retries
