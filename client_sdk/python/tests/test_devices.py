@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import re
+import time
 import zlib
 from pathlib import Path
 from typing import Any
@@ -339,3 +340,169 @@ def test_a_sites_source_refuses_four_slot_frames_and_reorders_sets() -> None:
     s = asyncio.run(asyncio.wait_for(first(), 10.0))
     assert s.positions.shape == (7, 3) and s.device_seq == 1
     assert source.stats.bad_payload == 1 and source.stats.samples == 1
+
+
+# --- the device itself: closing while a read waits, failing and coming back ----------
+
+
+class SlowHid(FakeHid):
+    """A read that waits its whole timeout; records a close that lands inside a read
+    (which frees a hidapi handle under the reading thread)."""
+
+    def __init__(self) -> None:
+        super().__init__([])
+        self.reading = 0
+        self.closed_mid_read = False
+
+    def read(self, max_length: int, timeout_ms: int = 0) -> list[int]:
+        self.reading += 1
+        time.sleep(timeout_ms / 1000)
+        self.reading -= 1
+        return []
+
+    def close(self) -> None:
+        self.closed_mid_read = self.closed_mid_read or self.reading > 0
+        super().close()
+
+
+def test_closing_waits_for_the_read_in_progress() -> None:
+    async def main() -> tuple[SlowHid, SlowHid]:
+        cancelled, closed = SlowHid(), SlowHid()
+        first = HidTrackerSource(device=cancelled, timeout_ms=100)
+
+        async def stream() -> None:  # `async with source: await client.stream(source)`
+            async with first:
+                async for _ in first:
+                    pass
+
+        task = asyncio.create_task(stream())
+        await asyncio.sleep(0.03)
+        task.cancel()  # Ctrl-C: the read's thread runs on, __aexit__ closes
+        with pytest.raises(asyncio.CancelledError):
+            await task
+        second = HidTrackerSource(device=closed, timeout_ms=100)
+
+        async def drain() -> None:
+            async for _ in second:
+                pass
+
+        reader = asyncio.create_task(drain())
+        await asyncio.sleep(0.03)
+        await second.aclose()  # from another task: the iteration just ends
+        await asyncio.wait_for(reader, 2.0)
+        return cancelled, closed
+
+    for device in asyncio.run(main()):
+        assert device.closed and not device.closed_mid_read
+
+
+class FailingHid(FakeHid):
+    """A device whose queue may hold an OSError: the read that reaches it raises."""
+
+    def __init__(self, reports: list[bytes | OSError]) -> None:
+        self.queue = list(reports)
+        self.closed = False
+
+    def open(self, vendor_id: int, product_id: int, serial_number: str | None = None) -> None:
+        pass
+
+    def read(self, max_length: int, timeout_ms: int = 0) -> list[int]:
+        if not self.queue:
+            return []
+        item = self.queue.pop(0)
+        if isinstance(item, OSError):
+            raise item
+        return list(item)
+
+
+def test_an_unplugged_device_is_reopened_when_it_is_back(
+    rng: np.random.Generator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    hid = pytest.importorskip("hid")
+    pos, quat, valid = random_sample(rng)
+    plugs: list[list[bytes | OSError]] = [
+        [encode_hid_report(k, k * 16_667, pos, quat, valid) for k in range(3)]
+        + [OSError("read error")],
+        [encode_hid_report(200 + k, k * 16_667, pos, quat, valid) for k in range(3)],
+    ]
+    attempts = iter([OSError("open failed"), *plugs[1:]])  # not back at the first try
+
+    def device() -> FailingHid:
+        item = next(attempts)
+        if isinstance(item, OSError):
+            raise item
+        return FailingHid(item)
+
+    monkeypatch.setattr(hid, "device", lambda: FailingHid(plugs[0]))
+    source = HidTrackerSource(0x1209, 0x0001, timeout_ms=1)
+    source.reopen_s = 0.01
+    monkeypatch.setattr(hid, "device", device)
+
+    async def read(n: int) -> list[TrackerSample]:
+        got: list[TrackerSample] = []
+        async with source:
+            async for s in source:
+                got.append(s)
+                if len(got) == n:
+                    break
+        return got
+
+    got = asyncio.run(asyncio.wait_for(read(6), 10.0))
+    # The counters restart with the device: 200 is not read as 200 + 256 k.
+    assert [s.device_seq for s in got] == [0, 1, 2, 200, 201, 202]
+    assert got[3].device_t == 0.0 and source.stats.disconnects == 1
+
+
+def test_a_serial_port_that_fails_is_reopened(
+    rng: np.random.Generator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    serial = pytest.importorskip("serial")
+    pos, quat, valid = random_sample(rng)
+    frames = [encode_serial_frame(k, k, pos, quat, valid) for k in range(4)]
+
+    class Port:
+        def __init__(self, chunks: list[bytes | OSError]) -> None:
+            self.chunks = chunks
+            self.closed = False
+
+        @property
+        def in_waiting(self) -> int:
+            return 0
+
+        def read(self, size: int = 1) -> bytes:
+            if not self.chunks:
+                return b""
+            item = self.chunks.pop(0)
+            if isinstance(item, OSError):
+                raise item
+            return item
+
+        def close(self) -> None:
+            self.closed = True
+
+    # The first port dies mid-frame; the rest of that frame never comes.
+    first = Port([frames[0], frames[1][:50], serial.SerialException("device disconnected")])
+    ports = iter([first, serial.SerialException("no such port"), Port([frames[2], frames[3]])])
+
+    def serial_for_url(url: str, **kw: Any) -> Port:
+        item = next(ports)
+        if isinstance(item, OSError):
+            raise item
+        return item
+
+    monkeypatch.setattr(serial, "serial_for_url", serial_for_url)
+    source = SerialTrackerSource("/dev/ttyUSB9")
+    source.reopen_s = 0.01
+
+    async def read(n: int) -> list[TrackerSample]:
+        got: list[TrackerSample] = []
+        async with source:
+            async for s in source:
+                got.append(s)
+                if len(got) == n:
+                    break
+        return got
+
+    got = asyncio.run(asyncio.wait_for(read(3), 10.0))
+    assert [s.device_seq for s in got] == [0, 2, 3] and first.closed
+    assert source.stats.disconnects == 1 and source.stats.bad_checksum == 0

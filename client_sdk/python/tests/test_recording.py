@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 
 from posecast_client.bvh import read_bvh
+from posecast_client.codec import encode
+from posecast_client.errors import RecordingError
 from posecast_client.protocol import Limits, Member, Pose, Presence, Welcome
 from posecast_client.recording import (
     RecordingWriter,
@@ -91,3 +93,35 @@ def test_export_writes_one_file_per_player(tmp_path: Path) -> None:
     paths = export_bvh(read_recording(path), tmp_path / "out")
     assert sorted(paths) == ["a:b", "p-1"] and paths["a:b"].name == "a_b.bvh"
     assert all(read_bvh(p).n_frames == 30 for p in paths.values())
+
+
+def test_bytes_that_are_no_record_are_corrupt_not_a_cut_tail(tmp_path: Path) -> None:
+    path = tmp_path / "r.pcrec"
+    w = RecordingWriter(path, url="ws://x/", room="lobby")
+    for k in range(4):
+        w.write(Presence("join", "lobby", f"p-{k}", "P"))
+    w.close()
+    data = path.read_bytes()
+    record = len(msgpack.packb([0.5, encode(Presence("join", "lobby", "p-3", "P"))]))
+    middle = len(data) - 2 * record  # between the third and the fourth record
+    for junk in (b"\xc1", b"\xc6\x7f\xff\xff\xff", b"\x00"):  # reserved byte, 2 GB bin, an int
+        path.write_bytes(data[:middle] + junk + data[middle:])
+        with pytest.raises(RecordingError, match="corrupt"):
+            read_recording(path)
+    header = len(data) - 4 * record
+    for cut in range(header, len(data) + 1):  # a cut anywhere after the header is a tail
+        path.write_bytes(data[:cut])
+        assert len(read_recording(path).messages) == (cut - header) // record
+
+
+def test_export_follows_on_where_the_server_clock_jumps(tmp_path: Path) -> None:
+    before = walk_poses(0.5)
+    # The recorder rejoined a node on another host: another clock, far ahead (without
+    # the split, the export asks for 6e12 frames, and fails at once).
+    after = [Pose(p.player, p.seq + 30, p.t + 1e11, p.positions + 1.0, p.rotations)
+             for p in before]  # fmt: skip
+    n = poses2bvh(before + after, tmp_path / "p.bvh", 60.0)
+    assert n == 60
+    _, fk_pos = read_bvh(tmp_path / "p.bvh").fk()
+    want = np.stack([p.positions for p in before + after])
+    np.testing.assert_allclose(fk_pos, want, atol=2e-5)

@@ -107,3 +107,26 @@ def test_looping_and_offsets() -> None:
         ReplaySource(np.zeros((5, 11, 3)), np.zeros((5, 11, 4)), 60.0)  # beyond 10 sites
     with pytest.raises(ValueError):
         ReplaySource(np.zeros((5, 3, 3)), np.zeros((5, 4, 4)), 60.0)  # rows disagree
+
+
+@pytest.mark.parametrize("frame_time", ["inf", "4.9e-324", "1e12"])
+def test_a_frame_time_that_is_no_frame_rate_is_refused(tmp_path: Path, frame_time: str) -> None:
+    path = tmp_path / "walk.bvh"
+    write_walk_bvh(path, seconds=0.5)
+    text = path.read_text().replace("Frame Time: 0.01666667", f"Frame Time: {frame_time}")
+    path.write_text(text)  # 1/inf, an infinite rate, or resampling to 1.7e15 frames
+    with pytest.raises(BvhError, match="Frame Time"):
+        BvhReplaySource(path)
+
+
+def test_rows_the_server_would_refuse_are_untracked() -> None:
+    pos = np.zeros((10, 4, 3))
+    pos[5, 3, 0] = 0.5  # a one-frame glitch in a clip: 1800 m/s^2 for a synthetic IMU
+    quat = np.tile([0.0, 0.0, 0.0, 1.0], (10, 4, 1))
+    src = ReplaySource(pos, quat, 60.0, inertial=[False, False, False, True])
+    far = ReplaySource(pos + np.array([0.0, 0.0, 999.9]), quat, 60.0, offset_m=(0.0, 0.0, 0.2))
+    for s in [*src.samples(), *far.samples()]:
+        tracked = [i for i in range(4) if s.valid >> i & 1]
+        assert (np.abs(s.positions[tracked]) <= 1000.0).all()
+    assert [s.valid for s in src.samples()][3:8] == [0b1111, 0b0111, 0b0111, 0b0111, 0b1111]
+    assert {s.valid for s in far.samples()} == {0}

@@ -11,11 +11,15 @@
    :func:`posecast_client.codec.decode`. Recorded types: ``welcome`` (again after each
    rejoin), ``pose``, ``presence`` and non-fatal ``error``.
 
-A truncated last record (the recorder was killed) is ignored on reading.
+A truncated last record (the recorder was killed) is ignored on reading; any other
+bytes that are not a record make the file corrupt.
 
 **BVH export** writes each player's poses on the canonical 19-joint skeleton at the
 room's pose rate, one frame per tick (``pose.t``; a tick without a pose for that
-player repeats the previous frame). Bone lengths are the player's median measured
+player repeats the previous frame). Where a player's ``pose.t`` jumps by more than
+``MAX_GAP_S`` (10 s) from one pose to the next in order of arrival (the recorder
+rejoined a server with another clock, or the player was away that long), the poses
+after the jump follow on the next tick. Bone lengths are the player's median measured
 lengths along the reference directions. Rotations are the server's when poses carry
 ``rot``; positions-only poses are turned into rotations by aligning bones: a joint
 with several children takes the least-squares rotation of its child bones (Kabsch),
@@ -43,6 +47,7 @@ from posecast_client.skeleton import JOINT_NAMES, PARENTS, children, reference_o
 
 FORMAT = "posecast-recording"
 VERSION = 1
+MAX_GAP_S = 10.0  # a longer jump of a player's pose.t is another clock, not a pause
 
 
 class RecordingWriter:
@@ -111,16 +116,39 @@ def read_recording(path: str | Path) -> Recording:
         except (msgpack.UnpackException, ValueError, TypeError, PosecastClientError) as exc:
             if isinstance(exc, RecordingError):
                 raise
-            raise RecordingError(f"{path}: a corrupt posecast recording ({exc})") from exc
+            raise RecordingError(f"{path}: a corrupt posecast recording ({exc!r})") from exc
     return rec
 
 
+MAX_RECORD_BYTES = 1 << 20  # what the reader buffers: no message the recorder writes is near
+
+
 def _unpack(f: BinaryIO) -> Iterator[Any]:
-    unpacker = msgpack.Unpacker(f, raw=False, max_buffer_size=1 << 20)
-    try:
-        yield from unpacker
-    except (msgpack.OutOfData, ValueError):
-        return  # a truncated tail
+    """The file's msgpack values. Bytes left over at the end are ignored only when they
+    can be a record cut short; anything else undecodable is a corrupt file."""
+    unpacker = msgpack.Unpacker(f, raw=False, max_buffer_size=MAX_RECORD_BYTES)
+    end = 0
+    for value in unpacker:  # raises on a byte no value starts with, ends on a cut one
+        yield value
+        end = unpacker.tell()
+    f.seek(end)
+    tail = f.read(MAX_RECORD_BYTES + 16)
+    if end and tail and not _cut_record(tail):  # (no header at all: not a recording)
+        raise RecordingError(f"{f.name}: a corrupt posecast recording (no record at byte {end})")
+
+
+def _cut_record(tail: bytes) -> bool:
+    """Whether ``tail`` can be the start of a ``[t_s, data]`` record (fixarray 2,
+    float64, bin 8/16/32 of at most MAX_RECORD_BYTES) that the end of the file cut."""
+    if not b"\x92\xcb".startswith(tail[:2]):
+        return False
+    if len(tail) <= 10:
+        return True  # cut in the time
+    width = {0xC4: 1, 0xC5: 2, 0xC6: 4}.get(tail[10])
+    if width is None:
+        return False
+    size = int.from_bytes(tail[11 : 11 + width], "big")
+    return len(tail) < 11 + width or len(tail) - 11 - width < size <= MAX_RECORD_BYTES
 
 
 def world_rotations(positions: F64) -> F64:
@@ -148,12 +176,22 @@ def poses2bvh(poses: list[Pose], path: str | Path, rate_hz: float = 60.0) -> int
     """Write one player's poses as a BVH file; returns the number of frames."""
     if not poses:
         raise ValueError("no poses to export")
-    ordered = sorted({q.t: q for q in poses}.values(), key=lambda q: q.t)  # one per tick
-    t0 = ordered[0].t
-    n = round((ordered[-1].t - t0) * rate_hz) + 1
+    stretches: list[list[Pose]] = []  # split where pose.t jumps (in order of arrival)
+    for q in poses:
+        if stretches and abs(q.t - stretches[-1][-1].t) <= MAX_GAP_S:
+            stretches[-1].append(q)
+        else:
+            stretches.append([q])
+    ordered: list[Pose] = []
+    ticks: list[int] = []
+    for stretch in stretches:  # each on the tick after the last one's end
+        kept = sorted({q.t: q for q in stretch}.values(), key=lambda q: q.t)  # one per tick
+        start = ticks[-1] + 1 if ticks else 0
+        ordered += kept
+        ticks += [start + round((q.t - kept[0].t) * rate_hz) for q in kept]
+    n = ticks[-1] + 1
     idx = np.full(n, -1)
-    for k, pose in enumerate(ordered):
-        idx[min(n - 1, round((pose.t - t0) * rate_hz))] = k
+    idx[ticks] = np.arange(len(ticks))  # of two poses on one tick, the later
     idx = np.maximum.accumulate(idx)  # a tick without a pose holds the previous one
     pos = np.stack([q.positions for q in ordered])[idx]  # (F, 19, 3)
     rotations = [q.rotations for q in ordered if q.rotations is not None]

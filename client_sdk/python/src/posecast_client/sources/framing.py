@@ -175,6 +175,7 @@ class FramingStats:
     skipped_bytes: int = 0  # garbage before a sync, and the first byte of each bad frame
     bad_checksum: int = 0
     bad_payload: int = 0  # checksum fine but an unknown version/length or absurd values
+    disconnects: int = 0  # the device failed (unplugged, reset): reopened when back
 
 
 @dataclass
@@ -213,6 +214,11 @@ class SerialFrameDecoder:
             else:
                 self.stats.samples += 1
                 out.append(sample)
+
+    def reset(self) -> None:
+        """Drop the bytes of a frame a disconnect cut (they are never continued)."""
+        self.stats.skipped_bytes += len(self._buf)
+        self._buf.clear()
 
     @staticmethod
     def _payload(body: bytes, now: float | None) -> TrackerSample | None:
@@ -354,6 +360,10 @@ class HidReportDecoder:
     stats: FramingStats = field(default_factory=FramingStats)
     _seq: int | None = None
     _t_us: int | None = None
+
+    def reset(self) -> None:
+        """Forget the counters: a device that came back starts them anew."""
+        self._seq = self._t_us = None
 
     def decode(self, report: bytes, now: float | None = None) -> TrackerSample | None:
         """A report in, its sample out (``None``, counted in ``stats``, if it is bad)."""

@@ -31,6 +31,7 @@ neighbours'), with the joint's orientation: a synthetic IMU.
 from __future__ import annotations
 
 import asyncio
+import math
 import time
 from collections.abc import AsyncIterator, Iterator, Sequence
 from dataclasses import dataclass
@@ -42,6 +43,7 @@ from numpy.typing import ArrayLike
 
 from posecast_client.bvh import read_bvh
 from posecast_client.errors import BvhError
+from posecast_client.protocol import MAX_COORD_M
 from posecast_client.rotations import F64, fk, mat2quat, quat2mat, quat_mul, quat_nlerp
 from posecast_client.sites import MAX_SITES, SITES, TrackerSet, as_tracker_set
 from posecast_client.skeleton import PARENTS, TRACKER_JOINTS, reference_offsets
@@ -109,7 +111,9 @@ class ReplaySource(TrackerSource):
             positional rows only).
         noise_rad: standard deviation of random orientation noise, radians (0).
         dropout: fraction of the time each tracker is lost (0), in bursts of about
-            ``dropout_burst_s`` seconds; a lost tracker's ``valid`` bit is clear.
+            ``dropout_burst_s`` seconds; a lost tracker's ``valid`` bit is clear, as is
+            that of a row beyond +-1000 (m, or m/s^2: a glitch in a clip's motion),
+            which the server would refuse.
         offset_m: added to every position (to place several players side by side).
         seed: seeds the noise and the dropouts.
     """
@@ -180,7 +184,8 @@ class ReplaySource(TrackerSource):
                 if self.dropout > 0:
                     u = drops.random(n)
                     lost = np.where(lost, u >= p_recover, u < p_lose)
-                valid = int(sum(1 << i for i in range(n) if not lost[i]))
+                shown = ~lost & (np.abs(pos) <= MAX_COORD_M).all(axis=1)  # else refused
+                valid = int(sum(1 << i for i in range(n) if shown[i]))
                 yield TrackerSample(pos.copy(), quat.copy(), valid)
             if not self.loop:
                 return
@@ -241,7 +246,8 @@ class BvhReplaySource(ReplaySource):
         Other keyword arguments: as :class:`ReplaySource`.
 
     Raises:
-        BvhError: the file is not BVH, or no rig's joints are in it.
+        BvhError: the file is not BVH, no rig's joints are in it, or its Frame Time is
+            over 1 s (or infinite).
         ValueError: ``tracker_set`` names no tracker set.
     """
 
@@ -273,6 +279,11 @@ class BvhReplaySource(ReplaySource):
         idx = [bvh.names.index(name) for name in names]
         first = 1 if rig.first_frame_is_tpose and bvh.n_frames > 1 else 0
         fps = 1.0 / bvh.frame_time_s
+        if not 1.0 <= fps < math.inf:  # resampling ~1/fps more frames, or 1/inf
+            raise BvhError(
+                f"Frame Time {bvh.frame_time_s} s: need at least 1 frame a second",
+                file=str(path),
+            )
         if abs(fps - round(fps)) <= 1e-4 * fps:  # files store 1/120 as 0.0083333
             fps = float(round(fps))
         inertial = None if ts is None else ts.inertial
