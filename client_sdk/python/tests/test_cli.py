@@ -222,11 +222,19 @@ def _mistake(capsys: pytest.CaptureFixture[str], main: object, argv: list[str]) 
 def test_sim_refuses_a_bvh_it_cannot_read(
     capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
-    """Before connecting: a missing file or one that is not BVH, with the server
-    CLI's code for a BVH that cannot be read."""
+    """Before connecting: a missing file, one that is not BVH, or a BVH of no rig the
+    replay knows (its joints), with the server CLI's code for a BVH that cannot be read."""
     text = tmp_path / "notes.txt"
     text.write_text("hello\n", encoding="utf-8")
-    for path in (tmp_path / "none.bvh", text):
+    norig = tmp_path / "norig.bvh"
+    norig.write_text(
+        "HIERARCHY\nROOT Foo\n{\n OFFSET 0 0 0\n"
+        " CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
+        " End Site\n {\n  OFFSET 0 1 0\n }\n}\n"
+        "MOTION\nFrames: 1\nFrame Time: 0.0333333\n0 0 0 0 0 0\n",
+        encoding="utf-8",
+    )
+    for path in (tmp_path / "none.bvh", text, norig):
         with pytest.raises(SystemExit) as exit_:
             sim.main(["--secret", "s" * 32, "--bvh", str(path)])
         err = capsys.readouterr().err

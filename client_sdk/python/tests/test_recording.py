@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import msgpack
@@ -93,6 +94,23 @@ def test_export_writes_one_file_per_player(tmp_path: Path) -> None:
     paths = export_bvh(read_recording(path), tmp_path / "out")
     assert sorted(paths) == ["a:b", "p-1"] and paths["a:b"].name == "a_b.bvh"
     assert all(read_bvh(p).n_frames == 30 for p in paths.values())
+
+
+def test_players_whose_file_names_would_clash_each_get_a_file(tmp_path: Path) -> None:
+    """``a:b`` and ``a_b`` both make ``a_b``, and ``A_B`` is the same file on a
+    case-insensitive file system: each player still gets a file of its own."""
+    path = tmp_path / "r.pcrec"
+    w = RecordingWriter(path, url="ws://x/", room="r")
+    players = ("a:b", "a_b", "A_B")
+    for p in walk_poses(0.2):
+        for k, player in enumerate(players):
+            w.write(Pose(player, p.seq, p.t, p.positions + k, p.rotations))
+    w.close()
+    paths = export_bvh(read_recording(path), tmp_path / "out")
+    names = {player: paths[player].name for player in players}
+    assert names == {"A_B": "A_B.bvh", "a:b": "a_b~2.bvh", "a_b": "a_b~3.bvh"}
+    motions = [read_bvh(paths[player]).motion for player in players]
+    assert all(not np.array_equal(a, b) for a, b in itertools.combinations(motions, 2))
 
 
 def test_bytes_that_are_no_record_are_corrupt_not_a_cut_tail(tmp_path: Path) -> None:

@@ -222,12 +222,24 @@ def poses2bvh(poses: list[Pose], path: str | Path, rate_hz: float = 60.0) -> int
 
 
 def export_bvh(recording: Recording, out_dir: str | Path) -> dict[str, Path]:
-    """Write ``<player>.bvh`` for every player in ``recording``; returns their paths."""
+    """Write ``<player>.bvh`` for every player in ``recording``; returns their paths.
+
+    ``:`` in an id becomes ``_`` (Windows refuses it in file names). Two players whose
+    names would then be the same, or differ only in case (a case-insensitive file
+    system), get ``~2``, ``~3``, ... on the later one in id order (``~`` is in no id):
+    the returned paths say whose file is whose."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {}
+    taken: set[str] = set()
     for player, poses in sorted(recording.poses().items()):
-        path = out / (player.replace(":", "_") + ".bvh")
+        stem = base = player.replace(":", "_")
+        k = 1
+        while stem.lower() in taken:
+            k += 1
+            stem = f"{base}~{k}"
+        taken.add(stem.lower())
+        path = out / (stem + ".bvh")
         poses2bvh(poses, path, recording.rate_hz)
         paths[player] = path
     return paths

@@ -45,7 +45,6 @@ from typing import Any
 
 import numpy as np
 
-from posecast_client.bvh import read_bvh
 from posecast_client.cli.common import (
     Parser,
     add_server_arguments,
@@ -433,7 +432,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             usage_error(P, f"--layout {layout!r}: {exc}", "hmd3+waist, hmd3, or a tracker set")
     for path in args.bvh or ():
         try:
-            read_bvh(path)
+            BvhReplaySource(path)  # a file, a rig it knows, a frame rate
         except (BvhError, OSError) as exc:
             code, message, hint = describe(exc, args.url)
             usage_error(P, message, hint, code)
