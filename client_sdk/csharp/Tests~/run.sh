@@ -28,6 +28,12 @@ mcs -langversion:7.3 -target:library -nologo -out:"$OUT/probe.dll" "$OUT/probe.c
 MCS=(mcs -langversion:$LANGV -nologo -warnaserror+ -debug-)
 
 "${MCS[@]}" -target:library -out:"$OUT/Posecast.Client.dll" "$SDK"/Runtime/Core/*.cs
-"${MCS[@]}" -r:"$OUT/Posecast.Client.dll" -r:System.Core.dll -out:"$OUT/PosecastTests.exe" "$SDK"/Tests~/*.cs
+# Runtime/Unity against a stand-in UnityEngine (Tests~/UnityStub): compiled and its
+# logic tested here; it still needs a real Unity and a headset to be tried for real.
+"${MCS[@]}" -target:library -out:"$OUT/UnityEngine.dll" "$SDK"/Tests~/UnityStub/*.cs
+"${MCS[@]}" -target:library -r:"$OUT/Posecast.Client.dll" -r:"$OUT/UnityEngine.dll" \
+  -out:"$OUT/Posecast.Client.Unity.dll" "$SDK"/Runtime/Unity/*.cs
+"${MCS[@]}" -r:"$OUT/Posecast.Client.dll" -r:"$OUT/UnityEngine.dll" -r:"$OUT/Posecast.Client.Unity.dll" \
+  -r:System.Core.dll -out:"$OUT/PosecastTests.exe" "$SDK"/Tests~/*.cs
 echo "cs-test: built with mcs -langversion:$LANGV ($(mcs --version))"
 exec mono "$OUT/PosecastTests.exe" --repo "$PWD" "$@"

@@ -33,8 +33,12 @@
  *   alone are the set `head,left_hand,right_hand` (or the layout `hmd3`).
  *
  * A slot the frame cannot locate is left out (its `valid` bit is cleared when the
- * client sends the frame). Use a **floor-level** reference space (`local-floor` or
- * `bounded-floor`): the model reads Y as height above the floor.
+ * client sends the frame), and so is a controller or body tracker whose pose has
+ * `emulatedPosition` set: it lost tracking and its position is only held or guessed
+ * (the server then holds its last tracked pose). The head keeps an emulated position
+ * (a neck model while the headset lost tracking): it is still the best head there
+ * is. Use a **floor-level** reference space (`local-floor` or `bounded-floor`): the
+ * model reads Y as height above the floor.
  */
 
 import type { FrameInput, TrackerPose } from "./trackers.js";
@@ -56,6 +60,8 @@ export interface XRRigidTransformLike {
 /** An `XRPose` (or `XRViewerPose`). */
 export interface XRPoseLike {
   readonly transform: XRRigidTransformLike;
+  /** True when the position is not tracked but held or estimated (tracking lost). */
+  readonly emulatedPosition?: boolean;
 }
 
 /** An `XRInputSource`: only handedness and the grip space are read. */
@@ -122,7 +128,7 @@ export function fromXRFrame(
       continue;
     }
     const grip = frame.getPose(source.gripSpace, refSpace);
-    if (!grip) continue;
+    if (!grip || grip.emulatedPosition === true) continue; // lost: untracked, not frozen
     if (source.handedness === "left") out.leftHand = xrToPosecast(grip.transform);
     else out.rightHand = xrToPosecast(grip.transform);
   }
@@ -135,7 +141,7 @@ export function fromXRFrame(
     if (isTransform(space)) out[key] = xrToPosecast(space);
     else {
       const pose = frame.getPose(space, refSpace);
-      if (pose) out[key] = xrToPosecast(pose.transform);
+      if (pose && pose.emulatedPosition !== true) out[key] = xrToPosecast(pose.transform);
     }
   }
   if (typeof frame.predictedDisplayTime === "number") out.t = frame.predictedDisplayTime / 1000;

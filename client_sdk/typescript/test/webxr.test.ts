@@ -126,3 +126,27 @@ test("a real XRFrame (lib webxr types) satisfies XRFrameLike", () => {
   const typed = (f: XRFrame, s: XRReferenceSpace, w: XRSpace) => fromXRFrame(f, s, { waist: w });
   assert.equal(typeof typed, "function");
 });
+
+test("a controller that lost tracking (emulatedPosition) is sent untracked, not frozen", () => {
+  // A controller out of the cameras' view: the browser still gives a pose, its position
+  // held or dead-reckoned (XRPose.emulatedPosition true). That is not where the hand is.
+  const held = transform([0.3, 1.1, -0.4], yaw(0));
+  const live = transform([-0.3, 1.1, -0.4], yaw(0));
+  const waist = transform([0, 0.98, 0], yaw(0));
+  const frame: XRFrameLike = {
+    session: { inputSources: [{ handedness: "left", gripSpace: LEFT_GRIP }, { handedness: "right", gripSpace: RIGHT_GRIP }] },
+    getViewerPose: () => ({ transform: transform([0, 1.6, 0], yaw(0)), emulatedPosition: false }),
+    getPose: (space) =>
+      space === LEFT_GRIP
+        ? { transform: held, emulatedPosition: true }
+        : space === WAIST_SPACE
+          ? { transform: waist, emulatedPosition: true }
+          : { transform: live, emulatedPosition: false },
+  };
+  const out = fromXRFrame(frame, REF, { waist: WAIST_SPACE });
+  assert.equal(out.leftHand, undefined);
+  assert.equal(out.waist, undefined);
+  assert.ok(out.rightHand);
+  assert.ok(out.head);
+  assert.equal(toTrackers(out).valid, 0b0101);
+});

@@ -1,9 +1,11 @@
 // Unity-only: drives a Humanoid Animator's bones from one remote player's pose,
 // sampled from the streamer's jitter buffer at the server's time. The pose's world
 // rotation of joint j is the turn from posecast's T-pose rest, so each bone takes
-// ToUnity(q_j) * rest_j, with rest_j the bone's world rotation captured while the
-// avatar stands in a T-pose facing +Z (docs/engines.md). NOT compiled or run by
-// make cs-test (it needs UnityEngine).
+// root * ToUnity(q_j) * rest_j and the hips root.TransformPoint(ToUnity(p_pelvis)),
+// with root the Animator's transform and rest_j the bone's rotation relative to it,
+// captured while the avatar stands in a T-pose facing its root's +Z (docs/engines.md):
+// the pose plays in the avatar root's frame, wherever the avatar is placed. make cs-test
+// compiles and tests it against a stand-in UnityEngine (Tests~/UnityStub), not in Unity.
 
 using UnityEngine;
 
@@ -13,7 +15,7 @@ namespace Posecast.Client.Unity
     {
         public PosecastXRStreamer Streamer;
         public string Player;                 // the remote player's id
-        public Animator Avatar;               // a Humanoid rig, in a T-pose facing +Z at Awake
+        public Animator Avatar;               // a Humanoid rig, in a T-pose facing its root's +Z at Awake
 
         private Transform[] _bones;
         private Quaternion[] _rest;
@@ -21,23 +23,30 @@ namespace Posecast.Client.Unity
         private void Awake()
         {
             var humans = UnityFrames.HumanBones();
+            var toRoot = Quaternion.Inverse(Avatar.transform.rotation);
             _bones = new Transform[humans.Length];
             _rest = new Quaternion[humans.Length];
             for (int j = 0; j < humans.Length; j++)
             {
                 _bones[j] = Avatar.GetBoneTransform(humans[j]);
-                if (_bones[j] != null) _rest[j] = _bones[j].rotation;
+                if (_bones[j] != null) _rest[j] = toRoot * _bones[j].rotation;
             }
         }
 
         private void LateUpdate()
         {
             if (Streamer == null || Streamer.Client == null) return;
-            var shown = Streamer.Poses.PoseAt(Player, Streamer.Client.ServerNow);
+            Apply(Streamer.Poses.PoseAt(Player, Streamer.Client.ServerNow));
+        }
+
+        /// <summary>Pose the avatar's bones as `shown` (a pose without rotations is skipped).</summary>
+        public void Apply(InterpolatedPose shown)
+        {
             if (shown == null || shown.Rotations == null) return;
-            if (_bones[0] != null) _bones[0].position = UnityFrames.ToUnity(shown.Positions[0]);
+            var root = Avatar.transform;
+            if (_bones[0] != null) _bones[0].position = root.TransformPoint(UnityFrames.ToUnity(shown.Positions[0]));
             for (int j = 0; j < _bones.Length; j++)
-                if (_bones[j] != null) _bones[j].rotation = UnityFrames.ToUnity(shown.Rotations[j]) * _rest[j];
+                if (_bones[j] != null) _bones[j].rotation = root.rotation * UnityFrames.ToUnity(shown.Rotations[j]) * _rest[j];
         }
     }
 }

@@ -1,8 +1,8 @@
 // Unity-only: reads the headset and both controllers through Unity's XR input and
 // streams them as posecast frames (layout "hmd3": no waist tracker). Everything it
-// calls (the client, frame checks, frame conversion) is the tested library; this
-// component was NOT compiled or run by make cs-test (it needs UnityEngine and an XR
-// device).
+// calls (the client, frame checks, frame conversion) is the tested library; make
+// cs-test compiles this component against a stand-in UnityEngine (Tests~/UnityStub)
+// and tests its device reads, but it was not run in Unity or on a headset.
 
 using System.Collections.Generic;
 using UnityEngine;
@@ -26,6 +26,7 @@ namespace Posecast.Client.Unity
         private readonly Vec3[] _pos = new Vec3[4];
         private readonly Quat[] _rot = new Quat[4];
         private bool _sending;
+        private bool _floor; // the tracking origin is settled (floor level, or warned that it cannot be)
 
         private async void Start()
         {
@@ -33,12 +34,32 @@ namespace Posecast.Client.Unity
             await Client.JoinAsync(Room, DisplayName, layout: "hmd3", poseRateHz: PoseRateHz);
         }
 
+        // A controller that lost tracking (out of the cameras' view) still reports its last
+        // pose, frozen: it reads as untracked (its valid bit clear) when the runtime says so.
+        // The head is read all the same (its rotation still tracked, its position held), as
+        // fromXRFrame does in the TypeScript SDK.
         private static bool Read(XRNode node, out Vector3 p, out Quaternion q)
         {
             var d = InputDevices.GetDeviceAtXRNode(node);
             p = Vector3.zero; q = Quaternion.identity;
-            return d.isValid && d.TryGetFeatureValue(CommonUsages.devicePosition, out p)
+            bool tracked;
+            if (!d.isValid) return false;
+            if (node != XRNode.Head && d.TryGetFeatureValue(CommonUsages.isTracked, out tracked) && !tracked) return false;
+            return d.TryGetFeatureValue(CommonUsages.devicePosition, out p)
                    && d.TryGetFeatureValue(CommonUsages.deviceRotation, out q);
+        }
+
+        // The protocol's y is the height above the floor (proto/README.md), and device
+        // positions are in the tracking space: ask for a floor-level origin (Unity's
+        // default on some runtimes is the eye level, y = 0 at the headset). False: no XR
+        // input subsystem yet, ask again.
+        internal static bool RequestFloor(XRInputSubsystem subsystem)
+        {
+            if (subsystem == null) return false;
+            if (subsystem.GetTrackingOriginMode() != TrackingOriginModeFlags.Floor
+                && !subsystem.TrySetTrackingOriginMode(TrackingOriginModeFlags.Floor))
+                Debug.LogWarning("posecast: the XR runtime has no floor-level tracking origin; the avatar's height will be wrong");
+            return true;
         }
 
         private async void Update()
@@ -47,6 +68,7 @@ namespace Posecast.Client.Unity
             ClientEvent e;
             while (Client.TryGetEvent(out e)) Poses.Feed(e);
             if (_sending) return; // one frame in flight at a time; frames supersede each other
+            if (!_floor) _floor = RequestFloor(InputDevices.GetDeviceAtXRNode(XRNode.Head).subsystem);
             int valid = 0;
             var nodes = new[] { XRNode.Head, XRNode.LeftHand, XRNode.RightHand };
             for (int i = 0; i < 3; i++)

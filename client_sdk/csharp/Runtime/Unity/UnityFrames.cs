@@ -1,7 +1,7 @@
 // Unity-only: posecast values <-> Unity's Vector3/Quaternion (left-handed, +Y up,
 // metres). Every conversion is Conventions' (tested on proto/vectors/sdk/
-// conventions.json); this file only changes the types. NOT compiled or run by
-// make cs-test (it needs UnityEngine).
+// conventions.json); this file only changes the types. make cs-test compiles it against
+// a stand-in UnityEngine (Tests~/UnityStub), not in Unity.
 
 using UnityEngine;
 

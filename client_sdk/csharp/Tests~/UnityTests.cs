@@ -1,0 +1,136 @@
+// Runtime/Unity on the stand-in UnityEngine (Tests~/UnityStub): the avatar driver's
+// bone mapping (rest rotations, the avatar's own root), and what the XR streamer
+// reads from Unity's XR input (lost tracking, the tracking origin).
+
+using System;
+using System.Reflection;
+using Posecast.Client.Unity;
+using UnityEngine;
+using UnityEngine.XR;
+
+namespace Posecast.Client.Tests
+{
+    public static class UnityTests
+    {
+        private static void Near(Vector3 want, Vector3 got, double tol, string what)
+        {
+            T.Near(new Vec3(want.x, want.y, want.z), new Vec3(got.x, got.y, got.z), tol, what);
+        }
+
+        private static Quaternion Yaw(float deg) { return Quaternion.AngleAxis(deg, new Vector3(0, 1, 0)); }
+
+        /// <summary>A Humanoid avatar whose root is at `rootPos`, turned by `rootRot`, standing in a
+        /// T-pose facing its root's +Z; every bone's local +Y runs along the bone (a common rig).</summary>
+        private static Animator Avatar(Vector3 rootPos, Quaternion rootRot)
+        {
+            var a = new Animator();
+            a.transform = new Transform { position = rootPos, rotation = rootRot };
+            var names = Conventions.UnityHumanBones();
+            for (int j = 0; j < names.Length; j++)
+            {
+                var bone = (HumanBodyBones)Enum.Parse(typeof(HumanBodyBones), names[j]);
+                // In the root's frame: left arm bones point +Y at root -X (the avatar's left, Unity),
+                // right arm bones at +X; the rest keep the root's axes.
+                Quaternion local = Quaternion.identity;
+                if (names[j].StartsWith("LeftUpperArm") || names[j].StartsWith("LeftLowerArm") || names[j] == "LeftHand")
+                    local = Quaternion.AngleAxis(90, new Vector3(0, 0, 1));   // +Y -> -X
+                if (names[j].StartsWith("RightUpperArm") || names[j].StartsWith("RightLowerArm") || names[j] == "RightHand")
+                    local = Quaternion.AngleAxis(-90, new Vector3(0, 0, 1));  // +Y -> +X
+                a.Bones[bone] = new Transform { position = rootPos, rotation = rootRot * local };
+            }
+            return a;
+        }
+
+        private static PosecastAvatarDriver Driver(Animator avatar)
+        {
+            var d = new PosecastAvatarDriver { Avatar = avatar };
+            typeof(PosecastAvatarDriver).GetMethod("Awake", BindingFlags.Instance | BindingFlags.NonPublic).Invoke(d, null);
+            return d;
+        }
+
+        /// <summary>The reference T-pose with some joints turned (posecast world, xyzw).</summary>
+        private static InterpolatedPose Pose(Vec3 pelvis, params object[] turns)
+        {
+            var pos = new Vec3[Protocol.NumJoints];
+            var rot = new Quat[Protocol.NumJoints];
+            for (int j = 0; j < rot.Length; j++) { pos[j] = pelvis; rot[j] = Quat.Identity; }
+            for (int i = 0; i < turns.Length; i += 2) rot[(int)(Joint)turns[i]] = (Quat)turns[i + 1];
+            return new InterpolatedPose { Player = "p", Positions = pos, Rotations = rot };
+        }
+
+        private static Quat AxisAngle(double x, double y, double z, double deg)
+        {
+            double h = deg * Math.PI / 360.0;
+            return new Quat(x * Math.Sin(h), y * Math.Sin(h), z * Math.Sin(h), Math.Cos(h));
+        }
+
+        private static readonly Vector3 Up = new Vector3(0, 1, 0), Fwd = new Vector3(0, 0, 1);
+
+        public static void Register()
+        {
+            T.Run("unity driver: the T-pose is the rest pose, and an arm lowered in posecast hangs down in Unity", () =>
+            {
+                var avatar = Avatar(Vector3.zero, Quaternion.identity);
+                var d = Driver(avatar);
+                d.Apply(Pose(new Vec3(0, 0.98, 0)));
+                Near(new Vector3(0, 0.98f, 0), avatar.GetBoneTransform(HumanBodyBones.Hips).position, 1e-6, "hips");
+                Near(new Vector3(-1, 0, 0), avatar.GetBoneTransform(HumanBodyBones.LeftUpperArm).rotation * Up, 1e-6, "left arm at rest");
+                // posecast: the left arm (+X) turned down about the forward axis: -90 degrees about +Z.
+                d.Apply(Pose(new Vec3(0, 0.98, 0), Joint.LEFT_UPPER_ARM, AxisAngle(0, 0, 1, -90)));
+                Near(new Vector3(0, -1, 0), avatar.GetBoneTransform(HumanBodyBones.LeftUpperArm).rotation * Up, 1e-6, "left arm down");
+            });
+
+            T.Run("unity driver: an avatar placed and turned in the scene moves in its own root's frame", () =>
+            {
+                var root = Yaw(90); // the avatar faces Unity +X
+                var avatar = Avatar(new Vector3(2, 0, 3), root);
+                var d = Driver(avatar);
+                // A nod: the head turned 30 degrees about posecast +X (its left), looking down.
+                d.Apply(Pose(new Vec3(0.5, 0.98, 0), Joint.HEAD, AxisAngle(1, 0, 0, 30)));
+                var hips = avatar.GetBoneTransform(HumanBodyBones.Hips);
+                // posecast (0.5, 0.98, 0) is Unity (-0.5, 0.98, 0) in the root's frame: root * that + (2, 0, 3).
+                Near(new Vector3(2, 0.98f, 3.5f), hips.position, 1e-6, "hips in the root's frame");
+                Near(new Vector3(1, 0, 0), hips.rotation * Fwd, 1e-6, "hips face the root's forward");
+                var face = avatar.GetBoneTransform(HumanBodyBones.Head).rotation * Fwd;
+                Near(new Vector3((float)Math.Cos(Math.PI / 6), -0.5f, 0), face, 1e-6, "the head nods along the root's forward");
+            });
+
+            T.Run("unity streamer: a controller that lost tracking is not read as tracked", () =>
+            {
+                var read = typeof(PosecastXRStreamer).GetMethod("Read", BindingFlags.Static | BindingFlags.NonPublic);
+                var dev = new FakeDevice();
+                dev.Features["DevicePosition"] = new Vector3(0.3f, 1.1f, 0.2f);
+                dev.Features["DeviceRotation"] = Quaternion.identity;
+                dev.Features["IsTracked"] = true;
+                InputDevices.Fakes[XRNode.LeftHand] = dev;
+                try
+                {
+                    var args = new object[] { XRNode.LeftHand, null, null };
+                    T.True((bool)read.Invoke(null, args), "tracked: read");
+                    Near(new Vector3(0.3f, 1.1f, 0.2f), (Vector3)args[1], 1e-6, "position");
+                    dev.Features["IsTracked"] = false; // out of the cameras' view: Unity keeps the last pose
+                    args = new object[] { XRNode.LeftHand, null, null };
+                    T.True(!(bool)read.Invoke(null, args), "lost tracking: not read (sent untracked, not frozen)");
+                    InputDevices.Fakes[XRNode.Head] = dev; // the head keeps its held position, as in fromXRFrame
+                    args = new object[] { XRNode.Head, null, null };
+                    T.True((bool)read.Invoke(null, args), "a head that lost positional tracking is still read");
+                }
+                finally { InputDevices.Fakes.Remove(XRNode.LeftHand); InputDevices.Fakes.Remove(XRNode.Head); }
+            });
+
+            T.Run("unity streamer: asks for a floor-level tracking origin (y = height above the floor)", () =>
+            {
+                var ask = typeof(PosecastXRStreamer).GetMethod("RequestFloor", BindingFlags.Static | BindingFlags.NonPublic);
+                T.True(ask != null, "PosecastXRStreamer.RequestFloor");
+                T.True(!(bool)ask.Invoke(null, new object[] { null }), "no subsystem yet: ask again later");
+                var sub = new XRInputSubsystem { Mode = TrackingOriginModeFlags.Device };
+                T.True((bool)ask.Invoke(null, new object[] { sub }), "settled");
+                T.Equal(TrackingOriginModeFlags.Floor, sub.Mode, "origin");
+                var eyeOnly = new XRInputSubsystem { Mode = TrackingOriginModeFlags.Device, Supported = TrackingOriginModeFlags.Device };
+                int warned = UnityEngine.Debug.Warnings.Count;
+                T.True((bool)ask.Invoke(null, new object[] { eyeOnly }), "settled (cannot)");
+                T.Equal(warned + 1, UnityEngine.Debug.Warnings.Count, "warned once");
+            });
+        }
+    }
+}
