@@ -71,3 +71,39 @@ def test_a_player_with_a_queue_of_one_keeps_only_its_newest_frame() -> None:
     inbox.joined("p", seed=0, layout=Layout.HMD3_WAIST, queue=1)
     assert [inbox.frame("p", _frame(seq)) for seq in range(2)] == [False, True]
     assert inbox.take().frames["p"].seq == 1 and inbox.take().frames == {}
+
+
+def test_a_client_faster_than_the_tick_that_never_said_so_gets_its_newest_frame() -> None:
+    """A game engine streaming at a 90 Hz display rate, announced as 60 Hz (no
+    ``rate_hz``): with a queue of two it would stay one tick behind for good. After two
+    windows above 1.1 frames a tick it is stepped on its newest frame; a 60 Hz client
+    that flushes a stall's frames in one window is not taken for fast."""
+    from posecast.online.core.tick import RATE_WINDOW_TICKS
+
+    inbox = EngineInbox()
+    for p in ("fast", "flush"):
+        inbox.joined(p, seed=0, layout=Layout.HMD3_WAIST)
+    seq = {"fast": 0, "flush": 0}
+    behind: list[int] = []  # per tick: the newest frame sent minus the one stepped
+
+    def send(p: str, n: int) -> None:
+        for _ in range(n):
+            inbox.frame(p, _frame(seq[p]))
+            seq[p] += 1
+
+    windows = 4
+    for tick in range(windows * RATE_WINDOW_TICKS):
+        send("fast", 2 if tick % 2 else 1)  # 90 Hz: 3 frames every 2 ticks
+        stalled = RATE_WINDOW_TICKS // 2 <= tick < RATE_WINDOW_TICKS
+        flushed = tick == RATE_WINDOW_TICKS
+        send("flush", 0 if stalled else 1 + (RATE_WINDOW_TICKS // 2 if flushed else 0))
+        got = inbox.take().frames
+        behind.append(seq["fast"] - 1 - got["fast"].seq)
+    first, last = behind[:RATE_WINDOW_TICKS], behind[-RATE_WINDOW_TICKS:]
+    assert max(first[5:]) >= 1  # a queue of two: behind
+    assert max(last) == 0  # after two fast windows: the newest, every tick
+    # The flush (a window of 90 frames after one of 30) never made "flush" fast: its
+    # queue of two still steps its frames one by one.
+    inbox.frame("flush", _frame(seq["flush"]))
+    inbox.frame("flush", _frame(seq["flush"] + 1))
+    assert inbox.take().frames["flush"].seq == seq["flush"]

@@ -202,8 +202,9 @@ class Admission:
     def _apply(self, c: Conn, action: Action, now: float) -> None:
         s = c.session
         if isinstance(action, FrameIn):
-            if self.inbox.frame(s.player, action.frame):
-                self._superseded.inc()
+            superseded = self.inbox.frame(s.player, action.frame)
+            if superseded:
+                self._superseded.inc(superseded)
             self.metrics.frames_in.inc()
         elif isinstance(action, Join):
             self._join(c, action, now)

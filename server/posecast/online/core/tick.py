@@ -16,7 +16,12 @@ the next gap. Past its depth the oldest waiting frame is superseded (latest wins
 counted as dropped), so the added latency is one tick at most. A client that
 announces more frames per second than the tick rate (``hello.rate_hz``: a 72, 90 or
 120 Hz headset) would keep the queue full for good, one tick behind: it gets a queue
-of one, the newest frame, as every client did before the queue.
+of one, the newest frame, as every client did before the queue. So does a client that
+sends faster than the tick without saying so (a game engine streaming at its display
+rate): over each second (:data:`RATE_WINDOW_TICKS`) its frames are counted, and one
+whose frames came at more than :data:`FAST_FRAMES_PER_TICK` a tick for two seconds
+in a row (not a 60 Hz client flushing what a stall held back) is stepped on its
+newest frame from then on, the older ones superseded, until a second at 60 Hz.
 
 A player enters the engine with its first frame (or its first calibration or
 selector), not when it joins: a connection that joins and never streams (a client
@@ -34,6 +39,9 @@ from posecast.online.engine.selectors import Selector
 from posecast.online.engine.types import EngineEvent, TrackerFrame
 from posecast.online.protocol.records import PoseState
 from posecast.tracking.layouts import Layout, PlayerLayout
+
+RATE_WINDOW_TICKS = 60  # the window the arrival rate of unannounced fast clients is read over
+FAST_FRAMES_PER_TICK = 1.1  # 66 Hz at a 60 Hz tick: above any 60 Hz client's jitter or drift
 
 
 @dataclass(frozen=True)
@@ -75,6 +83,10 @@ class EngineInbox:
         self._depth: dict[str, int] = {}  # per player, when it differs from ``depth``
         self._waiting: dict[str, tuple[int, PlayerLayout]] = {}  # joined, not in the engine yet
         self._in_engine: set[str] = set()
+        self._arrived: dict[str, int] = {}  # frames per player in this rate window
+        self._window = 0  # ticks taken in this rate window
+        self._over: set[str] = set()  # sent faster than the tick over the last window
+        self._fast: set[str] = set()  # ... and the one before it
 
     def joined(
         self, player: str, seed: int, layout: PlayerLayout, queue: int | None = None
@@ -85,12 +97,14 @@ class EngineInbox:
         if queue is not None:
             self._depth[player] = queue
 
-    def frame(self, player: str, frame: TrackerFrame) -> bool:
-        """Queue ``frame``; True when the queue was full and its oldest frame dropped."""
+    def frame(self, player: str, frame: TrackerFrame) -> int:
+        """Queue ``frame``; how many older frames it superseded (the queue was full)."""
         self._enter(player)
+        self._arrived[player] = self._arrived.get(player, 0) + 1
         queue = self._frames.setdefault(player, deque())
-        superseded = len(queue) >= self._depth.get(player, self.depth)
-        if superseded:
+        depth = self._depth.get(player) or (1 if player in self._fast else self.depth)
+        superseded = max(0, len(queue) - depth + 1)
+        for _ in range(superseded):
             queue.popleft()
         queue.append(frame)
         return superseded
@@ -104,11 +118,21 @@ class EngineInbox:
         self._waiting.pop(player, None)
         self._frames.pop(player, None)
         self._depth.pop(player, None)
+        self._arrived.pop(player, None)
+        self._fast.discard(player)
+        self._over.discard(player)
         if player in self._in_engine:
             self._in_engine.discard(player)
             self._ops.append(EngineOp("remove", player))
 
     def take(self) -> TickInput:
+        self._window += 1
+        if self._window >= RATE_WINDOW_TICKS:
+            limit = FAST_FRAMES_PER_TICK * self._window
+            over = {p for p, n in self._arrived.items() if n > limit}
+            self._fast, self._over = over & self._over, over
+            self._arrived.clear()
+            self._window = 0
         ops, self._ops = self._ops, []
         frames = {}
         for player, queue in list(self._frames.items()):
