@@ -45,3 +45,21 @@ def test_node_clocks_map_another_epoch_to_this_one() -> None:
     # A node silent for FORGET_S is dropped when another one appears.
     c.local("d", 0.0, 1014.0 + FORGET_S + 1)
     assert len(c) == 1
+
+
+def test_node_clocks_keep_each_players_time_moving_on() -> None:
+    from posecast.online.core.clock import MIN_STEP_S, NodeClocks
+
+    c = NodeClocks()
+    assert c.local("b", 10.0, 100.100, "m") == pytest.approx(100.100, abs=1e-9)
+    # q's newer pose with less delay lowers the offset by 95 ms; m's older pose in the
+    # same batch would map before m's last time: it moves on from there instead.
+    assert c.local("b", 10.1, 100.105, "q") == pytest.approx(100.105, abs=1e-9)
+    assert c.local("b", 10.0667, 100.105, "m") == pytest.approx(100.100 + MIN_STEP_S, abs=1e-9)
+    assert c.local("b", 10.2, 100.205, "m") == pytest.approx(100.205, abs=1e-6)
+    # Forgotten (m left): its next time is the node's mapping again, even if earlier.
+    c.local("b", 10.3, 100.305, "m")
+    c.forget("m", "b")
+    assert c.local("b", 10.25, 100.31, "m") == pytest.approx(100.255, abs=1e-4)
+    c.forget("q")  # of any node
+    assert c.local("b", 10.0, 100.4, "q") == pytest.approx(100.005, abs=1e-3)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 from posecast.online.protocol.messages import (
     Presence,
     Welcome,
@@ -160,3 +162,33 @@ def test_a_player_that_moved_rooms_keeps_its_avatar_until_it_is_gone_from_all() 
     assert len(avatars) == held - 1
     for conn in (a, b):
         h.inbox(conn)
+
+
+def test_a_remote_players_time_never_goes_back_when_the_offset_drops() -> None:
+    """Node B's first batch took a 100 ms round trip; the next, 5 ms, merged ticks 1-6
+    latest-wins: q's tick-6 pose (which lowers B's offset) and m's tick-4 one (m sends
+    at 15 Hz). m's tick-4 pose must not get a time before its tick-0 one: a client
+    ordering poses by t would show it first, and the avatar would move back."""
+    from posecast.online.protocol.messages import Pose
+
+    h = Harness()
+    a = h.join("a")
+    sink = h.hub.sink
+    sink.remote_snapshot("r1", {"m": ("node-b", "M"), "q": ("node-b", "Q")}, h.now, h.now)
+    h.inbox(a)
+    base, tick = 5.0e6, 1 / 60
+    times: dict[str, list[float]] = {}
+
+    def read() -> None:  # after each batch: a v1 outbox keeps a player's newest pose
+        for msg in h.inbox(a):
+            if isinstance(msg, Pose):
+                times.setdefault(msg.player, []).append(msg.t)
+
+    first = [("q", _pose("q", 0, base)), ("m", _pose("m", 0, base))]
+    sink.remote_tick("r1", "node-b", first, [], h.now + 0.100)
+    read()
+    later = [("q", _pose("q", 6, base + 6 * tick)), ("m", _pose("m", 4, base + 4 * tick))]
+    sink.remote_tick("r1", "node-b", later, [], h.now + 0.105)
+    read()
+    assert len(times["m"]) == 2 and times["m"][1] > times["m"][0], times
+    assert times["q"][1] == pytest.approx(h.now + 0.105, abs=1e-6)  # the offset did drop

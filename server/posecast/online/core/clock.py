@@ -78,6 +78,7 @@ class ClockEstimator:
 RISE_S_PER_S = 1e-3  # how fast a node's offset may grow (drift, a slower path)
 RESET_S = 1.0  # a sample this far above the offset: that node's clock started again
 FORGET_S = 60.0  # a node silent this long is forgotten (when another one appears)
+MIN_STEP_S = 1e-6  # a player's mapped time moves on at least this much a pose
 
 
 @dataclass
@@ -89,12 +90,39 @@ class NodeClocks:
     path that got slower for good) and starts over when a sample is above it by more
     than :data:`RESET_S` (a new epoch). A pose's local time is then about when it
     would have arrived over the quickest path: never later than it did arrive.
+
+    One player's mapped times never go back, though the offset drops: a batch that
+    waited out a slow round trip can hold another player's newer pose (a lower
+    offset) and this player's older one, and a client that orders poses by ``t``
+    would show the older one after the newer. A player's time is at least
+    :data:`MIN_STEP_S` past its last one (until :meth:`forget`, or a new epoch).
     """
 
     _nodes: dict[str, tuple[float, float]] = field(default_factory=dict)  # offset, last
+    _players: dict[tuple[str, str], float] = field(default_factory=dict)  # last mapped t
 
-    def local(self, node: str, t: float, now: float) -> float:
-        """``t`` on ``node``'s clock, received at ``now`` on this one, as this node's time."""
+    def local(self, node: str, t: float, now: float, player: str = "") -> float:
+        """``t`` on ``node``'s clock, received at ``now`` on this one, as this node's
+        time; never before ``player``'s last one plus :data:`MIN_STEP_S`."""
+        mapped = self._map(node, t, now)
+        if not player:
+            return mapped
+        key = (node, player)
+        last = self._players.get(key)
+        if last is not None and mapped <= last and last - mapped < RESET_S:
+            mapped = last + MIN_STEP_S
+        self._players[key] = mapped
+        return mapped
+
+    def forget(self, player: str, node: str | None = None) -> None:
+        """``player`` (of ``node``, or of any node) left: its next time starts afresh."""
+        if node is not None:
+            self._players.pop((node, player), None)
+        else:
+            for key in [k for k in self._players if k[1] == player]:
+                del self._players[key]
+
+    def _map(self, node: str, t: float, now: float) -> float:
         sample = now - t
         held = self._nodes.get(node)
         if held is None:
@@ -108,8 +136,11 @@ class NodeClocks:
         return max(0.0, t + offset)
 
     def _forget(self, now: float) -> None:
-        for node in [n for n, (_, last) in self._nodes.items() if now - last > FORGET_S]:
+        gone = {n for n, (_, last) in self._nodes.items() if now - last > FORGET_S}
+        for node in gone:
             del self._nodes[node]
+        for key in [k for k in self._players if k[0] in gone]:
+            del self._players[key]
 
     def __len__(self) -> int:
         return len(self._nodes)

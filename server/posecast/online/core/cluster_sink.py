@@ -71,6 +71,8 @@ class ClusterSink:
 
     def remote_leave(self, room: str, player: str, node: str, now: float) -> None:
         gone = self.remote.leave(room, player, node, now)
+        if gone is not None:
+            self.clocks.forget(player, node)
         if gone is not None and self.rooms.room_of(player) != room:
             self.router.to_room(room, Presence("leave", room, player, gone.name), now)
             self.refresh()
@@ -94,7 +96,7 @@ class ClusterSink:
             except ProtocolError:
                 undecodable += 1
                 continue
-            data = with_time(data, at, self.clocks.local(node, t, now))
+            data = with_time(data, at, self.clocks.local(node, t, now, player))
             superseded += self.router.pose_to_room(room, player, data, now)
         for data in events:
             if self._member_event(room, node, data):
@@ -163,6 +165,7 @@ class ClusterSink:
                     others[m.player] = (held.node, m.name)
         joined, left = self.remote.snapshot(room, others, issued_at)
         for m in left:
+            self.clocks.forget(m.player)
             if m.player not in local:  # one that moved here left the remote view only
                 self.router.to_room(room, Presence("leave", room, m.player, m.name), now)
         for m in joined:
@@ -190,6 +193,7 @@ class ClusterSink:
         for room in gone:
             self.bus.unwatch(room)
             for player in self.remote.drop_room(room):
+                self.clocks.forget(player)
                 self.router.release_if_gone(player)
         for room in new:
             self.bus.watch(room)  # may report the room's remote members at once
