@@ -92,8 +92,9 @@ class RedisBus(Bus):
         super().__init__(node)
         self.cfg, self.metrics = cfg, metrics
         self.store = RedisStore(
-            cfg.redis_prefix, node, cfg.redis_node_ttl_s, metrics, cfg.redis_heartbeat_s / 2
-        )
+            cfg.redis_prefix, node, cfg.redis_node_ttl_s, metrics, cfg.redis_heartbeat_s / 2,
+            timeout_s=cfg.redis_timeout_s,
+        )  # fmt: skip
         self.store.piggyback = self._piggyback
         self._watched: dict[str, bytes] = {}  # room -> its channel
         self._rooms: dict[bytes, str] = {}  # channel -> room

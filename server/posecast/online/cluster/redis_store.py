@@ -17,6 +17,7 @@ connection, its tasks and reconnects are :mod:`posecast.online.cluster.redis_bus
 
 from __future__ import annotations
 
+import asyncio
 import time
 from collections.abc import Callable, Collection, Mapping
 from typing import Any
@@ -62,13 +63,18 @@ class RedisStore:
         node_ttl_s: float,
         metrics: Metrics,
         refresh_every_s: float = 0.5,
+        timeout_s: float | None = None,
     ) -> None:
+        """``timeout_s``: the longest one round trip of :meth:`execute` may take, as a
+        whole (the client's socket timeout bounds each read: replies that trickle in
+        could stretch a round trip far past it)."""
         self.prefix, self.node, self.metrics = prefix, node, metrics
         self.ttl_ms = int(node_ttl_s * 1000)
         self.ctl_channel = f"{prefix}:ctl"
         self.burned_key = f"{prefix}:burned"
         self._leave_sha = self._claim_sha = ""
         self.refresh_every_s = refresh_every_s
+        self.timeout_s = timeout_s
         # Called with every pipeline about to go out that holds a command: adds what
         # must not wait for a long series of round trips (the bus's pose batches).
         self.piggyback: Callable[[Any], None] | None = None
@@ -148,8 +154,13 @@ class RedisStore:
         t0 = time.perf_counter()
         if t0 - self._refreshed >= self.refresh_every_s:
             self.refresh(pipe)
-        out: list[Any] = await pipe.execute()
-        self.metrics.bus_roundtrip.observe(time.perf_counter() - t0)
+        async with asyncio.timeout(self.timeout_s):
+            out: list[Any] = await pipe.execute()
+        took = time.perf_counter() - t0
+        self.metrics.bus_roundtrip.observe(took)
+        if self.timeout_s is not None and took > self.timeout_s:
+            # The client can swallow the timeout's cancellation and return late.
+            raise TimeoutError(f"a Redis round trip took {took:.2f} s")
         return out[:n]
 
     async def reburn(self, client: Redis, known: Mapping[str, int], own: Mapping[str, int]) -> None:
