@@ -71,3 +71,12 @@ def test_an_ipv6_host_is_one_address_per_64_and_mapped_ipv4_is_its_ipv4() -> Non
     assert not budget.exhausted("2001:db8:1:3::1", 0.0)
     budget.charge("::ffff:192.0.2.7", 0.0)
     assert budget.exhausted("192.0.2.7", 0.0)
+
+
+def test_take_runs_into_debt_and_says_how_long_it_takes_to_pay_back() -> None:
+    b = TokenBucket(rate_hz=10.0, burst=5.0)
+    assert b.take(0.0, 5) == 0.0  # the burst
+    assert b.take(0.0, 20) == pytest.approx(2.0)  # 20 in debt at 10 a second
+    assert b.take(1.0, 0) == pytest.approx(1.0)  # half paid back
+    assert not b.allow(1.5)
+    assert b.take(2.0, 1) == pytest.approx(0.1)

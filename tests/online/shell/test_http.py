@@ -78,6 +78,16 @@ def test_page_and_bundle_are_served_from_package_data() -> None:
     assert get("/viewer/nope.js").status_code == 404
 
 
+def test_a_repeated_accept_encoding_header_is_read_not_a_500() -> None:
+    """Two ``Accept-Encoding`` lines (legal HTTP) raised ``MultipleValuesError`` in
+    the route: HTTP 500 and an unthrottled ERROR traceback per request."""
+    twice = [("Accept-Encoding", "br"), ("Accept-Encoding", "gzip")]
+    r = get("/viewer/viewer.js", headers=twice)
+    assert (r.status_code, r.headers["Content-Encoding"]) == (200, "gzip")
+    plain = get("/viewer/", headers=[("Accept-Encoding", "br"), ("Accept-Encoding", "zstd")])
+    assert plain.status_code == 200 and "Content-Encoding" not in plain.headers
+
+
 def test_dev_server_mints_a_short_lived_spectator_token_for_loopback() -> None:
     r = get("/viewer/token?room=demo")
     assert r.status_code == 200

@@ -182,8 +182,13 @@ class Admission:
     def oversized(self, conn: int, now: float) -> None:
         """``conn`` sent a message past the WebSocket frame cap: websockets closed it
         (1009) before the codec saw it. Counted, and charged, as a ``TOO_LARGE``."""
+        self.refused_by_transport(conn, TooLargeError("message over the WebSocket frame cap"), now)
+
+    def refused_by_transport(self, conn: int, exc: ProtocolError, now: float) -> None:
+        """websockets closed ``conn`` for what it sent before the codec saw it: past the
+        frame cap (1009, ``TOO_LARGE``), a frame that breaks RFC 6455 or a text message
+        that is not UTF-8 (1002, 1007: ``MALFORMED``). Counted, and charged, as ``exc``."""
         c = self.conns.get(conn)
-        exc = TooLargeError("message over the WebSocket frame cap")
         self.metrics.errors.labels(exc.code).inc()
         if c is not None:
             self._charge(c, exc, now)

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from posecast.errors import ProtocolError
 from posecast.online.auth.tokens import ReplayGuard
 from posecast.online.cluster.bus import Bus
 from posecast.online.cluster.memory import MemoryBus
@@ -89,6 +90,9 @@ class Hub:
 
     def oversized(self, conn: int, now: float) -> None:
         self.admission.oversized(conn, now)
+
+    def refused_by_transport(self, conn: int, exc: ProtocolError, now: float) -> None:
+        self.admission.refused_by_transport(conn, exc, now)
 
     def check_timeouts(self, now: float) -> None:
         self.admission.check_timeouts(now)

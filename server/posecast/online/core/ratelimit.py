@@ -38,12 +38,7 @@ class TokenBucket:
     stamp: float | None = None
 
     def allow(self, now: float) -> bool:
-        if self.stamp is None:
-            self.tokens, self.stamp = self.burst, now
-        else:
-            elapsed = max(0.0, now - self.stamp)
-            self.tokens = min(self.burst, self.tokens + elapsed * self.rate_hz)
-            self.stamp = now
+        self._refill(now)
         if self.tokens >= 1.0:
             self.tokens -= 1.0
             return True
@@ -55,6 +50,21 @@ class TokenBucket:
         if self.allow(now):
             return 0.0
         return (1.0 - self.tokens) / self.rate_hz
+
+    def take(self, now: float, n: int) -> float:
+        """Take ``n`` tokens, into debt if there are fewer; the seconds until the debt is
+        paid back (0.0 when there is none). For pacing what has already happened."""
+        self._refill(now)
+        self.tokens -= n
+        return max(0.0, -self.tokens / self.rate_hz)
+
+    def _refill(self, now: float) -> None:
+        if self.stamp is None:
+            self.tokens, self.stamp = self.burst, now
+        else:
+            elapsed = max(0.0, now - self.stamp)
+            self.tokens = min(self.burst, self.tokens + elapsed * self.rate_hz)
+            self.stamp = now
 
 
 @dataclass

@@ -30,9 +30,11 @@ from dataclasses import dataclass
 
 from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.exceptions import ConnectionClosed
-from websockets.frames import CloseCode
+from websockets.frames import CloseCode, Frame
+from websockets.protocol import Event
 from websockets.typing import Subprotocol
 
+from posecast.errors import MalformedError
 from posecast.online.cluster.auto import create_bus
 from posecast.online.config import ServerConfig
 from posecast.online.core.hub import Hub
@@ -48,6 +50,7 @@ from posecast.online.shell.ticker import EngineWorker, run_ticks
 
 log = logging.getLogger("posecast.server")
 _HTTP_PATHS = ("/healthz", "/readyz", "/metrics")
+_MALFORMED_CLOSES = (CloseCode.PROTOCOL_ERROR, CloseCode.INVALID_DATA)
 
 
 @dataclass
@@ -120,6 +123,9 @@ class PosecastServer:
             self.cfg.host,
             self.cfg.port,
             process_request=self.http,
+            create_connection=_paced_connection(
+                *self._read_pace(), paced=self.metrics.reads_paced.inc
+            ),
             # The highest version the client offers (posecast.v2, then posecast.v1); a
             # client offering neither gets HTTP 400. v1 clients keep working unchanged.
             subprotocols=[Subprotocol(SUBPROTOCOLS[v]) for v in sorted(SUBPROTOCOLS, reverse=True)],
@@ -194,10 +200,7 @@ class PosecastServer:
         # what the protocol allows it (frames plus control messages). Beyond that it
         # stops reading, so a flood waits in the flooder's own socket buffers and
         # TCP window instead of in this process's CPU time (docs/reliability.md).
-        pace = TokenBucket(
-            2.0 * (self.cfg.max_rate_hz + self.cfg.control_rate_hz),
-            2.0 * (self.cfg.rate_burst + self.cfg.control_rate_hz),
-        )
+        pace = TokenBucket(*self._read_pace())
         try:
             async for data in ws:
                 wait = pace.wait_s(time.monotonic())
@@ -208,10 +211,17 @@ class PosecastServer:
                 self.hub.receive(conn, data, time.monotonic())
                 self._flush()
         except ConnectionClosed as exc:
-            if exc.sent is not None and exc.sent.code == CloseCode.MESSAGE_TOO_BIG:
-                # Past the WebSocket frame cap the library closes before the codec sees
-                # the message; it is still a TOO_LARGE message, and counted as one.
+            # websockets itself refused what the client sent, and closed first, before the
+            # codec saw it: past the frame cap (1009), a frame that breaks RFC 6455 (1002)
+            # or a text message that is not UTF-8 (1007). Still a bad message from this
+            # client: counted, and charged to its address, as TOO_LARGE or MALFORMED. (A
+            # close the client began, whatever its code, is the client's to give.)
+            sent = exc.sent if exc.rcvd_then_sent is not True else None
+            if sent is not None and sent.code == CloseCode.MESSAGE_TOO_BIG:
                 self.hub.oversized(conn, time.monotonic())
+            elif sent is not None and sent.code in _MALFORMED_CLOSES:
+                refused = MalformedError(f"WebSocket: {sent.reason}")
+                self.hub.refused_by_transport(conn, refused, time.monotonic())
         finally:
             self.hub.disconnect(conn, time.monotonic())
             del self._clients[conn]
@@ -219,6 +229,12 @@ class PosecastServer:
             with contextlib.suppress(asyncio.CancelledError, ConnectionClosed):
                 await client.writer
             self._flush()
+
+    def _read_pace(self) -> tuple[float, float]:
+        """Rate and burst of read pacing: twice what the protocol allows a connection."""
+        cfg = self.cfg
+        rate_hz = 2.0 * (cfg.max_rate_hz + cfg.control_rate_hz)
+        return rate_hz, 2.0 * (cfg.rate_burst + cfg.control_rate_hz)
 
     async def _write(self, conn: int, client: _Client) -> None:
         box = self.hub.outbox(conn)
@@ -256,6 +272,55 @@ class PosecastServer:
     def _after_tick(self, now: float) -> None:
         self.hub.check_timeouts(now)
         self._flush()
+
+
+def _paced_connection(
+    rate_hz: float, burst: float, *, paced: Callable[[], None]
+) -> type[ServerConnection]:
+    """A ``ServerConnection`` that reads at most ``rate_hz`` WebSocket frames a second
+    (``burst`` saved up), control frames and fragments included.
+
+    The handler's read pacing counts messages, but websockets answers every ping frame
+    with a pong, and collects a message's fragments, before any message reaches the
+    handler: one client sending nothing but pings (no ``hello`` needed) took the event
+    loop (the tick fell to 16 Hz) and, not reading its pongs, piled them up in the
+    server's memory (+400 MB in 18 s). Past the budget this stops reading the socket
+    until the debt is paid back, so the flood waits on the client's side.
+    """
+
+    class PacedConnection(ServerConnection):
+        def connection_made(self, transport: asyncio.BaseTransport) -> None:
+            super().connection_made(transport)
+            self.pace = TokenBucket(rate_hz, burst)
+            self.frames_read = 0
+            self.read_again: asyncio.TimerHandle | None = None
+
+        def process_event(self, event: Event) -> None:
+            super().process_event(event)
+            self.frames_read += isinstance(event, Frame)
+
+        def data_received(self, data: bytes) -> None:
+            self.frames_read = 0
+            super().data_received(data)  # parses every frame in data, answers its pings
+            wait = self.pace.take(time.monotonic(), self.frames_read)
+            if wait > 0.0:
+                paced()
+                self.transport.pause_reading()
+                if self.read_again is not None:
+                    self.read_again.cancel()
+                self.read_again = self.loop.call_later(wait, self._read_again)
+
+        def _read_again(self) -> None:
+            self.read_again = None
+            if not getattr(self.recv_messages, "paused", False):  # the queue's back-pressure
+                self.transport.resume_reading()
+
+        def connection_lost(self, exc: Exception | None) -> None:
+            if self.read_again is not None:
+                self.read_again.cancel()
+            super().connection_lost(exc)
+
+    return PacedConnection
 
 
 async def _send_batch(ws: ServerConnection, batch: list[bytes]) -> None:

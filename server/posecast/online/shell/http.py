@@ -180,7 +180,8 @@ def respond(connection: Peer, request: Request, cfg: ServerConfig, rooms: Rooms)
     if sub in _ASSETS:
         name, content_type = _ASSETS[sub]
         extra = [("Content-Security-Policy", _PAGE_CSP)] if name.endswith(".html") else []
-        if "gzip" in request.headers.get("Accept-Encoding", ""):
+        # get_all: a repeated header is legal HTTP, and get() raises on it (HTTP 500).
+        if "gzip" in ",".join(request.headers.get_all("Accept-Encoding")):
             body, extra = _asset_gzip(name), [*extra, ("Content-Encoding", "gzip")]
         else:
             body = _asset(name)

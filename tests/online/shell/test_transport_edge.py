@@ -1,0 +1,157 @@
+"""The WebSocket layer's own refusals (posecast.online.shell.app): frames that websockets
+refuses before any message reaches the codec, and control frames, which websockets
+answers itself. A real server on loopback; the bad frames are written by hand."""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import os
+import struct
+import time
+from collections.abc import Coroutine
+from typing import Any
+
+import pytest
+from websockets.exceptions import InvalidStatus
+
+from posecast.online.protocol import encode
+from posecast.online.protocol.messages import Hello, Welcome
+from tests.online.conftest import make_cfg, token
+from tests.online.wsclient import Client, Factory, serving
+
+pytestmark = pytest.mark.timeout(60)
+
+
+def run(coro: Coroutine[Any, Any, None]) -> None:
+    asyncio.run(coro)
+
+
+def _frame(opcode: int, payload: bytes, *, fin: bool = True, masked: bool = True) -> bytes:
+    """One client frame (zero masking key: the payload goes as is)."""
+    assert len(payload) < 126
+    head = bytes([(0x80 if fin else 0) | opcode, (0x80 if masked else 0) | len(payload)])
+    return head + (b"\0\0\0\0" if masked else b"") + payload
+
+
+async def _raw(port: int) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
+    reader, writer = await asyncio.open_connection("127.0.0.1", port)
+    key = base64.b64encode(os.urandom(16)).decode()
+    writer.write(
+        f"GET / HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+        f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
+        f"Sec-WebSocket-Protocol: posecast.v1\r\n\r\n".encode()
+    )
+    head = await reader.readuntil(b"\r\n\r\n")
+    assert head.startswith(b"HTTP/1.1 101"), head
+    return reader, writer
+
+
+async def _close_code(reader: asyncio.StreamReader) -> int:
+    """Read server frames up to its close frame: that frame's close code."""
+    while True:
+        b0, b1 = await reader.readexactly(2)
+        n = b1 & 0x7F
+        if n == 126:
+            (n,) = struct.unpack("!H", await reader.readexactly(2))
+        elif n == 127:
+            (n,) = struct.unpack("!Q", await reader.readexactly(8))
+        payload = await reader.readexactly(n)
+        if b0 & 0x0F == 0x8:
+            code: int = struct.unpack("!H", payload[:2])[0]
+            return code
+
+
+BAD_FRAMES = {  # what each breaks, and the close code websockets answers it with
+    "text that is not UTF-8": (_frame(0x1, b"\xff\xfe"), 1007),
+    "an unmasked frame": (_frame(0x2, b"abc", masked=False), 1002),
+    "RSV1 set (no extension)": (bytes([0xC2, 0x83]) + b"\0\0\0\0abc", 1002),
+    "a continuation with no start": (_frame(0x0, b"abc"), 1002),
+    "a reserved opcode": (_frame(0x3, b"abc"), 1002),
+    "a fragmented ping": (_frame(0x9, b"x", fin=False), 1002),
+}
+
+
+def test_frames_websockets_refuses_are_counted_and_charged_as_malformed(
+    engine_factory: Factory,
+) -> None:
+    """Each closed its session (1002 / 1007) with nothing counted and nothing charged to
+    the address's fatal budget, so a client could join, send one, and come back again
+    without ever meeting the budget's 429."""
+
+    async def scenario() -> None:
+        n = len(BAD_FRAMES)
+        async with serving(make_cfg(fatal_per_ip_per_min=n), engine_factory) as server:
+            for i, (what, (data, code)) in enumerate(BAD_FRAMES.items()):
+                reader, writer = await _raw(server.port)
+                hello = encode(Hello(1, token(player=f"p{i}"), "r1", "Ann"))
+                writer.write(b"\x82\xfe" + struct.pack("!H", len(hello)) + b"\0\0\0\0" + hello)
+                writer.write(data)
+                assert await asyncio.wait_for(_close_code(reader), 5) == code, what
+                writer.close()
+            deadline = time.monotonic() + 5
+            counted = server.metrics.value("posecast_errors_total", {"code": "MALFORMED"})
+            while counted < n and time.monotonic() < deadline:
+                await asyncio.sleep(0.02)
+                counted = server.metrics.value("posecast_errors_total", {"code": "MALFORMED"})
+            assert counted == n
+            with pytest.raises(InvalidStatus) as e:  # the address's budget is spent
+                await Client.open(server.port)
+            assert e.value.response.status_code == 429
+
+    run(scenario())
+
+
+def test_a_close_the_client_begins_is_not_an_error_of_the_client(
+    engine_factory: Factory,
+) -> None:
+    """A client that closes with 1009 (a server message too big for it) or 1002 says
+    something about the server: nothing is counted or charged against it."""
+
+    async def scenario() -> None:
+        async with serving(make_cfg(fatal_per_ip_per_min=1), engine_factory) as server:
+            for i, code in enumerate((1009, 1002, 1009)):
+                cl = await Client.open(server.port)
+                assert isinstance(await cl.hello(token(player=f"c{i}")), Welcome)
+                await cl.ws.close(code, "from the client")
+                await asyncio.wait_for(cl.closed.wait(), 5)
+            await asyncio.sleep(0.1)
+            for code in ("TOO_LARGE", "MALFORMED"):
+                assert server.metrics.value("posecast_errors_total", {"code": code}) == 0
+            last = await Client.open(server.port)  # the budget of 1 is untouched
+            assert isinstance(await last.hello(token(player="last")), Welcome)
+            await last.close()
+
+    run(scenario())
+
+
+def test_ping_frames_are_paced_like_messages(engine_factory: Factory) -> None:
+    """websockets answers each ping frame with a pong before any message reaches the
+    handler's read pacing: one connection, no hello needed, that sent only pings took
+    the event loop and, reading no pongs, the server's memory. Frames, control frames
+    included, are now read at most at the messages' pace: 2 * (120 + 20) a second, a
+    burst of 2 * (30 + 20), and what one socket read holds (256 KiB) before the pause."""
+
+    async def scenario() -> None:
+        cfg = make_cfg()
+        async with serving(cfg, engine_factory) as server:
+            reader, writer = await _raw(server.port)
+            ping = _frame(0x9, b"x" * 125)
+            t0 = time.monotonic()
+            writer.write(ping * 8000)  # 1 MiB of pings
+            pongs = 0
+            with pytest.raises(TimeoutError):
+                while True:
+                    head = await asyncio.wait_for(reader.readexactly(2), 1.0)
+                    assert head == b"\x8a\x7d"  # a pong, 125 bytes, nothing else
+                    await reader.readexactly(125)
+                    pongs += 1
+            window_s = time.monotonic() - t0
+            rate_hz = 2.0 * (cfg.max_rate_hz + cfg.control_rate_hz)
+            burst = 2.0 * (cfg.rate_burst + cfg.control_rate_hz)
+            one_read = 256 * 1024 // len(ping) + 1
+            assert 0 < pongs <= rate_hz * window_s + burst + one_read < 8000
+            assert server.metrics.value("posecast_reads_paced_total") >= 1
+            writer.transport.abort()
+
+    run(scenario())
