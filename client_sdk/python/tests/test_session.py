@@ -54,6 +54,15 @@ def test_time_must_not_go_backwards() -> None:
         s.frame(POS, QUAT, now=6.0, t=4.0)
 
 
+def test_a_frame_without_time_after_one_stamped_ahead_takes_that_time() -> None:
+    # A stamp ahead of the clock (a WebXR frame's predicted display time) must not get
+    # the next unstamped frame refused as going back: it takes the last frame's time.
+    s = ClientSession()
+    s.sent(s.frame(POS, QUAT, now=5.0, t=5.02), 5.0)
+    assert s.frame(POS, QUAT, now=5.01).t == 5.02
+    assert s.frame(POS, QUAT, now=5.03).t == 5.03
+
+
 def test_tracked_slots_are_checked_and_normalised_untracked_ones_ignored() -> None:
     s = ClientSession()
     quat = QUAT * 3.0

@@ -334,7 +334,9 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
     const set = this.trackerSet;
     const rows = set ? toSites(set, input) : undefined;
     const { trackers, valid } = rows ? { trackers: undefined, valid: rows.valid } : toTrackers(input as FrameInput);
-    const t = input.t ?? this.now();
+    // No `t`: now, or the last frame's if that is later (a WebXR frame's
+    // predictedDisplayTime is ahead of now; the next unstamped frame must not be refused).
+    const t = input.t ?? Math.max(this.now(), this.lastFrameT);
     if (!(t >= this.lastFrameT && t <= MAX_TIME_S)) {
       throw new RangeError(`frame time ${t} s is outside [${this.lastFrameT}, ${MAX_TIME_S}]`);
     }

@@ -142,6 +142,8 @@ test("join, frames out, poses and presence in, clock synced, bye on close", asyn
     assert.equal(client.sendFrame({ head: at, waist: at }), 0);
     assert.equal(client.sendFrame({ head: at, waist: at, t: 7.5 }), 1);
     assert.throws(() => client.sendFrame({ head: at, t: 7 }), RangeError); // time went back
+    // No t after a stamp ahead of the clock (a WebXR predictedDisplayTime): the last t, not now (5).
+    assert.equal(client.sendFrame({ head: at, waist: at }), 2);
     const nan = { position: [0, Number.NaN, 0], orientation: [0, 0, 0, 1] } as const;
     assert.throws(() => client.sendFrame({ head: at, waist: nan, t: 8 }), (e: unknown) =>
       e instanceof OutOfRangeError && e.field === "trackers[3]");
@@ -162,11 +164,11 @@ test("join, frames out, poses and presence in, clock synced, bye on close", asyn
     peer.send({ type: "error", code: "RATE_LIMITED", message: "slow down", fatal: false });
     const err = await take(it, "error");
     assert.ok(err.type === "error" && err.error.code === "RATE_LIMITED");
-    assert.equal(client.sendFrame({ rightHand: tilted, t: 9 }), 2); // normalised, not refused
+    assert.equal(client.sendFrame({ rightHand: tilted, t: 9 }), 3); // normalised, not refused
     await sleep(0.05);
     const frames = peer.received.filter((m) => m.type === "frame");
-    assert.deepEqual(frames.map((f) => [f.seq, f.t, f.valid]), [[0, 5, 0b1001], [1, 7.5, 0b1001], [2, 9, 0b0100]]);
-    const third = frames[2]!;
+    assert.deepEqual(frames.map((f) => [f.seq, f.t, f.valid]), [[0, 5, 0b1001], [1, 7.5, 0b1001], [2, 7.5, 0b1001], [3, 9, 0b0100]]);
+    const third = frames[3]!;
     assert.ok("trackers" in third);
     assert.deepEqual(third.trackers[2], [0, 1, 0, 0, 0, 0, 1]);
     assert.ok(peer.received.some((m) => m.type === "calibrate" && "height_m" in m && m.height_m === 1.8));

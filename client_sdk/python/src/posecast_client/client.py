@@ -466,7 +466,8 @@ class Client:
             seq: the frame counter (default: one more than the last, from ``seq0``);
                 an explicit seq must be newer than the last one.
             t: the sample time on this client's ``time.monotonic()`` clock (default:
-                now); it must not go backwards.
+                now, or the last frame's time if that is later); it must not go
+                backwards.
 
         Raises:
             OutOfRangeError, NotNormalisedError, OutOfOrderError, DuplicateError:

@@ -270,7 +270,10 @@ class ClientSession:
                 raise DuplicateError(f"seq {seq} was already sent", field="seq", ref_seq=seq)
             if d < 0:
                 raise OutOfOrderError(f"seq {seq} after {self.last_seq}", field="seq", ref_seq=seq)
-        t = now if t is None else float(t)
+        # No time given: now, or the last frame's if that is later (a stamp ahead of
+        # the clock, like a WebXR frame's predicted display time, must not make the
+        # next unstamped frame refused as going back).
+        t = max(now, self.last_t) if t is None else float(t)
         if not (0.0 <= t <= MAX_TIME_S and t >= self.last_t):
             raise ValueError(f"frame time {t} s is outside [0, 1e12] or before the last one")
         return Frame(seq, t, pos, quat, valid, sites=ts is not None)
