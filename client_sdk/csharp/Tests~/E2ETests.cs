@@ -240,6 +240,22 @@ namespace Posecast.Client.Tests
                     T.True(matched > 30, matched + " poses of cs-a seen by both");
                     T.True(worst < 0.01, "largest joint difference " + worst + " m");
                 });
+                T.Run("e2e: a T-pose calibration is taken; an implausible one is CALIBRATION_FAILED, and the player goes on", () =>
+                {
+                    T.True(a != null, "the clients joined");
+                    var tpose = new[] { new Vec3(0, 1.62, 0), new Vec3(0.78, 1.42, 0), new Vec3(-0.78, 1.42, 0), new Vec3(0, 0.95, 0) };
+                    var q = new[] { Quat.Identity, Quat.Identity, Quat.Identity, Quat.Identity };
+                    Func<int> failed = () => { lock (a.Events) return a.Events.Count(e => e.Kind == EventKind.Error && e.Error.Code == "CALIBRATION_FAILED"); };
+                    T.True(a.Client.CalibrateTPoseAsync(tpose, q).Result, "sent");
+                    var low = (Vec3[])tpose.Clone(); low[0] = new Vec3(0, 0.3, 0); // a head 30 cm above the floor
+                    T.True(a.Client.CalibrateTPoseAsync(low, q).Result, "sent");
+                    T.True(WaitFor(() => failed() == 1, 10), "one CALIBRATION_FAILED, for the second: " + failed());
+                    int poses0 = b.PosesOf("cs-a").Count;
+                    T.True(WaitFor(() => b.PosesOf("cs-a").Count > poses0 + 10, 10), "a's poses go on");
+                    T.True(a.Failure == null, "no failure: " + a.Failure);
+                    var nan = (Vec3[])tpose.Clone(); nan[1] = new Vec3(double.NaN, 1, 0);
+                    T.Equal("trackers[1]", T.Throws<OutOfRangeException>(() => a.Client.CalibrateTPoseAsync(nan, q), "NaN: nothing sent").Field, "field");
+                });
                 T.Run("e2e: a client pinned to posecast.v1 joins and receives pose messages", () =>
                 {
                     var c = Player.Join(server, "cs-room", "cs-v1", -1.5, new ClientOptions { Versions = new[] { 1 } }).Result;

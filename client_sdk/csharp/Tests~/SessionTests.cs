@@ -154,6 +154,23 @@ namespace Posecast.Client.Tests
                 T.Throws<ArgumentException>(() => s.BuildFrame(pos, q, 0.5, valid: 7), "time going back");
                 T.Near(1.1, s.SentAt(0).Value, 0, "sent at");
             });
+            T.Run("session: a T-pose calibration checks every row as a tracked frame row and normalises", () =>
+            {
+                var s = new ClientSession();
+                var pos = new[] { new Vec3(0, 1.7, 0), new Vec3(0.8, 1.4, 0), new Vec3(-0.8, 1.4, 0), Vec3.Zero };
+                var q = new[] { new Quat(0, 0, 0, 2), Quat.Identity, Quat.Identity, Quat.Identity };
+                var c = s.BuildTPose(pos, q);
+                T.True(c.TPose && !c.Sites && c.HeightM == null, "a T-pose of the four slots");
+                T.NearRot(Quat.Identity, c.Orientations[0], 1e-15, "normalised");
+                var decoded = (Calibrate)Codec.Decode(Codec.Encode(c), Protocol.V2);
+                T.Near(new Vec3(0.8, 1.4, 0), decoded.Positions[1], 0, "a calibrate the server reads");
+                var q2 = (Quat[])q.Clone(); q2[3] = new Quat(0, 0, 0, 0);
+                T.Equal("trackers[3]", T.Throws<NotNormalisedException>(() => s.BuildTPose(pos, q2), "every row is read, the waist's too").Field, "field");
+                var p2 = (Vec3[])pos.Clone(); p2[2] = new Vec3(0, 2000, 0);
+                T.Throws<OutOfRangeException>(() => s.BuildTPose(p2, q), "out of range");
+                T.Throws<ArgumentException>(() => s.BuildTPose(new Vec3[3], new Quat[3]), "three rows");
+                T.Equal(0L, s.Stats.FramesSent, "no frame counted");
+            });
             T.Run("session: hello per version; back-off grows with jitter and stays capped", () =>
             {
                 var s = new ClientSession();

@@ -118,6 +118,32 @@ namespace Posecast.Client.Tests
                 finally { InputDevices.Fakes.Remove(XRNode.LeftHand); InputDevices.Fakes.Remove(XRNode.Head); }
             });
 
+            T.Run("unity streamer: reads the headset and controllers in posecast's frame for frames and the T-pose", () =>
+            {
+                var read = typeof(PosecastXRStreamer).GetMethod("ReadTrackers", BindingFlags.Static | BindingFlags.NonPublic);
+                var head = new FakeDevice();
+                head.Features["DevicePosition"] = new Vector3(0.1f, 1.6f, 0.2f);
+                head.Features["DeviceRotation"] = Quaternion.identity;
+                var right = new FakeDevice();
+                right.Features["DevicePosition"] = new Vector3(0.7f, 1.4f, 0.2f);
+                right.Features["DeviceRotation"] = Quaternion.identity;
+                right.Features["IsTracked"] = true;
+                InputDevices.Fakes[XRNode.Head] = head;
+                InputDevices.Fakes[XRNode.RightHand] = right;
+                try
+                {
+                    var pos = new Vec3[4]; var rot = new Quat[4];
+                    pos[3] = new Vec3(9, 9, 9);
+                    T.Equal(0b101, (int)read.Invoke(null, new object[] { pos, rot }), "head and right hand; the left controller is absent");
+                    T.Near(UnityFrames.FromUnity(new Vector3(0.7f, 1.4f, 0.2f)), pos[2], 0, "right hand in posecast's frame");
+                    T.Near(Vec3.Zero, pos[1], 0, "an absent controller goes as the origin");
+                    T.Near(Vec3.Zero, pos[3], 0, "the waist slot (hmd3 ignores it) goes as the origin");
+                    var streamer = new PosecastXRStreamer();
+                    T.True(!streamer.CalibrateTPoseAsync().Result, "not joined: no T-pose sent");
+                }
+                finally { InputDevices.Fakes.Remove(XRNode.Head); InputDevices.Fakes.Remove(XRNode.RightHand); }
+            });
+
             T.Run("unity streamer: asks for a floor-level tracking origin (y = height above the floor)", () =>
             {
                 var ask = typeof(PosecastXRStreamer).GetMethod("RequestFloor", BindingFlags.Static | BindingFlags.NonPublic);

@@ -421,6 +421,21 @@ namespace Posecast.Client
         /// <summary>Calibrate the avatar by standing height, metres (0.9 .. 2.5).</summary>
         public Task<bool> CalibrateAsync(double heightM) { return SendAsync(new Calibrate { HeightM = heightM }); }
 
+        /// <summary>
+        /// Calibrate the avatar from one frame of the user standing in a T-pose (arms out
+        /// to the sides, facing forward): the scale from the head's height and, for a
+        /// headset-only player or a tracker set, each device's rotation offset to its body
+        /// part (without it a controller's own axes are taken for the hand's). All rows
+        /// tracked, checked as frames are (OutOfRange, NotNormalised; nothing is sent); an
+        /// implausible T-pose comes back as a CALIBRATION_FAILED error event.
+        /// </summary>
+        public Task<bool> CalibrateTPoseAsync(Vec3[] positions, Quat[] orientations)
+        {
+            Calibrate c;
+            lock (_lock) c = Session.BuildTPose(positions, orientations);
+            return SendAsync(c);
+        }
+
         /// <summary>v2: receive poses at 60, 30, 20 or 15 Hz from now on.</summary>
         public Task<bool> SetPoseRateAsync(double rateHz) { return SendAsync(new PoseRate { RateHz = rateHz }); }
 

@@ -142,29 +142,9 @@ namespace Posecast.Client
         public Frame BuildFrame(Vec3[] positions, Quat[] orientations, double now, int? valid = null,
                                 long? seq = null, double? t = null)
         {
-            int rows = Set == null ? Protocol.NumTrackers : Set.Count;
-            int full = Set == null ? Protocol.AllTrackersValid : Set.AllValid;
-            string key = Set == null ? "trackers" : "sites";
-            if (positions == null || orientations == null || positions.Length != rows || orientations.Length != rows)
-                throw new ArgumentException(Set == null
-                    ? "need 4 positions and 4 orientations (HEAD, LEFT_HAND, RIGHT_HAND, WAIST)"
-                    : "need " + rows + " positions and orientations, one per site of " + Set.Name);
-            int mask = valid ?? full;
-            if (mask < 0 || mask > full) throw new ArgumentException("valid must be in 0.." + full);
-            var pos = new Vec3[rows];
-            var quat = new Quat[rows];
-            for (int i = 0; i < rows; i++)
-            {
-                if ((mask >> i & 1) == 0) { pos[i] = Vec3.Zero; quat[i] = Quat.Identity; continue; }
-                var p = positions[i];
-                if (!(Math.Abs(p.X) <= Protocol.MaxCoordM && Math.Abs(p.Y) <= Protocol.MaxCoordM && Math.Abs(p.Z) <= Protocol.MaxCoordM))
-                    throw ErrorCodes.OutOfRange(key + "[" + i + "]", key + "[" + i + "] value " + p);
-                double n = orientations[i].Norm;
-                if (!(Fields.IsFinite(n) && n > 1e-6))
-                    throw ErrorCodes.NotNormalised(key + "[" + i + "]", key + "[" + i + "] orientation " + orientations[i]);
-                pos[i] = p;
-                quat[i] = orientations[i].Normalised;
-            }
+            int mask = valid ?? (Set == null ? Protocol.AllTrackersValid : Set.AllValid);
+            Vec3[] pos; Quat[] quat;
+            CheckRows(positions, orientations, mask, out pos, out quat);
             long s;
             if (seq == null) s = LastSeq == null ? Seq0 : (LastSeq.Value + 1) & Protocol.UInt32Max;
             else
@@ -182,6 +162,45 @@ namespace Posecast.Client
             if (!(tt >= 0.0 && tt <= Protocol.MaxTimeS && tt >= LastT))
                 throw new ArgumentException("frame time " + tt + " s is outside [0, 1e12] or before the last one");
             return new Frame { Seq = s, T = tt, Positions = pos, Orientations = quat, Valid = mask, Sites = Set != null };
+        }
+
+        /// <summary>
+        /// A checked calibration from one frame of the user standing in a T-pose: every row
+        /// (the four slots, or every site of the tracker set) checked as a tracked row of
+        /// <see cref="BuildFrame"/> is. A headset-only player's waist slot is not read by the
+        /// server; any finite row will do (origin + identity).
+        /// </summary>
+        public Calibrate BuildTPose(Vec3[] positions, Quat[] orientations)
+        {
+            Vec3[] pos; Quat[] quat;
+            CheckRows(positions, orientations, Set == null ? Protocol.AllTrackersValid : Set.AllValid, out pos, out quat);
+            return new Calibrate { Positions = pos, Orientations = quat, Sites = Set != null };
+        }
+
+        private void CheckRows(Vec3[] positions, Quat[] orientations, int mask, out Vec3[] pos, out Quat[] quat)
+        {
+            int rows = Set == null ? Protocol.NumTrackers : Set.Count;
+            int full = Set == null ? Protocol.AllTrackersValid : Set.AllValid;
+            string key = Set == null ? "trackers" : "sites";
+            if (positions == null || orientations == null || positions.Length != rows || orientations.Length != rows)
+                throw new ArgumentException(Set == null
+                    ? "need 4 positions and 4 orientations (HEAD, LEFT_HAND, RIGHT_HAND, WAIST)"
+                    : "need " + rows + " positions and orientations, one per site of " + Set.Name);
+            if (mask < 0 || mask > full) throw new ArgumentException("valid must be in 0.." + full);
+            pos = new Vec3[rows];
+            quat = new Quat[rows];
+            for (int i = 0; i < rows; i++)
+            {
+                if ((mask >> i & 1) == 0) { pos[i] = Vec3.Zero; quat[i] = Quat.Identity; continue; }
+                var p = positions[i];
+                if (!(Math.Abs(p.X) <= Protocol.MaxCoordM && Math.Abs(p.Y) <= Protocol.MaxCoordM && Math.Abs(p.Z) <= Protocol.MaxCoordM))
+                    throw ErrorCodes.OutOfRange(key + "[" + i + "]", key + "[" + i + "] value " + p);
+                double n = orientations[i].Norm;
+                if (!(Fields.IsFinite(n) && n > 1e-6))
+                    throw ErrorCodes.NotNormalised(key + "[" + i + "]", key + "[" + i + "] orientation " + orientations[i]);
+                pos[i] = p;
+                quat[i] = orientations[i].Normalised;
+            }
         }
 
         /// <summary>The frame left at client time `now`: its seq and time are taken.</summary>

@@ -5,6 +5,7 @@
 // and tests its device reads, but it was not run in Unity or on a headset.
 
 using System.Collections.Generic;
+using System.Threading.Tasks;
 using UnityEngine;
 using UnityEngine.XR;
 
@@ -69,23 +70,56 @@ namespace Posecast.Client.Unity
             while (Client.TryGetEvent(out e)) Poses.Feed(e);
             if (_sending) return; // one frame in flight at a time; frames supersede each other
             if (!_floor) _floor = RequestFloor(InputDevices.GetDeviceAtXRNode(XRNode.Head).subsystem);
-            int valid = 0;
-            var nodes = new[] { XRNode.Head, XRNode.LeftHand, XRNode.RightHand };
-            for (int i = 0; i < 3; i++)
-            {
-                Vector3 p; Quaternion q;
-                if (Read(nodes[i], out p, out q))
-                {
-                    _pos[i] = UnityFrames.FromUnity(p);
-                    _rot[i] = UnityFrames.FromUnity(q);
-                    valid |= 1 << i;
-                }
-                else { _pos[i] = Vec3.Zero; _rot[i] = Quat.Identity; }
-            }
-            _pos[3] = Vec3.Zero; _rot[3] = Quat.Identity; // hmd3: the waist slot is ignored
+            int valid = ReadTrackers(_pos, _rot);
             _sending = true;
             try { await Client.SendFrameAsync(_pos, _rot, valid); }
             finally { _sending = false; }
+        }
+
+        private static readonly XRNode[] Nodes = { XRNode.Head, XRNode.LeftHand, XRNode.RightHand };
+
+        // The headset and both controllers now, in posecast's frame, into pos/rot (4 slots;
+        // an unread one and the waist slot, which hmd3 ignores, as origin + identity).
+        // Returns the valid bits.
+        internal static int ReadTrackers(Vec3[] pos, Quat[] rot)
+        {
+            int valid = 0;
+            for (int i = 0; i < Nodes.Length; i++)
+            {
+                Vector3 p; Quaternion q;
+                if (Read(Nodes[i], out p, out q))
+                {
+                    pos[i] = UnityFrames.FromUnity(p);
+                    rot[i] = UnityFrames.FromUnity(q);
+                    valid |= 1 << i;
+                }
+                else { pos[i] = Vec3.Zero; rot[i] = Quat.Identity; }
+            }
+            pos[3] = Vec3.Zero; rot[3] = Quat.Identity;
+            return valid;
+        }
+
+        /// <summary>
+        /// Calibrate from the pose the user holds now: a T-pose (standing straight, arms
+        /// out to the sides, facing forward). Call it from your calibration step; until
+        /// then the server takes each controller's own axes for its hand's and the default
+        /// body height. False when not joined, or when the headset or a controller is not
+        /// tracked (nothing is sent; ask again).
+        /// </summary>
+        public Task<bool> CalibrateTPoseAsync()
+        {
+            if (Client == null || !Client.Connected) return Task.FromResult(false);
+            var pos = new Vec3[4];
+            var rot = new Quat[4];
+            if (ReadTrackers(pos, rot) != 0b0111) return Task.FromResult(false);
+            return Client.CalibrateTPoseAsync(pos, rot);
+        }
+
+        /// <summary>Calibrate by the user's standing height, metres (0.9 .. 2.5), instead.</summary>
+        public Task<bool> CalibrateHeightAsync(double heightM)
+        {
+            if (Client == null || !Client.Connected) return Task.FromResult(false);
+            return Client.CalibrateAsync(heightM);
         }
 
         private async void OnDestroy()
