@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import base64
+import contextlib
 import os
 import struct
 import time
@@ -16,7 +17,7 @@ import pytest
 from websockets.exceptions import InvalidStatus
 
 from posecast.online.protocol import encode
-from posecast.online.protocol.messages import Hello, Welcome
+from posecast.online.protocol.messages import Hello, Ping, Welcome
 from tests.online.conftest import make_cfg, token
 from tests.online.wsclient import Client, Factory, serving
 
@@ -47,17 +48,22 @@ async def _raw(port: int) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
     return reader, writer
 
 
+async def _server_frame(reader: asyncio.StreamReader) -> tuple[int, bytes]:
+    """The next frame the server sent: its opcode and payload."""
+    b0, b1 = await reader.readexactly(2)
+    n = b1 & 0x7F
+    if n == 126:
+        (n,) = struct.unpack("!H", await reader.readexactly(2))
+    elif n == 127:
+        (n,) = struct.unpack("!Q", await reader.readexactly(8))
+    return b0 & 0x0F, await reader.readexactly(n)
+
+
 async def _close_code(reader: asyncio.StreamReader) -> int:
     """Read server frames up to its close frame: that frame's close code."""
     while True:
-        b0, b1 = await reader.readexactly(2)
-        n = b1 & 0x7F
-        if n == 126:
-            (n,) = struct.unpack("!H", await reader.readexactly(2))
-        elif n == 127:
-            (n,) = struct.unpack("!Q", await reader.readexactly(8))
-        payload = await reader.readexactly(n)
-        if b0 & 0x0F == 0x8:
+        opcode, payload = await _server_frame(reader)
+        if opcode == 0x8:
             code: int = struct.unpack("!H", payload[:2])[0]
             return code
 
@@ -153,5 +159,48 @@ def test_ping_frames_are_paced_like_messages(engine_factory: Factory) -> None:
             assert 0 < pongs <= rate_hz * window_s + burst + one_read < 8000
             assert server.metrics.value("posecast_reads_paced_total") >= 1
             writer.transport.abort()
+
+    run(scenario())
+
+
+def test_pings_between_messages_stay_paced_when_the_message_queue_drains(
+    engine_factory: Factory,
+) -> None:
+    """websockets resumes reading when its queue of messages drains below its low mark,
+    which undid the read pacing's pause: a client sending a message every few hundred
+    pings had each drained queue buy it another socket read, about 40,000 pings
+    answered, several times a second. The queue's resume now waits for the budget."""
+
+    async def scenario() -> None:
+        cfg = make_cfg()
+        async with serving(cfg, engine_factory) as server:
+            reader, writer = await _raw(server.port)
+            hello = encode(Hello(1, token(player="p"), "r1", "Ann"))
+            writer.write(b"\x82\xfe" + struct.pack("!H", len(hello)) + b"\0\0\0\0" + hello)
+            ping = _frame(0x9, b"")
+            unit = _frame(0x2, encode(Ping(1.0))) + ping * 150  # a message, 150 pings
+
+            async def flood() -> None:
+                with contextlib.suppress(OSError):
+                    while True:
+                        writer.write(unit * 1000)
+                        await writer.drain()
+
+            flooding = asyncio.create_task(flood())
+            window_s, pongs = 3.0, 0
+            deadline = time.monotonic() + window_s
+            with contextlib.suppress(TimeoutError):
+                while True:
+                    left = max(0.0, deadline - time.monotonic())
+                    opcode, _ = await asyncio.wait_for(_server_frame(reader), left)
+                    pongs += opcode == 0xA
+            flooding.cancel()
+            writer.transport.abort()
+            with contextlib.suppress(asyncio.CancelledError):
+                await flooding
+            rate_hz = 2.0 * (cfg.max_rate_hz + cfg.control_rate_hz)
+            burst = 2.0 * (cfg.rate_burst + cfg.control_rate_hz)
+            one_read = 256 * 1024 // len(ping) + 1
+            assert 0 < pongs <= rate_hz * window_s + burst + one_read, pongs
 
     run(scenario())

@@ -286,6 +286,10 @@ def _paced_connection(
     loop (the tick fell to 16 Hz) and, not reading its pongs, piled them up in the
     server's memory (+400 MB in 18 s). Past the budget this stops reading the socket
     until the debt is paid back, so the flood waits on the client's side.
+
+    Reading resumes only when both allow it: the pace, and websockets' queue of
+    messages (which pauses reading above its high mark and resumes it below its low
+    one, and would otherwise resume a paced read as soon as the handler drained it).
     """
 
     class PacedConnection(ServerConnection):
@@ -294,6 +298,7 @@ def _paced_connection(
             self.pace = TokenBucket(rate_hz, burst)
             self.frames_read = 0
             self.read_again: asyncio.TimerHandle | None = None
+            self.recv_messages.resume = self._queue_drained
 
         def process_event(self, event: Event) -> None:
             super().process_event(event)
@@ -312,7 +317,11 @@ def _paced_connection(
 
         def _read_again(self) -> None:
             self.read_again = None
-            if not getattr(self.recv_messages, "paused", False):  # the queue's back-pressure
+            if not self.recv_messages.paused:  # the queue's back-pressure
+                self.transport.resume_reading()
+
+        def _queue_drained(self) -> None:
+            if self.read_again is None:  # else the pace resumes reading when it allows
                 self.transport.resume_reading()
 
         def connection_lost(self, exc: Exception | None) -> None:
