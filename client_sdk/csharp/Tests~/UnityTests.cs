@@ -1,5 +1,6 @@
 // Runtime/Unity on the stand-in UnityEngine (Tests~/UnityStub): the avatar driver's
-// bone mapping (rest rotations, the avatar's own root), and what the XR streamer
+// bone mapping (rest rotations from the avatar's Humanoid T-pose or its Awake pose, the
+// avatar's own root), and what the XR streamer
 // reads from Unity's XR input (lost tracking, the tracking origin).
 
 using System;
@@ -93,6 +94,58 @@ namespace Posecast.Client.Tests
                 Near(new Vector3(1, 0, 0), hips.rotation * Fwd, 1e-6, "hips face the root's forward");
                 var face = avatar.GetBoneTransform(HumanBodyBones.Head).rotation * Fwd;
                 Near(new Vector3((float)Math.Cos(Math.PI / 6), -0.5f, 0), face, 1e-6, "the head nods along the root's forward");
+            });
+
+            // float32 rotations composed through a hierarchy: 1e-5.
+            T.Run("unity driver: an avatar standing in an A-pose takes its rest from its Humanoid T-pose, and is put back", () =>
+            {
+                // root -> Hips -> LeftUpperArm -> LeftLowerArm; each bone's local +Y along it.
+                // At Awake the arm hangs 45 degrees down from the T-pose; the definition holds the T-pose.
+                var tposeArm = Quaternion.AngleAxis(90, new Vector3(0, 0, 1));   // +Y -> -X (the avatar's left)
+                var aposeArm = Quaternion.AngleAxis(135, new Vector3(0, 0, 1));  // 45 degrees below it
+                Func<bool, Animator> build = (defined) =>
+                {
+                    var a = new Animator();
+                    a.transform = new Transform { name = "Ada", position = new Vector3(1, 0, 0), rotation = Yaw(90) };
+                    var hips = new Transform { name = "Hips" }; hips.parent = a.transform; hips.localRotation = Quaternion.identity;
+                    var upper = new Transform { name = "LeftUpperArm" }; upper.parent = hips; upper.localRotation = aposeArm;
+                    var lower = new Transform { name = "LeftLowerArm" }; lower.parent = upper; lower.localRotation = Quaternion.identity;
+                    a.Bones[HumanBodyBones.Hips] = hips;
+                    a.Bones[HumanBodyBones.LeftUpperArm] = upper;
+                    a.Bones[HumanBodyBones.LeftLowerArm] = lower;
+                    if (defined)
+                        a.avatar = new UnityEngine.Avatar
+                        {
+                            isHuman = true,
+                            humanDescription = new HumanDescription
+                            {
+                                skeleton = new[]
+                                {
+                                    new SkeletonBone { name = "Ada", rotation = Yaw(-30) },  // the root's own: not touched
+                                    new SkeletonBone { name = "Hips", rotation = Quaternion.identity },
+                                    new SkeletonBone { name = "LeftUpperArm", rotation = tposeArm },
+                                    new SkeletonBone { name = "LeftLowerArm", rotation = Quaternion.identity },
+                                },
+                            },
+                        };
+                    return a;
+                };
+                var avatar = build(true);
+                var root = avatar.transform;
+                var d = Driver(avatar);
+                var arm = avatar.GetBoneTransform(HumanBodyBones.LeftUpperArm);
+                Near(new Vector3(0, 0, 0), new Vector3(arm.localRotation.x - aposeArm.x, arm.localRotation.y - aposeArm.y, arm.localRotation.z - aposeArm.z), 1e-5, "the A-pose put back after Awake");
+                T.NearRot(new Quat(Yaw(90).x, Yaw(90).y, Yaw(90).z, Yaw(90).w), new Quat(root.rotation.x, root.rotation.y, root.rotation.z, root.rotation.w), 1e-5, "the root left where the scene placed it");
+                d.Apply(Pose(new Vec3(0, 0.98, 0)));
+                Near(root.rotation * new Vector3(-1, 0, 0), arm.rotation * Up, 1e-5, "posecast's rest pose: the arm straight out to the avatar's left");
+                Near(root.rotation * new Vector3(-1, 0, 0), avatar.GetBoneTransform(HumanBodyBones.LeftLowerArm).rotation * Up, 1e-5, "the forearm too");
+                d.Apply(Pose(new Vec3(0, 0.98, 0), Joint.LEFT_UPPER_ARM, AxisAngle(0, 0, 1, -90)));
+                Near(new Vector3(0, -1, 0), arm.rotation * Up, 1e-5, "an arm lowered in posecast hangs down");
+                // Without the definition the pose at Awake is taken for the T-pose: the arm stays 45 degrees low.
+                var bare = build(false);
+                Driver(bare).Apply(Pose(new Vec3(0, 0.98, 0)));
+                var low = bare.GetBoneTransform(HumanBodyBones.LeftUpperArm).rotation * Up;
+                Near(bare.transform.rotation * (aposeArm * Up), low, 1e-5, "no definition: the Awake pose is the rest");
             });
 
             T.Run("unity streamer: a controller that lost tracking is not read as tracked", () =>

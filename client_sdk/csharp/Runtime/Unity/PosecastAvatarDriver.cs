@@ -2,11 +2,16 @@
 // sampled from the streamer's jitter buffer at the server's time. The pose's world
 // rotation of joint j is the turn from posecast's T-pose rest, so each bone takes
 // root * ToUnity(q_j) * rest_j and the hips root.TransformPoint(ToUnity(p_pelvis)),
-// with root the Animator's transform and rest_j the bone's rotation relative to it,
-// captured while the avatar stands in a T-pose facing its root's +Z (docs/engines.md):
-// the pose plays in the avatar root's frame, wherever the avatar is placed. make cs-test
-// compiles and tests it against a stand-in UnityEngine (Tests~/UnityStub), not in Unity.
+// with root the Animator's transform and rest_j the bone's rotation relative to it in
+// a T-pose facing its root's +Z (docs/engines.md): the pose plays in the avatar root's
+// frame, wherever the avatar is placed. The T-pose is the one the avatar's Humanoid
+// definition holds (Avatar.humanDescription.skeleton, which Unity's avatar setup puts
+// in a T-pose), taken at Awake and put back, so a rig that stands in an A-pose or
+// any other pose skins correctly; without a definition, the pose it stands in at
+// Awake. make cs-test compiles and tests it against a stand-in UnityEngine
+// (Tests~/UnityStub), not in Unity.
 
+using System.Collections.Generic;
 using UnityEngine;
 
 namespace Posecast.Client.Unity
@@ -15,7 +20,9 @@ namespace Posecast.Client.Unity
     {
         public PosecastXRStreamer Streamer;
         public string Player;                 // the remote player's id
-        public Animator Avatar;               // a Humanoid rig, in a T-pose facing its root's +Z at Awake
+        public Animator Avatar;               // a Humanoid rig facing its root's +Z
+        [Tooltip("Rest from the avatar's Humanoid T-pose; off: from the pose it stands in at Awake (then a T-pose)")]
+        public bool RestFromDefinition = true;
 
         private Transform[] _bones;
         private Quaternion[] _rest;
@@ -26,11 +33,43 @@ namespace Posecast.Client.Unity
             var toRoot = Quaternion.Inverse(Avatar.transform.rotation);
             _bones = new Transform[humans.Length];
             _rest = new Quaternion[humans.Length];
-            for (int j = 0; j < humans.Length; j++)
+            var held = RestFromDefinition ? HoldDefinedTPose(Avatar) : null;
+            try
             {
-                _bones[j] = Avatar.GetBoneTransform(humans[j]);
-                if (_bones[j] != null) _rest[j] = toRoot * _bones[j].rotation;
+                for (int j = 0; j < humans.Length; j++)
+                {
+                    _bones[j] = Avatar.GetBoneTransform(humans[j]);
+                    if (_bones[j] != null) _rest[j] = toRoot * _bones[j].rotation;
+                }
             }
+            finally
+            {
+                if (held != null) for (int i = held.Count - 1; i >= 0; i--) held[i].Key.localRotation = held[i].Value;
+            }
+        }
+
+        // Puts every transform the avatar's Humanoid definition names (below the Animator's
+        // own, which stays where the scene placed it) in its defined T-pose rotation;
+        // returns their rotations before, to put back. Null when the avatar has no such
+        // definition (no Avatar, not human, no skeleton).
+        internal static List<KeyValuePair<Transform, Quaternion>> HoldDefinedTPose(Animator animator)
+        {
+            var avatar = animator.avatar;
+            if (avatar == null || !avatar.isHuman) return null;
+            var skeleton = avatar.humanDescription.skeleton;
+            if (skeleton == null || skeleton.Length == 0) return null;
+            var byName = new Dictionary<string, Transform>();
+            foreach (var t in animator.transform.GetComponentsInChildren<Transform>(true))
+                if (t != animator.transform && !byName.ContainsKey(t.name)) byName[t.name] = t;
+            var held = new List<KeyValuePair<Transform, Quaternion>>();
+            foreach (var bone in skeleton)
+            {
+                Transform t;
+                if (bone.name == null || !byName.TryGetValue(bone.name, out t)) continue;
+                held.Add(new KeyValuePair<Transform, Quaternion>(t, t.localRotation));
+                t.localRotation = bone.rotation;
+            }
+            return held;
         }
 
         private void LateUpdate()

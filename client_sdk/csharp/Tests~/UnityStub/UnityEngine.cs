@@ -1,7 +1,7 @@
 // A stand-in for the few UnityEngine types Runtime/Unity uses, so run.sh can compile
 // the Unity layer and test its logic on Mono (UnityTests.cs). Same names and
 // signatures as Unity's; the behaviour is the part the tests need (Quaternion's
-// Hamilton product, a Transform without a hierarchy, XR devices the test sets up).
+// Hamilton product, a Transform hierarchy without scale, an Avatar's T-pose skeleton, XR devices the test sets up).
 // Not shipped: Unity does not import Tests~.
 
 using System;
@@ -15,6 +15,15 @@ namespace UnityEngine
     {
         private Transform _transform;
         public Transform transform { get { return _transform ?? (_transform = this as Transform ?? new Transform()); } set { _transform = value; } }
+
+        public T[] GetComponentsInChildren<T>(bool includeInactive) where T : Component
+        {
+            var all = new List<Transform>();
+            transform.Walk(all);
+            var found = new List<T>();
+            foreach (var t in all) if (t is T) found.Add((T)(Component)t);
+            return found.ToArray();
+        }
     }
 
     public class Behaviour : Component { }
@@ -34,6 +43,7 @@ namespace UnityEngine
         public Vector3(float x, float y, float z) { this.x = x; this.y = y; this.z = z; }
         public static Vector3 zero { get { return new Vector3(0, 0, 0); } }
         public static Vector3 operator +(Vector3 a, Vector3 b) { return new Vector3(a.x + b.x, a.y + b.y, a.z + b.z); }
+        public static Vector3 operator -(Vector3 a, Vector3 b) { return new Vector3(a.x - b.x, a.y - b.y, a.z - b.z); }
         public override string ToString() { return "(" + x + ", " + y + ", " + z + ")"; }
     }
 
@@ -70,12 +80,68 @@ namespace UnityEngine
         public override string ToString() { return "(" + x + ", " + y + ", " + z + ", " + w + ")"; }
     }
 
-    /// <summary>World position and rotation only (no parent, no scale).</summary>
+    /// <summary>Position and rotation, local to an optional parent (no scale). Setting
+    /// `parent` keeps the world pose, as Unity's does.</summary>
     public class Transform : Component
     {
-        public Vector3 position;
-        public Quaternion rotation = Quaternion.identity;
+        public string name = "";
+        public Vector3 localPosition;
+        public Quaternion localRotation = Quaternion.identity;
+        private Transform _parent;
+        private readonly List<Transform> _children = new List<Transform>();
+
+        public Transform parent
+        {
+            get { return _parent; }
+            set
+            {
+                Vector3 p = position; Quaternion q = rotation;
+                if (_parent != null) _parent._children.Remove(this);
+                _parent = value;
+                if (value != null) value._children.Add(this);
+                position = p; rotation = q;
+            }
+        }
+
+        public Vector3 position
+        {
+            get { return _parent == null ? localPosition : _parent.TransformPoint(localPosition); }
+            set { localPosition = _parent == null ? value : Quaternion.Inverse(_parent.rotation) * (value - _parent.position); }
+        }
+
+        public Quaternion rotation
+        {
+            get { return _parent == null ? localRotation : _parent.rotation * localRotation; }
+            set { localRotation = _parent == null ? value : Quaternion.Inverse(_parent.rotation) * value; }
+        }
+
         public Vector3 TransformPoint(Vector3 p) { return position + rotation * p; }
+
+        internal void Walk(List<Transform> into)
+        {
+            into.Add(this);
+            foreach (var c in _children) c.Walk(into);
+        }
+    }
+
+    public sealed class Avatar : Object
+    {
+        public bool isHuman;
+        public HumanDescription humanDescription;  // Unity: a read-only property
+    }
+
+    public struct HumanDescription
+    {
+        public SkeletonBone[] skeleton;
+    }
+
+    /// <summary>A Transform's name and its T-pose in its parent's space (Unity's SkeletonBone).</summary>
+    public struct SkeletonBone
+    {
+        public string name;
+        public Vector3 position;
+        public Quaternion rotation;
+        public Vector3 scale;
     }
 
     public enum HumanBodyBones
@@ -87,6 +153,7 @@ namespace UnityEngine
 
     public class Animator : Behaviour
     {
+        public Avatar avatar;
         public readonly Dictionary<HumanBodyBones, Transform> Bones = new Dictionary<HumanBodyBones, Transform>();
         public Transform GetBoneTransform(HumanBodyBones b) { Transform t; return Bones.TryGetValue(b, out t) ? t : null; }
     }
