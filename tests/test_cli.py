@@ -155,15 +155,16 @@ def test_a_missing_bvh_directory_is_an_error(tmp_path: Path, capsys) -> None:
         (["--rig", "no_such_rig"], "RIG_UNKNOWN"),
         (["--rigs", "no_such_dir"], "CONFIG_INVALID"),
         (["--out", "__file__"], "CONFIG_INVALID"),
+        (["--out", "__file__/prepared"], "CONFIG_INVALID"),  # was a NotADirectoryError
     ],
-    ids=["unknown-rig", "missing-rigs-dir", "out-is-a-file"],
+    ids=["unknown-rig", "missing-rigs-dir", "out-is-a-file", "out-under-a-file"],
 )
 def test_data_prepare_user_error(
     bvh_dir: Path, tmp_path: Path, capsys, extra: list[str], code: str
 ) -> None:
     afile = tmp_path / "afile"
     afile.write_text("x", "utf-8")
-    extra = [str(afile) if a == "__file__" else a for a in extra]
+    extra = [a.replace("__file__", str(afile)) for a in extra]
     argv = ["data", "prepare", "--bvh", str(bvh_dir), "--out", str(tmp_path / "o"), *extra]
     user_error(capsys, main(argv), code)
     assert not (tmp_path / "o").exists()

@@ -35,6 +35,7 @@ import argparse
 import contextlib
 import errno
 import math
+import os
 import socket
 import sys
 from collections.abc import Iterator, Sequence
@@ -145,8 +146,18 @@ def _json_out(path: Path | None) -> None:
 
 
 def _out_dir(option: str, path: Path) -> None:
+    """Fail now, not with a traceback at the first write, when the output directory
+    cannot be made: the path, or a folder above it, is a file, or the nearest folder
+    that exists is not writable."""
     if path.exists() and not path.is_dir():
         raise _config(f"{option} {path} exists and is not a directory", "pick a directory path")
+    at = path.absolute()
+    while not at.exists():
+        at = at.parent
+    if not at.is_dir():
+        raise _config(f"{option} {path}: {at} is a file, not a directory", "pick a directory path")
+    if not os.access(at, os.W_OK | os.X_OK):
+        raise _config(f"{option} {path}: cannot write in {at}", "pick a directory you may write in")
 
 
 def _models_dir(path: Path | None, option: str = "--models") -> None:
