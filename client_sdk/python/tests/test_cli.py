@@ -273,6 +273,17 @@ def test_sim_rejects_bad_churn_options(capsys: pytest.CaptureFixture[str]) -> No
             "no directory",
         ),
         ("record", ["--secret", "s" * 32], "--room is required"),
+        ("record", ["--secret", "s" * 32, "--room", "r", "--out", str(DATA)], "is a directory"),
+        (
+            "record",
+            ["--secret", "s" * 32, "--room", "r", "--bvh", str(DATA / "walk_cmu_mb.bvh" / "o")],
+            "is a file, not a directory",
+        ),
+        (
+            "record",
+            ["--export", str(DATA / "walk_cmu_mb.bvh"), "--bvh", str(DATA / "walk_cmu_mb.bvh")],
+            "is a file, not a directory",
+        ),
         ("record", ["--room", "r"], "neither a token nor a secret"),
         ("sim", ["--secret", "s" * 32, "--url", "notaurl"], "is not a WebSocket URL"),
         ("record", ["--secret", "s" * 32, "--room", "r", "--url", "http://x/"], "WebSocket"),

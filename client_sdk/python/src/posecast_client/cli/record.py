@@ -79,8 +79,24 @@ async def record(args: argparse.Namespace) -> Path:
     return out
 
 
+def _check_bvh_dir(bvh: Path) -> None:
+    """Refuse, before a recording starts rather than after it ends, a ``--bvh`` that
+    cannot become a directory: a file, or a path under one."""
+    at = bvh.absolute()
+    while not at.exists():
+        at = at.parent
+    if not at.is_dir():
+        usage_error(
+            P,
+            f"--bvh {bvh}: {at} is a file, not a directory",
+            "name a directory for the BVH files (it is made if missing)",
+        )
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.bvh is not None:
+        _check_bvh_dir(args.bvh)
     if args.export is not None:
         path = args.export
         if args.bvh is None:
@@ -95,6 +111,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         out = args.out or Path(f"{args.room}.pcrec")
         if not out.parent.is_dir():
             usage_error(P, f"--out {out}: no directory {out.parent}", "create it first")
+        if out.is_dir():
+            usage_error(
+                P, f"--out {out} is a directory", "name the file to write, e.g. lobby.pcrec"
+            )
         try:
             path = asyncio.run(record(args))
         except Exception as exc:  # the server's refusal, no server, a file: code and hint
