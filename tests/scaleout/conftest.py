@@ -170,3 +170,11 @@ async def player(node: Node, name: str, room: str = "r1", seed: int = 0) -> Clie
 
 def pose_from(src: str) -> Callable[[Any], bool]:
     return lambda m: isinstance(m, Pose) and m.player == src
+
+
+async def until(what: str, check: Callable[[], bool], timeout_s: float = 15.0) -> None:
+    """Wait for ``check()``, failing with ``what`` after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while not check():
+        assert time.monotonic() < deadline, f"not in {timeout_s} s: {what}"
+        await asyncio.sleep(0.05)

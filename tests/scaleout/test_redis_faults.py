@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import asyncio
 import time
-from collections.abc import Callable
 
 import pytest
 import redis
@@ -29,18 +28,12 @@ from tests.scaleout.conftest import (
     player,
     pose_from,
     run,
+    until,
 )
 from tests.scaleout.redis_proxy import RedisProxy
 
 # Generous: the first test may also install redis-server with apt-get (session fixture).
 pytestmark = pytest.mark.timeout(300)
-
-
-async def until(what: str, check: Callable[[], bool], timeout_s: float = 15.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not check():
-        assert time.monotonic() < deadline, f"not in {timeout_s} s: {what}"
-        await asyncio.sleep(0.05)
 
 
 def start(*nodes: Node) -> None:

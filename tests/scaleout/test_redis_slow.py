@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import asyncio
 import itertools
-import time
-from collections.abc import Callable
 
 import pytest
 import redis
@@ -23,7 +21,7 @@ from posecast.online.metrics import Metrics
 from posecast.online.protocol.messages import Pose
 from tests.online.cluster.test_redis_bus import Sink, run_bus
 from tests.online.conftest import make_cfg
-from tests.scaleout.conftest import Node, RedisServer, player, pose_from, run
+from tests.scaleout.conftest import Node, RedisServer, player, pose_from, run, until
 from tests.scaleout.redis_proxy import RedisProxy
 
 pytestmark = pytest.mark.timeout(300)  # the first test may apt-get install redis-server
@@ -31,13 +29,6 @@ pytestmark = pytest.mark.timeout(300)  # the first test may apt-get install redi
 TICKS_IN = "posecast_bus_messages_total"
 TRIPS = "posecast_bus_roundtrip_seconds_count"
 RECONNECTS = "posecast_bus_reconnects_total"
-
-
-async def until(what: str, check: Callable[[], bool], timeout_s: float = 15.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not check():
-        assert time.monotonic() < deadline, f"not in {timeout_s} s: {what}"
-        await asyncio.sleep(0.05)
 
 
 def gaps(times: list[float]) -> list[float]:
