@@ -100,6 +100,32 @@ def test_what_server_messages_mean() -> None:
     assert s.clock.offset_s == pytest.approx(9.999)
 
 
+def test_a_skeleton_announces_its_handle_and_keeps_the_same_players_reference() -> None:
+    import json
+    from pathlib import Path
+
+    from posecast_client.codec import decode
+    from posecast_client.protocol import Poses, Skeleton
+
+    cases = json.loads((Path(__file__).parents[3] / "proto/vectors/poses.json").read_text())
+    c = next(c for c in cases if c.get("name") == "poses_stream_two_avatars")
+    s = ClientSession()
+    s.connected(2)
+    # No presence for these avatars reached this client: their skeletons announce them.
+    for a in c["avatars"]:
+        s.receive(Skeleton(a["player"], a["handle"], bytes.fromhex(a["skeleton"]["$bin"])), 0.0)
+    first, second = (decode(bytes.fromhex(h), version=2) for h in c["messages"][:2])
+    assert isinstance(first, Poses) and isinstance(second, Poses)
+    keyed, _ = s.receive_all(first, 0.0)
+    assert {p.player for p in keyed} == {a["player"] for a in c["avatars"]}
+    assert s.stats.bad_records == 0
+    # A calibration of the same player later: its reference stays, deltas go on.
+    a = c["avatars"][0]
+    s.receive(Skeleton(a["player"], a["handle"], bytes.fromhex(a["skeleton"]["$bin"])), 0.5)
+    deltas, _ = s.receive_all(second, 0.5)
+    assert deltas and s.stats.bad_records == 0 and not s.want_resync
+
+
 def test_backoff_doubles_with_jitter_up_to_the_cap() -> None:
     rng = random.Random(1)
     for attempt in range(1, 12):

@@ -57,9 +57,9 @@ export class AvatarTable {
 
   /** A player's calibration changed: rebuild its joints with these offsets from now on. */
   skeleton(msg: SkeletonMessage): void {
-    const avatar = this.avatars.get(msg.handle);
-    if (avatar !== undefined) avatar.offsets = skeleton2offsets(msg.skeleton);
-    else this.announce(msg.player, msg.handle, msg.skeleton);
+    // A handle not known yet, or now another player's, is announced by it (as the Python
+    // and C# SDKs do); the same player keeps its reference.
+    this.announce(msg.player, msg.handle, msg.skeleton);
   }
 
   /** Drop every reference (the next record of each avatar must be a keyframe). */

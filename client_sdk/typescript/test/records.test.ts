@@ -143,3 +143,21 @@ test("a join of a known player on its own handle keeps its reference; another pl
   const fresh = table.poses({ type: "poses", t: 3, data: c.messages.map(dataOf)[2]! });
   assert.match(fresh.error?.message ?? "", /before its keyframe/);
 });
+
+test("a skeleton announces a handle not known yet, keeps the same player's reference, not another's", () => {
+  const c = STREAMS.find((s) => s.name === "poses_stream_two_avatars")!;
+  const [first, second, third] = c.messages.map(dataOf);
+  const table = new AvatarTable();
+  const ms = members(c);
+  table.reset([]); // no members announced: their skeletons do it
+  for (const m of ms) table.skeleton({ type: "skeleton", player: m.player, handle: m.handle!, skeleton: m.skeleton! });
+  const keyed = table.poses({ type: "poses", t: 1, data: first! });
+  assert.equal(keyed.error, undefined);
+  assert.deepEqual(new Set(keyed.poses.map((p) => p.player)), new Set(ms.map((m) => m.player)));
+  const m = ms[0]!;
+  table.skeleton({ type: "skeleton", player: m.player, handle: m.handle!, skeleton: m.skeleton! }); // a calibration
+  assert.equal(table.poses({ type: "poses", t: 2, data: second! }).error, undefined);
+  // The handle now another player's (its leave never arrived): wait for its keyframe.
+  table.skeleton({ type: "skeleton", player: "someone-else", handle: m.handle!, skeleton: m.skeleton! });
+  assert.match(table.poses({ type: "poses", t: 3, data: third! }).error?.message ?? "", /before its keyframe/);
+});

@@ -344,8 +344,9 @@ class ClientSession:
             self.stats.poses += 1
             return msg, None
         if isinstance(msg, Skeleton):
-            if msg.handle in self.avatars.players:
-                self.avatars.offsets[msg.handle] = skeleton2offsets(msg.skeleton)
+            # A handle not known yet (or now another player's) is announced by it, as
+            # the TypeScript and C# SDKs do; the same player keeps its reference.
+            self.avatars.announce(msg.player, msg.handle, msg.skeleton)
             return None, None
         if isinstance(msg, Pong):
             self.clock.add(msg.t0, msg.t1, msg.t2, now)
