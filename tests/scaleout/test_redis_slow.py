@@ -14,13 +14,9 @@ import asyncio
 import itertools
 
 import pytest
-import redis
 
-from posecast.online.cluster.redis_bus import RedisBus
-from posecast.online.metrics import Metrics
 from posecast.online.protocol.messages import Pose
-from tests.online.cluster.test_redis_bus import Sink, run_bus
-from tests.online.conftest import make_cfg
+from tests.online.cluster.test_redis_bus import MEMBERS, px_on_node_f, run_bus
 from tests.scaleout.conftest import Node, RedisServer, player, pose_from, run, until
 from tests.scaleout.redis_proxy import RedisProxy
 
@@ -103,14 +99,7 @@ def test_a_join_queued_behind_a_resync_is_not_taken_as_written_before_its_reads(
     the fix a resync counted every join numbered before it was dequeued as written
     ahead of its reads, and reported px replaced: the node would have ended the new
     session and kept none."""
-    members = "posecast:members:{r1}"
-    store = redis.Redis(port=redis_server.port)
-    store.set("posecast:node:node-f", b"1", px=60_000)
-    store.hset(members, "px", "node-f\tPX")
-    # One heartbeat only (at the connect): nothing else reads or claims meanwhile.
-    cfg = make_cfg(redis_url=redis_server.url, redis_heartbeat_s=30, redis_node_ttl_s=60)
-    bus, sink = RedisBus(cfg, Metrics(), node="node-n"), Sink()
-    bus.attach(sink)
+    store, bus, sink = px_on_node_f(redis_server)
 
     def resync_then_admit_px() -> None:  # run mid-resync, by its read of who is local
         bus.watch("r1")  # queues a resync of r1
@@ -121,7 +110,7 @@ def test_a_join_queued_behind_a_resync_is_not_taken_as_written_before_its_reads(
         await until("the connect's heartbeat", lambda: bus.healthy and sink.calls >= 2)
         sink.on_call = resync_then_admit_px
         bus.watch("r1")
-        await until("px's join written", lambda: store.hget(members, "px") == b"node-n\tPX")
+        await until("px's join written", lambda: store.hget(MEMBERS, "px") == b"node-n\tPX")
         seen = len(sink.snapshots)
         bus.watch("r1")  # one read after the join: px is this node's
         await until("a read after the join", lambda: len(sink.snapshots) > seen)

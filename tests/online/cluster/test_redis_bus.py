@@ -107,6 +107,19 @@ def run_bus(bus: RedisBus, steps: Callable[[], Awaitable[None]]) -> None:
     asyncio.run(scenario())
 
 
+def px_on_node_f(redis_server: RedisServer) -> tuple[redis.Redis, RedisBus, Sink]:  # noqa: F811
+    """Redis (a client of it) where player px of room r1 plays on node-f, which still
+    looks alive (its key has not expired); and node-n's bus, not started, with one
+    heartbeat only (at the connect): nothing else reads or claims meanwhile."""
+    store = redis.Redis(port=redis_server.port)
+    store.set("posecast:node:node-f", b"1", px=60_000)
+    store.hset(MEMBERS, "px", "node-f\tPX")
+    cfg = make_cfg(redis_url=redis_server.url, redis_heartbeat_s=30, redis_node_ttl_s=60)
+    bus, sink = RedisBus(cfg, Metrics(), node="node-n"), Sink()
+    bus.attach(sink)
+    return store, bus, sink
+
+
 async def until(what: str, check: Callable[[], bool], timeout_s: float = 15.0) -> None:
     deadline = time.monotonic() + timeout_s
     while not check():
@@ -117,14 +130,7 @@ async def until(what: str, check: Callable[[], bool], timeout_s: float = 15.0) -
 def test_a_stale_read_never_ends_a_local_player_and_a_takeover_does(
     redis_server: RedisServer,  # noqa: F811
 ) -> None:
-    store = redis.Redis(port=redis_server.port)
-    # Player px played on node-f, which still looks alive (its key has not expired).
-    store.set("posecast:node:node-f", b"1", px=60_000)
-    store.hset(MEMBERS, "px", "node-f\tPX")
-    # One heartbeat only (at the connect): nothing else reads or claims meanwhile.
-    cfg = make_cfg(redis_url=redis_server.url, redis_heartbeat_s=30, redis_node_ttl_s=60)
-    bus, sink = RedisBus(cfg, Metrics(), node="node-n"), Sink()
-    bus.attach(sink)
+    store, bus, sink = px_on_node_f(redis_server)
 
     async def read_r1() -> tuple[str, dict[str, tuple[str, str]], list[str]]:
         seen = len(sink.snapshots)
