@@ -63,6 +63,17 @@ def assert_sample(s: TrackerSample, sent: Sent, step: float | None) -> None:
     np.testing.assert_allclose(got, expected(pos, quat, valid, step), rtol=0, atol=1e-12)
 
 
+async def take(source: HidTrackerSource | SerialTrackerSource, n: int) -> list[TrackerSample]:
+    """The first ``n`` samples of ``source``, which is closed after (``async with``)."""
+    got: list[TrackerSample] = []
+    async with source:
+        async for s in source:
+            got.append(s)
+            if len(got) == n:
+                break
+    return got
+
+
 # --- serial ------------------------------------------------------------------------
 
 
@@ -133,13 +144,8 @@ def test_serial_source_reads_a_loop_port(rng: np.random.Generator) -> None:
             port.write(encode_serial_frame(seq, seq * 1000, pos, quat, valid))
 
     async def read_all() -> list[TrackerSample]:
-        got: list[TrackerSample] = []
         writer = asyncio.create_task(asyncio.to_thread(write_all))
-        async with source:
-            async for s in source:
-                got.append(s)
-                if len(got) == len(sent):
-                    break
+        got = await take(source, len(sent))
         await writer
         return got
 
@@ -204,16 +210,7 @@ def test_hid_source_skips_garbage_and_unwraps_counters(rng: np.random.Generator)
     device = FakeHid(reports)
     source = HidTrackerSource(device=device, timeout_ms=1)
 
-    async def read_all() -> list[TrackerSample]:
-        got: list[TrackerSample] = []
-        async with source:
-            async for s in source:
-                got.append(s)
-                if len(got) == good:
-                    break
-        return got
-
-    got = asyncio.run(asyncio.wait_for(read_all(), 20.0))
+    got = asyncio.run(asyncio.wait_for(take(source, good), 20.0))
     assert device.closed
     for s in got:
         assert_sample(s, sent, 0.001)
@@ -438,16 +435,7 @@ def test_an_unplugged_device_is_reopened_when_it_is_back(
     source.reopen_s = 0.01
     monkeypatch.setattr(hid, "device", device)
 
-    async def read(n: int) -> list[TrackerSample]:
-        got: list[TrackerSample] = []
-        async with source:
-            async for s in source:
-                got.append(s)
-                if len(got) == n:
-                    break
-        return got
-
-    got = asyncio.run(asyncio.wait_for(read(6), 10.0))
+    got = asyncio.run(asyncio.wait_for(take(source, 6), 10.0))
     # The counters restart with the device: 200 is not read as 200 + 256 k.
     assert [s.device_seq for s in got] == [0, 1, 2, 200, 201, 202]
     assert got[3].device_t == 0.0 and source.stats.disconnects == 1
@@ -494,15 +482,6 @@ def test_a_serial_port_that_fails_is_reopened(
     source = SerialTrackerSource("/dev/ttyUSB9")
     source.reopen_s = 0.01
 
-    async def read(n: int) -> list[TrackerSample]:
-        got: list[TrackerSample] = []
-        async with source:
-            async for s in source:
-                got.append(s)
-                if len(got) == n:
-                    break
-        return got
-
-    got = asyncio.run(asyncio.wait_for(read(3), 10.0))
+    got = asyncio.run(asyncio.wait_for(take(source, 3), 10.0))
     assert [s.device_seq for s in got] == [0, 2, 3] and first.closed
     assert source.stats.disconnects == 1 and source.stats.bad_checksum == 0
