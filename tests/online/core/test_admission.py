@@ -167,12 +167,16 @@ def test_fatal_errors_end_the_session_and_leave_the_room() -> None:
     assert h.hub.metrics.value("posecast_errors_total", {"code": "MALFORMED"}) == 1
 
 
-def test_text_frames_are_malformed_and_close_with_1003() -> None:
+@pytest.mark.parametrize("version", [1, 2])
+def test_text_frames_are_malformed_and_close_with_1003(version: int) -> None:
     h = Harness()
-    a = h.join("a")
+    a = h.join("a", version=version)
     h.inbox(a)
     h.hub.receive(a, '{"type": "ping"}', h.now)
-    assert h.codes(a) == ["MALFORMED"]
+    (error,) = [m for m in h.inbox(a) if isinstance(m, Error)]
+    assert error.code == "MALFORMED"
+    # The reason names no version: a v2 client was told "posecast v1 uses ...".
+    assert error.message == "posecast uses binary WebSocket messages only (msgpack)"
     assert h.hub.outbox(a).close_code == 1003  # type: ignore[union-attr]
 
 

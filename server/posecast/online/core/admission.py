@@ -148,7 +148,7 @@ class Admission:
             return
         self.metrics.bytes_in.inc(len(data))
         if isinstance(data, str):  # the spec closes these with 1003 (unsupported data)
-            exc = MalformedError("posecast v1 uses binary WebSocket messages only")
+            exc = MalformedError("posecast uses binary WebSocket messages only (msgpack)")
             self.metrics.errors.labels(exc.code).inc()
             self._charge(c, exc, now)
             self.end(c, now, final=Error.from_exception(exc), close_code=1003)
