@@ -8,6 +8,7 @@ import time
 
 import pytest
 
+from posecast.errors import TooLargeError
 from posecast.online.core.hub import Hub
 from posecast.online.core.session import Phase, Session
 from posecast.online.metrics import Metrics
@@ -251,7 +252,8 @@ def test_timeouts_do_not_spend_the_budget_but_an_oversized_message_does() -> Non
     hub.check_timeouts(now + 2.0)  # no hello in time: TIMED_OUT, fatal
     assert hub.admits(IP, now + 2.0)
     conn = _joined(hub, "p", now)
-    hub.oversized(conn, now)  # websockets closed it 1009 past the frame cap
+    too_large = TooLargeError("WebSocket: over size limit")  # websockets closed it 1009
+    hub.refused_by_transport(conn, too_large, now)
     assert hub.metrics.value("posecast_errors_total", {"code": "TOO_LARGE"}) == 1
     assert not hub.admits(IP, now)
 

@@ -35,7 +35,6 @@ from posecast.errors import (
     ServerShutdownError,
     SlowConsumerError,
     TimedOutError,
-    TooLargeError,
 )
 from posecast.online.auth.tokens import ReplayGuard
 from posecast.online.cluster.bus import Bus
@@ -178,11 +177,6 @@ class Admission:
             elif c.errors.allow(now):
                 msg = InternalError("the server failed to handle this message")
                 self.router.send(c, Error.from_exception(msg), now)
-
-    def oversized(self, conn: int, now: float) -> None:
-        """``conn`` sent a message past the WebSocket frame cap: websockets closed it
-        (1009) before the codec saw it. Counted, and charged, as a ``TOO_LARGE``."""
-        self.refused_by_transport(conn, TooLargeError("message over the WebSocket frame cap"), now)
 
     def refused_by_transport(self, conn: int, exc: ProtocolError, now: float) -> None:
         """websockets closed ``conn`` for what it sent before the codec saw it: past the

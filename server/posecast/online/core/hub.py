@@ -88,9 +88,6 @@ class Hub:
     def disconnect(self, conn: int, now: float) -> None:
         self.admission.disconnect(conn, now)
 
-    def oversized(self, conn: int, now: float) -> None:
-        self.admission.oversized(conn, now)
-
     def refused_by_transport(self, conn: int, exc: ProtocolError, now: float) -> None:
         self.admission.refused_by_transport(conn, exc, now)
 

@@ -34,7 +34,7 @@ from websockets.frames import CloseCode, Frame
 from websockets.protocol import Event
 from websockets.typing import Subprotocol
 
-from posecast.errors import MalformedError
+from posecast.errors import MalformedError, ProtocolError, TooLargeError
 from posecast.online.cluster.auto import create_bus
 from posecast.online.config import ServerConfig
 from posecast.online.core.hub import Hub
@@ -50,7 +50,12 @@ from posecast.online.shell.ticker import EngineWorker, run_ticks
 
 log = logging.getLogger("posecast.server")
 _HTTP_PATHS = ("/healthz", "/readyz", "/metrics")
-_MALFORMED_CLOSES = (CloseCode.PROTOCOL_ERROR, CloseCode.INVALID_DATA)
+# What websockets' own closes say the client sent: the error it is counted and charged as.
+_REFUSED_BY_CLOSE: dict[int, type[ProtocolError]] = {
+    CloseCode.MESSAGE_TOO_BIG: TooLargeError,  # past the frame cap
+    CloseCode.PROTOCOL_ERROR: MalformedError,  # a frame that breaks RFC 6455
+    CloseCode.INVALID_DATA: MalformedError,  # a text message that is not UTF-8
+}
 
 
 @dataclass
@@ -217,11 +222,10 @@ class PosecastServer:
             # client: counted, and charged to its address, as TOO_LARGE or MALFORMED. (A
             # close the client began, whatever its code, is the client's to give.)
             sent = exc.sent if exc.rcvd_then_sent is not True else None
-            if sent is not None and sent.code == CloseCode.MESSAGE_TOO_BIG:
-                self.hub.oversized(conn, time.monotonic())
-            elif sent is not None and sent.code in _MALFORMED_CLOSES:
-                refused = MalformedError(f"WebSocket: {sent.reason}")
-                self.hub.refused_by_transport(conn, refused, time.monotonic())
+            refused = None if sent is None else _REFUSED_BY_CLOSE.get(sent.code)
+            if sent is not None and refused is not None:
+                error = refused(f"WebSocket: {sent.reason}")
+                self.hub.refused_by_transport(conn, error, time.monotonic())
         finally:
             self.hub.disconnect(conn, time.monotonic())
             del self._clients[conn]
