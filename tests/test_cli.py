@@ -322,6 +322,7 @@ def test_export_user_error(tmp_path: Path, capsys) -> None:
         (["--layout", "sites"], "CONFIG_INVALID"),
         (["--split", "holdout"], "CONFIG_INVALID"),
         (["--samples", "0"], "CONFIG_INVALID"),
+        (["--samples", "100000000"], "CONFIG_INVALID"),
         (["--outlier-factor", "-1"], "CONFIG_INVALID"),
         (["--ik-max-drift", "-0.1"], "CONFIG_INVALID"),
         (["--ik-max-drift", "far"], "CONFIG_INVALID"),
@@ -401,6 +402,8 @@ def test_eval_apps_user_error(bvh_dir: Path, tmp_path: Path, capsys) -> None:
     user_error(capsys, rc, "CONFIG_INVALID")
     rc = main(["eval-apps", "--data", str(data), "--samples", "1,x"])
     user_error(capsys, rc, "CONFIG_INVALID")
+    rc = main(["eval-apps", "--data", str(data), "--samples", "10,100000000"])
+    user_error(capsys, rc, "CONFIG_INVALID")
     rc = main(["eval-apps", "--data", str(data), "--backend", "cuda"])
     user_error(capsys, rc, "CONFIG_INVALID")
     assert main(["data", "prepare", "--bvh", str(bvh_dir), "--out", str(data)]) == 0
@@ -416,6 +419,7 @@ def test_eval_apps_user_error(bvh_dir: Path, tmp_path: Path, capsys) -> None:
         ["--players", "1,x"],
         ["--players", "0"],
         ["--samples", "0"],
+        ["--samples", "100000000"],  # was a MemoryError traceback
         ["--ticks", "0"],
         ["--hmd3-share", "1.5"],
         ["--backend", "cuda"],
@@ -458,6 +462,9 @@ def test_serve_without_a_secret_is_a_config_error(capsys, monkeypatch) -> None:
     [
         (["--port", "70000"], "CONFIG_INVALID"),
         (["--samples", "0"], "CONFIG_INVALID"),
+        (["--samples", "100000000"], "CONFIG_INVALID"),  # was a MemoryError traceback
+        (["--lookahead", "100000"], "CONFIG_INVALID"),  # was a MemoryError traceback
+        (["--lookahead", "256"], "CONFIG_INVALID"),  # served, and every welcome refused
         (["--layouts", "hmd4"], "CONFIG_INVALID"),
         (["--backend", "cuda"], "CONFIG_INVALID"),
         (["--models-dir", "/no/such/models"], "MODEL_INVALID"),
@@ -475,6 +482,7 @@ def test_serve_user_error(capsys, monkeypatch, extra: list[str], code: str) -> N
     ("extra", "code"),
     [
         (["--samples", "0"], "CONFIG_INVALID"),
+        (["--samples", "100000000"], "CONFIG_INVALID"),  # was a MemoryError traceback
         (["--seconds", "-1"], "CONFIG_INVALID"),
         (["--port", "-1"], "CONFIG_INVALID"),
         (["--bvh", "/no/such/file.bvh"], "BVH_INVALID"),

@@ -80,6 +80,20 @@ def _at_least(option: str, value: float, low: float, command: str) -> None:
         raise _config(f"{option} {value} must be >= {low:g}", f"see `posecast {command} --help`")
 
 
+def _samples(option: str, values: Sequence[int], command: str) -> None:
+    """Latent sample counts N: 1 to the engine's MAX_SAMPLES (a larger N would stop the
+    run later with a MemoryError traceback)."""
+    from posecast.online.engine.config import MAX_SAMPLES
+
+    for n in values:
+        _at_least(option, n, 1, command)
+        if n > MAX_SAMPLES:
+            raise _config(
+                f"{option} {n} must be <= {MAX_SAMPLES}",
+                f"N = 100 is what the server runs; see `posecast {command} --help`",
+            )
+
+
 def _finite(option: str, value: float, command: str, *, positive: bool = False) -> None:
     if not math.isfinite(value) or value < 0 or (positive and value == 0):
         need = "a finite number > 0" if positive else "a finite number >= 0"
@@ -367,7 +381,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     _at_least("--port", args.port, 0, "demo")
     if args.port > 65535:
         raise _config(f"--port {args.port} outside [0, 65535]", "0 picks any free port")
-    _at_least("--samples", args.samples, 1, "demo")
+    _samples("--samples", [args.samples], "demo")
     if args.seconds is not None:
         _finite("--seconds", args.seconds, "demo", positive=True)
     _need("data", "scipy")
@@ -589,7 +603,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         )
     if args.data is not None and args.split not in SPLITS:
         raise _config(f"--split {args.split!r} unknown", f"use one of {', '.join(SPLITS)}")
-    _at_least("--samples", args.samples, 1, "eval")
+    _samples("--samples", [args.samples], "eval")
     _finite("--outlier-factor", args.outlier_factor, "eval", positive=True)
     ssi_defaults = EngineConfig()
     latent_scale = ssi_defaults.latent_scale if args.latent_scale is None else args.latent_scale
@@ -677,6 +691,7 @@ def _cmd_eval_apps(args: argparse.Namespace) -> int:
     import json
 
     counts = _int_list("--samples", args.samples, "eval-apps")
+    _samples("--samples", counts, "eval-apps")
     _at_least("--runs", args.runs, 1, "eval-apps")
     _at_least("--threads", args.threads, 1, "eval-apps")
     _finite("--latent-scale", args.latent_scale, "eval-apps", positive=True)
@@ -718,8 +733,8 @@ def _cmd_bench_engine(args: argparse.Namespace) -> int:
 
     cmd = "bench engine"
     counts = _int_list("--players", args.players, cmd)
+    _samples("--samples", [args.samples], cmd)
     for option, value in (
-        ("--samples", args.samples),
         ("--threads", args.threads),
         ("--ticks", args.ticks),
         ("--naive-players", args.naive_players),

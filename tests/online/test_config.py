@@ -54,6 +54,8 @@ def test_env_values_are_typed() -> None:
     [
         {"port": 70000},
         {"samples": 0},
+        {"samples": 10**8},  # was a MemoryError traceback when the engine loaded
+        {"lookahead": 256},  # welcome.lookahead_frames is 0 to 255: every client refused it
         {"tick_hz": 0.5},
         {"slow_consumer_s": 0.0},
         {"max_message_bytes": 100},  # below the protocol's floor

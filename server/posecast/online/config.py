@@ -21,8 +21,9 @@ from urllib.parse import urlsplit
 from posecast.errors import ConfigError
 from posecast.online.auth.tokens import new_secret
 from posecast.online.engine.backend import BACKENDS, MAX_THREADS
+from posecast.online.engine.config import MAX_SAMPLES
 from posecast.online.engine.upper_ik import WRIST_ELBOW_SHARE
-from posecast.online.protocol.messages import Limits
+from posecast.online.protocol.messages import MAX_LOOKAHEAD_FRAMES, Limits
 from posecast.tracking.layouts import Layout
 
 ENV_PREFIX = "POSECAST_"
@@ -198,8 +199,10 @@ class ServerConfig:
             raise ConfigError(f"socket_sndbuf_bytes must be in [0, {MAX_SNDBUF_BYTES}]")
         if not 0.0 <= self.wrist_elbow <= 1.0:
             raise ConfigError("wrist_elbow must be a share between 0 and 1")
-        if self.lookahead < 0:
-            raise ConfigError("lookahead must be >= 0")
+        if self.samples > MAX_SAMPLES:
+            raise ConfigError(f"samples must be <= {MAX_SAMPLES}")
+        if not 0 <= self.lookahead <= MAX_LOOKAHEAD_FRAMES:  # welcome.lookahead_frames
+            raise ConfigError(f"lookahead must be in [0, {MAX_LOOKAHEAD_FRAMES}] frames")
         if self.backend not in BACKENDS:
             raise ConfigError(f"backend {self.backend!r} unknown: one of {', '.join(BACKENDS)}")
         if self.log_level.upper() not in ("DEBUG", "INFO", "WARNING", "ERROR"):

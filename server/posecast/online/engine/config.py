@@ -8,6 +8,12 @@ from posecast.errors import ConfigError
 from posecast.online.engine.ik import MAX_DRIFT_M, RELEASE_FRAMES
 from posecast.online.engine.upper_ik import WRIST_ELBOW_SHARE
 
+# The most latent samples per player, N. The engine's buffers hold (lookahead + 2) x
+# players x N GRU states of 128 floats; past a few thousand one player costs gigabytes
+# and a tick takes longer than its period anyway (the paper and the server use 100;
+# eval-apps goes to 1000).
+MAX_SAMPLES = 4096
+
 
 @dataclass(frozen=True)
 class EngineConfig:
@@ -127,8 +133,8 @@ class EngineConfig:
         return self.upper_body_ik and self.pelvis_lean
 
     def __post_init__(self) -> None:
-        if self.samples < 1:
-            raise ConfigError("samples must be >= 1")
+        if not 1 <= self.samples <= MAX_SAMPLES:
+            raise ConfigError(f"samples must be in [1, {MAX_SAMPLES}]")
         if self.lookahead < 0 or self.transition_frames < 1:
             raise ConfigError("lookahead must be >= 0 and transition_frames >= 1")
         if self.outlier_factor <= 0 or self.stale_after_frames < 1:
