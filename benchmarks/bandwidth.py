@@ -127,7 +127,8 @@ def run_room(
     """One room of ``players`` for ``seconds`` (simulated); ``clips`` empty: the SDK's
     procedural walk, a different seed per player."""
     cfg = ServerConfig(token_secret=SECRET, port=0, samples=1, max_watchers_per_room=8,
-                       conn_per_ip_per_min=10_000, fatal_per_ip_per_min=10_000)  # fmt: skip
+                       conn_per_ip_per_min=10_000, fatal_per_ip_per_min=10_000,
+                       sockets_per_ip=10_000)  # fmt: skip
     now = 1000.0
     hub = Hub(cfg, Metrics(), wall_offset_s=time.time() - now)
     room = f"bw-{players}"

@@ -58,7 +58,7 @@ class Server(ServeProcess):
     def __init__(self, samples: int, log: Path, extra: list[str], cpus: set[int] | None) -> None:
         log.unlink(missing_ok=True)  # this run's lines only
         super().__init__(
-            "--conn-per-ip-per-min", "1000000", *extra,
+            "--conn-per-ip-per-min", "1000000", "--sockets-per-ip", "1000000", *extra,
             secret=SECRET, samples=samples, lookahead=None, log=log,
             preexec_fn=confined(cpus),
         )  # fmt: skip

@@ -28,7 +28,12 @@ from posecast.online.protocol.messages import Hello, Pose
 SECRET = "x" * 40
 P = int(sys.argv[1])
 cfg = ServerConfig(
-    token_secret=SECRET, port=0, samples=1, conn_per_ip_per_min=10_000, fatal_per_ip_per_min=10_000
+    token_secret=SECRET,
+    port=0,
+    samples=1,
+    conn_per_ip_per_min=10_000,
+    fatal_per_ip_per_min=10_000,
+    sockets_per_ip=10_000,
 )
 now = 1000.0
 hub = Hub(cfg, Metrics(), wall_offset_s=time.time() - now)

@@ -30,12 +30,14 @@ SECRET = "test-secret-" + "x" * 20
 
 def make_cfg(**changes: Any) -> ServerConfig:
     """Test defaults: ephemeral port, 8 samples, generous per-IP limits (every test
-    client comes from loopback; test_hostile_churn tests the limits themselves)."""
+    client comes from loopback; test_hostile_churn and test_transport_edge test the
+    limits themselves)."""
     base: dict[str, Any] = {
         "token_secret": SECRET,
         "port": 0,
         "samples": 8,
         "conn_per_ip_per_min": 10_000,
+        "sockets_per_ip": 10_000,
         "fatal_per_ip_per_min": 10_000,
         "accepts_per_s": 10_000.0,
     }

@@ -50,6 +50,7 @@ namespace Posecast.Client.Tests
             };
             psi.EnvironmentVariables["POSECAST_TOKEN_SECRET"] = Secret;
             psi.EnvironmentVariables["POSECAST_CONN_PER_IP_PER_MIN"] = "100000";
+            psi.EnvironmentVariables["POSECAST_SOCKETS_PER_IP"] = "100000";
             Proc = Process.Start(psi);
             var ready = new ManualResetEventSlim();
             Proc.OutputDataReceived += (s, e) => { if (e.Data != null && e.Data.Contains("listening on ws://")) ready.Set(); };

@@ -72,7 +72,12 @@ def start_server(
     exe = posecast_bin()
     if exe is None:
         pytest.skip("the posecast server is not installed here")
-    env = dict(os.environ, POSECAST_CONN_PER_IP_PER_MIN="100000", POSECAST_LOG_LEVEL="WARNING")
+    env = dict(
+        os.environ,
+        POSECAST_CONN_PER_IP_PER_MIN="100000",
+        POSECAST_SOCKETS_PER_IP="100000",
+        POSECAST_LOG_LEVEL="WARNING",
+    )
     env.pop("POSECAST_TOKEN_SECRET", None)
     if secret is not None:
         env["POSECAST_TOKEN_SECRET"] = secret

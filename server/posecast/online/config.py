@@ -143,6 +143,9 @@ class ServerConfig:
     max_connections: int = _opt(2048, "WebSocket connections open at once")
     max_watch_rooms: int = _opt(16, "extra rooms one backend may watch")
     conn_per_ip_per_min: int = _opt(120, "connection attempts per client IP per minute")
+    sockets_per_ip: int = _opt(
+        256, "sockets open at once per client IP, from the TCP accept (before any request)"
+    )
     fatal_per_ip_per_min: int = _opt(
         20, "fatal protocol errors per client IP per minute before its connections get HTTP 429"
     )
@@ -180,7 +183,8 @@ class ServerConfig:
             raise ConfigError("tick_hz must be in [1, 240]")
         positive = (
             "samples engine_threads rate_burst max_rooms max_connections conn_per_ip_per_min "
-            "fatal_per_ip_per_min reliable_queue replay_cache max_watchers_per_room frame_queue"
+            "sockets_per_ip fatal_per_ip_per_min reliable_queue replay_cache "
+            "max_watchers_per_room frame_queue"
         )
         for name in positive.split():
             if getattr(self, name) < 1:

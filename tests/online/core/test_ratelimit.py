@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from posecast.online.core.ratelimit import FatalBudget, IpLimiter, TokenBucket
+from posecast.online.core.ratelimit import FatalBudget, IpLimiter, SocketCount, TokenBucket
 
 
 def test_bucket_allows_the_rate_and_a_burst_then_refuses() -> None:
@@ -80,3 +80,17 @@ def test_take_runs_into_debt_and_says_how_long_it_takes_to_pay_back() -> None:
     assert b.take(1.0, 0) == pytest.approx(1.0)  # half paid back
     assert not b.allow(1.5)
     assert b.take(2.0, 1) == pytest.approx(0.1)
+
+
+def test_socket_count_holds_per_address_and_forgets_an_address_with_none_open() -> None:
+    count = SocketCount(2)
+    assert count.open("10.0.0.1") and count.open("10.0.0.1")
+    assert not count.open("10.0.0.1")  # a third at once
+    assert count.open("10.0.0.2")  # another address has its own
+    assert count.open("2001:db8::1") and count.open("2001:db8::2")  # one /64: one address
+    assert not count.open("2001:db8::3")
+    count.close("10.0.0.1")
+    assert count.open("10.0.0.1")  # room for one again
+    for ip in ("10.0.0.1", "10.0.0.1", "10.0.0.2", "2001:db8::1", "2001:db8::9"):
+        count.close(ip)
+    assert count._open == {}  # nothing kept for addresses with no socket open

@@ -14,7 +14,7 @@ from collections.abc import Coroutine
 from typing import Any
 
 import pytest
-from websockets.exceptions import InvalidStatus
+from websockets.exceptions import InvalidMessage, InvalidStatus
 
 from posecast.online.protocol import encode
 from posecast.online.protocol.messages import Hello, Ping, Welcome
@@ -202,5 +202,57 @@ def test_pings_between_messages_stay_paced_when_the_message_queue_drains(
             burst = 2.0 * (cfg.rate_burst + cfg.control_rate_hz)
             one_read = 256 * 1024 // len(ping) + 1
             assert 0 < pongs <= rate_hz * window_s + burst + one_read, pongs
+
+    run(scenario())
+
+
+def test_sockets_that_send_nothing_are_capped_per_address(engine_factory: Factory) -> None:
+    """A socket that connects and sends no request reaches no HTTP check (the per-IP
+    attempt rate reads the request) and held a coroutine and a file descriptor until
+    the opening handshake timed out, as many as one address cared to open. Past
+    ``sockets_per_ip`` the server drops a new one at once; the count goes down as
+    sockets close, whoever closes them."""
+
+    async def dropped(reader: asyncio.StreamReader) -> None:
+        with contextlib.suppress(ConnectionResetError):
+            assert await asyncio.wait_for(reader.read(1), 10.0) == b""
+
+    async def scenario() -> None:
+        cfg = make_cfg(sockets_per_ip=4, hello_timeout_s=3.0)
+        async with serving(cfg, engine_factory) as server:
+            refused = {"result": "ip_sockets"}
+            t0 = time.monotonic()
+            idle = [await asyncio.open_connection("127.0.0.1", server.port) for _ in range(4)]
+            reader, writer = await asyncio.open_connection("127.0.0.1", server.port)
+            await dropped(reader)  # the fifth, at once
+            assert time.monotonic() - t0 < cfg.hello_timeout_s  # not by the handshake's timeout
+            writer.close()
+            assert server.metrics.value("posecast_connects_total", refused) == 1
+            with pytest.raises(InvalidMessage):  # a WebSocket client from there too: no response
+                await Client.open(server.port)
+            assert server.metrics.value("posecast_connects_total", refused) == 2
+            for _, w in idle[:2]:  # closed by the client
+                w.close()
+            retries = 0  # until the server has seen those two close
+            while True:
+                try:
+                    cl = await Client.open(server.port)
+                    break
+                except InvalidMessage:
+                    retries += 1
+                    assert retries < 50
+                    await asyncio.sleep(0.1)
+            assert isinstance(await cl.hello(token(player="p")), Welcome)
+            for r, _ in idle[2:]:  # the other two time out (hello_timeout_s)
+                await dropped(r)
+            await asyncio.sleep(0.2)
+            # cl and three more fit (their places came back); a fifth does not.
+            more = [await asyncio.open_connection("127.0.0.1", server.port) for _ in range(3)]
+            reader, writer = await asyncio.open_connection("127.0.0.1", server.port)
+            await dropped(reader)
+            assert server.metrics.value("posecast_connects_total", refused) == 3 + retries
+            for _, w in more + idle + [(reader, writer)]:
+                w.close()
+            await cl.close()
 
     run(scenario())

@@ -1,4 +1,5 @@
-"""Rate limits: a token bucket per connection, connection attempts and fatal errors per IP.
+"""Rate limits: a token bucket per connection; connection attempts, open sockets and fatal
+errors per IP.
 
 Both are pure: the caller passes the time (seconds, any monotonic clock).
 """
@@ -95,6 +96,36 @@ class IpLimiter:
         while len(self._seen) > self.max_ips:
             self._seen.popitem(last=False)
         return ok
+
+
+@dataclass
+class SocketCount:
+    """At most ``per_ip`` sockets open at once per address (as :func:`address_key`
+    counts it), counted from the TCP accept: a socket that connects and never sends a
+    request holds one until the opening handshake times out, and the per-IP attempt
+    rate, which the HTTP request reaches, never sees it. Memory: one entry per address
+    with a socket open."""
+
+    per_ip: int
+    _open: dict[str, int] = field(default_factory=dict)
+
+    def open(self, ip: str) -> bool:
+        """Count a new socket from ``ip``; False (not counted) past the limit."""
+        key = address_key(ip)
+        n = self._open.get(key, 0)
+        if n >= self.per_ip:
+            return False
+        self._open[key] = n + 1
+        return True
+
+    def close(self, ip: str) -> None:
+        """A socket :meth:`open` counted has closed."""
+        key = address_key(ip)
+        n = self._open.get(key, 0) - 1
+        if n > 0:
+            self._open[key] = n
+        else:
+            self._open.pop(key, None)
 
 
 @dataclass

@@ -38,7 +38,7 @@ from posecast.errors import MalformedError, ProtocolError, TooLargeError
 from posecast.online.cluster.auto import create_bus
 from posecast.online.config import ServerConfig
 from posecast.online.core.hub import Hub
-from posecast.online.core.ratelimit import TokenBucket
+from posecast.online.core.ratelimit import SocketCount, TokenBucket
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.multi import MultiEngine
 from posecast.online.engine.ssi import Engine
@@ -129,7 +129,10 @@ class PosecastServer:
             self.cfg.port,
             process_request=self.http,
             create_connection=_paced_connection(
-                *self._read_pace(), paced=self.metrics.reads_paced.inc
+                *self._read_pace(),
+                paced=self.metrics.reads_paced.inc,
+                sockets=SocketCount(self.cfg.sockets_per_ip),
+                refused=self.metrics.connects.labels("ip_sockets").inc,
             ),
             # The highest version the client offers (posecast.v2, then posecast.v1); a
             # client offering neither gets HTTP 400. v1 clients keep working unchanged.
@@ -279,10 +282,18 @@ class PosecastServer:
 
 
 def _paced_connection(
-    rate_hz: float, burst: float, *, paced: Callable[[], None]
+    rate_hz: float,
+    burst: float,
+    *,
+    paced: Callable[[], None],
+    sockets: SocketCount,
+    refused: Callable[[], None],
 ) -> type[ServerConnection]:
     """A ``ServerConnection`` that reads at most ``rate_hz`` WebSocket frames a second
-    (``burst`` saved up), control frames and fragments included.
+    (``burst`` saved up), control frames and fragments included, and that is dropped
+    at once when its address already holds ``sockets.per_ip`` sockets (``refused``):
+    sockets that connect and send nothing reach no HTTP check, and each held a
+    coroutine and a file descriptor until the opening handshake timed out.
 
     The handler's read pacing counts messages, but websockets answers every ping frame
     with a pong, and collects a message's fragments, before any message reaches the
@@ -303,6 +314,12 @@ def _paced_connection(
             self.frames_read = 0
             self.read_again: asyncio.TimerHandle | None = None
             self.recv_messages.resume = self._queue_drained
+            peer = transport.get_extra_info("peername")
+            self.counted = str(peer[0]) if isinstance(peer, tuple) and peer else None
+            if self.counted is not None and not sockets.open(self.counted):
+                self.counted = None
+                refused()
+                self.transport.abort()  # the handshake fails at once; connection_lost follows
 
         def process_event(self, event: Event) -> None:
             super().process_event(event)
@@ -331,6 +348,9 @@ def _paced_connection(
         def connection_lost(self, exc: Exception | None) -> None:
             if self.read_again is not None:
                 self.read_again.cancel()
+            if self.counted is not None:
+                sockets.close(self.counted)
+                self.counted = None
             super().connection_lost(exc)
 
     return PacedConnection
