@@ -191,7 +191,7 @@ def poses2bvh(poses: list[Pose], path: str | Path, rate_hz: float = 60.0) -> int
         ticks += [start + round((q.t - kept[0].t) * rate_hz) for q in kept]
     n = ticks[-1] + 1
     idx = np.full(n, -1)
-    idx[ticks] = np.arange(len(ticks))  # of two poses on one tick, the later
+    np.maximum.at(idx, ticks, np.arange(len(ticks)))  # of two poses on one tick, the later
     idx = np.maximum.accumulate(idx)  # a tick without a pose holds the previous one
     pos = np.stack([q.positions for q in ordered])[idx]  # (F, 19, 3)
     rotations = [q.rotations for q in ordered if q.rotations is not None]
