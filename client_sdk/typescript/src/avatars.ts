@@ -103,6 +103,9 @@ export class AvatarTable {
       this.states.delete(old);
     }
     const known = this.avatars.get(handle);
+    // A handle passed to another player is no longer the old one's (its leave never
+    // arrived): that player's late leave or new handle must not drop the new avatar.
+    if (known !== undefined && known.player !== player) this.handles.delete(known.player);
     this.handles.set(player, handle);
     this.avatars.set(handle, { player, offsets: skeleton2offsets(skeleton) });
     // A new avatar on this handle waits for a keyframe; the same one announced again

@@ -161,3 +161,26 @@ test("a skeleton announces a handle not known yet, keeps the same player's refer
   table.skeleton({ type: "skeleton", player: "someone-else", handle: m.handle!, skeleton: m.skeleton! });
   assert.match(table.poses({ type: "poses", t: 3, data: third! }).error?.message ?? "", /before its keyframe/);
 });
+
+test("a handle passed to another player is no longer the old player's: its late leave or new handle leaves the new avatar", () => {
+  // The old player's leave never arrived before its handle went to someone else (as
+  // the Python and C# SDKs keep it: the handle names one player, the newest).
+  const c = STREAMS.find((s) => s.name === "poses_stream_two_avatars")!;
+  const [first] = c.messages.map(dataOf);
+  const ms = members(c);
+  const m = ms[0]!;
+  for (const late of ["leave", "join elsewhere"]) {
+    const table = new AvatarTable();
+    table.reset(ms);
+    table.skeleton({ type: "skeleton", player: "someone-else", handle: m.handle!, skeleton: m.skeleton! });
+    assert.equal(table.handleOf(m.player), undefined, late);
+    assert.equal(table.offsetsOf(m.player), undefined, late);
+    if (late === "leave") table.presence({ type: "presence", event: "leave", room: "r", player: m.player, name: "" });
+    else table.presence({ type: "presence", event: "join", room: "r", player: m.player, name: "again",
+      handle: 999, skeleton: m.skeleton! });
+    assert.equal(table.handleOf("someone-else"), m.handle, late);
+    const keyed = table.poses({ type: "poses", t: 1, data: first! });
+    assert.equal(keyed.error, undefined, late);
+    assert.ok(keyed.poses.some((p) => p.player === "someone-else"), late);
+  }
+});
