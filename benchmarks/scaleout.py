@@ -70,6 +70,7 @@ def start_redis(workdir: str) -> tuple[subprocess.Popen[bytes], int]:
 def start_node(name: str, redis_url: str, args: argparse.Namespace) -> ServeProcess:
     return ServeProcess(
         "--node-id", name, "--redis", redis_url, "--conn-per-ip-per-min", "100000",
+        "--sockets-per-ip", "100000",
         secret=SECRET, samples=args.samples, lookahead=args.lookahead,
     )  # fmt: skip
 

@@ -120,7 +120,8 @@ def _metric(metrics: Metrics, series: str) -> float:
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     server = ServeProcess(
-        "--conn-per-ip-per-min", "100000", "--engine-threads", str(args.engine_threads),
+        "--conn-per-ip-per-min", "100000", "--sockets-per-ip", "100000",
+        "--engine-threads", str(args.engine_threads),
         secret=SECRET, samples=args.samples, lookahead=args.lookahead,
     )  # fmt: skip
     try:

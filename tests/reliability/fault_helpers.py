@@ -53,7 +53,8 @@ class ServerProc(ServeProcess):
 
     def __init__(self, *extra: str, log: Path | None = None, log_level: str = "WARNING") -> None:
         super().__init__(
-            "--conn-per-ip-per-min", "100000", "--fatal-per-ip-per-min", "100000", *extra,
+            "--conn-per-ip-per-min", "100000", "--fatal-per-ip-per-min", "100000",
+            "--sockets-per-ip", "100000", *extra,
             secret=SECRET, samples=8, lookahead=2, log=log, log_level=log_level,
             env={"POSECAST_LAYOUTS": Layout.HMD3_WAIST.value},
         )  # fmt: skip

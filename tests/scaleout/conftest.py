@@ -127,7 +127,8 @@ class Node(ServeProcess):
         super().__init__(
             "--redis", redis_url, "--node-id", name,
             "--redis-heartbeat-s", str(HEARTBEAT_S), "--redis-node-ttl-s", str(NODE_TTL_S),
-            "--conn-per-ip-per-min", "10000", "--fatal-per-ip-per-min", "10000", *extra,
+            "--conn-per-ip-per-min", "10000", "--fatal-per-ip-per-min", "10000",
+            "--sockets-per-ip", "10000", *extra,
             secret=SECRET, samples=8, lookahead=2,
         )  # fmt: skip
 
