@@ -105,6 +105,9 @@ namespace Posecast.Client.Tests
                 r = s.Receive(key, 1.5);
                 var p3 = r.Events.Where(e => e.Kind == EventKind.Pose && e.Pose.Player == "p-3").Single().Pose;
                 T.Near(p3.Positions[0], p3.Positions[(int)Joint.HEAD], 1e-12, "zero bones: the head is at the pelvis");
+                // p-3 announced again on another handle: its old handle is forgotten, as in the other SDKs.
+                s.Receive(Enc(new Presence { Event = "join", Room = "r", Player = "p-3", Name = "x", Handle = 77, Skeleton = skel }), 1.6);
+                T.True(!s.Handles.ContainsKey(3) && s.Handles[77] == "p-3", "one handle per player: " + string.Join(",", s.Handles.Keys));
             });
             T.Run("session v1: poses, pong, non-fatal and fatal errors, bye", () =>
             {

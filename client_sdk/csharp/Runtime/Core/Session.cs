@@ -242,7 +242,11 @@ namespace Posecast.Client
         private void Announce(string player, long handle, byte[] skeleton)
         {
             string had;
-            if (!_playerOf.TryGetValue(handle, out had) || had != player) _refs[handle] = null; // a keyframe comes first
+            if (!_playerOf.TryGetValue(handle, out had) || had != player)
+            {
+                ForgetPlayer(player); // moved to another handle: its old one is gone (as in the Python and TS SDKs)
+                _refs[handle] = null; // a keyframe comes first
+            }
             _playerOf[handle] = player;
             _bones[handle] = Records.BytesToSkeleton(skeleton);
         }
