@@ -8,6 +8,7 @@ subcommand provokes one (``test_*_user_error`` and the tests around them).
 from __future__ import annotations
 
 import json
+import logging
 import re
 import socket
 import subprocess
@@ -535,3 +536,25 @@ def test_a_command_line_mistake_is_a_config_error_naming_its_command(
     err = user_error(capsys, main(argv), "CONFIG_INVALID")
     assert says in err, err
     assert f"hint: see `{command} --help` for the options" in err, err
+
+
+def test_serve_logs_each_posecast_variable_that_sets_nothing(capsys, monkeypatch) -> None:
+    """POSECAST_REDIS (for POSECAST_REDIS_URL) used to leave a node silently embedded."""
+    import posecast.online.shell.app as app
+
+    async def served(cfg, on_ready) -> None:  # the server itself is not under test
+        assert cfg.redis_url == ""
+
+    monkeypatch.setattr(app, "serve_until_signal", served)
+    monkeypatch.setenv("POSECAST_TOKEN_SECRET", "s" * 32)
+    monkeypatch.setenv("POSECAST_REDIS", "redis://redis:6379/0")
+    for name in ("posecast", "websockets"):  # serve configures them: give them back after
+        logger = logging.getLogger(name)
+        monkeypatch.setattr(logger, "handlers", list(logger.handlers))
+        monkeypatch.setattr(logger, "propagate", logger.propagate)
+        monkeypatch.setattr(logger, "level", logger.level)
+    assert main(["serve", "--port", "0"]) == 0
+    lines = [json.loads(ln) for ln in capsys.readouterr().err.splitlines() if ln.startswith("{")]
+    (warning,) = [ln for ln in lines if ln["event"] == "unknown setting ignored"]
+    assert warning["level"] == "WARNING" and warning["variable"] == "POSECAST_REDIS"
+    assert warning["did_you_mean"] == "POSECAST_REDIS_URL"

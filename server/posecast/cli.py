@@ -34,6 +34,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import errno
+import logging
 import math
 import os
 import socket
@@ -831,7 +832,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     import asyncio
     import os
 
-    from posecast.online.config import MIN_SECRET_CHARS, ServerConfig
+    from posecast.online.config import MIN_SECRET_CHARS, ServerConfig, unknown_variables
     from posecast.online.shell.app import serve_until_signal
     from posecast.online.shell.logging import configure
 
@@ -849,6 +850,10 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         raise _hinted(exc, hint + " (docs/server.md)") from None
     _models_dir(Path(cfg.models_dir) if cfg.models_dir else None, "--models-dir")
     configure(cfg.log_level)
+    for name, meant in unknown_variables(os.environ).items():
+        logging.getLogger("posecast.server").warning(
+            "unknown setting ignored", extra={"variable": name, "did_you_mean": meant}
+        )
     if cfg.dev and not os.environ.get("POSECAST_TOKEN_SECRET"):
         print(f"posecast: --dev: token secret for this run: {cfg.token_secret}", flush=True)
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from posecast.errors import ConfigError
-from posecast.online.config import ServerConfig, add_arguments, option_help
+from posecast.online.config import ServerConfig, add_arguments, option_help, unknown_variables
 
 SECRET = "s" * 32
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "server.md"
@@ -146,3 +146,20 @@ def test_the_node_key_must_outlive_the_slowest_round_trips() -> None:
     with pytest.raises(ConfigError, match=r"redis_node_ttl_s \(3 s\).* = 4\.5 s"):
         ServerConfig(token_secret=SECRET, redis_timeout_s=2.0)
     ServerConfig(token_secret=SECRET, redis_timeout_s=2.0, redis_node_ttl_s=4.6)
+
+
+def test_unknown_variables_are_named_with_what_they_likely_meant() -> None:
+    env = {
+        "POSECAST_REDIS": "redis://redis:6379/0",  # the flag is --redis; the variable _URL
+        "POSECAST_SAMPELS": "10",
+        "POSECAST_SOMETHING": "1",
+        "POSECAST_PORT": "8765",  # a setting
+        "POSECAST_URL": "ws://x/",  # the SDK tools'
+        "HOME": "/root",
+    }
+    assert unknown_variables(env) == {
+        "POSECAST_REDIS": "POSECAST_REDIS_URL",
+        "POSECAST_SAMPELS": "POSECAST_SAMPLES",
+        "POSECAST_SOMETHING": None,
+    }
+    assert unknown_variables({f"POSECAST_{f.name.upper()}": "" for f in fields(ServerConfig)}) == {}

@@ -290,6 +290,35 @@ class ServerConfig:
         return dataclasses.replace(self, **changes)
 
 
+# POSECAST_* variables that are read elsewhere, not server settings: the SDK tools'
+# (posecast-sim, posecast-record), the native kernels' ISA override, the tests'.
+OTHER_VARIABLES = frozenset(
+    {"POSECAST_URL", "POSECAST_TOKEN", "POSECAST_BIN", "POSECAST_NATIVE_ISA"}
+)
+
+
+def unknown_variables(env: Mapping[str, str]) -> dict[str, str | None]:
+    """``POSECAST_*`` names in ``env`` that set nothing, each with the setting it most
+    likely meant (or ``None``): a typo, or ``POSECAST_REDIS`` for ``POSECAST_REDIS_URL``,
+    would otherwise leave its default in force without a word."""
+    import difflib
+
+    known = [f.name.upper() for f in fields(ServerConfig)]
+
+    def meant(name: str) -> str | None:  # compared without the prefix they all share
+        close = difflib.get_close_matches(name[len(ENV_PREFIX) :], known, n=1, cutoff=0.7)
+        return ENV_PREFIX + close[0] if close else None
+
+    return {
+        name: meant(name)
+        for name in sorted(env)
+        if name.startswith(ENV_PREFIX)
+        and name[len(ENV_PREFIX) :] not in known
+        and name not in OTHER_VARIABLES
+        and not name.startswith("POSECAST_FUZZ_")
+    }
+
+
 def option_help() -> list[tuple[str, str, str, str]]:
     """``(field, env var, default, help)`` of every option, for the CLI and the docs."""
     out = []
