@@ -184,6 +184,22 @@ def test_demo_runs_a_room(capsys) -> None:
     assert all(r > 20 for r in rates.values()), rates
 
 
+def test_demo_stops_cleanly_on_sigterm() -> None:
+    """`kill` or a process manager stops make run's demo as Ctrl-C does (it was killed
+    by the signal, exit 143, the server never drained)."""
+    import signal
+
+    argv = [sys.executable, "-m", "posecast", "demo", "--port", "0", "--samples", "8"]
+    with subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) as p:
+        assert p.stdout is not None
+        out = [p.stdout.readline() for _ in range(3)]  # server, viewer, the first rates
+        assert out[1].startswith("viewer: "), out
+        p.send_signal(signal.SIGTERM)
+        rest, _ = p.communicate(timeout=30)
+    assert p.returncode == 0, (out, rest)
+    assert "Traceback" not in rest, rest
+
+
 def test_token_mints_a_token_the_server_verifies(capsys, monkeypatch) -> None:
     import time
 

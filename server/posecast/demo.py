@@ -14,6 +14,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import secrets
+import signal
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -145,13 +146,24 @@ async def run(port: int, seconds: float | None, bvh: Path | None, samples: int) 
         asyncio.create_task(headset(url, token("bob"), "Bob", motion(bvh, 2), 0.8, Layout.HMD3)),
         asyncio.create_task(spectator(url, token("viewer", "spectator"))),
     ]
+    # SIGTERM (a process manager, `kill`, a container stop) ends the demo as Ctrl-C
+    # does: the players leave and the server drains, exit 0 (it was killed, 143).
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    with contextlib.suppress(NotImplementedError):  # an event loop without signals
+        loop.add_signal_handler(signal.SIGTERM, stop.set)
+    body = asyncio.ensure_future(
+        asyncio.gather(*tasks) if seconds is None else asyncio.sleep(seconds)
+    )
+    stopping = asyncio.create_task(stop.wait())
     try:
-        if seconds is None:
-            await asyncio.gather(*tasks)
-        else:
-            await asyncio.sleep(seconds)
+        await asyncio.wait({body, stopping}, return_when=asyncio.FIRST_COMPLETED)
+        if body.done():
+            body.result()  # a failed headset or spectator fails the demo, as before
     finally:
-        for t in tasks:
+        for t in (*tasks, body, stopping):
             t.cancel()
-        await asyncio.gather(*tasks, return_exceptions=True)
+        await asyncio.gather(*tasks, body, stopping, return_exceptions=True)
+        with contextlib.suppress(NotImplementedError):
+            loop.remove_signal_handler(signal.SIGTERM)
         await server.stop()
