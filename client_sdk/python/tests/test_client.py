@@ -137,6 +137,57 @@ def test_a_kick_ends_the_session_for_good(dev_server: DevServer, uid: str) -> No
     run(main())
 
 
+def test_the_readme_loop_reports_a_kick_once_and_a_failed_stream(
+    dev_server: DevServer, uid: str
+) -> None:
+    """The README's pattern (stream in a task, read events until it is done): a kick
+    ended the read with KickedError, and the stream task, failing of the same kick a
+    moment later, was left for asyncio to report as "Task exception was never
+    retrieved"; a stream that failed on its own ended the read as if it had finished."""
+    import gc
+
+    room = f"room-{uid}"
+
+    class Broken(pc.WalkSource):
+        async def __aiter__(self):  # type: ignore[no-untyped-def,override]
+            yield await anext(aiter(pc.WalkSource(seconds=0.1)))
+            raise OSError("the tracker went away")
+
+    async def main() -> None:
+        unreported: list[dict[str, Any]] = []
+        asyncio.get_running_loop().set_exception_handler(lambda _, ctx: unreported.append(ctx))
+        player = await pc.connect(dev_server.url, dev_server.token(room, f"p-{uid}"))
+        backend = await pc.connect(dev_server.url, dev_server.token(room, f"b-{uid}", "backend"))
+        async with player, backend:
+            await player.join(room, "P")
+            await backend.join(room, "Ops")
+            streaming = asyncio.create_task(player.stream(pc.WalkSource(seconds=10.0)))
+            await asyncio.sleep(0.2)
+            assert await backend.send(pc.Kick(f"p-{uid}", "cheating"))
+            with pytest.raises(errors.KickedError):
+                async for _ in player.events(until=streaming):
+                    pass
+            while not streaming.done():  # it fails of the kick too; nobody awaits it
+                await asyncio.sleep(0.01)
+        del streaming, player  # the kick's traceback on the client holds the task
+        gc.collect()
+        await asyncio.sleep(0)
+        assert unreported == []
+        other = await pc.connect(dev_server.url, dev_server.token(room, f"q-{uid}"))
+        async with other:
+            await other.join(room, "Q")
+            failing = asyncio.create_task(other.stream(Broken(seconds=1.0)))
+            with pytest.raises(OSError, match="went away"):
+                async for _ in other.events(until=failing):
+                    pass
+        del failing, other
+        gc.collect()
+        await asyncio.sleep(0)
+        assert unreported == []
+
+    run(main())
+
+
 def test_closed_clients_refuse_to_send(dev_server: DevServer, uid: str) -> None:
     async def main() -> None:
         client = await pc.connect(dev_server.url, dev_server.token("r", f"p-{uid}"))

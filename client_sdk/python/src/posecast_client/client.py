@@ -99,6 +99,12 @@ Token = str | Callable[[], str | Awaitable[str]]
 _TRANSPORT_ERRORS = (OSError, TimeoutError, ConnectionClosed, InvalidHandshake)
 
 
+def _retrieve(future: asyncio.Future[Any]) -> None:
+    """Mark ``future``'s error as retrieved (see :meth:`Client.events`)."""
+    if not future.cancelled():
+        future.exception()
+
+
 class Client:
     """One connection to a posecast server, kept alive across drops. Make it with
     :func:`connect`. Options (keyword-only, with their defaults):
@@ -538,18 +544,28 @@ class Client:
         and ``Reconnecting`` while the connection is down.
 
         Ends after :meth:`close`, or once ``until`` (e.g. the task streaming frames) is
-        done and the events so far are delivered. One reader at a time.
+        done and the events so far are delivered; if ``until`` failed, with its error.
+        ``until``'s error is this reader's to report: when the session ends first (a
+        kick) and ``until`` then fails of the same cause, asyncio is not left to warn
+        that nobody retrieved it. One reader at a time.
 
         Raises:
             ProtocolError: the error that ended the session (``KickedError``...).
             ConnectionLostError: the connection is gone and reconnecting gave up.
+            Exception: the error ``until`` ended with.
         """
+        if until is not None:
+            until.add_done_callback(_retrieve)
         while True:
             while self._events:
                 yield self._events.popleft()
             if self._failure is not None:
                 raise self._failure
-            if self._closing or (until is not None and until.done()):
+            if self._closing:
+                return
+            if until is not None and until.done():
+                if not until.cancelled() and (error := until.exception()) is not None:
+                    raise error
                 return
             self._wake.clear()
             waiter = asyncio.ensure_future(self._wake.wait())
