@@ -168,6 +168,17 @@ namespace Posecast.Client.Tests
                 p = Skeleton.ForwardKinematics(Vec3.Zero, world, Skeleton.ReferenceOffsets());
                 T.Near(new Vec3(0, 0.47, -0.70), p[(int)Joint.LEFT_HAND], 1e-12, "turned left hand");
             });
+            T.Run("skeleton: a pose's body scale is its bone lengths over the reference's, whatever it does", () =>
+            {
+                var rng = new Random(5);
+                var world = new Quat[19];
+                for (int j = 0; j < 19; j++) world[j] = Quat.FromRotationVector(rng.NextDouble() - 0.5, rng.NextDouble() - 0.5, rng.NextDouble() - 0.5);
+                var offsets = Skeleton.ReferenceOffsets();
+                T.Near(1.0, Skeleton.BodyScale(Skeleton.ForwardKinematics(new Vec3(1, 0.9, 2), world, offsets)), 1e-12, "the reference body");
+                for (int j = 0; j < offsets.Length; j++) offsets[j] = offsets[j] * 1.1;
+                T.Near(1.1, Skeleton.BodyScale(Skeleton.ForwardKinematics(Vec3.Zero, world, offsets)), 1e-12, "a body 1.1 times as tall");
+                T.Near(1.0, Skeleton.BodyScale(new Vec3[19]), 0, "all joints at one point");
+            });
         }
     }
 }

@@ -148,6 +148,32 @@ namespace Posecast.Client.Tests
                 Near(bare.transform.rotation * (aposeArm * Up), low, 1e-5, "no definition: the Awake pose is the rest");
             });
 
+            T.Run("unity driver: the hips' place is fitted to the avatar's legs, so its feet stay on the floor", () =>
+            {
+                // An avatar whose hips stand 0.8 m above its root (shorter legs than the reference body's 0.98 m).
+                var avatar = Avatar(new Vector3(2, 0, 3), Yaw(90));
+                avatar.GetBoneTransform(HumanBodyBones.Hips).position = avatar.transform.TransformPoint(new Vector3(0, 0.8f, 0));
+                var d = Driver(avatar);
+                var hips = avatar.GetBoneTransform(HumanBodyBones.Hips);
+                var world = new Quat[19];
+                for (int j = 0; j < 19; j++) world[j] = Quat.Identity;
+                Func<double, Vec3, InterpolatedPose> player = (size, pelvis) =>
+                {
+                    var offsets = Skeleton.ReferenceOffsets();
+                    for (int j = 0; j < offsets.Length; j++) offsets[j] = offsets[j] * size;
+                    return new InterpolatedPose { Player = "p", Positions = Skeleton.ForwardKinematics(pelvis, world, offsets), Rotations = world };
+                };
+                // A reference-sized player standing, 0.5 m to its left and 1 m forward: the hips at 0.8 m, the step scaled alike.
+                d.Apply(player(1.0, new Vec3(0.5, 0.98, 1.0)));
+                var k = 0.8 / 0.98;
+                Near(avatar.transform.TransformPoint(new Vector3((float)(-0.5 * k), 0.8f, (float)(1.0 * k))), hips.position, 1e-5, "fitted");
+                d.Apply(player(1.1, new Vec3(0, 0.98 * 1.1, 0))); // a taller player standing: the same avatar height
+                Near(avatar.transform.TransformPoint(new Vector3(0, 0.8f, 0)), hips.position, 1e-5, "a taller player");
+                d.FitToAvatar = false;
+                d.Apply(player(1.0, new Vec3(0, 0.98, 0)));
+                Near(avatar.transform.TransformPoint(new Vector3(0, 0.98f, 0)), hips.position, 1e-5, "off: posecast's metres");
+            });
+
             T.Run("unity streamer: a controller that lost tracking is not read as tracked", () =>
             {
                 var read = typeof(PosecastXRStreamer).GetMethod("Read", BindingFlags.Static | BindingFlags.NonPublic);

@@ -29,7 +29,27 @@ namespace Posecast.Client
             return o;
         }
 
+        /// <summary>The reference body's PELVIS height above the floor in its rest pose, metres.</summary>
+        public const double RestPelvisHeightM = 0.98;
+
         public static int Parent(Joint j) { return Protocol.Parents[(int)j]; }
+
+        /// <summary>
+        /// A pose's body size against the reference body: the sum of its 18 bone lengths
+        /// over the reference's (a calibration scales every bone alike, so one number
+        /// fits the whole body; the TypeScript viewer's poseToBones scale). 1 for a pose
+        /// whose joints all coincide.
+        /// </summary>
+        public static double BodyScale(Vec3[] positions)
+        {
+            double bones = 0, reference = 0;
+            for (int j = 1; j < Protocol.NumJoints; j++)
+            {
+                bones += (positions[j] - positions[Protocol.Parents[j]]).Length;
+                reference += new Vec3(ReferenceM[3 * j - 3], ReferenceM[3 * j - 2], ReferenceM[3 * j - 1]).Length;
+            }
+            return bones > 1e-6 ? bones / reference : 1.0;
+        }
 
         /// <summary>Joint positions from the PELVIS position, the 19 world rotations and 18 bone offsets.</summary>
         public static Vec3[] ForwardKinematics(Vec3 root, Quat[] world, Vec3[] offsets)

@@ -116,6 +116,7 @@ namespace UnityEngine
         }
 
         public Vector3 TransformPoint(Vector3 p) { return position + rotation * p; }
+        public Vector3 InverseTransformPoint(Vector3 p) { return Quaternion.Inverse(rotation) * (p - position); }
 
         internal void Walk(List<Transform> into)
         {
