@@ -163,10 +163,12 @@ namespace Posecast.Client.Tests
                     for (int j = 0; j < offsets.Length; j++) offsets[j] = offsets[j] * size;
                     return new InterpolatedPose { Player = "p", Positions = Skeleton.ForwardKinematics(pelvis, world, offsets), Rotations = world };
                 };
-                // A reference-sized player standing, 0.5 m to its left and 1 m forward: the hips at 0.8 m, the step scaled alike.
+                // A reference-sized player standing 0.5 m to its left and 1 m forward: the hips at
+                // 0.8 m, across the floor where the player is (others see the avatar there).
                 d.Apply(player(1.0, new Vec3(0.5, 0.98, 1.0)));
-                var k = 0.8 / 0.98;
-                Near(avatar.transform.TransformPoint(new Vector3((float)(-0.5 * k), 0.8f, (float)(1.0 * k))), hips.position, 1e-5, "fitted");
+                Near(avatar.transform.TransformPoint(new Vector3(-0.5f, 0.8f, 1.0f)), hips.position, 1e-5, "fitted");
+                d.Apply(player(1.0, new Vec3(0, 0.49, 0))); // crouching: half the height, fitted alike
+                Near(avatar.transform.TransformPoint(new Vector3(0, 0.4f, 0)), hips.position, 1e-5, "crouching");
                 d.Apply(player(1.1, new Vec3(0, 0.98 * 1.1, 0))); // a taller player standing: the same avatar height
                 Near(avatar.transform.TransformPoint(new Vector3(0, 0.8f, 0)), hips.position, 1e-5, "a taller player");
                 d.FitToAvatar = false;

@@ -1,8 +1,9 @@
 // Unity-only: drives a Humanoid Animator's bones from one remote player's pose,
 // sampled from the streamer's jitter buffer at the server's time. The pose's world
 // rotation of joint j is the turn from posecast's T-pose rest, so each bone takes
-// root * ToUnity(q_j) * rest_j and the hips root.TransformPoint(ToUnity(k * p_pelvis)),
-// k the avatar's hips height over the player's rest pelvis height (FitToAvatar),
+// root * ToUnity(q_j) * rest_j and the hips root.TransformPoint(ToUnity(p_pelvis)) with
+// its height times k, the avatar's hips height over the player's rest pelvis height
+// (FitToAvatar),
 // with root the Animator's transform and rest_j the bone's rotation relative to it in
 // a T-pose facing its root's +Z (docs/engines.md): the pose plays in the avatar root's
 // frame, wherever the avatar is placed. The T-pose is the one the avatar's Humanoid
@@ -24,7 +25,7 @@ namespace Posecast.Client.Unity
         public Animator Avatar;               // a Humanoid rig facing its root's +Z
         [Tooltip("Rest from the avatar's Humanoid T-pose; off: from the pose it stands in at Awake (then a T-pose)")]
         public bool RestFromDefinition = true;
-        [Tooltip("Scale the hips' place by the avatar's leg length over the player's, so the feet stay on the floor and strides fit the legs")]
+        [Tooltip("Scale the hips' height by the avatar's leg length over the player's, so the feet stay on the floor")]
         public bool FitToAvatar = true;
 
         private Transform[] _bones;
@@ -54,9 +55,10 @@ namespace Posecast.Client.Unity
         }
 
         // The avatar's hips height over the player's (the player's rest pelvis height from
-        // the pose's own bone lengths): the hips' place is scaled by it, so a shorter or
-        // taller avatar stands on the floor and its strides fit its legs. 1 when off, or
-        // when the avatar's hips stand at its root (no height to fit).
+        // the pose's own bone lengths): the hips' height is scaled by it, so a shorter or
+        // taller avatar stands on the floor; its place across the floor stays the
+        // player's (others in the room see it where the player is). 1 when off, or when
+        // the avatar's hips stand at its root (no height to fit).
         internal double Fit(Vec3[] positions)
         {
             if (!FitToAvatar || !(_hipsHeight > 0.1f)) return 1.0;
@@ -98,7 +100,11 @@ namespace Posecast.Client.Unity
         {
             if (shown == null || shown.Rotations == null) return;
             var root = Avatar.transform;
-            if (_bones[0] != null) _bones[0].position = root.TransformPoint(UnityFrames.ToUnity(shown.Positions[0] * Fit(shown.Positions)));
+            if (_bones[0] != null)
+            {
+                var p = shown.Positions[0];
+                _bones[0].position = root.TransformPoint(UnityFrames.ToUnity(new Vec3(p.X, p.Y * Fit(shown.Positions), p.Z)));
+            }
             for (int j = 0; j < _bones.Length; j++)
                 if (_bones[j] != null) _bones[j].rotation = root.rotation * UnityFrames.ToUnity(shown.Rotations[j]) * _rest[j];
         }
