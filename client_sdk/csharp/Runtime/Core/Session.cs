@@ -142,7 +142,7 @@ namespace Posecast.Client
         public Frame BuildFrame(Vec3[] positions, Quat[] orientations, double now, int? valid = null,
                                 long? seq = null, double? t = null)
         {
-            int mask = valid ?? (Set == null ? Protocol.AllTrackersValid : Set.AllValid);
+            int mask = valid ?? AllValid;
             Vec3[] pos; Quat[] quat;
             CheckRows(positions, orientations, mask, out pos, out quat);
             long s;
@@ -173,14 +173,17 @@ namespace Posecast.Client
         public Calibrate BuildTPose(Vec3[] positions, Quat[] orientations)
         {
             Vec3[] pos; Quat[] quat;
-            CheckRows(positions, orientations, Set == null ? Protocol.AllTrackersValid : Set.AllValid, out pos, out quat);
+            CheckRows(positions, orientations, AllValid, out pos, out quat);
             return new Calibrate { Positions = pos, Orientations = quat, Sites = Set != null };
         }
+
+        // Every row of this player's frames tracked: the four slots', or its set's sites'.
+        private int AllValid { get { return Set == null ? Protocol.AllTrackersValid : Set.AllValid; } }
 
         private void CheckRows(Vec3[] positions, Quat[] orientations, int mask, out Vec3[] pos, out Quat[] quat)
         {
             int rows = Set == null ? Protocol.NumTrackers : Set.Count;
-            int full = Set == null ? Protocol.AllTrackersValid : Set.AllValid;
+            int full = AllValid;
             string key = Set == null ? "trackers" : "sites";
             if (positions == null || orientations == null || positions.Length != rows || orientations.Length != rows)
                 throw new ArgumentException(Set == null

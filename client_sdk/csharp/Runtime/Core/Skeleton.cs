@@ -42,13 +42,18 @@ namespace Posecast.Client
         /// </summary>
         public static double BodyScale(Vec3[] positions)
         {
-            double bones = 0, reference = 0;
-            for (int j = 1; j < Protocol.NumJoints; j++)
-            {
-                bones += (positions[j] - positions[Protocol.Parents[j]]).Length;
-                reference += new Vec3(ReferenceM[3 * j - 3], ReferenceM[3 * j - 2], ReferenceM[3 * j - 1]).Length;
-            }
-            return bones > 1e-6 ? bones / reference : 1.0;
+            double bones = 0;
+            for (int j = 1; j < Protocol.NumJoints; j++) bones += (positions[j] - positions[Protocol.Parents[j]]).Length;
+            return bones > 1e-6 ? bones / ReferenceBoneSumM : 1.0;
+        }
+
+        private static readonly double ReferenceBoneSumM = BoneSum(ReferenceOffsets());
+
+        private static double BoneSum(Vec3[] offsets)
+        {
+            double sum = 0;
+            foreach (var o in offsets) sum += o.Length;
+            return sum;
         }
 
         /// <summary>Joint positions from the PELVIS position, the 19 world rotations and 18 bone offsets.</summary>

@@ -1,10 +1,9 @@
 // Unity-only: drives a Humanoid Animator's bones from one remote player's pose,
 // sampled from the streamer's jitter buffer at the server's time. The pose's world
 // rotation of joint j is the turn from posecast's T-pose rest, so each bone takes
-// root * ToUnity(q_j) * rest_j and the hips root.TransformPoint(ToUnity(p_pelvis)) with
-// its height times k, the avatar's hips height over the player's rest pelvis height
-// (FitToAvatar),
-// with root the Animator's transform and rest_j the bone's rotation relative to it in
+// root * ToUnity(q_j) * rest_j and the hips root.TransformPoint(ToUnity(p_pelvis)), its
+// height times the avatar's hips height over the player's rest pelvis height
+// (FitToAvatar), with root the Animator's transform and rest_j the bone's rotation relative to it in
 // a T-pose facing its root's +Z (docs/engines.md): the pose plays in the avatar root's
 // frame, wherever the avatar is placed. The T-pose is the one the avatar's Humanoid
 // definition holds (Avatar.humanDescription.skeleton, which Unity's avatar setup puts
