@@ -63,3 +63,11 @@ def test_node_clocks_keep_each_players_time_moving_on() -> None:
     assert c.local("b", 10.25, 100.31, "m") == pytest.approx(100.255, abs=1e-4)
     c.forget("q")  # of any node
     assert c.local("b", 10.0, 100.4, "q") == pytest.approx(100.005, abs=1e-3)
+    # Retained for the nodes that still have it: another node's guard goes, b's stays.
+    last = c.local("b", 10.1, 100.5, "q")
+    c.local("c", 50.0, 100.5, "q")
+    c.retain("q", {"b"})
+    assert c.guarded == 2  # (b, m), (b, q)
+    assert c.local("b", 10.05, 100.5, "q") == pytest.approx(last + MIN_STEP_S, abs=1e-9)
+    c.retain("q", ())
+    assert c.guarded == 1

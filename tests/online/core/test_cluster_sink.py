@@ -192,3 +192,64 @@ def test_a_remote_players_time_never_goes_back_when_the_offset_drops() -> None:
     read()
     assert len(times["m"]) == 2 and times["m"][1] > times["m"][0], times
     assert times["q"][1] == pytest.approx(h.now + 0.105, abs=1e-6)  # the offset did drop
+
+
+@pytest.mark.parametrize("gone_from_r1", ["leave", "snapshot", "last_audience"])
+@pytest.mark.parametrize("new_node", ["node-b", "node-c"])
+def test_a_remote_players_time_never_goes_back_when_it_moves_rooms(
+    gone_from_r1: str, new_node: str
+) -> None:
+    """Player m of node B moves from room r1 to room r2 (on B again, or on node C), and
+    this node hears of the join in r2 before m is gone from r1 (B's leave, a snapshot
+    without m, or r1's last local audience leaving). m's time guard must outlive r1
+    while r2 holds m: its older pose in a batch where q's newer one lowers the offset
+    must not map before a time already sent. Once m is gone from every room, no guard
+    is left for it."""
+    from posecast.online.protocol.messages import Pose
+
+    h = Harness()
+    a, b = h.join("a"), h.join("b", room="r2")
+    sink = h.hub.sink
+    sink.remote_snapshot("r1", {"m": ("node-b", "M")}, h.now, h.now)
+    sink.remote_snapshot("r2", {"q": (new_node, "Q")}, h.now, h.now)
+    sink.remote_join("r2", "m", "M", new_node, h.now + 0.01)
+    base, tick = 5.0e6, 1 / 60
+    times: list[float] = []
+
+    def read() -> None:
+        times.extend(m.t for m in h.inbox(b) if isinstance(m, Pose) and m.player == "m")
+
+    first = [("q", _pose("q", 0, base)), ("m", _pose("m", 0, base))]
+    sink.remote_tick("r2", new_node, first, [], h.now + 0.100)
+    read()
+    if gone_from_r1 == "leave":
+        sink.remote_leave("r1", "m", "node-b", h.now + 0.101)
+    elif gone_from_r1 == "snapshot":
+        sink.remote_snapshot("r1", {}, h.now + 0.101, h.now + 0.101)
+    else:
+        h.hub.disconnect(a, h.now + 0.101)
+    assert h.hub.remote.get("r1", "m") is None and h.hub.remote.get("r2", "m") is not None
+    later = [("q", _pose("q", 6, base + 6 * tick)), ("m", _pose("m", 4, base + 4 * tick))]
+    sink.remote_tick("r2", new_node, later, [], h.now + 0.105)
+    read()
+    assert len(times) == 2 and times[1] > times[0], times
+    # Gone from r2 too: m's guard is released (q's stays while q plays there).
+    assert sink.clocks.guarded == 2
+    sink.remote_leave("r2", "m", new_node, h.now + 0.2)
+    assert sink.clocks.guarded == 1
+    sink.remote_snapshot("r2", {}, h.now + 0.3, h.now + 0.3)
+    assert sink.clocks.guarded == 0
+
+
+def test_a_remote_player_that_moves_between_nodes_keeps_one_time_guard() -> None:
+    """m moves within r1 from node B to node C (B's leave, stale by then, changes
+    nothing): B's guard for m goes at once rather than when m leaves."""
+    h, _ = _with_remote_m()
+    sink = h.hub.sink
+    sink.remote_tick("r1", "node-b", [("m", _pose("m", 0, 5.0e6))], [], h.now + 0.01)
+    sink.remote_join("r1", "m", "M", "node-c", h.now + 0.02)
+    sink.remote_tick("r1", "node-c", [("m", _pose("m", 1, 7.0e6))], [], h.now + 0.03)
+    sink.remote_leave("r1", "m", "node-b", h.now + 0.04)
+    assert sink.clocks.guarded == 1
+    sink.remote_leave("r1", "m", "node-c", h.now + 0.05)
+    assert sink.clocks.guarded == 0

@@ -16,6 +16,7 @@ pose's ``t`` is moved onto it before it goes out.
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Collection
 from dataclasses import dataclass, field
 
 WINDOW_S = 2.0  # one offset estimate per window
@@ -95,7 +96,8 @@ class NodeClocks:
     waited out a slow round trip can hold another player's newer pose (a lower
     offset) and this player's older one, and a client that orders poses by ``t``
     would show the older one after the newer. A player's time is at least
-    :data:`MIN_STEP_S` past its last one (until :meth:`forget`, or a new epoch).
+    :data:`MIN_STEP_S` past its last one (until :meth:`forget` or :meth:`retain`
+    drops it, or a new epoch).
     """
 
     _nodes: dict[str, tuple[float, float]] = field(default_factory=dict)  # offset, last
@@ -119,8 +121,18 @@ class NodeClocks:
         if node is not None:
             self._players.pop((node, player), None)
         else:
-            for key in [k for k in self._players if k[1] == player]:
-                del self._players[key]
+            self.retain(player, ())
+
+    def retain(self, player: str, nodes: Collection[str]) -> None:
+        """Keep ``player``'s times only for ``nodes`` (those that still have it in a
+        room here); of any other node its next time starts afresh."""
+        for key in [k for k in self._players if k[1] == player and k[0] not in nodes]:
+            del self._players[key]
+
+    @property
+    def guarded(self) -> int:
+        """How many (node, player) last times are held."""
+        return len(self._players)
 
     def _map(self, node: str, t: float, now: float) -> float:
         sample = now - t

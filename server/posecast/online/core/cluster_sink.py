@@ -65,17 +65,27 @@ class ClusterSink:
             # landed elsewhere): that one wins, as a takeover does on one node.
             replaced = ReplacedError("the same player joined on another node")
             self._end(local, now, Error.from_exception(replaced))
-        if room in self._watched and self.remote.join(room, player, node, name, now):
+        if room not in self._watched:
+            return
+        is_new = self.remote.join(room, player, node, name, now)
+        self._release_clock(player)  # of the node it moved away from, if any
+        if is_new:
             self.router.to_room(room, Presence("join", room, player, name), now)
             self.refresh()
 
     def remote_leave(self, room: str, player: str, node: str, now: float) -> None:
         gone = self.remote.leave(room, player, node, now)
         if gone is not None:
-            self.clocks.forget(player, node)
+            self._release_clock(player)
         if gone is not None and self.rooms.room_of(player) != room:
             self.router.to_room(room, Presence("leave", room, player, gone.name), now)
             self.refresh()
+
+    def _release_clock(self, player: str) -> None:
+        """``player``'s time guard goes for the nodes that no longer have it in any room
+        here (one moving between rooms is in both a while: a leave of the old room must
+        not let its poses in the new one go back), and with its last room, entirely."""
+        self.clocks.retain(player, self.remote.nodes_of(player))
 
     def remote_tick(
         self,
@@ -165,7 +175,7 @@ class ClusterSink:
                     others[m.player] = (held.node, m.name)
         joined, left = self.remote.snapshot(room, others, issued_at)
         for m in left:
-            self.clocks.forget(m.player)
+            self._release_clock(m.player)
             if m.player not in local:  # one that moved here left the remote view only
                 self.router.to_room(room, Presence("leave", room, m.player, m.name), now)
         for m in joined:
@@ -193,7 +203,7 @@ class ClusterSink:
         for room in gone:
             self.bus.unwatch(room)
             for player in self.remote.drop_room(room):
-                self.clocks.forget(player)
+                self._release_clock(player)
                 self.router.release_if_gone(player)
         for room in new:
             self.bus.watch(room)  # may report the room's remote members at once

@@ -103,6 +103,10 @@ class RemoteRooms:
         """``player`` is a remote member of any room here."""
         return any(player in members for members in self._rooms.values())
 
+    def nodes_of(self, player: str) -> set[str]:
+        """The nodes that have ``player`` in a room here (more than one while it moves)."""
+        return {m[player].node for m in self._rooms.values() if player in m}
+
     def members(self, room: str) -> tuple[Member, ...]:
         return tuple(Member(p, m.name) for p, m in self._rooms.get(room, {}).items())
 
