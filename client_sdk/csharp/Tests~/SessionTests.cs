@@ -191,6 +191,24 @@ namespace Posecast.Client.Tests
                     T.True(d >= cap / 2 && d <= cap, "attempt " + a + ": " + d);
                 }
             });
+            T.Run("tokens: a secret shorter than any server takes is refused, counted in characters as the server does", () =>
+            {
+                string e = "\u00e9", smile = "\ud83d\ude00";  // 2 UTF-8 bytes; one character of two UTF-16 units
+                var refused = new Dictionary<string, int>
+                {
+                    { "", 0 }, { "dev", 3 }, { new string('s', 15), 15 },
+                    { string.Concat(Enumerable.Repeat(e, 8)), 8 },  // 16 bytes of UTF-8, 8 characters
+                    { smile + new string('s', 14), 15 },  // 16 UTF-16 units, 15 characters
+                };
+                foreach (var kv in refused)
+                {
+                    var err = T.Throws<ArgumentException>(() => DevTokens.Mint(kv.Key, "r", "p"), "secret of " + kv.Value);
+                    T.True(err.Message.StartsWith("the secret has " + kv.Value + " characters; a server takes none under 16"), err.Message);
+                }
+                T.Throws<ArgumentException>(() => DevTokens.Mint(null, "r", "p"), "no secret");
+                foreach (var ok in new[] { new string('s', 16), string.Concat(Enumerable.Repeat(e, 16)), smile + new string('s', 15) })
+                    T.Equal(2, DevTokens.Mint(ok, "r", "p").Split('.').Length, "a token from a secret of 16 characters");
+            });
         }
     }
 }

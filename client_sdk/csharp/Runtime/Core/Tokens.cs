@@ -31,10 +31,27 @@ namespace Posecast.Client
             return sb.Append('"').ToString();
         }
 
-        /// <summary>A token for `player` in `room` with `role`, valid ttlS seconds from now.</summary>
+        /// <summary>The server refuses a shorter token secret (posecast.online.config), in characters.</summary>
+        public const int MinSecretChars = 16;
+
+        /// <summary>Characters as the server (Python) counts them: code points, a UTF-16 surrogate pair one.</summary>
+        private static int Characters(string s)
+        {
+            int n = 0;
+            for (int i = 0; i < s.Length; i++, n++)
+                if (char.IsHighSurrogate(s[i]) && i + 1 < s.Length && char.IsLowSurrogate(s[i + 1])) i++;
+            return n;
+        }
+
+        /// <summary>A token for `player` in `room` with `role`, valid ttlS seconds from now. A secret
+        /// shorter than any server takes (MinSecretChars) is refused: no server would verify the token.</summary>
         public static string Mint(string secret, string room, string player, string role = "player", int ttlS = 3600)
         {
-            if (string.IsNullOrEmpty(secret)) throw new ArgumentException("the token secret must not be empty");
+            if (secret == null) throw new ArgumentException("no token secret (POSECAST_TOKEN_SECRET)");
+            int chars = Characters(secret);
+            if (chars < MinSecretChars)
+                throw new ArgumentException("the secret has " + chars + " characters; a server takes none under "
+                                            + MinSecretChars + ", so no server verifies tokens minted with it");
             if (Array.IndexOf(Protocol.Roles, role) < 0) throw new ArgumentException("no role " + role);
             long iat = DateTimeOffset.UtcNow.ToUnixTimeSeconds();
             var jti = new byte[12];

@@ -27,6 +27,25 @@ MAX_TTL_S = 7 * 24 * 3600  # what the server's minting tool allows
 MIN_SECRET_CHARS = 16  # the server refuses shorter secrets (posecast.online.config)
 
 
+def secret_problem(secret: str | bytes) -> str | None:
+    """Why no server verifies tokens minted with ``secret``, or None if one may.
+
+    A server's secret is text of at least :data:`MIN_SECRET_CHARS` characters (its
+    ``POSECAST_TOKEN_SECRET``, keyed as UTF-8), so the length counts characters as the
+    server does: of ``secret``, or of the text whose UTF-8 bytes ``secret`` is."""
+    if isinstance(secret, bytes):
+        try:
+            secret = secret.decode("utf-8")
+        except UnicodeDecodeError:
+            return "the secret is not UTF-8 text, and a server's secret is text"
+    if len(secret) < MIN_SECRET_CHARS:
+        return (
+            f"the secret has {len(secret)} characters; a server takes none under "
+            f"{MIN_SECRET_CHARS}, so no server verifies tokens minted with it"
+        )
+    return None
+
+
 def _b64(raw: bytes) -> str:
     return base64.urlsafe_b64encode(raw).rstrip(b"=").decode("ascii")
 
@@ -46,14 +65,17 @@ def mint_token(
 
     Args:
         secret: the server's token secret (``POSECAST_TOKEN_SECRET``); text is UTF-8.
+            One shorter than any server takes (:data:`MIN_SECRET_CHARS` characters)
+            is refused: no server would verify the token.
         role: ``player``, ``spectator`` or ``backend``.
         rooms: further rooms a backend may watch.
         now: Unix time of issue (default: the wall clock).
         jti: the token's unique id (default: random).
     """
+    problem = secret_problem(secret)
+    if problem is not None:
+        raise ValueError(problem)
     key = secret.encode("utf-8") if isinstance(secret, str) else secret
-    if not key:
-        raise ValueError("the token secret must not be empty")
     if role not in ROLES:
         raise ValueError(f"role must be one of {ROLES}, not {role!r}")
     if rooms and role != "backend":

@@ -23,7 +23,7 @@ from posecast_client.client import Client, connect
 from posecast_client.codec import ID_PATTERN
 from posecast_client.errors import BvhError, ConnectionLostError, ProtocolError, RecordingError
 from posecast_client.protocol import MAX_ID_BYTES
-from posecast_client.tokens import MAX_TTL_S, MIN_SECRET_CHARS, mint_token
+from posecast_client.tokens import MAX_TTL_S, mint_token, secret_problem
 
 ENV_PREFIX = "POSECAST_"
 CONFIG_INVALID = "CONFIG_INVALID"  # the server's code for a bad configuration value
@@ -138,11 +138,11 @@ def resolve_server(
             "pass --secret (what `posecast serve --dev` prints) or --token, or set "
             "POSECAST_TOKEN_SECRET or POSECAST_TOKEN",
         )
-    if args.secret and len(args.secret) < MIN_SECRET_CHARS:
+    problem = secret_problem(args.secret) if args.secret else None
+    if problem is not None:  # mint_token's own refusal, as a usage error
         usage_error(
             prog,
-            f"the secret has {len(args.secret)} characters; a server takes none under "
-            f"{MIN_SECRET_CHARS}, so no server verifies tokens minted with it",
+            problem,
             "pass the secret the server was started with (`posecast serve --dev` prints it)",
         )
     if not 0 < args.ttl <= MAX_TTL_S:
