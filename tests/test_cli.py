@@ -534,24 +534,119 @@ def test_train_device_auto_takes_cuda_only_where_torch_sees_one(monkeypatch) -> 
 
 
 @pytest.mark.parametrize(
-    ("argv", "command", "says"),
+    ("argv", "says", "hint"),
     [
-        (["serve", "--no-such-flag"], "posecast serve", "unrecognized arguments: --no-such-flag"),
-        (["serve", "--port", "abc"], "posecast serve", "invalid int value: 'abc'"),
-        (["data", "prepare", "--bvh", "x"], "posecast data prepare", "required: --out"),
-        (["eval", "--data", "d", "--samples"], "posecast eval", "expected one argument"),
-        ([], "posecast", "required: command"),
+        (["serve", "--port", "abc"], "invalid int value: 'abc'", "see `posecast serve --help`"),
+        (
+            ["data", "prepare", "--bvh", "x"],
+            "required: --out",
+            "see `posecast data prepare --help`",
+        ),
+        (
+            ["eval", "--data", "d", "--samples"],
+            "expected one argument",
+            "see `posecast eval --help`",
+        ),
+        (
+            ["token", "--room", "R", "--player", "P", "--ttl", "1e3"],
+            "invalid int value: '1e3'",
+            "see `posecast token --help`",
+        ),
+        (["train", "cvea"], "invalid choice: 'cvea'", "see `posecast train --help`"),
     ],
 )
 def test_a_command_line_mistake_is_a_config_error_naming_its_command(
-    capsys, argv: list[str], command: str, says: str
+    capsys, argv: list[str], says: str, hint: str
 ) -> None:
-    """What argparse refuses (an unknown option, a malformed or missing value, no
-    command) prints the CLI's own error, code and a hint naming the command's help,
-    never a bare argparse message."""
+    """What argparse refuses (a malformed or missing value, a missing option) prints
+    the CLI's own error, code and a hint naming the command's help, never a bare
+    argparse message."""
     err = user_error(capsys, main(argv), "CONFIG_INVALID")
     assert says in err, err
-    assert f"hint: see `{command} --help` for the options" in err, err
+    assert f"hint: {hint} for the options" in err, err
+
+
+@pytest.mark.parametrize(
+    ("argv", "says", "hint"),
+    [
+        # An unknown option with no command: it, not the missing command, is the mistake.
+        (["--bogus"], "unknown option --bogus", "see `posecast --help` for the options"),
+        (["-x"], "unknown option -x", "see `posecast --help` for the options"),
+        (["data", "--bogus"], "unknown option --bogus", "see `posecast data --help`"),
+        # ... nor is a required option it hides, perhaps by a typo of it.
+        (
+            ["token", "--room", "R", "--plyer", "P"],
+            "unknown option --plyer",
+            "did you mean --player? see `posecast token --help` for the options",
+        ),
+        (
+            ["data", "clearance", "--bvh", "x"],  # was: "required: --data"
+            "unknown option --bvh",
+            "see `posecast data clearance --help` for the options",
+        ),
+        # After a command, by argparse's order already, now with the nearest option.
+        (
+            ["serve", "--no-such-flag"],
+            "unknown option --no-such-flag",
+            "see `posecast serve --help`",
+        ),
+        (
+            ["serve", "--prot", "1"],
+            "unknown option --prot",
+            "did you mean --port? see `posecast serve --help` for the options",
+        ),
+        (["serve", "-p", "80"], "unknown option -p", "see `posecast serve --help` for the options"),
+        (["--bogus", "serve"], "unknown option --bogus", "see `posecast serve --help`"),
+        # An option typed before its command.
+        (
+            ["--port", "80", "serve"],
+            "unknown option --port",
+            "an option goes after its command: `posecast serve --port`",
+        ),
+        # A misspelt or missing command: named with the commands, not by argparse's dest.
+        (
+            ["srve"],
+            "unknown command 'srve' for `posecast` (one of data, train,",
+            "did you mean `posecast serve`? see `posecast --help` for the commands",
+        ),
+        (
+            ["data", "prep", "--out", "x"],
+            "unknown command 'prep' for `posecast data` (one of prepare, clearance, wrists)",
+            "did you mean `posecast data prepare`? see `posecast data --help` for the commands",
+        ),
+        ([], "`posecast` needs a command: data, train,", "see `posecast --help` for the commands"),
+        (
+            ["data"],
+            "`posecast data` needs a command: prepare, clearance, wrists",
+            "see `posecast data --help` for the commands",
+        ),
+        (["serve", "80"], "unrecognized arguments: 80", "see `posecast serve --help`"),
+    ],
+)
+def test_the_first_wrong_word_is_the_one_reported(
+    capsys, argv: list[str], says: str, hint: str
+) -> None:
+    """argparse finds a missing command or option before it looks at the words it did
+    not know: ``posecast --bogus`` said a command was missing. The CLI names the
+    unknown option or command, in the order typed, with the nearest valid one."""
+    err = user_error(capsys, main(argv), "CONFIG_INVALID")
+    assert f"posecast: error [CONFIG_INVALID]: {says}" in err, err
+    assert f"hint: {hint}" in err, err
+    assert "did you mean" in hint or "did you mean" not in err, err
+
+
+def test_an_unknown_option_with_no_command_prints_no_traceback() -> None:
+    out = subprocess.run(
+        [sys.executable, "-m", "posecast", "--bogus"],
+        input="",
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={"PATH": "/usr/bin:/bin"},
+    )
+    assert out.returncode == 2, out.stderr
+    assert "posecast: error [CONFIG_INVALID]: unknown option --bogus\n" in out.stderr
+    assert "\nhint: see `posecast --help`" in out.stderr and "Traceback" not in out.stderr
 
 
 def test_serve_logs_each_posecast_variable_that_sets_nothing(capsys, monkeypatch) -> None:

@@ -33,10 +33,12 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import difflib
 import errno
 import logging
 import math
 import os
+import re
 import socket
 import sys
 from collections.abc import Iterator, Sequence
@@ -907,23 +909,129 @@ def _cmd_token(args: argparse.Namespace) -> int:
     return 0
 
 
+_NEGATIVE_NUMBER = re.compile(r"^-\d+$|^-\d*\.\d+$")  # a value to argparse, not an option
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse whose refusals (an unknown option, a missing or malformed value, no
     command) print the usage and raise a :class:`ConfigError` hinted with the
     command's ``--help``, which :func:`main` prints as every other user error.
     Subcommand parsers are made of this class too (argparse's ``add_subparsers`` takes
-    the parent's class)."""
+    the parent's class).
+
+    The first wrong word of a command is the one reported (:meth:`refusal`): argparse
+    finds a missing argument or command before it looks at the words it did not
+    know, so ``posecast --bogus`` said a command was missing and
+    ``posecast token --room R --plyer P`` that ``--player`` was. An unknown option or
+    command is named with the nearest valid one."""
+
+    _argv: Sequence[str] = ()  # the words this parser was last given (its command's own)
+
+    def parse_known_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> tuple[argparse.Namespace, list[str]]:
+        self._argv = list(sys.argv[1:] if args is None else args)
+        return super().parse_known_args(self._argv, namespace)
 
     def error(self, message: str) -> NoReturn:
         self.print_usage(sys.stderr)
-        raise _usage_error(self.prog, message)
+        raise self.refusal(self._argv, message)
+
+    def refusal(self, argv: Sequence[str], message: str) -> ConfigError:
+        """The error for ``argv`` (this command's words), which argparse refused with
+        ``message``: an unknown option or command, in the order typed, else a missing
+        command, else ``message``."""
+        commands = self.commands()
+        for i, arg in enumerate(argv):
+            if arg == "--":  # every word after it is a value (the first one a command)
+                rest = argv[i + 1 : i + 2]
+                if commands and rest and rest[0] not in commands:
+                    return self._unknown_command(rest[0], commands)
+                break
+            if _is_option(arg):
+                if not self._knows(arg):
+                    return self._unknown_option(arg.split("=", 1)[0])
+            elif commands:
+                if arg not in commands:
+                    return self._unknown_command(arg, commands)
+                return commands[arg].refusal(argv[i + 1 :], message)  # the rest are its
+        else:
+            if commands:
+                return _config(
+                    f"`{self.prog}` needs a command: {', '.join(commands)}",
+                    f"see `{self.prog} --help` for the commands",
+                )
+        return _usage_error(self.prog, message)
+
+    def commands(self) -> dict[str, _Parser]:
+        """This command's subcommands (none for a leaf)."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                return dict(action.choices)
+        return {}
+
+    def options(self) -> list[str]:
+        return [s for action in self._actions for s in action.option_strings]
+
+    def _knows(self, arg: str) -> bool:
+        name = arg.split("=", 1)[0]
+        options = self.options()
+        if name in options:
+            return True
+        if name.startswith("--"):  # an abbreviation, as argparse takes (or refuses) it
+            return self.allow_abbrev and any(o.startswith(name) for o in options)
+        return arg[:2] in options  # -vq, -xVALUE
+
+    def _unknown_option(self, name: str) -> ConfigError:
+        # Compared without the dashes, which every option shares (--bogus is not like
+        # --layouts); a long option before a short one of the same letters.
+        by_name = {o.lstrip("-"): o for o in sorted(self.options(), key=len, reverse=True)}
+        near = difflib.get_close_matches(name.lstrip("-"), list(by_name), n=1, cutoff=0.6)
+        if near:
+            hint = f"did you mean {by_name[near[0]]}? see `{self.prog} --help` for the options"
+        else:
+            owners = [p.prog for p in _leaves(self) if p is not self and p._knows(name)]
+            if owners:  # an option typed before its command
+                hint = f"an option goes after its command: `{owners[0]} {name}`"
+            else:
+                hint = f"see `{self.prog} --help` for the options"
+        return _config(f"unknown option {name}", hint)
+
+    def _unknown_command(self, word: str, commands: dict[str, _Parser]) -> ConfigError:
+        near = difflib.get_close_matches(word, list(commands), n=1, cutoff=0.6)
+        help_ = f"see `{self.prog} --help` for the commands"
+        hint = f"did you mean `{self.prog} {near[0]}`? {help_}" if near else help_
+        return _config(
+            f"unknown command {word!r} for `{self.prog}` (one of {', '.join(commands)})", hint
+        )
+
+
+def _is_option(arg: str) -> bool:
+    """``arg`` is an option to argparse (``-x``, ``--name``, ``--name=V``), not a value."""
+    return arg.startswith("-") and arg != "-" and not _NEGATIVE_NUMBER.match(arg) and " " not in arg
+
+
+def _leaves(parser: _Parser) -> Iterator[_Parser]:
+    """``parser`` and every command under it that takes no further command."""
+    commands = parser.commands()
+    if not commands:
+        yield parser
+    for sub in commands.values():
+        yield from _leaves(sub)
+
+
+def _parser_for(parser: _Parser, command: str) -> _Parser:
+    """The parser of ``command`` (``"data prepare"``) under ``parser``."""
+    for word in command.split():
+        parser = parser.commands().get(word, parser)
+    return parser
 
 
 def _usage_error(prog: str, message: str) -> ConfigError:
     return _config(message, f"see `{prog} --help` for the options")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser() -> _Parser:
     parser = _Parser(prog="posecast", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -1318,10 +1426,12 @@ def _hint_for(exc: PosecastError, command: str) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     args: argparse.Namespace | None = None
     try:
-        args, extra = build_parser().parse_known_args(argv)
+        parser = build_parser()
+        args, extra = parser.parse_known_args(argv)
         if extra:  # named for the command they were given to, not for posecast's top level
-            prog = f"posecast {_command(args)}"
-            raise _usage_error(prog, f"unrecognized arguments: {' '.join(extra)}")
+            owner = _parser_for(parser, _command(args))
+            owner.print_usage(sys.stderr)
+            raise owner.refusal(extra, f"unrecognized arguments: {' '.join(extra)}")
         return int(args.func(args))
     except PosecastError as exc:
         print(f"posecast: error [{exc.code}]: {exc}", file=sys.stderr)
