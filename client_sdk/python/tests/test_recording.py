@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import tracemalloc
 from pathlib import Path
 
 import msgpack
@@ -16,6 +17,7 @@ from posecast_client.protocol import Limits, Member, Pose, Presence, Welcome
 from posecast_client.recording import (
     RecordingWriter,
     export_bvh,
+    open_recording,
     poses2bvh,
     read_recording,
     world_rotations,
@@ -94,6 +96,10 @@ def test_export_writes_one_file_per_player(tmp_path: Path) -> None:
     paths = export_bvh(read_recording(path), tmp_path / "out")
     assert sorted(paths) == ["a:b", "p-1"] and paths["a:b"].name == "a_b.bvh"
     assert all(read_bvh(p).n_frames == 30 for p in paths.values())
+    with open_recording(path) as reader:  # read record by record: the same files
+        streamed = export_bvh(reader, tmp_path / "streamed")
+    for player, p in paths.items():
+        assert streamed[player].read_bytes() == p.read_bytes()
 
 
 def test_players_whose_file_names_would_clash_each_get_a_file(tmp_path: Path) -> None:
@@ -121,15 +127,22 @@ def test_bytes_that_are_no_record_are_corrupt_not_a_cut_tail(tmp_path: Path) -> 
     w.close()
     data = path.read_bytes()
     record = len(msgpack.packb([0.5, encode(Presence("join", "lobby", "p-3", "P"))]))
-    middle = len(data) - 2 * record  # between the third and the fourth record
+    middle = len(data) - 2 * record  # between the second and the third record
     for junk in (b"\xc1", b"\xc6\x7f\xff\xff\xff", b"\x00"):  # reserved byte, 2 GB bin, an int
         path.write_bytes(data[:middle] + junk + data[middle:])
         with pytest.raises(RecordingError, match="corrupt"):
             read_recording(path)
+        got = []  # read record by record: the records before the junk, then the error
+        with open_recording(path) as reader, pytest.raises(RecordingError, match="corrupt"):
+            for _, m in reader:
+                got.append(m)
+        assert [m.player for m in got] == ["p-0", "p-1"]
     header = len(data) - 4 * record
     for cut in range(header, len(data) + 1):  # a cut anywhere after the header is a tail
         path.write_bytes(data[:cut])
         assert len(read_recording(path).messages) == (cut - header) // record
+        with open_recording(path) as reader:
+            assert sum(1 for _ in reader) == (cut - header) // record
 
 
 def test_export_follows_on_where_the_server_clock_jumps(tmp_path: Path) -> None:
@@ -143,3 +156,43 @@ def test_export_follows_on_where_the_server_clock_jumps(tmp_path: Path) -> None:
     _, fk_pos = read_bvh(tmp_path / "p.bvh").fk()
     want = np.stack([p.positions for p in before + after])
     np.testing.assert_allclose(fk_pos, want, atol=2e-5)
+
+
+def test_a_recording_is_read_record_by_record_in_memory_that_does_not_grow(
+    tmp_path: Path,
+) -> None:
+    """A recording of hours at 60 Hz must not be decoded into memory whole: reading
+    four times the records takes no more memory (read whole, it takes 1.6 kB a pose)."""
+    poses = walk_poses(1.0)
+
+    def peak(n: int) -> int:
+        path = tmp_path / f"{n}.pcrec"
+        w = RecordingWriter(path, url="ws://x/", room="r", flush_every=1024)
+        for k in range(n):
+            p = poses[k % len(poses)]
+            w.write(Pose("p-1", k, k / 60.0, p.positions, p.rotations), now=k / 60.0)
+        w.close()
+        tracemalloc.start()
+        try:
+            with open_recording(path) as reader:
+                assert reader.header["room"] == "r"
+                assert sum(isinstance(m, Pose) for _, m in reader) == n
+            return tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+
+    small, large = peak(500), peak(2000)
+    assert large - small < 100_000, (small, large)  # read whole: 2.4 MB more
+
+
+def test_a_file_that_is_no_recording_is_refused_on_opening(tmp_path: Path) -> None:
+    path = tmp_path / "x.pcrec"
+    for data, why in [
+        (msgpack.packb({"format": "other"}), "not a posecast recording"),
+        (msgpack.packb({"format": "posecast-recording", "version": 9}), "version 9 is not 1"),
+        (b"", "not a posecast recording"),
+        (b"\xc1", "corrupt"),
+    ]:
+        path.write_bytes(data)
+        with pytest.raises(RecordingError, match=why):
+            open_recording(path)  # (its file closed: -W error would see it left open)

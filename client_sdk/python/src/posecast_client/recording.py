@@ -14,6 +14,10 @@
 A truncated last record (the recorder was killed) is ignored on reading; any other
 bytes that are not a record make the file corrupt.
 
+**Reading.** :func:`open_recording` reads a file record by record (memory stays flat
+however long the recording: hours at 60 Hz); :func:`read_recording` reads all of it
+into a :class:`Recording`. :func:`export_bvh` takes either.
+
 **BVH export** writes each player's poses on the canonical 19-joint skeleton at the
 room's pose rate, one frame per tick (``pose.t``; a tick without a pose for that
 player repeats the previous frame). Where a player's ``pose.t`` jumps by more than
@@ -29,8 +33,9 @@ leaf its parent's rotation.
 
 from __future__ import annotations
 
+import contextlib
 import time
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -48,6 +53,7 @@ from posecast_client.skeleton import JOINT_NAMES, PARENTS, children, reference_o
 FORMAT = "posecast-recording"
 VERSION = 1
 MAX_GAP_S = 10.0  # a longer jump of a player's pose.t is another clock, not a pause
+DEFAULT_RATE_HZ = 60.0  # the pose rate of a recording without a welcome
 
 
 class RecordingWriter:
@@ -93,31 +99,86 @@ class Recording:
     def rate_hz(self) -> float:
         """The room's pose rate, from the first ``welcome`` (60 without one)."""
         w = next((m for _, m in self.messages if isinstance(m, Welcome)), None)
-        return 60.0 if w is None else w.rate_hz
+        return DEFAULT_RATE_HZ if w is None else w.rate_hz
+
+
+class RecordingReader:
+    """A recording read one record at a time (see :func:`open_recording`).
+
+    ``header`` is read on opening; iterating gives each ``(t_s, message)`` (decoded)
+    as the file is read, once. Close it (or use ``with``) when done.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self._f: BinaryIO = self.path.open("rb")
+        try:
+            with _corrupt_is_recording_error(self.path):
+                self._items = _unpack(self._f)
+                header = next(self._items, None)
+                if not isinstance(header, dict) or header.get("format") != FORMAT:
+                    raise RecordingError(f"{path}: not a posecast recording")
+                if header.get("version") != VERSION:
+                    raise RecordingError(
+                        f"{path}: recording version {header.get('version')} is not {VERSION}"
+                    )
+        except BaseException:
+            self._f.close()
+            raise
+        self.header: dict[str, Any] = header
+        self._records = self._read()
+
+    def _read(self) -> Generator[tuple[float, Message], None, None]:
+        with _corrupt_is_recording_error(self.path):
+            for item in self._items:
+                t, data = item
+                yield float(t), decode(data)
+
+    def __iter__(self) -> Iterator[tuple[float, Message]]:
+        return self._records
+
+    def close(self) -> None:
+        self._records.close()
+        self._f.close()
+
+    def __enter__(self) -> RecordingReader:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def open_recording(path: str | Path) -> RecordingReader:
+    """Open a recording to read it record by record, in memory that does not grow with
+    its length::
+
+        with open_recording("lobby.pcrec") as rec:
+            for t_s, message in rec:
+                ...
+
+    A file that is not a recording (or of another version):
+    :class:`~posecast_client.errors.RecordingError` at once; a corrupt record: the same
+    error when the reading reaches it (a record cut short at the end is no error)."""
+    return RecordingReader(path)
 
 
 def read_recording(path: str | Path) -> Recording:
-    """Read a whole recording (messages decoded). A file that is not one, or is cut
-    short or corrupt: :class:`~posecast_client.errors.RecordingError`."""
-    with Path(path).open("rb") as f:
-        try:
-            items = _unpack(f)
-            header = next(items, None)
-            if not isinstance(header, dict) or header.get("format") != FORMAT:
-                raise RecordingError(f"{path}: not a posecast recording")
-            if header.get("version") != VERSION:
-                raise RecordingError(
-                    f"{path}: recording version {header.get('version')} is not {VERSION}"
-                )
-            rec = Recording(header)
-            for item in items:
-                t, data = item
-                rec.messages.append((float(t), decode(data)))
-        except (msgpack.UnpackException, ValueError, TypeError, PosecastClientError) as exc:
-            if isinstance(exc, RecordingError):
-                raise
-            raise RecordingError(f"{path}: a corrupt posecast recording ({exc!r})") from exc
-    return rec
+    """Read a whole recording (messages decoded) into memory; for a long one,
+    :func:`open_recording` reads it record by record. A file that is not one, or is
+    corrupt: :class:`~posecast_client.errors.RecordingError`."""
+    with open_recording(path) as reader:
+        return Recording(reader.header, list(reader))
+
+
+@contextlib.contextmanager
+def _corrupt_is_recording_error(path: Path) -> Iterator[None]:
+    """What msgpack and the decoder raise about the file's bytes, as a RecordingError."""
+    try:
+        yield
+    except RecordingError:
+        raise
+    except (msgpack.UnpackException, ValueError, TypeError, PosecastClientError) as exc:
+        raise RecordingError(f"{path}: a corrupt posecast recording ({exc!r})") from exc
 
 
 MAX_RECORD_BYTES = 1 << 20  # what the reader buffers: no message the recorder writes is near
@@ -221,8 +282,24 @@ def poses2bvh(poses: list[Pose], path: str | Path, rate_hz: float = 60.0) -> int
     return n
 
 
-def export_bvh(recording: Recording, out_dir: str | Path) -> dict[str, Path]:
+def _poses_and_rate(recording: Recording | RecordingReader) -> tuple[dict[str, list[Pose]], float]:
+    """Each player's poses and the room's pose rate, as :class:`Recording` gives them;
+    of a reader, in one pass that keeps the poses only."""
+    if isinstance(recording, Recording):
+        return recording.poses(), recording.rate_hz
+    poses: dict[str, list[Pose]] = {}
+    rate_hz: float | None = None
+    for _, m in recording:
+        if isinstance(m, Pose):
+            poses.setdefault(m.player, []).append(m)
+        elif rate_hz is None and isinstance(m, Welcome):
+            rate_hz = m.rate_hz
+    return poses, DEFAULT_RATE_HZ if rate_hz is None else rate_hz
+
+
+def export_bvh(recording: Recording | RecordingReader, out_dir: str | Path) -> dict[str, Path]:
     """Write ``<player>.bvh`` for every player in ``recording``; returns their paths.
+    A reader (:func:`open_recording`) is read to its end, keeping only the poses.
 
     ``:`` in an id becomes ``_`` (Windows refuses it in file names). Two players whose
     names would then be the same, or differ only in case (a case-insensitive file
@@ -232,7 +309,8 @@ def export_bvh(recording: Recording, out_dir: str | Path) -> dict[str, Path]:
     out.mkdir(parents=True, exist_ok=True)
     paths = {}
     taken: set[str] = set()
-    for player, poses in sorted(recording.poses().items()):
+    players, rate_hz = _poses_and_rate(recording)
+    for player, poses in sorted(players.items()):
         stem = base = player.replace(":", "_")
         k = 1
         while stem.lower() in taken:
@@ -240,6 +318,6 @@ def export_bvh(recording: Recording, out_dir: str | Path) -> dict[str, Path]:
             stem = f"{base}~{k}"
         taken.add(stem.lower())
         path = out / (stem + ".bvh")
-        poses2bvh(poses, path, recording.rate_hz)
+        poses2bvh(poses, path, rate_hz)
         paths[player] = path
     return paths

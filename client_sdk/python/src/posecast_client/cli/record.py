@@ -35,7 +35,7 @@ from posecast_client.cli.common import (
     usage_error,
 )
 from posecast_client.protocol import Error, Pose, Presence, Welcome
-from posecast_client.recording import RecordingWriter, export_bvh, read_recording
+from posecast_client.recording import RecordingWriter, export_bvh, open_recording
 from posecast_client.session import Reconnecting
 
 P = "posecast-record"  # the program, as its errors name it
@@ -121,7 +121,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             failure(P, exc, args.url)
     if args.bvh is not None:
         try:
-            exported = export_bvh(read_recording(path), args.bvh)
+            with open_recording(path) as recording:  # read record by record
+                exported = export_bvh(recording, args.bvh)
         except Exception as exc:
             failure(P, exc, args.url or "")
         for player, bvh in exported.items():
