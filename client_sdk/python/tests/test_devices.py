@@ -319,6 +319,81 @@ def test_hid_sites_reports(rng: np.random.Generator) -> None:
     assert dec.decode(bytes(bad)) is None and dec.stats.bad_checksum == 1
 
 
+PERIOD_US = 16_667  # a 60 Hz device
+
+
+def one_report(kind: str, seq: int, t_us: int) -> bytes:
+    """A version-1 (four slots) or tracker-set HID report; only its counters matter."""
+    if kind == "slots":
+        return encode_hid_report(seq, t_us, np.zeros((4, 3)), np.tile([0.0, 0.0, 0.0, 1.0], (4, 1)))
+    return encode_hid_sites_report(
+        seq, t_us, ["head"], np.zeros((1, 3)), np.array([[0, 0, 0, 1.0]])
+    )
+
+
+@pytest.mark.parametrize("kind", ["slots", "sites"])
+@pytest.mark.parametrize("uptime_s", [5.0, 3000.0, 4290.0])
+def test_a_device_reset_under_an_open_handle_carries_the_counters_on(
+    kind: str, uptime_s: float
+) -> None:
+    """A device that resets while the bridge holds it open starts seq and t_us over.
+    Read as a wrap, its device_t went up to 71.6 minutes ahead (71.5 after 5 s of
+    uptime; 21.6 after 3000 s; 5 s after 4290 s, just short of a wrap); it goes on by
+    the host's time between the reports instead, and seq by one."""
+    dec = HidReportDecoder()
+    host, up_us = 100.0, int(uptime_s * 1e6)
+    got = [
+        dec.decode(one_report(kind, 40 + k, up_us + k * PERIOD_US), host + k / 60) for k in range(3)
+    ]
+    got += [
+        dec.decode(one_report(kind, k, (k + 1) * PERIOD_US), host + (3 + k) / 60) for k in range(3)
+    ]
+    samples = [s for s in got if s is not None]
+    assert len(samples) == 6 and dec.stats.samples == 6
+    assert [s.device_seq for s in samples] == [40, 41, 42, 43, 44, 45]
+    steps = np.diff([s.device_t for s in samples if s.device_t is not None])
+    np.testing.assert_allclose(steps, [PERIOD_US * 1e-6] * 5, rtol=0, atol=1e-6)
+    assert dec.stats.device_resets == 1
+
+
+def test_without_host_times_a_clock_that_steps_back_is_a_reset() -> None:
+    dec = HidReportDecoder()
+    reports = [one_report("slots", 40 + k, 5_000_000 + k * PERIOD_US) for k in range(3)]
+    reports += [one_report("slots", k, (k + 1) * PERIOD_US) for k in range(3)]
+    samples = [dec.decode(r) for r in reports]
+    assert [s.device_seq for s in samples if s is not None] == [40, 41, 42, 43, 44, 45]
+    times = [s.device_t for s in samples if s is not None and s.device_t is not None]
+    np.testing.assert_allclose(np.diff(times), [PERIOD_US * 1e-6] * 5, rtol=0, atol=1e-9)
+    assert dec.stats.device_resets == 1
+
+
+def test_a_wrap_is_no_reset_even_for_reports_that_queued() -> None:
+    """The 32-bit clock wraps every 71.6 minutes; reports that waited in the host's queue
+    arrive together, their device times still a period apart. Neither is a reset."""
+    dec = HidReportDecoder()
+    start = 2**32 - 2 * PERIOD_US - 5
+    for k in range(6):
+        s = dec.decode(one_report("slots", 254 + k, start + k * PERIOD_US), 100.0 + (k // 3) / 60)
+        assert s is not None and s.device_t is not None
+        assert s.device_seq == 254 + k and s.device_t == pytest.approx(
+            (start + k * PERIOD_US) * 1e-6
+        )
+    assert dec.stats.device_resets == 0
+
+
+def test_the_hid_source_carries_on_over_a_device_reset() -> None:
+    """The bridge keeps the device open (no read failed): the decoder re-anchors."""
+    reports = [one_report("slots", 40 + k, 5_000_000 + k * PERIOD_US) for k in range(3)]
+    reports += [one_report("slots", k, (k + 1) * PERIOD_US) for k in range(3)]
+    source = HidTrackerSource(device=FakeHid(reports), timeout_ms=1)
+    got = asyncio.run(asyncio.wait_for(take(source, 6), 10.0))
+    assert [s.device_seq for s in got] == [40, 41, 42, 43, 44, 45]
+    assert source.stats.device_resets == 1 and source.stats.disconnects == 0
+    a, b = got[2], got[3]  # across the reset: the host's time between them
+    assert a.t is not None and b.t is not None and a.device_t is not None and b.device_t is not None
+    assert b.device_t - a.device_t == pytest.approx(max(b.t - a.t, 1e-6), abs=1e-6)
+
+
 def test_a_sites_source_refuses_four_slot_frames_and_reorders_sets() -> None:
     ts = TrackerSet.parse(PLAYER_SET)
     v, q = np.zeros((6, 3)), np.tile([0.0, 0.0, 0.0, 1.0], (6, 1))

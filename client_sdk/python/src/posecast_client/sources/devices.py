@@ -11,7 +11,10 @@ it in use. A device that fails (unplugged, reset: the read raises ``OSError``) i
 closed and, when the source opened it (by URL, or by USB ids), reopened every
 ``reopen_s`` seconds until it is back, each failure counted in
 ``stats.disconnects``; the bytes of a frame the failure cut are dropped. A device
-object passed in is not reopened: its failure ends the iteration with the error.
+object passed in is not reopened: its failure ends the iteration with the error. A
+HID device that resets with no read failing starts its counters over under the open
+handle: the decoder carries them on (``stats.device_resets``, see
+:class:`~posecast_client.sources.framing.HidReportDecoder`).
 
 pyserial and hidapi are optional (``pip install posecast-client[serial,hid]``);
 tests pass a device object instead (pyserial's ``loop://`` port, or any object with

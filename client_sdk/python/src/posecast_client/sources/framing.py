@@ -176,6 +176,7 @@ class FramingStats:
     bad_checksum: int = 0
     bad_payload: int = 0  # checksum fine but an unknown version/length or absurd values
     disconnects: int = 0  # the device failed (unplugged, reset): reopened when back
+    device_resets: int = 0  # HID: the device's counters started over under an open handle
 
 
 @dataclass
@@ -353,17 +354,58 @@ def encode_hid_sites_report(
     return bytes(report)
 
 
+RESET_SLACK_S = 1.0  # how far a report's t_us may run ahead of the host's clock (queued)
+
+
 @dataclass
 class HidReportDecoder:
-    """Decodes reports one by one; unwraps the 8-bit seq and 32-bit microsecond clock."""
+    """Decodes reports one by one; unwraps the 8-bit seq and 32-bit microsecond clock.
+
+    Between two reports the device's clock moves as the host's does (the host times
+    each report with ``now``); it may run ahead by :data:`RESET_SLACK_S`, for reports
+    that waited in the host's queue. A ``t_us`` further ahead than that, or behind,
+    is no wrap but a device reset under the open handle: read as a wrap it would put
+    ``device_t`` up to 71.6 minutes ahead. Both counters then carry on from where they
+    were (``t_us`` by the host's elapsed time, ``seq`` by one), counted in
+    ``stats.device_resets``. Without host times, only a ``t_us`` behind (by less than
+    half the wrap) is a reset, and the clock carries on by the last step.
+    """
 
     stats: FramingStats = field(default_factory=FramingStats)
-    _seq: int | None = None
+    _seq: int | None = None  # unwrapped, as the last sample gave them
     _t_us: int | None = None
+    _raw: tuple[int, int] = (0, 0)  # the last report's seq and t_us as sent
+    _now: float | None = None  # the host's time of the last report
+    _step_us: int = 0  # the last step of t_us between reports (not a reset)
 
     def reset(self) -> None:
         """Forget the counters: a device that came back starts them anew."""
-        self._seq = self._t_us = None
+        self._seq = self._t_us = self._now = None
+        self._step_us = 0
+
+    def _unwrap(self, seq8: int, t32: int, now: float | None) -> tuple[int, int, bool]:
+        """The unwrapped seq and t_us of a report, and whether the device reset."""
+        if self._seq is None or self._t_us is None:
+            return seq8, t32, False
+        step = (t32 - self._raw[1]) & 0xFFFFFFFF
+        host_us = None if now is None or self._now is None else (now - self._now) * 1e6
+        # Without host times, only a clock behind (by less than half the wrap) is a reset.
+        most_us = (1 << 31) - 1 if host_us is None else host_us + RESET_SLACK_S * 1e6
+        if step <= most_us:
+            return self._seq + ((seq8 - self._raw[0]) & 0xFF), self._t_us + step, False
+        gap = self._step_us if host_us is None else round(host_us)
+        return self._seq + 1, self._t_us + max(gap, 1), True
+
+    def _keep(
+        self, seq8: int, t32: int, now: float | None, seq: int, t_us: int, reset: bool
+    ) -> None:
+        """A good sample's counters become the ones the next report is read against."""
+        if reset:
+            self.stats.device_resets += 1
+        elif self._t_us is not None:
+            self._step_us = t_us - self._t_us
+        self._seq, self._t_us, self._raw, self._now = seq, t_us, (seq8, t32), now
+        self.stats.samples += 1
 
     def decode(self, report: bytes, now: float | None = None) -> TrackerSample | None:
         """A report in, its sample out (``None``, counted in ``stats``, if it is bad)."""
@@ -383,12 +425,9 @@ class HidReportDecoder:
             self.stats.bad_payload += 1
             return None
         _untracked_to_identity(pos, quat, valid)
-        self._seq = seq8 if self._seq is None else self._seq + ((seq8 - self._seq) & 0xFF)
-        self._t_us = t32 if self._t_us is None else self._t_us + ((t32 - self._t_us) & 0xFFFFFFFF)
-        self.stats.samples += 1
-        return TrackerSample(
-            pos, quat, valid, t=now, device_seq=self._seq, device_t=self._t_us * 1e-6
-        )
+        seq, t_us, reset = self._unwrap(seq8, t32, now)
+        self._keep(seq8, t32, now, seq, t_us, reset)
+        return TrackerSample(pos, quat, valid, t=now, device_seq=seq, device_t=t_us * 1e-6)
 
     def _sites(self, report: bytes, now: float | None) -> TrackerSample | None:
         if len(report) != HID_SITES_REPORT_BYTES:
@@ -408,14 +447,12 @@ class HidReportDecoder:
         codes = [r[0] for r in rows]
         unit = [ACC_UNIT if c & INERTIAL_BIT else 0.001 for c in codes]
         values = [[x * u for x in r[1:4]] for r, u in zip(rows, unit, strict=True)]
-        seq = seq8 if self._seq is None else self._seq + ((seq8 - self._seq) & 0xFF)
-        t_us = t32 if self._t_us is None else self._t_us + ((t32 - self._t_us) & 0xFFFFFFFF)
+        seq, t_us, reset = self._unwrap(seq8, t32, now)
         sample = _sites_sample(
             codes, values, [r[4:] for r in rows], valid, n, now, seq, t_us * 1e-6
         )
         if sample is None:
             self.stats.bad_payload += 1
             return None
-        self._seq, self._t_us = seq, t_us
-        self.stats.samples += 1
+        self._keep(seq8, t32, now, seq, t_us, reset)
         return sample
