@@ -475,6 +475,45 @@ def test_serve_without_a_secret_is_a_config_error(capsys, monkeypatch) -> None:
 
 
 @pytest.mark.parametrize(
+    ("argv", "env", "said"),
+    [
+        (["--tick-hz", "nan"], {}, "--tick-hz nan must be in [1, 240]"),
+        ([], {"POSECAST_TICK_HZ": "nan"}, "POSECAST_TICK_HZ=nan must be in [1, 240]"),
+        (
+            ["--redis-timeout-s", "2"],
+            {},
+            "--redis-node-ttl-s 3 must be above timeout + max(heartbeat / 2 + timeout,"
+            " heartbeat) = 4.5 s, with --redis-timeout-s 2 and --redis-heartbeat-s 1",
+        ),
+        (["--redis", "redis://h:port/0"], {}, "--redis: Port could not be cast"),
+    ],
+)
+def test_serve_names_a_bad_setting_as_the_user_gave_it(
+    capsys, monkeypatch, argv: list[str], env: dict[str, str], said: str
+) -> None:
+    """``posecast serve --tick-hz nan`` said ``tick_hz must be in [1, 240]``."""
+    import os
+
+    for name in [k for k in os.environ if k.startswith("POSECAST_")]:
+        monkeypatch.delenv(name)
+    for name, value in env.items():
+        monkeypatch.setenv(name, value)
+    err = user_error(capsys, main(["serve", "--dev", *argv]), "CONFIG_INVALID")
+    assert f"posecast: error [CONFIG_INVALID]: {said}" in err, err
+    assert "tick_hz" not in err and "redis_" not in err, err
+
+
+def test_serve_names_a_models_dir_from_the_environment(capsys, monkeypatch) -> None:
+    import os
+
+    for name in [k for k in os.environ if k.startswith("POSECAST_")]:
+        monkeypatch.delenv(name)
+    monkeypatch.setenv("POSECAST_MODELS_DIR", "/no/such/models")
+    err = user_error(capsys, main(["serve", "--dev"]), "MODEL_INVALID")
+    assert "leave out POSECAST_MODELS_DIR" in err.splitlines()[-1], err
+
+
+@pytest.mark.parametrize(
     ("extra", "code"),
     [
         (["--port", "70000"], "CONFIG_INVALID"),

@@ -834,13 +834,20 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     import asyncio
     import os
 
-    from posecast.online.config import MIN_SECRET_CHARS, ServerConfig, unknown_variables
+    from posecast.online.config import (
+        FLAGS_GIVEN,
+        MIN_SECRET_CHARS,
+        ServerConfig,
+        unknown_variables,
+    )
     from posecast.online.shell.app import serve_until_signal
     from posecast.online.shell.logging import configure
 
-    overrides = {k: v for k, v in vars(args).items() if k not in ("command", "func")}
-    try:
-        cfg = ServerConfig.from_sources(os.environ, overrides)
+    flags: dict[str, str] = getattr(args, FLAGS_GIVEN, None) or {}
+    skip = ("command", "func", FLAGS_GIVEN)
+    overrides = {k: v for k, v in vars(args).items() if k not in skip}
+    try:  # an error names each setting as typed: its flag, else its POSECAST_* variable
+        cfg = ServerConfig.from_sources(os.environ, overrides, flags)
     except ConfigError as exc:
         if "token secret" in exc.message:
             hint = (
@@ -850,7 +857,10 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         else:
             hint = "set it by its flag or POSECAST_* variable: see `posecast serve --help`"
         raise _hinted(exc, hint + " (docs/server.md)") from None
-    _models_dir(Path(cfg.models_dir) if cfg.models_dir else None, "--models-dir")
+    models_dir = flags.get("models_dir") or (
+        "POSECAST_MODELS_DIR" if os.environ.get("POSECAST_MODELS_DIR") else "--models-dir"
+    )
+    _models_dir(Path(cfg.models_dir) if cfg.models_dir else None, models_dir)
     configure(cfg.log_level)
     for name, meant in unknown_variables(os.environ).items():
         logging.getLogger("posecast.server").warning(

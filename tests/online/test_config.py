@@ -10,7 +10,13 @@ from pathlib import Path
 import pytest
 
 from posecast.errors import ConfigError
-from posecast.online.config import ServerConfig, add_arguments, option_help, unknown_variables
+from posecast.online.config import (
+    FLAGS_GIVEN,
+    ServerConfig,
+    add_arguments,
+    option_help,
+    unknown_variables,
+)
 
 SECRET = "s" * 32
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "server.md"
@@ -87,10 +93,104 @@ def test_limits_follow_the_config() -> None:
 def test_every_option_has_a_flag_except_the_secret() -> None:
     parser = argparse.ArgumentParser()
     add_arguments(parser)
-    args = vars(parser.parse_args(["--max-rate-hz", "30", "--dev"]))
+    args = vars(parser.parse_args(["--max-rate-hz", "30", "--dev", "--redis", "redis://r"]))
     assert args["max_rate_hz"] == 30 and args["dev"] is True and args["port"] is None
     assert "token_secret" not in args
+    # Each flag typed is recorded as typed (an alias too), for the errors.
+    given = args.pop(FLAGS_GIVEN)
+    assert given == {"max_rate_hz": "--max-rate-hz", "dev": "--dev", "redis_url": "--redis"}
     assert set(args) == {f.name for f in fields(ServerConfig)} - {"token_secret"}
+    assert FLAGS_GIVEN not in vars(parser.parse_args([]))
+
+
+def _flags(*argv: str) -> tuple[dict[str, object], dict[str, str]]:
+    """The overrides and the flags as typed that ``posecast serve argv`` gives."""
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    args = vars(parser.parse_args(argv))
+    return args, args.pop(FLAGS_GIVEN, {})
+
+
+@pytest.mark.parametrize(
+    ("argv", "said"),
+    [
+        (["--tick-hz", "nan"], "--tick-hz nan must be in [1, 240]"),
+        (["--tick", "500"], "--tick-hz 500 must be in [1, 240]"),  # an abbreviation: the flag
+        (["--port", "70000"], "--port 70000 must be in [0, 65535]"),
+        (["--samples", "0"], "--samples 0 must be >= 1"),
+        (["--engine-threads", "65"], "--engine-threads 65 must be in [1, 64]"),
+        (["--slow-consumer-s", "0"], "--slow-consumer-s 0 must be > 0"),
+        (["--max-players-per-room", "33"], "--max-players-per-room 33 must be in [1, 32]"),
+        (["--log-level", "LOUD"], "--log-level 'LOUD' unknown: one of DEBUG, INFO"),
+        (["--node-id", "a b"], "--node-id 'a b' must be 1 to 64 of"),
+        # The URL may carry a password: named, never shown; by the alias typed.
+        (["--redis", "redis://u:pw@h:port/0"], "--redis: Port could not"),
+        (["--redis-url", "http://u:pw@h/0"], "--redis-url must start with redis://"),
+    ],
+)
+def test_a_bad_flag_is_named_as_typed_with_its_range(argv: list[str], said: str) -> None:
+    """``posecast serve --tick-hz nan`` said ``tick_hz must be in [1, 240]``: the field,
+    not the flag typed."""
+    overrides, flags = _flags(*argv)
+    env = {"POSECAST_TOKEN_SECRET": SECRET}
+    with pytest.raises(ConfigError) as info:
+        ServerConfig.from_sources(env, overrides, flags)
+    assert info.value.code == "CONFIG_INVALID"
+    assert str(info.value).startswith(said), str(info.value)
+    assert "pw" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("var", "raw", "said"),
+    [
+        ("POSECAST_TICK_HZ", "nan", "POSECAST_TICK_HZ=nan must be in [1, 240]"),
+        ("POSECAST_SAMPLES", "100000000", "POSECAST_SAMPLES=100000000 must be in [1, 4096]"),
+        ("POSECAST_WRIST_ELBOW", "1.5", "POSECAST_WRIST_ELBOW=1.5 must be a share in [0, 1]"),
+        ("POSECAST_LAYOUTS", "hmd4", "POSECAST_LAYOUTS='hmd4' must be a comma-separated"),
+        ("POSECAST_TOKEN_SECRET", "short", "POSECAST_TOKEN_SECRET has 5 characters"),
+        ("POSECAST_REDIS_URL", "http://u:pw@h/0", "POSECAST_REDIS_URL must start with"),
+    ],
+)
+def test_a_bad_variable_is_named_as_set(var: str, raw: str, said: str) -> None:
+    env = {"POSECAST_TOKEN_SECRET": SECRET, var: raw}
+    with pytest.raises(ConfigError) as info:
+        ServerConfig.from_sources(env)
+    assert str(info.value).startswith(said), str(info.value)
+    assert "pw" not in str(info.value) and "short" not in str(info.value)
+
+
+def test_a_flag_is_named_over_the_variable_it_beats() -> None:
+    env = {"POSECAST_TOKEN_SECRET": SECRET, "POSECAST_TICK_HZ": "60"}
+    with pytest.raises(ConfigError, match=r"^--tick-hz 0\.5 must"):
+        ServerConfig.from_sources(env, *_flags("--tick-hz", "0.5"))
+
+
+def test_a_cross_field_error_names_both_options_as_given() -> None:
+    """The node TTL against the Redis timeout: each named as the user gave it, one
+    left at its default in the way the user sets the others."""
+    env = {"POSECAST_TOKEN_SECRET": SECRET}
+    with pytest.raises(ConfigError) as info:
+        ServerConfig.from_sources(env, *_flags("--redis-timeout-s", "2"))
+    assert str(info.value) == (
+        "--redis-node-ttl-s 3 must be above timeout + max(heartbeat / 2 + timeout,"
+        " heartbeat) = 4.5 s, with --redis-timeout-s 2 and --redis-heartbeat-s 1: lower"
+        " --redis-timeout-s or raise --redis-node-ttl-s"
+    )
+    # A container sets variables only: the default one is named by its variable too.
+    with pytest.raises(ConfigError) as info:
+        ServerConfig.from_sources({**env, "POSECAST_REDIS_TIMEOUT_S": "2"})
+    text = str(info.value)
+    assert text.startswith("POSECAST_REDIS_NODE_TTL_S=3 must be above"), text
+    assert "with POSECAST_REDIS_TIMEOUT_S=2 and POSECAST_REDIS_HEARTBEAT_S=1" in text, text
+    assert "redis_" not in text, "a field's name, not what the user set"
+    # Both sources at once; the TTL that must be twice the heartbeat names both.
+    with pytest.raises(ConfigError) as info:
+        env2 = {**env, "POSECAST_REDIS_HEARTBEAT_S": "1"}
+        ServerConfig.from_sources(env2, *_flags("--redis-node-ttl-s", "1.5"))
+    assert str(info.value) == (
+        "--redis-node-ttl-s 1.5 must be at least twice POSECAST_REDIS_HEARTBEAT_S=1: lower"
+        " POSECAST_REDIS_HEARTBEAT_S or raise --redis-node-ttl-s"
+    )
 
 
 def test_docs_table_lists_every_option_with_env_and_default() -> None:
@@ -143,7 +243,7 @@ def test_the_node_key_must_outlive_the_slowest_round_trips() -> None:
     """Refreshes reach Redis up to timeout + max(heartbeat / 2 + timeout, heartbeat)
     apart (docs/scale-out.md, "A slow Redis"): a TTL not above that is refused."""
     ServerConfig(token_secret=SECRET)  # the defaults: 1 + max(0.5 + 1, 1) = 2.5 s < 3 s
-    with pytest.raises(ConfigError, match=r"redis_node_ttl_s \(3 s\).* = 4\.5 s"):
+    with pytest.raises(ConfigError, match=r"redis_node_ttl_s=3 .* = 4\.5 s"):
         ServerConfig(token_secret=SECRET, redis_timeout_s=2.0)
     ServerConfig(token_secret=SECRET, redis_timeout_s=2.0, redis_node_ttl_s=4.6)
 

@@ -3,8 +3,10 @@
 Every field can be set by a ``posecast serve`` flag (``--max-rate-hz``) or an
 environment variable (``POSECAST_MAX_RATE_HZ``); a flag beats the environment,
 which beats the default. :meth:`ServerConfig.from_sources` is the only place that
-reads either; nothing below it looks at ``os.environ``. ``docs/server.md`` lists
-every option (a test keeps the table in sync with this class).
+reads either; nothing below it looks at ``os.environ``. A bad value is named as the
+user gave it (``--tick-hz nan``, ``POSECAST_TICK_HZ=nan``): the edge passes in where
+each value came from. ``docs/server.md`` lists every option (a test keeps the table
+in sync with this class).
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import dataclasses
 import math
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import InitVar, dataclass, field, fields
 from typing import Any
 from urllib.parse import urlsplit
 
@@ -23,13 +25,14 @@ from posecast.online.auth.tokens import new_secret
 from posecast.online.engine.backend import BACKENDS, MAX_THREADS
 from posecast.online.engine.config import MAX_SAMPLES
 from posecast.online.engine.upper_ik import WRIST_ELBOW_SHARE
-from posecast.online.protocol.messages import MAX_LOOKAHEAD_FRAMES, Limits
+from posecast.online.protocol.messages import LIMIT_RANGES, MAX_LOOKAHEAD_FRAMES, Limits
 from posecast.tracking.layouts import Layout
 
 ENV_PREFIX = "POSECAST_"
 _ID = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 MIN_SECRET_CHARS = 16
 MAX_SNDBUF_BYTES = 2**31 - 1  # SO_SNDBUF is a C int
+LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
 
 
 def _opt(default: Any, help: str, flags: tuple[str, ...] = (), **extra: Any) -> Any:
@@ -170,75 +173,13 @@ class ServerConfig:
     redis_timeout_s: float = _opt(1.0, "seconds one Redis round trip may take before a reconnect")
     redis_backoff_max_s: float = _opt(5.0, "longest wait between Redis reconnect attempts")
 
-    def __post_init__(self) -> None:
-        if not self.token_secret:
-            raise ConfigError(
-                "no token secret: set POSECAST_TOKEN_SECRET (or pass --dev to invent one)"
-            )
-        if len(self.token_secret) < MIN_SECRET_CHARS:
-            raise ConfigError(f"the token secret must be at least {MIN_SECRET_CHARS} characters")
-        if not 0 <= self.port <= 65535:
-            raise ConfigError(f"port {self.port} outside [0, 65535]")
-        if not 1.0 <= self.tick_hz <= 240.0:
-            raise ConfigError("tick_hz must be in [1, 240]")
-        positive = (
-            "samples engine_threads rate_burst max_rooms max_connections conn_per_ip_per_min "
-            "sockets_per_ip fatal_per_ip_per_min reliable_queue replay_cache "
-            "max_watchers_per_room frame_queue"
-        )
-        for name in positive.split():
-            if getattr(self, name) < 1:
-                raise ConfigError(f"{name} must be >= 1")
-        seconds = (
-            "token_leeway_s control_rate_hz error_rate_hz accepts_per_s slow_consumer_s "
-            "hello_timeout_s idle_timeout_s drain_timeout_s close_timeout_s redis_heartbeat_s "
-            "redis_timeout_s redis_backoff_max_s"
-        )
-        for name in seconds.split():
-            if not getattr(self, name) > 0:
-                raise ConfigError(f"{name} must be > 0")
-        if self.engine_threads > MAX_THREADS:
-            raise ConfigError(f"engine_threads must be <= {MAX_THREADS}")
-        if not 0 <= self.socket_sndbuf_bytes <= MAX_SNDBUF_BYTES:
-            raise ConfigError(f"socket_sndbuf_bytes must be in [0, {MAX_SNDBUF_BYTES}]")
-        if not 0.0 <= self.wrist_elbow <= 1.0:
-            raise ConfigError("wrist_elbow must be a share between 0 and 1")
-        if self.samples > MAX_SAMPLES:
-            raise ConfigError(f"samples must be <= {MAX_SAMPLES}")
-        if not 0 <= self.lookahead <= MAX_LOOKAHEAD_FRAMES:  # welcome.lookahead_frames
-            raise ConfigError(f"lookahead must be in [0, {MAX_LOOKAHEAD_FRAMES}] frames")
-        if self.backend not in BACKENDS:
-            raise ConfigError(f"backend {self.backend!r} unknown: one of {', '.join(BACKENDS)}")
-        if self.log_level.upper() not in ("DEBUG", "INFO", "WARNING", "ERROR"):
-            raise ConfigError(f"log_level {self.log_level!r} unknown")
-        if not math.isfinite(self.redis_node_ttl_s):
-            raise ConfigError("redis_node_ttl_s must be a finite number of seconds")
-        if self.redis_node_ttl_s < 2 * self.redis_heartbeat_s:
-            raise ConfigError("redis_node_ttl_s must be at least twice redis_heartbeat_s")
-        # The node key's refreshes reach Redis at most this far apart while every round
-        # trip answers within redis_timeout_s (docs/scale-out.md, "A slow Redis"): a
-        # shorter TTL lets a live node's key lapse, and other nodes reap its players.
-        hb, rt = self.redis_heartbeat_s, self.redis_timeout_s
-        gap = rt + max(hb / 2 + rt, hb)
-        if not self.redis_node_ttl_s > gap:
-            raise ConfigError(
-                f"redis_node_ttl_s ({self.redis_node_ttl_s:g} s) must be above redis_timeout_s"
-                f" + max(redis_heartbeat_s / 2 + redis_timeout_s, redis_heartbeat_s) ="
-                f" {gap:g} s: lower redis_timeout_s or raise redis_node_ttl_s"
-            )
-        if self.redis_url and not self.redis_url.startswith(("redis://", "rediss://", "unix://")):
-            raise ConfigError("redis_url must start with redis://, rediss:// or unix://")
-        try:  # a port that is not a number fails here, not in the bus's endless retries
-            _ = urlsplit(self.redis_url).port
-        except ValueError as exc:
-            raise ConfigError(f"redis_url: {exc}") from None
-        if not _ID.fullmatch(self.node_id or "x") or not _ID.fullmatch(self.redis_prefix):
-            raise ConfigError("node_id and redis_prefix: 1 to 64 of A-Z a-z 0-9 _ . -")
-        served = self._layout_names()
-        known = tuple(Layout)
-        if not served or any(x not in known for x in served) or len(set(served)) < len(served):
-            raise ConfigError(f"layouts: a comma-separated subset of {', '.join(known)}")
-        self.limits()  # the protocol ranges (message size, rate, room size) hold
+    # How the user gave each setting (``--tick-hz``, ``POSECAST_TICK_HZ``), for the
+    # errors of the checks below; a setting not in it is named by its field. Not a field:
+    # :meth:`from_sources` passes it in, nothing keeps it.
+    sources: InitVar[Mapping[str, str] | None] = None
+
+    def __post_init__(self, sources: Mapping[str, str] | None) -> None:
+        _check(self, _Named(self, sources or {}))
 
     @property
     def served_layouts(self) -> tuple[Layout, ...]:
@@ -264,30 +205,168 @@ class ServerConfig:
 
     @classmethod
     def from_sources(
-        cls, env: Mapping[str, str], overrides: Mapping[str, Any] | None = None
+        cls,
+        env: Mapping[str, str],
+        overrides: Mapping[str, Any] | None = None,
+        flags: Mapping[str, str] | None = None,
     ) -> ServerConfig:
         """Defaults, then ``POSECAST_*`` from ``env``, then non-``None`` ``overrides``.
 
-        With ``dev`` on and no secret anywhere, a random secret is invented (the
-        caller prints it). Raises :class:`ConfigError` for any bad value.
+        ``flags`` maps each override the user typed to the flag as typed
+        (``{"redis_url": "--redis"}``, what :func:`add_arguments` records), so that an
+        error names the setting as it was given: that flag, else its ``POSECAST_*``
+        variable; other overrides are named by their field. With ``dev`` on and no
+        secret anywhere, a random secret is invented (the caller prints it). Raises
+        :class:`ConfigError` for any bad value.
         """
         values: dict[str, Any] = {}
+        given: dict[str, str] = {}
         for f in fields(cls):
-            raw = env.get(ENV_PREFIX + f.name.upper())
+            raw = env.get(_variable(f.name))
             if raw is not None and raw != "":
                 values[f.name] = _parse(f, raw)
+                given[f.name] = _variable(f.name)
         for name, value in (overrides or {}).items():
             if value is not None:
                 values[name] = value
+                given[name] = (flags or {}).get(name, name)
         if values.get("dev") and not values.get("token_secret"):
             values["token_secret"] = new_secret()
+        # A setting left at its default is named as the user sets the others: by its
+        # variable when they gave only variables (a container), else by its flag.
+        by_variable = bool(given) and all(x.startswith(ENV_PREFIX) for x in given.values())
+        for f in fields(cls):
+            if f.name not in given:
+                flag = _flags(f)
+                given[f.name] = _variable(f.name) if by_variable or not flag else flag[0]
         try:
-            return cls(**values)
+            return cls(**values, sources=given)
         except TypeError as exc:  # an unknown override name: a programming error at the edge
             raise ConfigError(str(exc)) from None
 
     def replace(self, **changes: Any) -> ServerConfig:
         return dataclasses.replace(self, **changes)
+
+
+class _Named:
+    """How an error names a setting of ``cfg``: as ``sources`` says the user gave it
+    (``--tick-hz``, ``POSECAST_TICK_HZ``), else by its field (``tick_hz``)."""
+
+    def __init__(self, cfg: ServerConfig, sources: Mapping[str, str]) -> None:
+        self.cfg, self.sources = cfg, sources
+
+    def __call__(self, name: str) -> str:
+        """The setting's name, ``--tick-hz``."""
+        return self.sources.get(name, name)
+
+    def value(self, name: str) -> str:
+        """The setting with its value as a user writes it: ``--tick-hz nan``,
+        ``POSECAST_TICK_HZ=nan``, ``tick_hz=nan``."""
+        value = getattr(self.cfg, name)
+        text = f"{value:g}" if isinstance(value, float) else repr(value)
+        label = self(name)
+        return f"{label} {text}" if label.startswith("-") else f"{label}={text}"
+
+
+# The config's settings that are protocol limits (welcome.limits), by their Limits name.
+_LIMITS = {
+    "max_message_bytes": "max_message_bytes",
+    "max_rate_hz": "max_rate_hz",
+    "max_players_per_room": "max_players",
+    "max_watch_rooms": "max_watch_rooms",
+}
+_POSITIVE = (
+    "samples engine_threads rate_burst max_rooms max_connections conn_per_ip_per_min "
+    "sockets_per_ip fatal_per_ip_per_min reliable_queue replay_cache max_watchers_per_room "
+    "frame_queue"
+)
+_SECONDS = (
+    "token_leeway_s control_rate_hz error_rate_hz accepts_per_s slow_consumer_s "
+    "hello_timeout_s idle_timeout_s drain_timeout_s close_timeout_s redis_heartbeat_s "
+    "redis_timeout_s redis_backoff_max_s"
+)
+
+
+def _check(cfg: ServerConfig, n: _Named) -> None:
+    """Raise :class:`ConfigError` for the first bad setting of ``cfg``, each named by
+    ``n`` as the user gave it, with the range it must be in. Secrets (the token secret,
+    a Redis URL's password) are never shown."""
+    if not cfg.token_secret:
+        raise ConfigError(
+            "no token secret: set POSECAST_TOKEN_SECRET (or pass --dev to invent one)"
+        )
+    if len(cfg.token_secret) < MIN_SECRET_CHARS:
+        raise ConfigError(
+            f"{n('token_secret')} has {len(cfg.token_secret)} characters: the token secret"
+            f" must be at least {MIN_SECRET_CHARS}"
+        )
+    if not 0 <= cfg.port <= 65535:
+        raise ConfigError(f"{n.value('port')} must be in [0, 65535]")
+    if not 1.0 <= cfg.tick_hz <= 240.0:
+        raise ConfigError(f"{n.value('tick_hz')} must be in [1, 240]")
+    for name in _POSITIVE.split():
+        if getattr(cfg, name) < 1:
+            raise ConfigError(f"{n.value(name)} must be >= 1")
+    for name in _SECONDS.split():
+        if not getattr(cfg, name) > 0:
+            raise ConfigError(f"{n.value(name)} must be > 0")
+    if cfg.engine_threads > MAX_THREADS:
+        raise ConfigError(f"{n.value('engine_threads')} must be in [1, {MAX_THREADS}]")
+    if not 0 <= cfg.socket_sndbuf_bytes <= MAX_SNDBUF_BYTES:
+        raise ConfigError(f"{n.value('socket_sndbuf_bytes')} must be in [0, {MAX_SNDBUF_BYTES}]")
+    if not 0.0 <= cfg.wrist_elbow <= 1.0:
+        raise ConfigError(f"{n.value('wrist_elbow')} must be a share in [0, 1]")
+    if cfg.samples > MAX_SAMPLES:
+        raise ConfigError(f"{n.value('samples')} must be in [1, {MAX_SAMPLES}]")
+    if not 0 <= cfg.lookahead <= MAX_LOOKAHEAD_FRAMES:  # welcome.lookahead_frames
+        raise ConfigError(f"{n.value('lookahead')} must be in [0, {MAX_LOOKAHEAD_FRAMES}] frames")
+    if cfg.backend not in BACKENDS:
+        raise ConfigError(f"{n.value('backend')} unknown: one of {', '.join(BACKENDS)}")
+    if cfg.log_level.upper() not in LOG_LEVELS:
+        raise ConfigError(f"{n.value('log_level')} unknown: one of {', '.join(LOG_LEVELS)}")
+    ttl, hb, rt = cfg.redis_node_ttl_s, cfg.redis_heartbeat_s, cfg.redis_timeout_s
+    if not math.isfinite(ttl):
+        raise ConfigError(f"{n.value('redis_node_ttl_s')} must be a finite number of seconds")
+    if ttl < 2 * hb:
+        raise ConfigError(
+            f"{n.value('redis_node_ttl_s')} must be at least twice"
+            f" {n.value('redis_heartbeat_s')}: lower {n('redis_heartbeat_s')} or raise"
+            f" {n('redis_node_ttl_s')}"
+        )
+    # The node key's refreshes reach Redis at most this far apart while every round
+    # trip answers within redis_timeout_s (docs/scale-out.md, "A slow Redis"): a
+    # shorter TTL lets a live node's key lapse, and other nodes reap its players.
+    gap = rt + max(hb / 2 + rt, hb)
+    if not ttl > gap:
+        raise ConfigError(
+            f"{n.value('redis_node_ttl_s')} must be above timeout + max(heartbeat / 2 +"
+            f" timeout, heartbeat) = {gap:g} s, with {n.value('redis_timeout_s')} and"
+            f" {n.value('redis_heartbeat_s')}: lower {n('redis_timeout_s')} or raise"
+            f" {n('redis_node_ttl_s')}"
+        )
+    # The URL is never shown: it may carry a password.
+    if cfg.redis_url and not cfg.redis_url.startswith(("redis://", "rediss://", "unix://")):
+        raise ConfigError(f"{n('redis_url')} must start with redis://, rediss:// or unix://")
+    try:  # a port that is not a number fails here, not in the bus's endless retries
+        _ = urlsplit(cfg.redis_url).port
+    except ValueError as exc:
+        raise ConfigError(f"{n('redis_url')}: {exc}") from None
+    for name in ("node_id", "redis_prefix"):
+        value = getattr(cfg, name)
+        if (value or name == "redis_prefix") and not _ID.fullmatch(value):
+            raise ConfigError(f"{n.value(name)} must be 1 to 64 of A-Z a-z 0-9 _ . -")
+    served = cfg._layout_names()
+    known = tuple(Layout)
+    if not served or any(x not in known for x in served) or len(set(served)) < len(served):
+        raise ConfigError(
+            f"{n.value('layouts')} must be a comma-separated subset of {', '.join(known)},"
+            " each once"
+        )
+    for name, limit in _LIMITS.items():  # the protocol's ranges (proto/README.md, Limits)
+        low, high = LIMIT_RANGES[limit]
+        if not low <= getattr(cfg, name) <= high:
+            raise ConfigError(f"{n.value(name)} must be in [{low}, {high}]")
+    cfg.limits()  # anything else Limits refuses (a value that is not an int)
 
 
 # POSECAST_* variables that are read elsewhere, not server settings: the SDK tools'
@@ -331,24 +410,61 @@ def option_help() -> list[tuple[str, str, str, str]]:
     return out
 
 
+# The attribute of the parsed namespace where add_arguments' flags record how they were
+# typed: {field: flag}, for ServerConfig.from_sources's flags (absent if none was).
+FLAGS_GIVEN = "config_flags_given"
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """One ``--flag`` per option (default ``None``: the environment or the default
-    decides). The token secret has no flag: command lines show up in ``ps``."""
+    decides). The token secret has no flag: command lines show up in ``ps``. Each
+    flag typed is recorded in ``args.<FLAGS_GIVEN>`` as typed (``--redis`` or
+    ``--redis-url``), for the errors of :meth:`ServerConfig.from_sources`."""
     for f in fields(ServerConfig):
-        if f.name == "token_secret":
+        flags = _flags(f)
+        if not flags:
             continue
-        flags = ("--" + f.name.replace("_", "-"), *f.metadata["flags"])
-        text = f"{f.metadata['help']} [{ENV_PREFIX}{f.name.upper()}, default {f.default!r}]"
+        text = f"{f.metadata['help']} [{_variable(f.name)}, default {f.default!r}]"
         if str(f.type) == "bool":
-            parser.add_argument(*flags, action="store_true", default=None, help=text)
+            parser.add_argument(*flags, action=_Flag, nargs=0, const=True, default=None, help=text)
         else:
             kind = {"int": int, "float": float}.get(str(f.type), str)
-            parser.add_argument(*flags, type=kind, default=None, help=text, metavar="V")
+            parser.add_argument(
+                *flags, action=_Flag, type=kind, default=None, help=text, metavar="V"
+            )
+
+
+class _Flag(argparse.Action):
+    """``store`` (``store_true`` with ``nargs=0``) that also records the flag as typed."""
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: Any,
+        option_string: str | None = None,
+    ) -> None:
+        setattr(namespace, self.dest, self.const if self.nargs == 0 else values)
+        given = dict(getattr(namespace, FLAGS_GIVEN, None) or {})
+        given[self.dest] = option_string or self.option_strings[0]
+        setattr(namespace, FLAGS_GIVEN, given)
+
+
+def _flags(f: dataclasses.Field[Any]) -> tuple[str, ...]:
+    """The option's command-line flags, its own first (none for the token secret)."""
+    if f.name == "token_secret":
+        return ()
+    return ("--" + f.name.replace("_", "-"), *f.metadata["flags"])
+
+
+def _variable(name: str) -> str:
+    """The option's environment variable, ``POSECAST_TICK_HZ``."""
+    return ENV_PREFIX + name.upper()
 
 
 def _parse(f: dataclasses.Field[Any], raw: str) -> Any:
     kind = str(f.type)
-    name = ENV_PREFIX + f.name.upper()
+    name = _variable(f.name)
     try:
         if kind == "bool":
             if raw.lower() in ("1", "true", "yes", "on"):
