@@ -14,6 +14,16 @@ $(PY):
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 
+# make run needs only the serving install and the data extra (scipy: the demo's
+# generated walk derives its contact labels), about 0.4 GB; make test adds the [dev]
+# extra (torch for training and the parity tests, the gates, Redis; about 6 GB).
+RUN_STAMP := $(VENV)/.run-installed-$(shell cat pyproject.toml client_sdk/python/pyproject.toml | cksum | cut -d' ' -f1)
+
+$(RUN_STAMP): $(PY) pyproject.toml client_sdk/python/pyproject.toml
+	$(PY) -m pip install --quiet -e ".[data]" -e client_sdk/python
+	rm -f $(VENV)/.run-installed-*
+	touch $@
+
 $(STAMP): $(PY) pyproject.toml
 	$(PY) -m pip install --quiet -e ".[dev]" -e "client_sdk/python[serial,hid]"
 	rm -f $(VENV)/.installed-*
@@ -24,7 +34,7 @@ $(STAMP): $(PY) pyproject.toml
 NATIVE_SRC   := setup.py $(wildcard server/native/*.c server/native/*.h)
 NATIVE_STAMP := $(VENV)/.native-built
 
-$(NATIVE_STAMP): $(STAMP) $(NATIVE_SRC)
+$(NATIVE_STAMP): $(RUN_STAMP) $(NATIVE_SRC)
 	$(PY) -m pip install --quiet --no-deps -e .
 	$(PY) -c "from posecast import _native; print('posecast native kernels:', _native.isa())" \
 	  || echo "posecast: the native kernels did not build; the engine serves with the onnx backend"
@@ -65,7 +75,7 @@ cs-test: $(STAMP) $(NATIVE_STAMP)
 
 test: lint typecheck ts-test cs-test pytest
 
-run: $(STAMP) $(NATIVE_STAMP)
+run: $(RUN_STAMP) $(NATIVE_STAMP)
 	$(PY) -m posecast demo
 
 clean:
