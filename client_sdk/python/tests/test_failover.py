@@ -74,7 +74,9 @@ def test_no_url_is_refused() -> None:
 
 def test_when_no_url_opens_the_last_error_is_raised() -> None:
     async def main() -> None:
-        with pytest.raises(OSError):
-            await pc.connect([dead_url(), dead_url()], "token")
+        urls = [dead_url(), dead_url()]
+        with pytest.raises(pc.ConnectFailedError) as info:
+            await pc.connect(urls, "token")
+        assert info.value.url == urls[-1] and isinstance(info.value.__cause__, OSError)
 
     asyncio.run(main())

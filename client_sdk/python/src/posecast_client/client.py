@@ -41,6 +41,8 @@ import contextlib
 import inspect
 import logging
 import random
+import socket
+import ssl
 import time
 from collections import deque
 from collections.abc import (
@@ -53,18 +55,28 @@ from collections.abc import (
 )
 from types import TracebackType
 from typing import Any
+from urllib.parse import urlsplit
 
 import numpy as np
 from numpy.typing import ArrayLike
 from websockets.asyncio.client import ClientConnection
 from websockets.asyncio.client import connect as ws_connect
-from websockets.exceptions import ConnectionClosed, InvalidHandshake
+from websockets.exceptions import (
+    ConnectionClosed,
+    InvalidHandshake,
+    InvalidStatus,
+    InvalidURI,
+    WebSocketException,
+)
 from websockets.typing import Subprotocol
+from websockets.uri import parse_uri
 
 from posecast_client.clock import ClockSync
 from posecast_client.codec import decode, encode
 from posecast_client.errors import (
     ClientClosedError,
+    ConfigInvalidError,
+    ConnectFailedError,
     ConnectionLostError,
     ProtocolError,
     VersionUnsupportedError,
@@ -97,6 +109,132 @@ from posecast_client.sources.base import TrackerSample
 log = logging.getLogger("posecast_client")
 Token = str | Callable[[], str | Awaitable[str]]
 _TRANSPORT_ERRORS = (OSError, TimeoutError, ConnectionClosed, InvalidHandshake)
+
+
+EXAMPLE_URL = "ws://127.0.0.1:8765/"
+_TOKEN_HINT = (
+    "pass the join token: a string your backend minted (mint_token(...) for a dev server), "
+    "or a function returning one; an unset environment variable?"
+)
+
+
+def _what(value: object) -> str:
+    """How an unusable argument is named in an error: ``None``, ``an empty string``..."""
+    if value is None:
+        return "None"
+    if isinstance(value, str):
+        return "an empty string" if not value else "a blank string"
+    return f"a value of type {type(value).__name__}"
+
+
+def check_url(url: object) -> str:
+    """``url`` if the client can dial it: ``ws://`` or ``wss://``, a host, a port that
+    is a number up to 65535 (absent: 80 or 443), no ``#fragment``.
+
+    Raises:
+        ConfigInvalidError: anything else, before any dialing, with a hint (for an
+            ``http://`` URL its ``ws://`` twin; for ``host:port`` the ``ws://`` URL).
+    """
+    if not isinstance(url, str) or not url.strip():
+        raise ConfigInvalidError(
+            f"no server URL (got {_what(url)})",
+            hint=f"pass the server's WebSocket URL, such as {EXAMPLE_URL}; an unset "
+            "environment variable?",
+        )
+    text = url.strip()
+    parts = urlsplit(text)
+    scheme = parts.scheme.lower()
+    slashes = text[len(scheme) + 1 :].startswith("//")
+    if scheme in ("http", "https") and slashes:
+        twin = ("ws" if scheme == "http" else "wss") + text[len(scheme) :]
+        raise ConfigInvalidError(f"{url!r} is an HTTP URL, not a WebSocket one", hint=f"use {twin}")
+    if scheme not in ("ws", "wss") or not slashes:
+        hint = f"such as {EXAMPLE_URL}"
+        if "://" not in text and scheme not in ("ws", "wss", "http", "https"):  # host:port
+            hint = f"did you mean ws://{text}" + ("?" if "/" in text else "/?")
+        raise ConfigInvalidError(
+            f"{url!r} is not a WebSocket URL: it must start with ws:// (wss:// behind TLS)",
+            hint=hint,
+        )
+    if not parts.hostname:
+        raise ConfigInvalidError(f"{url!r} names no host", hint=f"such as {EXAMPLE_URL}")
+    try:
+        parts.port  # noqa: B018 (a property that checks the port)
+    except ValueError as exc:
+        raise ConfigInvalidError(
+            f"{url!r} has a bad port ({exc})", hint="a port is a number from 1 to 65535"
+        ) from exc
+    if parts.fragment or "#" in text:
+        raise ConfigInvalidError(
+            f"{url!r} has a #fragment, which a WebSocket URL may not",
+            hint="leave out the # and what follows it",
+        )
+    try:
+        parse_uri(url)  # what the WebSocket library itself takes, lest it refuse later
+    except (InvalidURI, ValueError) as exc:
+        raise ConfigInvalidError(
+            f"{url!r} is not a usable URL ({exc})", hint=f"such as {EXAMPLE_URL}"
+        ) from exc
+    return url
+
+
+def check_token(token: object) -> None:
+    """A token the client can send: a non-blank string, or a callable (its result is
+    checked at every join).
+
+    Raises:
+        ConfigInvalidError: ``None`` (an unset environment variable), an empty string,
+            bytes or anything else.
+    """
+    if callable(token) or (isinstance(token, str) and token.strip()):
+        return
+    raise ConfigInvalidError(f"no token (got {_what(token)})", hint=_TOKEN_HINT)
+
+
+_RUNNING = (
+    "is a posecast server running there, and reachable from here? `posecast serve --dev` starts one"
+)
+_STATUS_HINTS = {
+    429: "this address connected (or broke the protocol) too often: back off, try again later",
+    503: "the server is starting, busy or full: try again in a moment, with back-off",
+}
+
+
+def connect_failure(url: str, exc: BaseException, open_timeout_s: float) -> ConnectFailedError:
+    """The :class:`ConnectFailedError` for ``exc``, what opening ``url`` raised: the
+    reason in words, a hint, and the HTTP status when the server refused the upgrade."""
+    status: int | None = None
+    secure = urlsplit(url).scheme.lower() == "wss"
+    reason, hint = str(exc) or type(exc).__name__, _RUNNING
+    if isinstance(exc, InvalidStatus):
+        status = exc.response.status_code
+        said = exc.response.body.decode("utf-8", "replace").strip() if exc.response.body else ""
+        reason = f"the server refused the WebSocket upgrade with HTTP {status}"
+        if said:
+            reason += f" ({said.splitlines()[0][:120]})"
+        hint = _STATUS_HINTS.get(
+            status, f"is the URL a posecast WebSocket endpoint, such as {EXAMPLE_URL}?"
+        )
+    elif isinstance(exc, ConnectionRefusedError):
+        reason = "connection refused (nothing listens at that port)"
+    elif isinstance(exc, ssl.SSLCertVerificationError):
+        reason = f"TLS: the server's certificate is not accepted ({exc.verify_message})"
+        hint = "the certificate must be valid for the host and trusted here"
+    elif isinstance(exc, ssl.SSLError) or (secure and isinstance(exc, ConnectionResetError)):
+        reason = f"TLS failed ({getattr(exc, 'reason', None) or reason})"
+        hint = "does the server speak TLS at that port? one without TLS takes ws://"
+    elif isinstance(exc, socket.gaierror):
+        reason = f"the host name {urlsplit(url).hostname!r} does not resolve ({exc.strerror})"
+        hint = "check the host in the URL, and this machine's network"
+    elif isinstance(exc, TimeoutError):
+        reason = f"no WebSocket handshake within {open_timeout_s} s"
+        hint = "is the host reachable from here (a firewall, a VPN)? open_timeout_s allows longer"
+    elif isinstance(exc, InvalidHandshake):
+        reason = f"the WebSocket handshake failed ({exc})"
+        hint = f"is the URL a posecast WebSocket endpoint, such as {EXAMPLE_URL}?"
+    failed = ConnectFailedError(url, reason, hint=hint, status=status)
+    failed.__cause__ = exc
+    return failed
 
 
 def _retrieve(future: asyncio.Future[Any]) -> None:
@@ -148,9 +286,12 @@ class Client:
         seq0: int = 0,
         protocol: int = PROTOCOL_V2,
     ) -> None:
-        self.urls: tuple[str, ...] = (url,) if isinstance(url, str) else tuple(url)
-        if not self.urls:
-            raise ValueError("no server URL")
+        several = isinstance(url, Sequence) and not isinstance(url, str | bytes)
+        urls = tuple(url) if several else (url,)
+        if not urls:
+            raise ConfigInvalidError("no server URL", hint=f"pass one, such as {EXAMPLE_URL}")
+        self.urls: tuple[str, ...] = tuple(check_url(u) for u in urls)
+        check_token(token)
         self._url_index = 0
         self._token = token
         self.reconnect = reconnect
@@ -222,15 +363,18 @@ class Client:
         offered = [
             SUBPROTOCOLS[v] for v in sorted(SUBPROTOCOLS, reverse=True) if v <= self.protocol
         ]
-        ws = await ws_connect(
-            self.url,
-            subprotocols=[Subprotocol(p) for p in offered],
-            compression=None,  # poses are quantised binary: deflate costs CPU for little
-            open_timeout=self.open_timeout_s,
-            ping_interval=self.keepalive_s or None,
-            ping_timeout=self.keepalive_s or None,
-            max_size=65_536,  # messages are at most 16384 bytes; the codec says TOO_LARGE
-        )
+        try:
+            ws = await ws_connect(
+                self.url,
+                subprotocols=[Subprotocol(p) for p in offered],
+                compression=None,  # poses are quantised binary: deflate costs CPU for little
+                open_timeout=self.open_timeout_s,
+                ping_interval=self.keepalive_s or None,
+                ping_timeout=self.keepalive_s or None,
+                max_size=65_536,  # messages are at most 16384 bytes; the codec says TOO_LARGE
+            )
+        except (OSError, TimeoutError, WebSocketException) as exc:
+            raise connect_failure(self.url, exc, self.open_timeout_s) from exc
         if ws.subprotocol not in offered:
             await ws.close()
             raise VersionUnsupportedError(f"the server selected none of {offered}")
@@ -246,20 +390,35 @@ class Client:
         token = self._token() if callable(self._token) else self._token
         if inspect.isawaitable(token):
             token = await token
+        if not (isinstance(token, str) and token.strip()):
+            raise ConfigInvalidError(
+                f"the token function returned {_what(token)}",
+                hint="it must return the join token, a non-empty string",
+            )
         version = self._version_of(ws)
         self.session.connected(version)
-        await ws.send(encode(self.session.hello(str(token), **self._hello_args)))
-        async with asyncio.timeout(self.join_timeout_s):
-            while True:
-                data = await ws.recv()
-                if not isinstance(data, bytes):
-                    raise ConnectionLostError("the server sent a text message")
-                reply = classify_join_reply(decode(data, version=version))
-                if isinstance(reply, ProtocolError):
-                    raise reply
-                if reply is not None:
-                    self.session.receive(reply, time.monotonic())
-                    return reply
+        try:
+            await ws.send(encode(self.session.hello(token, **self._hello_args)))
+            async with asyncio.timeout(self.join_timeout_s):
+                while True:
+                    data = await ws.recv()
+                    if not isinstance(data, bytes):
+                        raise ConnectionLostError("the server sent a text message")
+                    reply = classify_join_reply(decode(data, version=version))
+                    if isinstance(reply, ProtocolError):
+                        raise reply
+                    if reply is not None:
+                        self.session.receive(reply, time.monotonic())
+                        return reply
+        except ConnectionClosed as exc:
+            why = exc.rcvd or "no close frame"
+            raise ConnectionLostError(
+                f"{self.url} closed the connection during the join ({why})"
+            ) from exc
+        except TimeoutError as exc:
+            raise ConnectionLostError(
+                f"no welcome from {self.url} within {self.join_timeout_s} s"
+            ) from exc
 
     async def join(
         self,
@@ -626,7 +785,7 @@ class Connecting:
             client._url_index = i
             try:
                 client._ws = await client._open()
-            except (OSError, TimeoutError, InvalidHandshake):
+            except ConnectFailedError:
                 if i == len(client.urls) - 1:
                     raise
                 continue
@@ -658,9 +817,14 @@ def connect(url: str | Sequence[str], token: Token, **options: Any) -> Connectin
     a sequence of the URLs of one cluster's nodes: failover, see :class:`Client`.
 
     Raises:
-        OSError, TimeoutError, websockets.InvalidHandshake: the server is unreachable
-            or refused the WebSocket (HTTP 429 when connecting too often, 503 when it
-            is not ready); with several URLs, the last one's error once none opened.
-            The first connection is never retried.
+        ConfigInvalidError: at once, before dialing: a URL that is not ``ws://`` or
+            ``wss://`` with a host (``http://...``, ``host:port``), or no token (``None``
+            from an unset environment variable, an empty string).
+        ConnectFailedError: the server is unreachable (refused, a name that does not
+            resolve, a timeout, TLS) or refused the WebSocket (``status`` 429 when
+            connecting too often, 503 when it is not ready); with several URLs, the
+            last one's once none opened. ``__cause__`` is the transport's exception. The
+            first connection is never retried.
+        VersionUnsupportedError: the server speaks neither protocol offered.
     """
     return Connecting(Client(url, token, **options))

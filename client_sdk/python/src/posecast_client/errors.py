@@ -7,7 +7,9 @@ refuses) are :class:`ProtocolError` subclasses, exactly one per code of
 
     PosecastClientError
     ├── ClientClosedError             the client was closed; it sends nothing more
+    ├── ConfigInvalidError            a URL or token the client cannot use (also a ValueError)
     ├── ConnectionLostError           the connection dropped without an error  retryable
+    │   └── ConnectFailedError        no WebSocket opened at url (refused, DNS, TLS, HTTP 429/503)
     ├── BvhError                      a BVH file cannot be read (file, line)
     ├── RecordingError                a file is not a posecast recording (also a ValueError)
     └── ProtocolError                 one per wire code: code, fatal, field, ref_seq
@@ -70,6 +72,35 @@ class ConnectionLostError(PosecastClientError):
     """
 
     retryable: ClassVar[bool] = True
+
+
+class ConfigInvalidError(PosecastClientError, ValueError):
+    """An argument the client cannot use, refused before it dials: a URL that is not
+    ``ws://`` or ``wss://`` with a host, or no token (``None``, empty, not a string).
+    Never retried. ``hint`` says what to pass instead; it ends the message too. A
+    ``ValueError`` too, as the client raised one before this class."""
+
+    retryable: ClassVar[bool] = False
+
+    def __init__(self, message: str, *, hint: str) -> None:
+        super().__init__(f"{message} (hint: {hint})")
+        self.hint = hint
+
+
+class ConnectFailedError(ConnectionLostError):
+    """No WebSocket session opened at ``url``: the connection was refused or timed out,
+    the host name did not resolve, TLS failed, or the server refused the upgrade
+    (``status``: its HTTP status, such as 429 when this address connects too often or
+    503 while the server is not ready). ``reason`` says which, ``hint`` what to check
+    (both are in the message); ``__cause__`` is the transport's own exception.
+
+    Retryable, as the lost connection it replaces: reconnects go on after it (the
+    first :func:`~posecast_client.connect` is not retried).
+    """
+
+    def __init__(self, url: str, reason: str, *, hint: str, status: int | None = None) -> None:
+        super().__init__(f"could not connect to {url}: {reason} (hint: {hint})")
+        self.url, self.reason, self.hint, self.status = url, reason, hint, status
 
 
 class RecordingError(PosecastClientError, ValueError):

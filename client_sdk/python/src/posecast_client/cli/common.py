@@ -17,11 +17,17 @@ import sys
 from collections.abc import Mapping
 from typing import Any, NoReturn
 
-from websockets.exceptions import InvalidHandshake, InvalidStatus, InvalidURI
+from websockets.exceptions import InvalidHandshake, InvalidURI
 
 from posecast_client.client import Client, connect
 from posecast_client.codec import ID_PATTERN
-from posecast_client.errors import BvhError, ConnectionLostError, ProtocolError, RecordingError
+from posecast_client.errors import (
+    BvhError,
+    ConnectFailedError,
+    ConnectionLostError,
+    ProtocolError,
+    RecordingError,
+)
 from posecast_client.protocol import MAX_ID_BYTES
 from posecast_client.tokens import MAX_TTL_S, mint_token, secret_problem
 
@@ -176,8 +182,8 @@ async def connect_patiently(url: str, token: str, tries: int = 8, **options: Any
     for attempt in range(tries):
         try:
             return await connect(url, token, **options)
-        except InvalidStatus as exc:
-            if exc.response.status_code not in (429, 503) or attempt == tries - 1:
+        except ConnectFailedError as exc:
+            if exc.status not in (429, 503) or attempt == tries - 1:
                 raise
         await asyncio.sleep(delay)
         delay = min(delay * 2, 8.0)
