@@ -184,7 +184,7 @@ class TooLargeError(ProtocolError):
 
 
 class UnknownTypeError(ProtocolError):
-    """The type names no v1 message."""
+    """The type names no message of the connection's protocol version (v1 or v2)."""
 
     code = "UNKNOWN_TYPE"
     decoder = True
@@ -230,7 +230,8 @@ class RateLimitedError(ProtocolError):
 
 
 class UnauthenticatedError(ProtocolError):
-    """The hello token is missing, malformed or its signature does not verify."""
+    """The hello token is missing, malformed or its signature does not verify, or a
+    session with it ended with bye or a kick (refused until the token expires)."""
 
     code = "UNAUTHENTICATED"
     fatal = True
@@ -250,7 +251,7 @@ class ForbiddenError(ProtocolError):
 
 
 class VersionUnsupportedError(ProtocolError):
-    """hello.version is not a version this peer speaks (v1 speaks only 1)."""
+    """hello.version is not the connection's version: 1 on posecast.v1, 2 on posecast.v2."""
 
     code = "VERSION_UNSUPPORTED"
     fatal = True
