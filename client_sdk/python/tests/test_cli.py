@@ -16,7 +16,7 @@ import pytest
 from posecast_client.bvh import read_bvh
 from posecast_client.cli import record, sim
 from posecast_client.protocol import Pose, Presence, Welcome
-from posecast_client.recording import read_recording
+from posecast_client.recording import RecordingWriter, read_recording
 from posecast_client.skeleton import JOINT_NAMES
 from posecast_client.tokens import mint_token
 from sdk_helpers import DevServer
@@ -303,3 +303,68 @@ def test_a_command_line_mistake_prints_a_code_and_a_hint(
     main = {"sim": sim.main, "record": record.main}[tool]
     err = _mistake(capsys, main, argv)
     assert f"posecast-{tool}: error [CONFIG_INVALID]: " in err and says in err, err
+
+
+def test_recording_a_room_nobody_is_in_says_so_and_names_the_rooms_with_players(
+    dev_server: DevServer, capsys: pytest.CaptureFixture[str], tmp_path: Path, uid: str
+) -> None:
+    """The README paired ``posecast-sim --rooms 2`` (rooms sim-0, sim-1) with
+    ``posecast-record --room lobby``: the recording caught nothing, said '1 messages'
+    and exited 0 without a word. It now warns, naming the room, and the hint names the
+    rooms that have players (a --dev server tells a loopback client); exit 0 still."""
+    env = dict(os.environ, POSECAST_URL=dev_server.url, POSECAST_TOKEN_SECRET=dev_server.secret)
+    players = subprocess.Popen(
+        [sys.executable, "-m", "posecast_client.cli.sim", "--players", "3", "--rooms", "2",
+         "--room-prefix", f"play-{uid}", "--duration", "30", "-q"],
+        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+    try:
+        for _ in range(100):  # until both rooms have their players (or 20 s)
+            rooms = dict(record.server_rooms(dev_server.url) or [])
+            if rooms.get(f"play-{uid}-0") == 2 and rooms.get(f"play-{uid}-1") == 1:
+                break
+            time.sleep(0.2)
+        bvh = tmp_path / "bvh"
+        code = record.main(["--url", dev_server.url, "--secret", dev_server.secret,
+                            "--room", f"lobby-{uid}", "--out", str(tmp_path / "l.pcrec"),
+                            "--seconds", "0.5", "--bvh", str(bvh)])  # fmt: skip
+    finally:
+        players.terminate()
+        players.wait(30)
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert "posecast-record: 1 message in " in err, err
+    assert f"posecast-record: warning: no player's pose was seen in room lobby-{uid}" in err
+    assert f"no BVH written to {bvh}" in err and not list(bvh.glob("*.bvh"))
+    hint = next(ln for ln in err.splitlines() if ln.startswith("hint: "))
+    assert f"play-{uid}-0 (2 players)" in hint and f"play-{uid}-1 (1 player)" in hint, hint
+    assert f"lobby-{uid}" not in hint
+
+
+def test_no_poses_hint_without_the_servers_rooms(capsys: pytest.CaptureFixture[str]) -> None:
+    """A server that does not list its rooms (not --dev, another host, none there):
+    the hint says to check the room name; players that joined but sent no pose are named."""
+    assert record.server_rooms("ws://127.0.0.1:9/") is None
+    hint = record.no_poses_hint("lobby", None)
+    assert "check the room name (--room lobby)" in hint and "sim-0, sim-1" in hint
+    assert "no room on this server has a player" in record.no_poses_hint("lobby", [("lobby", 0)])
+    many = [(f"r{k}", 1) for k in range(10)]
+    assert "r7 (1 player) and 2 more" in record.no_poses_hint("lobby", many)
+    seen = record.Seen(messages=3, players={"p-2", "p-1"}, seconds=2.0)
+    record.warn_no_poses("lobby", seen, "ws://127.0.0.1:9/", None)
+    err = capsys.readouterr().err
+    assert "warning: no player's pose was seen in room lobby in 2.0 s" in err
+    assert "(players were in it: p-1, p-2; none streamed)" in err and "\nhint: " in err
+
+
+def test_exporting_a_recording_without_poses_warns(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    rec = tmp_path / "empty.pcrec"
+    w = RecordingWriter(rec, url="ws://x/", room="lobby")
+    w.write(Presence("join", "lobby", "p-1", "P"))
+    w.close()
+    assert record.main(["--export", str(rec), "--bvh", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err
+    assert f"warning: {rec} (room lobby) holds no player's pose; no BVH written" in err, err
+    assert not list((tmp_path / "out").glob("*.bvh"))
