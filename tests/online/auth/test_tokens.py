@@ -115,6 +115,25 @@ def test_replay_guard_refuses_ended_tokens_until_they_expire() -> None:
     assert len(guard) == 0
 
 
+def test_replay_guard_holds_a_burned_token_through_the_verify_leeway() -> None:
+    # verify() accepts a token until exp + leeway: the guard must refuse it as long.
+    guard = ReplayGuard(capacity=10, leeway_s=5.0)
+    token = _token(ttl_s=100, jti="burned")
+    c = verify(SECRET, token, now=NOW)
+    guard.end(c, NOW)
+    late = NOW + 103  # past exp, within the leeway: verify still accepts the token
+    assert verify(SECRET, token, now=late, leeway_s=5.0).jti == "burned"
+    with pytest.raises(UnauthenticatedError, match="already used"):
+        guard.check(c, late)
+    guard.check(c, NOW + 105)  # past the leeway: verify refuses it anyway
+    assert len(guard) == 0
+    # A session ending inside the leeway still burns its token.
+    c2 = verify(SECRET, _token(ttl_s=100, jti="late"), now=NOW + 102, leeway_s=5.0)
+    guard.end(c2, NOW + 102)
+    with pytest.raises(UnauthenticatedError):
+        guard.check(c2, NOW + 104)
+
+
 def test_replay_guard_is_bounded_and_forgets_the_soonest_expiring() -> None:
     guard = ReplayGuard(capacity=3)
     claims = [

@@ -288,3 +288,31 @@ def test_a_round_trip_whose_replies_trickle_in_fails_at_the_timeout(
 
     took = asyncio.run(scenario())
     assert took < 1.5  # three parts 0.2 s apart, each in time: 0.6 s and more without it
+
+
+def test_burned_tokens_are_read_back_through_the_verify_leeway(
+    redis_server: RedisServer,  # noqa: F811
+) -> None:
+    """A node (re)connecting reads the cluster's burned tokens: one past its ``exp`` but
+    within ``token_leeway_s`` still passes verification, so it must still be read back
+    (and the bus's own record of burns must keep it for its write-back)."""
+    store = RedisStore("posecast", "node-n", 60.0, Metrics())
+    wall = time.time()
+    redis.Redis(port=redis_server.port).zadd(
+        store.burned_key, {"late": int(wall) - 2, "gone": int(wall) - 30}
+    )
+
+    async def read(leeway_s: float) -> list[str]:
+        client = Redis(port=redis_server.port)
+        try:
+            return [jti for jti, _ in await store.burns(client, 10, leeway_s)]
+        finally:
+            await client.aclose()
+
+    assert asyncio.run(read(5.0)) == ["late"]
+    assert asyncio.run(read(0.0)) == []  # and the zero-leeway read forgot it
+
+    bus = RedisBus(make_cfg(redis_url=redis_server.url, token_leeway_s=5.0), Metrics(), "n")
+    bus.burned("late2", int(time.time()) - 2)
+    bus.burned("gone2", int(time.time()) - 30)
+    assert list(bus._own.live(time.time())) == ["late2"]

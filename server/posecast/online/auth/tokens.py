@@ -183,24 +183,28 @@ def _claims(c: object) -> Claims:
 class ReplayGuard:
     """Token ids of sessions that ended (``bye``, kick), remembered until they expire.
 
+    "Expire" is as :func:`verify` sees it: ``exp`` plus the ``leeway_s`` it allows, so a
+    burned token is never accepted again in the leeway after its ``exp``.
     Bounded: past ``capacity`` entries, the one expiring soonest is forgotten first
     (it is the one whose replay window is shortest). Memory is O(capacity).
     """
 
     capacity: int = 100_000
-    _exp: dict[str, int] = field(default_factory=dict)
-    _heap: list[tuple[int, str]] = field(default_factory=list)
+    leeway_s: float = 0.0
+    _exp: dict[str, float] = field(default_factory=dict)
+    _heap: list[tuple[float, str]] = field(default_factory=list)
 
     def end(self, claims: Claims, now: float) -> None:
         """Burn ``claims.jti``: later ``hello``s with it are refused until it expires."""
         self._purge(now)
-        if claims.jti in self._exp or claims.exp <= now:
+        until = claims.exp + self.leeway_s
+        if claims.jti in self._exp or until <= now:
             return
         while len(self._exp) >= self.capacity:
             _, old = heapq.heappop(self._heap)
             self._exp.pop(old, None)
-        self._exp[claims.jti] = claims.exp
-        heapq.heappush(self._heap, (claims.exp, claims.jti))
+        self._exp[claims.jti] = until
+        heapq.heappush(self._heap, (until, claims.jti))
 
     def check(self, claims: Claims, now: float) -> None:
         """Raise UNAUTHENTICATED if ``claims.jti`` belongs to an ended session."""

@@ -62,16 +62,18 @@ class _Batch:
 
 class _Burns:
     """Burned token ids and their expiry (Unix s), bounded like the replay guard: the
-    expired are forgotten, and past ``capacity`` the one expiring soonest."""
+    expired are forgotten (``leeway_s`` after their ``exp``, as tokens are verified),
+    and past ``capacity`` the one expiring soonest."""
 
-    def __init__(self, capacity: int) -> None:
+    def __init__(self, capacity: int, leeway_s: float = 0.0) -> None:
         self.capacity = capacity
+        self.leeway_s = leeway_s
         self._exp: dict[str, int] = {}
         self._heap: list[tuple[int, str]] = []
 
     def add(self, jti: str, exp: int, wall: float) -> None:
         self._purge(wall)
-        if jti in self._exp or exp <= wall:
+        if jti in self._exp or exp + self.leeway_s <= wall:
             return
         while len(self._exp) >= max(self.capacity, 1):
             self._exp.pop(heapq.heappop(self._heap)[1], None)
@@ -83,7 +85,7 @@ class _Burns:
         return dict(self._exp)
 
     def _purge(self, wall: float) -> None:
-        while self._heap and self._heap[0][0] <= wall:
+        while self._heap and self._heap[0][0] + self.leeway_s <= wall:
             self._exp.pop(heapq.heappop(self._heap)[1], None)
 
 
@@ -114,8 +116,8 @@ class RedisBus(Bus):
         self._ctl = self.store.ctl_channel.encode()
         # Every burn this node knows (its own, heard, loaded), and its own: a Redis
         # restarted empty has lost the first, those burned while disconnected never went out.
-        self._burns = _Burns(cfg.replay_cache)
-        self._own = _Burns(cfg.replay_cache)
+        self._burns = _Burns(cfg.replay_cache, cfg.token_leeway_s)
+        self._own = _Burns(cfg.replay_cache, cfg.token_leeway_s)
         # Local players, (room, player) -> the number of the bus.joined() call that made
         # them (one counter, so "joined before that moment" is a comparison).
         self._seq = 0
@@ -380,7 +382,9 @@ class RedisBus(Bus):
             wall = time.time()
             own = self._own.live(wall)
             await self.store.reburn(client, self._burns.live(wall) | own, own)
-            for jti, exp in await self.store.burns(client, self.cfg.replay_cache):
+            for jti, exp in await self.store.burns(
+                client, self.cfg.replay_cache, self.cfg.token_leeway_s
+            ):
                 self._burns.add(jti, exp, wall)
                 sink.remote_burn(jti, exp, time.monotonic())
         claim: dict[str, Mapping[str, str]] | None = None

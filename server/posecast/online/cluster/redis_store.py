@@ -235,9 +235,12 @@ class RedisStore:
         others = alive - {self.node}
         return {room: {p: v for p, v in t.items() if v[0] in others} for room, t in tables.items()}
 
-    async def burns(self, client: Redis, limit: int) -> list[tuple[str, int]]:
-        """Token ids burned and not yet expired (and forget the expired ones)."""
-        wall = time.time()
+    async def burns(
+        self, client: Redis, limit: int, leeway_s: float = 0.0
+    ) -> list[tuple[str, int]]:
+        """Token ids burned and not yet expired, ``leeway_s`` after their ``exp`` as
+        tokens are verified (and forget the expired ones)."""
+        wall = time.time() - leeway_s
         pipe = client.pipeline(transaction=False)
         pipe.zremrangebyscore(self.burned_key, "-inf", wall)
         pipe.zrangebyscore(self.burned_key, wall, "+inf", start=0, num=limit, withscores=True)

@@ -61,7 +61,7 @@ class Hub:
         self.connections = Connections()
         self.inbox = EngineInbox(cfg.frame_queue)
         self.bus = bus or MemoryBus(clock=lambda: 0.0)
-        replay = ReplayGuard(cfg.replay_cache)
+        replay = ReplayGuard(cfg.replay_cache, cfg.token_leeway_s)
         self.router = Router(self.connections, self.rooms, self.remote, self.bus, metrics)
         self.sink = ClusterSink(
             self.connections, self.rooms, self.remote, self.router, replay, self.bus, metrics,
