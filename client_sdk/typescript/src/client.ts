@@ -32,6 +32,8 @@ import { AvatarTable } from "./avatars.js";
 import { ClockSync } from "./clock.js";
 import { decode, encode } from "./codec.js";
 import {
+  ConfigInvalidError,
+  ConnectFailedError,
   ConnectionClosedError,
   errorFromMessage,
   ForbiddenError,
@@ -134,6 +136,130 @@ const PING_BURST = 4; // pings right after each welcome, so the clock converges 
 const PING_BURST_GAP_S = 0.05;
 const RESYNC_GAP_S = 0.25; // at most one automatic resync this often (the server rate-limits them)
 const WS_OPEN = 1;
+const EXAMPLE_URL = "ws://127.0.0.1:8765/";
+const TOKEN_HINT =
+  "pass the join token: a string your backend minted, or a function returning one; " +
+  "an unset environment variable?";
+const RUNNING_HINT =
+  "is a posecast server running there, and reachable from here? `posecast serve --dev` starts one";
+const STATUS_HINTS: ReadonlyMap<number, string> = new Map([
+  [429, "this address connected (or broke the protocol) too often: back off, try again later"],
+  [503, "the server is starting, busy or full: try again in a moment, with back-off"],
+]);
+
+/** How an unusable argument is named in an error: `undefined`, `an empty string`... */
+function what(value: unknown): string {
+  if (value === undefined || value === null) return String(value);
+  if (typeof value === "string") return value === "" ? "an empty string" : "a blank string";
+  return `a value of type ${typeof value}`;
+}
+
+/**
+ * `url` if the client can dial it: `ws://` or `wss://`, a host, a port up to 65535
+ * (absent: 80 or 443), no `#fragment`; the Python and C# SDKs take the same.
+ *
+ * @throws ConfigInvalidError anything else, with a hint (an `http://` URL: its `ws://`
+ *   twin; `host:port`: the `ws://` URL).
+ */
+export function checkUrl(url: unknown): string {
+  if (typeof url !== "string" || url.trim() === "") {
+    throw new ConfigInvalidError(
+      `no server URL (got ${what(url)})`,
+      `pass the server's WebSocket URL, such as ${EXAMPLE_URL}; an unset environment variable?`,
+    );
+  }
+  const text = url.trim();
+  const m = /^([A-Za-z][A-Za-z0-9+.-]*):(\/\/)?/.exec(text);
+  const scheme = m?.[1]?.toLowerCase() ?? "";
+  const slashes = m?.[2] !== undefined;
+  const quoted = JSON.stringify(url);
+  if ((scheme === "http" || scheme === "https") && slashes) {
+    const twin = (scheme === "http" ? "ws" : "wss") + text.slice(scheme.length);
+    throw new ConfigInvalidError(`${quoted} is an HTTP URL, not a WebSocket one`, `use ${twin}`);
+  }
+  if ((scheme !== "ws" && scheme !== "wss") || !slashes) {
+    const hostPort = !text.includes("://") && !["ws", "wss", "http", "https"].includes(scheme);
+    throw new ConfigInvalidError(
+      `${quoted} is not a WebSocket URL: it must start with ws:// (wss:// behind TLS)`,
+      hostPort ? `did you mean ws://${text}${text.includes("/") ? "" : "/"}?` : `such as ${EXAMPLE_URL}`,
+    );
+  }
+  const authority = text.slice(scheme.length + 3).split(/[/?#]/, 1)[0]!;
+  const hostPort = authority.slice(authority.lastIndexOf("@") + 1);
+  const bracket = hostPort.startsWith("[") ? hostPort.indexOf("]") + 1 : 0;
+  const colon = hostPort.indexOf(":", bracket);
+  const host = colon < 0 ? hostPort : hostPort.slice(0, colon);
+  const port = colon < 0 ? "" : hostPort.slice(colon + 1);
+  if (host === "" || host === "[]") {
+    throw new ConfigInvalidError(`${quoted} names no host`, `such as ${EXAMPLE_URL}`);
+  }
+  if (port !== "" && !(/^[0-9]{1,5}$/.test(port) && Number(port) <= 65535)) {
+    throw new ConfigInvalidError(`${quoted} has a bad port (${port})`, "a port is a number from 1 to 65535");
+  }
+  if (text.includes("#")) {
+    throw new ConfigInvalidError(
+      `${quoted} has a #fragment, which a WebSocket URL may not`,
+      "leave out the # and what follows it",
+    );
+  }
+  return url;
+}
+
+/**
+ * A token the client can send: a non-blank string, or a function (its result is
+ * checked at every join).
+ *
+ * @throws ConfigInvalidError `undefined` (an unset environment variable), `null`, an
+ *   empty string, anything else.
+ */
+export function checkToken(token: unknown): void {
+  if (typeof token === "function" || (typeof token === "string" && token.trim() !== "")) return;
+  throw new ConfigInvalidError(`no token (got ${what(token)})`, TOKEN_HINT);
+}
+
+/**
+ * The {@link ConnectFailedError} for a socket that closed before it opened: its reason
+ * and hint from the error event before it, where the WebSocket class tells (`ws` and
+ * Node's WebSocket give the cause: ECONNREFUSED, ENOTFOUND, a TLS code, "Unexpected
+ * server response: 429"; a browser tells nothing).
+ */
+function connectFailure(url: string, errorEvent: unknown, closeCode: number): ConnectFailedError {
+  const ev = (errorEvent ?? {}) as { readonly error?: unknown; readonly message?: unknown };
+  const cause = ev.error;
+  const sysCode = String((cause as { code?: unknown } | undefined)?.code ?? "");
+  const text = String((cause as { message?: unknown } | undefined)?.message ?? ev.message ?? "");
+  const http = /Unexpected server response: (\d+)/.exec(text);
+  const more = { closeCode, cause };
+  if (http !== null) {
+    const status = Number(http[1]);
+    const hint = STATUS_HINTS.get(status) ?? `is the URL a posecast WebSocket endpoint, such as ${EXAMPLE_URL}?`;
+    return new ConnectFailedError(url, `the server refused the WebSocket upgrade with HTTP ${status}`, hint, {
+      ...more,
+      status,
+    });
+  }
+  if (sysCode === "ECONNREFUSED") {
+    return new ConnectFailedError(url, "connection refused (nothing listens at that port)", RUNNING_HINT, more);
+  }
+  if (sysCode === "ENOTFOUND" || sysCode === "EAI_AGAIN") {
+    return new ConnectFailedError(
+      url,
+      `the host name does not resolve (${sysCode})`,
+      "check the host in the URL, and this machine's network",
+      more,
+    );
+  }
+  const secure = /^wss:/i.test(url.trim());
+  if (/SSL|TLS|CERT|EPROTO/.test(sysCode) || (secure && sysCode === "ECONNRESET")) {
+    return new ConnectFailedError(
+      url,
+      `TLS failed (${text || sysCode})`,
+      "does the server speak TLS at that port, with a certificate trusted here? one without TLS takes ws://",
+      more,
+    );
+  }
+  return new ConnectFailedError(url, text || `the socket closed (code ${closeCode})`, RUNNING_HINT, more);
+}
 
 /**
  * Open a WebSocket to a posecast server (offering `posecast.v2, posecast.v1`). Resolves
@@ -141,6 +267,11 @@ const WS_OPEN = 1;
  *
  * @param url e.g. `wss://host/v1` (the path is up to the deployment)
  * @param token the join token, or a function returning a fresh one
+ * @throws ConfigInvalidError before dialing: a URL that is not `ws://` or `wss://` with
+ *   a host (`http://...`, `host:port`), or no token (`undefined` from an unset
+ *   environment variable, `""`, neither a string nor a function)
+ * @throws ConnectFailedError the server cannot be reached or refused the upgrade
+ *   (`url`, `reason`, `hint`, `status` where the WebSocket class tells it)
  */
 export async function connect(
   url: string,
@@ -191,6 +322,8 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
     private readonly token: TokenSource,
     private readonly options: ConnectOptions = {},
   ) {
+    checkUrl(url);
+    checkToken(token);
     const ctor = options.WebSocket ?? globalWebSocket();
     if (typeof ctor !== "function") {
       throw new TypeError(
@@ -445,25 +578,41 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
   private openSocket(): Promise<WebSocketLike> {
     const gen = ++this.generation;
     const offered = this.options.protocol === PROTOCOL_V1 ? [SUBPROTOCOL] : [SUBPROTOCOL_V2, SUBPROTOCOL];
-    const ws = new this.WebSocketClass(this.url, offered);
+    let ws: WebSocketLike;
+    try {
+      ws = new this.WebSocketClass(this.url, offered);
+    } catch (err) {
+      // checkUrl passed it, so the host's own rule: e.g. a page served over https may
+      // not open a ws:// URL (SecurityError).
+      const why = err instanceof Error ? err.message : String(err);
+      throw new ConfigInvalidError(
+        `the WebSocket class refused ${JSON.stringify(this.url)} (${why})`,
+        "a page served over https needs a wss:// URL",
+        { cause: err },
+      );
+    }
     ws.binaryType = "arraybuffer";
     this.ws = ws;
     this.fatal = undefined;
     return new Promise<WebSocketLike>((resolve, reject) => {
+      const timeoutS = this.options.timeoutS ?? 10;
       const timer = setTimer(() => {
         ws.close();
-        reject(new ConnectionClosedError(`no connection to ${this.url} in time`));
-      }, this.options.timeoutS ?? 10);
-      ws.onerror = () => {}; // a close event follows every error
-      ws.onclose = (ev) => {
-        clearTimer(timer);
         reject(
-          new ConnectionClosedError(
-            `could not connect to ${this.url} (close code ${ev.code})`,
-            ev.code,
-            ev.reason,
+          new ConnectFailedError(
+            this.url,
+            `no WebSocket handshake within ${timeoutS} s`,
+            "is the host reachable from here (a firewall, a VPN)? options.timeoutS allows longer",
           ),
         );
+      }, timeoutS);
+      let errorEvent: unknown;
+      ws.onerror = (ev) => {
+        errorEvent = ev; // a close event follows every error; this one says why
+      };
+      ws.onclose = (ev) => {
+        clearTimer(timer);
+        reject(connectFailure(this.url, errorEvent, ev.code));
       };
       ws.onopen = () => {
         clearTimer(timer);
@@ -482,7 +631,13 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
 
   private async handshake(): Promise<Welcome> {
     const args = this.joinArgs!;
-    const token = typeof this.token === "string" ? this.token : await this.token();
+    const token: unknown = typeof this.token === "string" ? this.token : await this.token();
+    if (typeof token !== "string" || token.trim() === "") {
+      throw new ConfigInvalidError(
+        `the token function returned ${what(token)}`,
+        "it must return the join token, a non-empty string",
+      );
+    }
     return new Promise<Welcome>((resolve, reject) => {
       const timer = setTimer(() => {
         this.pending = undefined;

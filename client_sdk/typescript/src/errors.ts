@@ -9,7 +9,9 @@
  *
  * ```text
  * PosecastError                     code
+ * ├── ConfigInvalidError            CONFIG_INVALID     (hint; local: a URL or token refused before dialing)
  * ├── ConnectionClosedError         CONNECTION_CLOSED  (closeCode, closeReason; local)
+ * │   └── ConnectFailedError        CONNECTION_CLOSED  (url, reason, hint, status: no socket opened)
  * └── ProtocolError                 (one per wire code; field, refSeq, fatal)
  *     ├── MalformedError            MALFORMED            fatal
  *     ├── TooLargeError             TOO_LARGE            fatal
@@ -48,10 +50,25 @@ export class PosecastError extends Error {
   /** Stable upper-case code: a wire code for protocol errors, a local one otherwise. */
   readonly code: string;
 
-  constructor(code: string, message: string) {
-    super(message);
+  constructor(code: string, message: string, options?: { readonly cause?: unknown }) {
+    super(message, options);
     this.code = code;
     this.name = new.target.name;
+  }
+}
+
+/**
+ * An argument the client cannot use, refused before it dials: a URL that is not
+ * `ws://` or `wss://` with a host, or no token (`undefined` from an unset environment
+ * variable, an empty string, a value that is neither a string nor a function). Never
+ * retried. `hint` says what to pass instead; the message ends with it. Not a wire code.
+ */
+export class ConfigInvalidError extends PosecastError {
+  readonly hint: string;
+
+  constructor(message: string, hint: string, options?: { readonly cause?: unknown }) {
+    super("CONFIG_INVALID", `${message} (hint: ${hint})`, options);
+    this.hint = hint;
   }
 }
 
@@ -64,10 +81,44 @@ export class ConnectionClosedError extends PosecastError {
   readonly closeCode: number;
   readonly closeReason: string;
 
-  constructor(message: string, closeCode = 1006, closeReason = "") {
-    super("CONNECTION_CLOSED", message);
+  constructor(
+    message: string,
+    closeCode = 1006,
+    closeReason = "",
+    options?: { readonly cause?: unknown },
+  ) {
+    super("CONNECTION_CLOSED", message, options);
     this.closeCode = closeCode;
     this.closeReason = closeReason;
+  }
+}
+
+/**
+ * No WebSocket opened at `url`: refused, a host name that does not resolve, TLS
+ * failing, no handshake in `timeoutS`, or the server refusing the upgrade (`status`:
+ * 429 when this address connects too often, 503 while the server starts or is full;
+ * known where the WebSocket class says, as `ws` does). `reason` says which where the
+ * host tells (a browser tells nothing), `hint` what to check; `cause` is the host's
+ * own error, if any. A {@link ConnectionClosedError}: reconnects retry it.
+ */
+export class ConnectFailedError extends ConnectionClosedError {
+  readonly url: string;
+  readonly reason: string;
+  readonly hint: string;
+  readonly status: number | undefined;
+
+  constructor(
+    url: string,
+    reason: string,
+    hint: string,
+    more: { readonly status?: number | undefined; readonly closeCode?: number; readonly cause?: unknown } = {},
+  ) {
+    const options = more.cause === undefined ? undefined : { cause: more.cause };
+    super(`could not connect to ${url}: ${reason} (hint: ${hint})`, more.closeCode ?? 1006, "", options);
+    this.url = url;
+    this.reason = reason;
+    this.hint = hint;
+    this.status = more.status;
   }
 }
 

@@ -11,9 +11,11 @@ import { test } from "node:test";
 
 import WebSocket, { WebSocketServer, type WebSocket as ServerSocket } from "ws";
 
-import { connect, type ConnectOptions, PosecastClient } from "../src/client.js";
+import { connect, type ConnectOptions, PosecastClient, type WebSocketConstructor } from "../src/client.js";
 import { decode, encode } from "../src/codec.js";
 import {
+  ConfigInvalidError,
+  ConnectFailedError,
   ConnectionClosedError,
   ForbiddenError,
   KickedError,
@@ -198,11 +200,117 @@ test("a refused hello rejects join with the typed error and closes the client", 
   }
 });
 
-test("connect fails with ConnectionClosedError when nobody listens", async () => {
+test("connect fails with ConnectFailedError, naming the URL, when nobody listens", async () => {
   const server = await new FakeServer().ready();
   const url = server.url;
-  await server.close();
-  await assert.rejects(connect(url, "tok", FAST), ConnectionClosedError);
+  await server.close(); // a port bound a moment ago, now refused
+  await assert.rejects(connect(url, "tok", FAST), (err: unknown) => {
+    assert.ok(err instanceof ConnectFailedError && err instanceof ConnectionClosedError);
+    assert.equal(err.code, "CONNECTION_CLOSED"); // what reconnects retry
+    assert.equal(err.url, url);
+    assert.ok(err.message.startsWith(`could not connect to ${url}: connection refused`), err.message);
+    assert.ok(err.hint.includes("posecast serve --dev") && err.message.includes(err.hint));
+    assert.equal((err.cause as { code?: string } | undefined)?.code, "ECONNREFUSED");
+    return true;
+  });
+});
+
+test("an HTTP refusal of the upgrade is a ConnectFailedError with its status", async () => {
+  for (const status of [429, 503, 404]) {
+    const wss = new WebSocketServer({
+      port: 0,
+      host: "127.0.0.1",
+      verifyClient: (_info, done) => done(false, status, "too many connection attempts"),
+    });
+    await once(wss, "listening");
+    try {
+      const url = `ws://127.0.0.1:${(wss.address() as AddressInfo).port}/`;
+      await assert.rejects(connect(url, "tok", FAST), (err: unknown) => {
+        assert.ok(err instanceof ConnectFailedError, String(err));
+        assert.equal(err.status, status);
+        assert.ok(err.message.includes(`HTTP ${status}`), err.message);
+        assert.ok(err.hint.includes(status === 404 ? "endpoint" : "back"), err.hint);
+        return true;
+      });
+    } finally {
+      await new Promise((r) => wss.close(r));
+    }
+  }
+});
+
+/** A WebSocket class that counts how often it is made (dialing). */
+function countingWebSocket(): { made: string[]; WebSocket: WebSocketConstructor } {
+  const made: string[] = [];
+  class Counting extends WebSocket {
+    constructor(url: string, protocols?: string[]) {
+      made.push(url);
+      super(url, protocols);
+    }
+  }
+  return { made, WebSocket: Counting };
+}
+
+test("a URL the client cannot dial is a ConfigInvalidError before dialing", async () => {
+  const cases: [unknown, string][] = [
+    ["http://127.0.0.1:8765/", "use ws://127.0.0.1:8765/"],
+    ["https://posecast.example/v1", "use wss://posecast.example/v1"],
+    ["localhost:8765", "did you mean ws://localhost:8765/?"],
+    ["127.0.0.1:8765", "did you mean ws://127.0.0.1:8765/?"],
+    ["ftp://127.0.0.1/", "not a WebSocket URL"],
+    ["ws://", "names no host"],
+    ["ws://127.0.0.1:99999/", "bad port"],
+    ["ws://127.0.0.1:8765/#room", "#fragment"],
+    ["", "no server URL (got an empty string)"],
+    [undefined, "no server URL (got undefined)"], // process.env of an unset variable
+  ];
+  const { made, WebSocket: Counting } = countingWebSocket();
+  for (const [url, words] of cases) {
+    await assert.rejects(connect(url as string, "tok", { ...FAST, WebSocket: Counting }), (err: unknown) => {
+      assert.ok(err instanceof ConfigInvalidError, `${String(url)}: ${String(err)}`);
+      assert.equal(err.code, "CONFIG_INVALID");
+      assert.ok(err.message.includes(words) && err.message.endsWith(`(hint: ${err.hint})`), err.message);
+      return true;
+    });
+  }
+  assert.deepEqual(made, []);
+});
+
+test("a token that is neither a string nor a function is a ConfigInvalidError before dialing", async () => {
+  const { made, WebSocket: Counting } = countingWebSocket();
+  const cases: [unknown, string][] = [
+    [undefined, "no token (got undefined)"], // process.env.POSECAST_TOKEN, unset
+    [null, "no token (got null)"],
+    ["", "no token (got an empty string)"],
+    [" ", "no token (got a blank string)"],
+    [42, "no token (got a value of type number)"],
+  ];
+  for (const [token, words] of cases) {
+    await assert.rejects(
+      connect("ws://127.0.0.1:8765/", token as string, { ...FAST, WebSocket: Counting }),
+      (err: unknown) => {
+        assert.ok(err instanceof ConfigInvalidError && err.message.includes(words), String(err));
+        assert.ok(err.hint.includes("unset environment variable"));
+        return true;
+      },
+    );
+  }
+  assert.deepEqual(made, []);
+});
+
+test("a token function that returns no token fails the join with ConfigInvalidError", async () => {
+  const server = await new FakeServer().ready();
+  try {
+    const client = await connect(server.url, (() => undefined) as unknown as () => string, FAST);
+    await assert.rejects(client.join("lobby", "Ada"), (err: unknown) => {
+      assert.ok(err instanceof ConfigInvalidError, String(err));
+      assert.ok(err.message.includes("the token function returned undefined"));
+      return true;
+    });
+    assert.equal(server.peers.length, 0); // no hello went out
+    assert.equal(client.state, "closed");
+  } finally {
+    await server.close();
+  }
 });
 
 test("a lost connection is resumed: back-off, a fresh token, hello again, seq goes on", async () => {
@@ -285,14 +393,23 @@ test("KICKED ends the stream with KickedError; no reconnect", async () => {
 
 test("giving up after maxAttempts throws the last cause", async () => {
   const server = await new FakeServer().ready();
-  const client = await connect(server.url, "tok", FAST);
+  const url = server.url;
+  const client = await connect(url, "tok", FAST);
   await client.join("lobby", "Ada");
   await server.close();
   const attempts: number[] = [];
+  const causes: unknown[] = [];
   await assert.rejects(async () => {
-    for await (const ev of client) if (ev.type === "reconnecting") attempts.push(ev.attempt);
-  }, ConnectionClosedError);
+    for await (const ev of client) {
+      if (ev.type === "reconnecting") {
+        attempts.push(ev.attempt);
+        causes.push(ev.cause);
+      }
+    }
+  }, ConnectFailedError); // the last attempt's: the server's port refuses
   assert.deepEqual(attempts, [1, 2, 3, 4]);
+  assert.ok(!(causes[0] instanceof ConnectFailedError)); // the drop itself
+  assert.ok(causes.slice(1).every((c) => c instanceof ConnectFailedError && c.url === url));
 });
 
 test("spectators may not send frames; a missing WebSocket class is explained", async () => {
