@@ -55,7 +55,8 @@ class Metrics:
         )
         self.reach_limited = Counter(
             "posecast_reach_limited",
-            "Poses sent with the head or a hand more than 1 mm from its tracker (out of reach)",
+            "Poses sent with the head, a hand or a tracked foot or knee more than 1 mm "
+            "from its tracker (out of reach)",
             registry=r,
         )
         self.frames_in = Counter("posecast_frames", "Tracker frames accepted", registry=r)
