@@ -3,14 +3,17 @@
 from __future__ import annotations
 
 import argparse
+import math
 import re
 from dataclasses import fields
 from pathlib import Path
 
 import pytest
 
-from posecast.errors import ConfigError
+from posecast.errors import ConfigError, TokenExpiredError
+from posecast.online.auth.tokens import mint, verify
 from posecast.online.config import (
+    BOUNDS,
     FLAGS_GIVEN,
     ServerConfig,
     add_arguments,
@@ -117,9 +120,9 @@ def _flags(*argv: str) -> tuple[dict[str, object], dict[str, str]]:
         (["--tick-hz", "nan"], "--tick-hz nan must be in [1, 240]"),
         (["--tick", "500"], "--tick-hz 500 must be in [1, 240]"),  # an abbreviation: the flag
         (["--port", "70000"], "--port 70000 must be in [0, 65535]"),
-        (["--samples", "0"], "--samples 0 must be >= 1"),
+        (["--samples", "0"], "--samples 0 must be in [1, 4096]"),
         (["--engine-threads", "65"], "--engine-threads 65 must be in [1, 64]"),
-        (["--slow-consumer-s", "0"], "--slow-consumer-s 0 must be > 0"),
+        (["--slow-consumer-s", "0"], "--slow-consumer-s 0 must be in (0, 60] seconds"),
         (["--max-players-per-room", "33"], "--max-players-per-room 33 must be in [1, 32]"),
         (["--log-level", "LOUD"], "--log-level 'LOUD' unknown: one of DEBUG, INFO"),
         (["--node-id", "a b"], "--node-id 'a b' must be 1 to 64 of"),
@@ -145,7 +148,7 @@ def test_a_bad_flag_is_named_as_typed_with_its_range(argv: list[str], said: str)
     [
         ("POSECAST_TICK_HZ", "nan", "POSECAST_TICK_HZ=nan must be in [1, 240]"),
         ("POSECAST_SAMPLES", "100000000", "POSECAST_SAMPLES=100000000 must be in [1, 4096]"),
-        ("POSECAST_WRIST_ELBOW", "1.5", "POSECAST_WRIST_ELBOW=1.5 must be a share in [0, 1]"),
+        ("POSECAST_WRIST_ELBOW", "1.5", "POSECAST_WRIST_ELBOW=1.5 must be in [0, 1]"),
         ("POSECAST_LAYOUTS", "hmd4", "POSECAST_LAYOUTS='hmd4' must be a comma-separated"),
         ("POSECAST_TOKEN_SECRET", "short", "POSECAST_TOKEN_SECRET has 5 characters"),
         ("POSECAST_REDIS_URL", "http://u:pw@h/0", "POSECAST_REDIS_URL must start with"),
@@ -201,6 +204,95 @@ def test_docs_table_lists_every_option_with_env_and_default() -> None:
         assert f"`--{name.replace('_', '-')}`" in row or name == "token_secret", row
         if default:
             assert re.search(rf"`{re.escape(default)}`", row), (name, default, row)
+        if name in BOUNDS:  # and each number's range, as --help words it
+            assert BOUNDS[name].words() in row, (name, BOUNDS[name].words(), row)
+
+
+def test_every_number_has_finite_bounds_that_hold_its_default() -> None:
+    """A numeric option added without a range would take inf (a guard turned off)."""
+    numeric = {f.name for f in fields(ServerConfig) if str(f.type) in ("int", "float")}
+    assert set(BOUNDS) == numeric
+    for f in fields(ServerConfig):
+        if f.name in BOUNDS:
+            b = BOUNDS[f.name]
+            assert math.isfinite(b.low) and math.isfinite(b.high), f.name
+            assert b.holds(f.default), f.name
+
+
+# Every setting that took inf before (times, rates, counts, checked only from below),
+# and the absurd: a finite value past any deployment turns a guard off as well.
+_UNBOUNDED_BEFORE = [
+    ("--token-leeway-s", "inf", "(0, 300] seconds"),
+    ("--token-leeway-s", "1e9", "(0, 300] seconds"),
+    ("--control-rate-hz", "inf", "(0, 1000000]"),
+    ("--error-rate-hz", "inf", "(0, 1000000]"),
+    ("--accepts-per-s", "inf", "(0, 1000000]"),
+    ("--slow-consumer-s", "inf", "(0, 60] seconds"),
+    ("--hello-timeout-s", "inf", "(0, 60] seconds"),
+    ("--idle-timeout-s", "inf", "(0, 3600] seconds"),
+    ("--drain-timeout-s", "1e300", "(0, 600] seconds"),
+    ("--close-timeout-s", "inf", "(0, 60] seconds"),
+    ("--redis-heartbeat-s", "inf", "(0, 60] seconds"),
+    ("--redis-timeout-s", "inf", "(0, 60] seconds"),
+    ("--redis-backoff-max-s", "inf", "(0, 300] seconds"),
+    ("--redis-node-ttl-s", "1e9", "(0, 600] seconds"),
+    ("--replay-cache", "10000000000", "[1, 10000000]"),
+    ("--rate-burst", "1000000000", "[1, 1000000]"),
+    ("--max-rooms", "10000000", "[1, 1000000]"),
+    ("--max-connections", "10000000", "[1, 1000000]"),
+    ("--max-watchers-per-room", "10000000", "[1, 1000000]"),
+    ("--conn-per-ip-per-min", "10000000", "[1, 1000000]"),
+    ("--sockets-per-ip", "10000000", "[1, 1000000]"),
+    ("--fatal-per-ip-per-min", "10000000", "[1, 1000000]"),
+    ("--reliable-queue", "100000", "[1, 4096]"),
+    ("--frame-queue", "100000", "[1, 256]"),
+]
+
+
+@pytest.mark.parametrize(("flag", "raw", "interval"), _UNBOUNDED_BEFORE)
+def test_an_unbounded_value_is_refused_by_its_flag(flag: str, raw: str, interval: str) -> None:
+    """``posecast serve --dev --token-leeway-s inf`` started, and with it no token ever
+    expired (tokens.verify refuses only ``now - leeway >= exp``)."""
+    overrides, flags = _flags(flag, raw)
+    with pytest.raises(ConfigError) as info:
+        ServerConfig.from_sources({"POSECAST_TOKEN_SECRET": SECRET}, overrides, flags)
+    assert info.value.code == "CONFIG_INVALID"
+    value = overrides[flag[2:].replace("-", "_")]
+    shown = f"{value:g}" if isinstance(value, float) else raw  # as the error writes it
+    assert str(info.value) == f"{flag} {shown} must be in {interval}"
+
+
+@pytest.mark.parametrize("raw", ["inf", "-inf", "nan", "1e999", "301"])
+def test_a_non_finite_leeway_is_refused_by_its_variable(raw: str) -> None:
+    with pytest.raises(ConfigError) as info:
+        ServerConfig.from_sources({"POSECAST_TOKEN_SECRET": SECRET, "POSECAST_TOKEN_LEEWAY_S": raw})
+    assert info.value.code == "CONFIG_INVALID"
+    assert str(info.value).startswith("POSECAST_TOKEN_LEEWAY_S="), str(info.value)
+    assert str(info.value).endswith("must be in (0, 300] seconds"), str(info.value)
+
+
+def test_the_largest_leeway_still_lets_a_token_expire() -> None:
+    """What the bound protects: with the leeway at its top, a token that expired longer
+    ago is refused; inf (now refused) kept every token for ever."""
+    leeway = BOUNDS["token_leeway_s"].high
+    cfg = ServerConfig(token_secret=SECRET, token_leeway_s=leeway)
+    tok = mint(cfg.secret_bytes, room="room", player="p1", now=1000.0, ttl_s=60)
+    assert verify(cfg.secret_bytes, tok, now=1060.0 + leeway - 1, leeway_s=cfg.token_leeway_s)
+    with pytest.raises(TokenExpiredError):
+        verify(cfg.secret_bytes, tok, now=1060.0 + leeway, leeway_s=cfg.token_leeway_s)
+    with pytest.raises(ConfigError):
+        ServerConfig(token_secret=SECRET, token_leeway_s=math.inf)
+
+
+@pytest.mark.parametrize("name", sorted(BOUNDS))
+def test_every_bound_refuses_nan_inf_and_just_past_its_top(name: str) -> None:
+    b = BOUNDS[name]
+    for bad in (math.nan, math.inf, -math.inf, b.high + 1, b.low - 1):
+        with pytest.raises(ConfigError, match=rf"^{name}="):
+            ServerConfig(token_secret=SECRET, **{name: bad})  # type: ignore[arg-type]
+    if b.above:
+        with pytest.raises(ConfigError):
+            ServerConfig(token_secret=SECRET, **{name: b.low})  # type: ignore[arg-type]
 
 
 def test_no_upper_ik_reaches_the_engine() -> None:

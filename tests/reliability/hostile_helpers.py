@@ -369,7 +369,7 @@ def fuzz_arena_cfg() -> ServerConfig:
     per-IP and node-wide connection budgets (test_hostile_churn) opened up, since a
     fuzzer reconnects after every fatal error as fast as it can."""
     return make_cfg(
-        lookahead=1, error_rate_hz=1e6, control_rate_hz=1e6, rate_burst=10**9, max_rooms=16,
+        lookahead=1, error_rate_hz=1e6, control_rate_hz=1e6, rate_burst=10**6, max_rooms=16,
         fatal_per_ip_per_min=10**6, accepts_per_s=1e6,
     )  # fmt: skip
 

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import math
 import re
 from collections.abc import Mapping
 from dataclasses import InitVar, dataclass, field, fields
@@ -275,16 +274,86 @@ _LIMITS = {
     "max_players_per_room": "max_players",
     "max_watch_rooms": "max_watch_rooms",
 }
-_POSITIVE = (
-    "samples engine_threads rate_burst max_rooms max_connections conn_per_ip_per_min "
-    "sockets_per_ip fatal_per_ip_per_min reliable_queue replay_cache max_watchers_per_room "
-    "frame_queue"
-)
-_SECONDS = (
-    "token_leeway_s control_rate_hz error_rate_hz accepts_per_s slow_consumer_s "
-    "hello_timeout_s idle_timeout_s drain_timeout_s close_timeout_s redis_heartbeat_s "
-    "redis_timeout_s redis_backoff_max_s"
-)
+MILLION = 1_000_000
+
+
+@dataclass(frozen=True)
+class Bounds:
+    """The range of a numeric setting: ``low`` to ``high``, ``low`` itself excluded
+    when ``above``. Every bound is finite, so inf and nan are out of every range."""
+
+    low: float
+    high: float
+    above: bool = False  # low excluded: a time or a rate, where 0 would stop it
+    unit: str = ""
+
+    def holds(self, value: float) -> bool:
+        """``value`` is in range (nan never is)."""
+        if self.above:
+            return self.low < value <= self.high
+        return self.low <= value <= self.high
+
+    def interval(self) -> str:
+        """For the errors: ``[1, 4096]``, ``(0, 300] seconds``."""
+        text = f"{'(' if self.above else '['}{_num(self.low)}, {_num(self.high)}]"
+        return f"{text} {self.unit}" if self.unit else text
+
+    def words(self) -> str:
+        """For ``--help`` and docs/server.md: ``1 to 4096``, ``above 0, up to 300``."""
+        low, high = _num(self.low, True), _num(self.high, True)
+        return f"above {low}, up to {high}" if self.above else f"{low} to {high}"
+
+
+def _num(x: float, commas: bool = False) -> str:
+    """``4096``; with ``commas``, a number of six digits or more as ``1,000,000``."""
+    if float(x).is_integer():
+        return f"{int(x):,}" if commas and x >= 100_000 else str(int(x))
+    return f"{x:g}"
+
+
+def _seconds(high: float) -> Bounds:
+    return Bounds(0, high, above=True, unit="seconds")
+
+
+# Every numeric setting's range (docs/server.md states each in its row, a test keeps
+# them alike). The highs are far past any real deployment but keep each guard a guard:
+# a token leeway of inf let every token live for ever, a rate of inf turned its limit
+# off. Counts of connections and per-IP budgets go to a million (docker-compose.yml
+# opens the per-IP ones that far for a load test from one address).
+BOUNDS: dict[str, Bounds] = {
+    "port": Bounds(0, 65535),
+    # Kerberos' default clock skew: past it, a clock is broken, not skewed.
+    "token_leeway_s": _seconds(300),
+    "replay_cache": Bounds(1, 10 * MILLION),
+    "tick_hz": Bounds(1, 240),
+    "samples": Bounds(1, MAX_SAMPLES),
+    "lookahead": Bounds(0, MAX_LOOKAHEAD_FRAMES, unit="frames"),  # welcome.lookahead_frames
+    "wrist_elbow": Bounds(0, 1),
+    "engine_threads": Bounds(1, MAX_THREADS),
+    "frame_queue": Bounds(1, 256),
+    **{name: Bounds(*LIMIT_RANGES[limit]) for name, limit in _LIMITS.items()},
+    "rate_burst": Bounds(1, MILLION),
+    "control_rate_hz": Bounds(0, MILLION, above=True),
+    "error_rate_hz": Bounds(0, MILLION, above=True),
+    "max_watchers_per_room": Bounds(1, MILLION),
+    "max_rooms": Bounds(1, MILLION),
+    "max_connections": Bounds(1, MILLION),
+    "conn_per_ip_per_min": Bounds(1, MILLION),
+    "sockets_per_ip": Bounds(1, MILLION),
+    "fatal_per_ip_per_min": Bounds(1, MILLION),
+    "accepts_per_s": Bounds(0, MILLION, above=True),
+    "reliable_queue": Bounds(1, 4096),  # each up to max_message_bytes: 32 MiB a client
+    "socket_sndbuf_bytes": Bounds(0, MAX_SNDBUF_BYTES, unit="bytes"),
+    "slow_consumer_s": _seconds(60),
+    "hello_timeout_s": _seconds(60),
+    "idle_timeout_s": _seconds(3600),
+    "drain_timeout_s": _seconds(600),
+    "close_timeout_s": _seconds(60),
+    "redis_heartbeat_s": _seconds(60),
+    "redis_node_ttl_s": _seconds(600),  # above the gap (below) of the slowest heartbeat
+    "redis_timeout_s": _seconds(60),
+    "redis_backoff_max_s": _seconds(300),
+}
 
 
 def _check(cfg: ServerConfig, n: _Named) -> None:
@@ -300,33 +369,16 @@ def _check(cfg: ServerConfig, n: _Named) -> None:
             f"{n('token_secret')} has {len(cfg.token_secret)} characters: the token secret"
             f" must be at least {MIN_SECRET_CHARS}"
         )
-    if not 0 <= cfg.port <= 65535:
-        raise ConfigError(f"{n.value('port')} must be in [0, 65535]")
-    if not 1.0 <= cfg.tick_hz <= 240.0:
-        raise ConfigError(f"{n.value('tick_hz')} must be in [1, 240]")
-    for name in _POSITIVE.split():
-        if getattr(cfg, name) < 1:
-            raise ConfigError(f"{n.value(name)} must be >= 1")
-    for name in _SECONDS.split():
-        if not getattr(cfg, name) > 0:
-            raise ConfigError(f"{n.value(name)} must be > 0")
-    if cfg.engine_threads > MAX_THREADS:
-        raise ConfigError(f"{n.value('engine_threads')} must be in [1, {MAX_THREADS}]")
-    if not 0 <= cfg.socket_sndbuf_bytes <= MAX_SNDBUF_BYTES:
-        raise ConfigError(f"{n.value('socket_sndbuf_bytes')} must be in [0, {MAX_SNDBUF_BYTES}]")
-    if not 0.0 <= cfg.wrist_elbow <= 1.0:
-        raise ConfigError(f"{n.value('wrist_elbow')} must be a share in [0, 1]")
-    if cfg.samples > MAX_SAMPLES:
-        raise ConfigError(f"{n.value('samples')} must be in [1, {MAX_SAMPLES}]")
-    if not 0 <= cfg.lookahead <= MAX_LOOKAHEAD_FRAMES:  # welcome.lookahead_frames
-        raise ConfigError(f"{n.value('lookahead')} must be in [0, {MAX_LOOKAHEAD_FRAMES}] frames")
+    for f in fields(cfg):  # in the order of the fields, as --help lists them
+        bounds = BOUNDS.get(f.name)
+        value = getattr(cfg, f.name)
+        if bounds is not None and not (_is_number(value) and bounds.holds(value)):
+            raise ConfigError(f"{n.value(f.name)} must be in {bounds.interval()}")
     if cfg.backend not in BACKENDS:
         raise ConfigError(f"{n.value('backend')} unknown: one of {', '.join(BACKENDS)}")
     if cfg.log_level.upper() not in LOG_LEVELS:
         raise ConfigError(f"{n.value('log_level')} unknown: one of {', '.join(LOG_LEVELS)}")
     ttl, hb, rt = cfg.redis_node_ttl_s, cfg.redis_heartbeat_s, cfg.redis_timeout_s
-    if not math.isfinite(ttl):
-        raise ConfigError(f"{n.value('redis_node_ttl_s')} must be a finite number of seconds")
     if ttl < 2 * hb:
         raise ConfigError(
             f"{n.value('redis_node_ttl_s')} must be at least twice"
@@ -362,11 +414,11 @@ def _check(cfg: ServerConfig, n: _Named) -> None:
             f"{n.value('layouts')} must be a comma-separated subset of {', '.join(known)},"
             " each once"
         )
-    for name, limit in _LIMITS.items():  # the protocol's ranges (proto/README.md, Limits)
-        low, high = LIMIT_RANGES[limit]
-        if not low <= getattr(cfg, name) <= high:
-            raise ConfigError(f"{n.value(name)} must be in [{low}, {high}]")
     cfg.limits()  # anything else Limits refuses (a value that is not an int)
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
 
 
 # POSECAST_* variables that are read elsewhere, not server settings: the SDK tools'
@@ -424,7 +476,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         flags = _flags(f)
         if not flags:
             continue
-        text = f"{f.metadata['help']} [{_variable(f.name)}, default {f.default!r}]"
+        bounds = BOUNDS.get(f.name)
+        span = f", {bounds.words()}" if bounds else ""
+        text = f"{f.metadata['help']} [{_variable(f.name)}, default {f.default!r}{span}]"
         if str(f.type) == "bool":
             parser.add_argument(*flags, action=_Flag, nargs=0, const=True, default=None, help=text)
         else:
