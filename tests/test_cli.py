@@ -464,6 +464,43 @@ def test_bench_engine_runs_each_backend_asked_for(capsys) -> None:
     assert headers == ["backend onnx", "backend torch"]
 
 
+def _bench_report(p99: list[float]) -> dict[str, object]:
+    """A ``bench engine`` report for players 1 and 4 with these p99 ticks (no engine)."""
+    n = len(p99)
+    section = {"backend": "onnx", "tick_p50_ms": p99, "tick_p99_ms": p99}
+    return {
+        "backend": "onnx", "backend_asked": "onnx", "native_isa": None, "players": [1, 4],
+        "samples": 100, "tick_p50_ms": p99, "tick_p99_ms": p99, "gflops": [1.0] * n,
+        "rss_mb_per_player": [1.0] * n, "naive_loop": {}, "max_realtime_players": 0,
+        "both_models": section | {"hmd3_share": 0.5, "hmd3_players": [0, 2],
+                                  "rss_mb_per_player": [1.0] * n},
+        "mixed_sets": section | {"sets": ["3p"], "p50_ratio": [1.0] * n,
+                                 "rss_mb_per_player": [1.0] * n},
+    }  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("p99", "said"),
+    [
+        ([2.0, 8.0], "≥ 4 (every tested count fit)"),
+        ([20.0, 80.0], "none of the tested counts fit (the smallest, 1, took p99 20.0 ms)"),
+        ([2.0, 80.0], "1 (4 did not fit)"),
+    ],
+)
+def test_bench_engine_says_how_many_players_fit(capsys, monkeypatch, p99, said) -> None:
+    """``--players 1,4`` all fitting printed ``4`` as the most, none fitting ``0``."""
+    import posecast.offline.evaluation.engine_speed as speed
+
+    monkeypatch.setattr(speed, "run_side_by_side", lambda *a: [_bench_report(p99)])
+    assert main(["bench", "engine", "--players", "1,4", "--backend", "onnx"]) == 0
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("max players")]
+    assert lines == [
+        f"max players at 60 Hz (p99 < 16.7 ms), N=100: {said}",
+        f"max players at 60 Hz, both models: {said}",
+        f"max players at 60 Hz, mixed sets: {said}",
+    ]
+
+
 def test_serve_without_a_secret_is_a_config_error(capsys, monkeypatch) -> None:
     """No POSECAST_TOKEN_SECRET and no --dev: refused before any socket is opened."""
     import os

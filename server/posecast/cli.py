@@ -790,6 +790,8 @@ def _print_ratios(reports: list[dict[str, Any]]) -> None:
 
 def _print_bench(report: dict[str, Any], samples: int) -> None:
     """One backend's tables of ``posecast bench engine``."""
+    from posecast.offline.evaluation.engine_speed import realtime_summary
+
     used, asked = report["backend"], report["backend_asked"]
     print(f"backend {used}" + (f" ({asked} asked for; unavailable)" if used != asked else ""))
     print(f"{'players':>8s} {'p50 ms':>8s} {'p99 ms':>8s} {'GFLOP/s':>8s} {'MB/player':>10s}")
@@ -798,7 +800,8 @@ def _print_bench(report: dict[str, Any], samples: int) -> None:
             f"{p:8d} {report['tick_p50_ms'][i]:8.2f} {report['tick_p99_ms'][i]:8.2f} "
             f"{report['gflops'][i]:8.1f} {report['rss_mb_per_player'][i]:10.2f}"
         )
-    print(f"max players at 60 Hz (p99 < 16.7 ms), N={samples}: {report['max_realtime_players']}")
+    fit = realtime_summary(report["players"], report["tick_p99_ms"])
+    print(f"max players at 60 Hz (p99 < 16.7 ms), N={samples}: {fit}")
     if report["native_isa"]:
         print(f"native kernels: {report['native_isa']}")
     print(f"naive loop: {report['naive_loop']}")
@@ -814,7 +817,8 @@ def _print_bench(report: dict[str, Any], samples: int) -> None:
                 f"{p:8d} {both['hmd3_players'][i]:5d} {both['tick_p50_ms'][i]:8.2f} "
                 f"{both['tick_p99_ms'][i]:8.2f} {both['rss_mb_per_player'][i]:10.2f}"
             )
-        print(f"max players at 60 Hz, both models: {both['max_realtime_players']}")
+        fit = realtime_summary(report["players"], both["tick_p99_ms"])
+        print(f"max players at 60 Hz, both models: {fit}")
     sets = report.get("mixed_sets")
     if sets:
         print(
@@ -827,7 +831,8 @@ def _print_bench(report: dict[str, Any], samples: int) -> None:
                 f"{p:8d} {sets['tick_p50_ms'][i]:8.2f} {sets['tick_p99_ms'][i]:8.2f} "
                 f"{sets['p50_ratio'][i]:6.2f} {sets['rss_mb_per_player'][i]:10.2f}"
             )
-        print(f"max players at 60 Hz, mixed sets: {sets['max_realtime_players']}")
+        fit = realtime_summary(report["players"], sets["tick_p99_ms"])
+        print(f"max players at 60 Hz, mixed sets: {fit}")
 
 
 def _cmd_serve(args: argparse.Namespace) -> int:

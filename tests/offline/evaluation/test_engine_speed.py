@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-from posecast.offline.evaluation.engine_speed import bench, run
+from posecast.offline.evaluation.engine_speed import FRAME_BUDGET_MS, bench, realtime_summary, run
 
 
 def test_a_mixed_run_splits_players_between_the_models() -> None:
@@ -38,3 +38,23 @@ def test_mixed_tracker_sets_run_beside_the_single_layout() -> None:
     assert len(sets["tick_p50_ms"]) == len(sets["p50_ratio"]) == 2
     assert all(t > 0 for t in sets["tick_p50_ms"]) and all(x > 0 for x in sets["p50_ratio"])
     assert "mixed_sets" not in run([2], samples=4, threads=1, ticks=3, naive_players=1)
+
+
+def test_every_tested_count_fitting_says_the_limit_is_higher() -> None:
+    """``--players 1,4`` with both under the budget printed ``4``, as if 4 were the most."""
+    assert realtime_summary([1, 4], [3.0, 9.0]) == "≥ 4 (every tested count fit)"
+
+
+def test_no_tested_count_fitting_names_the_smallest() -> None:
+    """None fitting printed ``0``: no count was measured at 0."""
+    text = realtime_summary([10, 1], [40.0, 20.31])  # unsorted, as --players may be
+    assert text == "none of the tested counts fit (the smallest, 1, took p99 20.3 ms)"
+
+
+def test_the_limit_lies_between_the_largest_fit_and_the_next_count() -> None:
+    assert realtime_summary([1, 10, 25, 50], [1.0, 6.0, 15.0, 30.0]) == "25 (50 did not fit)"
+    # the budget itself does not fit (p99 < 16.7 ms)
+    assert realtime_summary([1, 2], [1.0, FRAME_BUDGET_MS]) == "1 (2 did not fit)"
+    # a count below the largest fit that did not: said, not hidden
+    noisy = realtime_summary([1, 10, 25, 50], [1.0, 17.0, 15.0, 30.0])
+    assert noisy == "25 (50 did not fit); 10 did not fit either, a noisy run"

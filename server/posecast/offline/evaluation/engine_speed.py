@@ -66,6 +66,31 @@ class BenchResult:
         return self.tick_p99_ms < FRAME_BUDGET_MS
 
 
+def realtime_summary(
+    players: list[int], p99_ms: list[float], budget_ms: float = FRAME_BUDGET_MS
+) -> str:
+    """How many players hold 60 Hz, as far as the tested counts tell: the largest count
+    whose p99 tick fits ``budget_ms`` and the next tested count, which did not
+    (``"25 (30 did not fit)"``); ``"≥ 4 (every tested count fit)"`` when the largest
+    fit, so the real limit is higher; ``"none of the tested counts fit (the smallest,
+    1, took p99 20.3 ms)"``. A count below the largest that fits which did not fit is
+    named too (a noisy run). The report's ``max_realtime_players`` stays the largest
+    count that fit (0 for none)."""
+    runs = sorted(zip(players, p99_ms, strict=True))
+    fits = [p for p, t in runs if t < budget_ms]
+    if not fits:
+        smallest, took = runs[0]
+        return f"none of the tested counts fit (the smallest, {smallest}, took p99 {took:.1f} ms)"
+    best = max(fits)
+    failed = sorted({p for p, t in runs if t >= budget_ms})
+    above = [p for p in failed if p > best]
+    below = [p for p in failed if p < best]
+    text = f"{best} ({above[0]} did not fit)" if above else f"≥ {best} (every tested count fit)"
+    if below:
+        text += f"; {', '.join(map(str, below))} did not fit either, a noisy run"
+    return text
+
+
 def _rss_mb() -> float:
     try:
         with open("/proc/self/statm") as f:
