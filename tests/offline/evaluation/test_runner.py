@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -18,11 +20,13 @@ from posecast.offline.train.masks import TABLE_SETS
 from posecast.online.engine.config import EngineConfig
 from posecast.tracking.sites import SITE_JOINT_INDEX, TrackerSet
 
+LOG: list[str] = []  # what evaluate logs while the report below is made
+
 
 @pytest.fixture(scope="module")
 def report() -> dict[str, object]:
     clips = [derive_frames(walk_clip(3.0, 60.0, seed=s)) for s in (0, 1)]
-    return evaluate(clips, 60.0, VARIANTS, engine_cfg=EngineConfig(samples=12))
+    return evaluate(clips, 60.0, VARIANTS, engine_cfg=EngineConfig(samples=12), log=LOG.append)
 
 
 def test_every_variant_reports_every_metric(report: dict[str, object]) -> None:
@@ -46,6 +50,42 @@ def test_table_lists_variants(report: dict[str, object]) -> None:
     table = format_table(report)  # type: ignore[arg-type]
     for name in VARIANTS:
         assert name in table
+    # Each variant's progress is one short line, not its results as a raw dict (the
+    # table and --json carry those).
+    assert [ln.split(":")[0] for ln in LOG] == list(VARIANTS)
+    assert all(re.fullmatch(r"\w+: \d+\.\d s", ln) for ln in LOG), LOG
+
+
+def _made_up_report() -> dict[str, object]:
+    variants = {
+        name: {k: 1000.0 * i + 0.123456 for i, k in enumerate(METRIC_KEYS)} | {"seconds": 7.5}
+        for name in ("cvae_ik", "baseline_mean_lower_body")
+    }
+    del variants["cvae_ik"]["transitions_per_min"]
+    return {
+        "layout": "hmd3", "backend": "onnx", "variants": variants,
+        "ground_truth": {"jitter": 2.5, "flagged_rate": 0.25},
+    }  # fmt: skip
+
+
+def test_the_console_table_is_a_metric_per_row_in_aligned_columns() -> None:
+    """The table ran its headers together (``flagged_rateflagged_self_intersection_rate``:
+    a name longer than its 22-character column) and left out six metrics."""
+    lines = format_table(_made_up_report()).splitlines()
+    assert lines[0] == "layout hmd3, SSI on backend onnx"
+    head, rows = lines[1], lines[2:]
+    assert head.split() == ["metric", "cvae_ik", "baseline_mean_lower_body", "ground_truth"]
+    assert [r.split()[0] for r in rows] == [*METRIC_KEYS, "seconds"]
+    # Every line as wide as the header, each figure ending where its header ends.
+    ends = [m.end() for m in re.finditer(r"\S+", head)][1:]
+    for row in rows:
+        assert len(row) == len(head), row
+        assert [m.end() for m in re.finditer(r"\S+", row)][1:] == ends, row
+    cells = {r.split()[0]: r.split()[1:] for r in rows}
+    assert cells["mpjpe_cm"] == ["0.123", "0.123", "-"]
+    assert cells["implausible_rate"][0] == f"{1000.0 * (len(METRIC_KEYS) - 1) + 0.123456:.3f}"
+    assert cells["transitions_per_min"][0] == "-"  # not a figure of cvae_ik
+    assert cells["jitter"][2] == "2.500" and cells["seconds"] == ["7.5", "7.5", "-"]
 
 
 def test_the_streamed_variant_has_its_hands_on_the_trackers(report: dict[str, object]) -> None:

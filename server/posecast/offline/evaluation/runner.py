@@ -72,7 +72,6 @@ METRIC_KEYS = (
     "ground_penetration_cm",
     "implausible_rate",
 )
-TABLE_KEYS = METRIC_KEYS[:13]  # the text table's columns (the JSON has every key)
 
 
 def _mean_leg_pose(meta: dict[str, Any]) -> np.ndarray | None:
@@ -278,7 +277,7 @@ def evaluate(
         res["seconds"] = round(time.perf_counter() - t0, 2)
         results[name] = res
         if log:
-            log(f"{name}: {res}")
+            log(f"{name}: {res['seconds']:.1f} s")
     gt_acc = m.Accumulator()
     for gt_mat, gt in truth:
         gt_acc.add("jitter", m.jitter(gt, fps))
@@ -369,17 +368,33 @@ def run_ssi(
 
 
 def format_table(report: dict[str, Any]) -> str:
-    def row(name: str, res: dict[str, Any]) -> str:
-        return f"{name:26s}" + "".join(f"{res.get(k, float('nan')):22.3f}" for k in TABLE_KEYS)
+    """The console table of ``posecast eval``: a metric per row, a variant per column
+    (and the ground truth's own figures), so that the long metric names fit; a figure
+    a variant does not have is ``-``. ``--json`` keeps the report itself."""
+    columns = [(name, res) for name, res in report["variants"].items()]
+    gt = report.get("ground_truth") or {}
+    if gt:
+        columns.append(("ground_truth", gt))
+    rows = [(k, [res.get(k) for _, res in columns]) for k in METRIC_KEYS]
+    rows.append(("seconds", [res.get("seconds") for _, res in columns]))
 
-    head = f"{'variant':26s}" + "".join(f"{k:>22s}" for k in TABLE_KEYS) + f"{'seconds':>9s}"
+    def cell(x: float | None, digits: int) -> str:
+        return "-" if x is None else f"{x:.{digits}f}"
+
+    cells = [(k, [cell(x, 1 if k == "seconds" else 3) for x in xs]) for k, xs in rows]
+    first = max(len("metric"), *(len(k) for k, _ in cells))
+    widths = [
+        max(len(name), *(len(row[i]) for _, row in cells)) for i, (name, _) in enumerate(columns)
+    ]
+
+    def line(label: str, texts: list[str]) -> str:
+        return f"{label:<{first}}" + "".join(
+            f"  {t:>{w}}" for t, w in zip(texts, widths, strict=True)
+        )
+
     title = f"layout {report.get('layout', Layout.HMD3_WAIST)}"
     if report.get("backend"):
         title += f", SSI on backend {report['backend']}"
-    lines = [title, head]
-    for name, res in report["variants"].items():
-        lines.append(row(name, res) + f"{res.get('seconds', 0):9.1f}")
-    gt = report.get("ground_truth") or {}
-    if gt:
-        lines.append(row("ground_truth", gt))
+    lines = [title, line("metric", [name for name, _ in columns])]
+    lines += [line(k, row) for k, row in cells]
     return "\n".join(lines)
