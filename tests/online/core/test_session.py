@@ -91,6 +91,10 @@ def test_a_layout_the_server_does_not_serve_is_fatal() -> None:
     with pytest.raises(LayoutUnsupportedError) as e:
         s.handle(Hello(1, token(), "r1", "A", layout="hmd3"), time.time())
     assert e.value.fatal and e.value.field == "layout"
+    assert e.value.message == (  # what is served, and how to serve it
+        "layout 'hmd3' is not served here (layouts hmd3+waist): start the server with hmd3"
+        " in its layouts, --layouts hmd3+waist,hmd3 (POSECAST_LAYOUTS)"
+    )
 
 
 def test_expired_token() -> None:
@@ -243,8 +247,13 @@ def _sites_frame(seq: int, valid: int = 0b11111, rows: int = 5) -> object:
 def test_a_tracker_set_joins_only_where_sets_are_served() -> None:
     from posecast.tracking.sites import TrackerSet
 
-    with pytest.raises(LayoutUnsupportedError, match="tracker sets are not served"):
+    with pytest.raises(LayoutUnsupportedError) as e:
         _session().handle(Hello(1, token(), "r1", "A", layout=TrackerSet.parse(_SET)), time.time())
+    # It said only "layout tracker sets are not served": now which option serves them.
+    assert e.value.message == (
+        "layout tracker sets are not served here (layouts hmd3+waist,hmd3): start the"
+        " server with sites in its layouts, --layouts hmd3+waist,hmd3,sites (POSECAST_LAYOUTS)"
+    )
     assert str(_set_player().layout) == _SET
 
 

@@ -208,9 +208,15 @@ class Session:
 
     def _hello(self, hello: Hello, now: float) -> Join:
         layout = requested_layout(hello)
-        if model_layout(layout) not in self.cfg.served_layouts:
+        model = model_layout(layout)
+        if model not in self.cfg.served_layouts:
             what = "tracker sets are" if isinstance(layout, TrackerSet) else f"{layout!r} is"
-            raise LayoutUnsupportedError(f"layout {what} not served", field="layout")
+            served = ",".join(self.cfg.served_layouts)
+            raise LayoutUnsupportedError(
+                f"layout {what} not served here (layouts {served}): start the server with"
+                f" {model} in its layouts, --layouts {served},{model} (POSECAST_LAYOUTS)",
+                field="layout",
+            )
         claims = verify(
             self.cfg.secret_bytes,
             hello.token,
