@@ -725,6 +725,85 @@ def test_an_unknown_option_with_no_command_prints_no_traceback() -> None:
     assert "\nhint: see `posecast --help`" in out.stderr and "Traceback" not in out.stderr
 
 
+def test_help_describes_posecast_for_its_users(capsys) -> None:
+    """``posecast --help`` showed the module docstring's developer note ("Configuration
+    is parsed here, once, and passed down.")."""
+    with pytest.raises(SystemExit) as exit_:
+        main(["--help"])
+    out = capsys.readouterr().out
+    assert exit_.value.code == 0
+    assert "Configuration is parsed" not in out
+    assert "Full-body poses for VR players" in " ".join(out.split()), out
+    assert "posecast serve --dev" in " ".join(out.split()), out
+
+
+def test_bench_engine_help_shows_the_defaults(capsys) -> None:
+    with pytest.raises(SystemExit):
+        main(["bench", "engine", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    for default in ("1,10,50,100,200", "100", "120", "2", "10"):
+        assert f"(default {default})" in out, (default, out)
+
+
+def _serve_output(monkeypatch, capsys, argv: list[str], env: dict[str, str]) -> list[str]:
+    """What ``posecast serve argv`` prints on stdout up to and once it listens (on 8765;
+    the server itself is not run)."""
+    import os
+
+    import posecast.online.shell.app as app
+
+    async def served(cfg, on_ready) -> None:
+        on_ready(8765)
+
+    monkeypatch.setattr(app, "serve_until_signal", served)
+    for name in [k for k in os.environ if k.startswith("POSECAST_")]:
+        monkeypatch.delenv(name)
+    for name, value in env.items():
+        monkeypatch.setenv(name, value)
+    for name in ("posecast", "websockets"):  # serve configures them: give them back after
+        logger = logging.getLogger(name)
+        monkeypatch.setattr(logger, "handlers", list(logger.handlers))
+        monkeypatch.setattr(logger, "propagate", logger.propagate)
+        monkeypatch.setattr(logger, "level", logger.level)
+    assert main(["serve", *argv]) == 0
+    return capsys.readouterr().out.splitlines()
+
+
+def test_serve_dev_prints_export_lines_to_paste_and_the_viewer(capsys, monkeypatch) -> None:
+    """``serve --dev`` gave its invented secret as prose only: the README told users to
+    copy it into ``export POSECAST_TOKEN_SECRET=<SECRET>`` by hand, and nothing said
+    where the viewer was."""
+    out = _serve_output(monkeypatch, capsys, ["--dev", "--host", "0.0.0.0"], {})
+    secret = re.fullmatch(r"posecast: --dev: token secret for this run: (\S+)", out[0])
+    assert secret, out
+    # Tests and SDK helpers read the first two lines so: the secret, then the port.
+    assert out[1] == "posecast: listening on ws://0.0.0.0:8765"
+    assert out[2:] == [
+        "posecast: --dev: viewer at http://127.0.0.1:8765/viewer/ (this machine only)",
+        "posecast: --dev: for a client in another shell, paste:",
+        f"export POSECAST_TOKEN_SECRET={secret.group(1)}",
+        "export POSECAST_URL=ws://127.0.0.1:8765/",
+    ]
+    pasted = subprocess.run(
+        ["bash", "-c", f'{out[4]}; {out[5]}; echo "$POSECAST_TOKEN_SECRET $POSECAST_URL"'],
+        capture_output=True, text=True, check=True, timeout=30,
+    )  # fmt: skip
+    assert pasted.stdout == f"{secret.group(1)} ws://127.0.0.1:8765/\n"
+
+
+def test_serve_dev_with_a_secret_set_prints_the_viewer_and_never_the_secret(
+    capsys, monkeypatch
+) -> None:
+    out = _serve_output(monkeypatch, capsys, ["--dev"], {"POSECAST_TOKEN_SECRET": "k" * 32})
+    assert out == [
+        "posecast: listening on ws://127.0.0.1:8765",
+        "posecast: --dev: viewer at http://127.0.0.1:8765/viewer/ (this machine only)",
+    ]
+    assert _serve_output(monkeypatch, capsys, [], {"POSECAST_TOKEN_SECRET": "k" * 32}) == [
+        "posecast: listening on ws://127.0.0.1:8765"
+    ]
+
+
 def test_serve_logs_each_posecast_variable_that_sets_nothing(capsys, monkeypatch) -> None:
     """POSECAST_REDIS (for POSECAST_REDIS_URL) used to leave a node silently embedded."""
     import posecast.online.shell.app as app
