@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import gzip
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from posecast_client.bvh import parse_bvh, read_bvh, write_bvh
+from posecast_client.bvh import BvhWriter, parse_bvh, read_bvh, write_bvh
 from posecast_client.errors import BvhError
 from posecast_client.rotations import fk, quat2mat, quat_normalize
 from posecast_client.skeleton import JOINT_NAMES, PARENTS, reference_offsets
@@ -59,6 +60,47 @@ def test_write_then_read_gives_the_same_motion(tmp_path: Path, rng: np.random.Ge
     _, pos = bvh.fk()
     _, want = fk(quat2mat(quat), root, reference_offsets(), PARENTS)
     np.testing.assert_allclose(pos, want, atol=2e-6)  # 6 decimals in the file
+
+
+def test_a_motion_written_in_parts_is_the_file_written_whole(
+    tmp_path: Path, rng: np.random.Generator
+) -> None:
+    """BvhWriter writes the motion as it comes: any split of the frames gives the bytes
+    write_bvh gives (gzip too: gzip.compress's with mtime 0), and the header's frame
+    count is held to."""
+    quat = quat_normalize(rng.normal(size=(50, 19, 4)))
+    root = rng.normal(size=(50, 3))
+
+    def writer(name: str, n_frames: int) -> BvhWriter:
+        return BvhWriter(
+            tmp_path / name,
+            names=JOINT_NAMES,
+            parents=PARENTS,
+            offsets=reference_offsets(),
+            n_frames=n_frames,
+            frame_time_s=1 / 60,
+        )
+
+    for name in ("whole.bvh", "whole.bvh.gz"):
+        write_bvh(tmp_path / name, names=JOINT_NAMES, parents=PARENTS, offsets=reference_offsets(),
+                  root_pos=root, local_quat=quat, frame_time_s=1 / 60)  # fmt: skip
+    whole = (tmp_path / "whole.bvh").read_bytes()
+    assert (tmp_path / "whole.bvh.gz").read_bytes() == gzip.compress(whole, mtime=0)
+    for part in (1, 7, 49):
+        for name in ("parts.bvh", "parts.bvh.gz"):
+            with writer(name, 50) as w:
+                for k in range(0, 50, part):
+                    w.write_frames(root[k : k + part], quat[k : k + part])
+            suffix = name.removeprefix("parts")
+            assert (tmp_path / name).read_bytes() == (tmp_path / f"whole{suffix}").read_bytes()
+    w = writer("short.bvh", 3)
+    w.write_frames(root[:2], quat[:2])
+    with pytest.raises(ValueError, match="2 frames written, the header says 3"):
+        w.close()
+    with writer("long.bvh", 3) as w:
+        with pytest.raises(ValueError, match="more than the 3 frames"):
+            w.write_frames(root[:4], quat[:4])
+        w.write_frames(root[:3], quat[:3])
 
 
 def test_the_server_reads_what_the_sdk_writes(tmp_path: Path, rng: np.random.Generator) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import itertools
 import tracemalloc
 from pathlib import Path
@@ -10,6 +11,7 @@ import msgpack
 import numpy as np
 import pytest
 
+from posecast_client import recording
 from posecast_client.bvh import read_bvh
 from posecast_client.codec import encode
 from posecast_client.errors import RecordingError
@@ -196,3 +198,102 @@ def test_a_file_that_is_no_recording_is_refused_on_opening(tmp_path: Path) -> No
         path.write_bytes(data)
         with pytest.raises(RecordingError, match=why):
             open_recording(path)  # (its file closed: -W error would see it left open)
+
+
+def _awkward_poses() -> list[Pose]:
+    """Poses as a recording can hold them: out of order within a stretch, two at one
+    time (the later wins) and two on one tick, gaps, a jump to another clock and back,
+    some without rotations."""
+    poses = walk_poses(5.0)
+    out = [*poses[:40], *poses[50:120]]
+    for k in range(0, len(out) - 4, 9):  # out of order
+        out[k], out[k + 3] = out[k + 3], out[k]
+    p = poses[130]
+    out += [p, Pose(p.player, p.seq, p.t, p.positions + 0.01, p.rotations)]  # one time
+    out += [Pose(p.player, p.seq, p.t + 0.004, p.positions + 0.02, p.rotations)]  # one tick
+    out += [Pose(q.player, q.seq, q.t + 1e6, q.positions + 1.0, q.rotations) for q in poses[:50]]
+    out += poses[140:200]
+    return out
+
+
+@pytest.mark.parametrize("with_rotations", [True, False])
+def test_the_export_written_in_chunks_is_the_export_written_whole(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, with_rotations: bool
+) -> None:
+    """The export converts and writes EXPORT_CHUNK_FRAMES frames at a time, holding a
+    pose that came early until its frame: the file is the same for any chunk."""
+    poses = _awkward_poses()
+    if not with_rotations:
+        poses[7] = Pose(poses[7].player, poses[7].seq, poses[7].t, poses[7].positions)
+    monkeypatch.setattr(recording, "EXPORT_CHUNK_FRAMES", 1 << 30)  # one chunk: all at once
+    n = poses2bvh(poses, tmp_path / "whole.bvh", 60.0)
+    whole = (tmp_path / "whole.bvh").read_bytes()
+    assert n == 131 + 50 + 60  # ticks 0-130 (gaps held), then each stretch after the last
+    for chunk in (1, 2, 7, 64):
+        monkeypatch.setattr(recording, "EXPORT_CHUNK_FRAMES", chunk)
+        assert poses2bvh(poses, tmp_path / f"{chunk}.bvh", 60.0) == n
+        assert (tmp_path / f"{chunk}.bvh").read_bytes() == whole, chunk
+
+
+def test_the_export_takes_memory_that_grows_by_bytes_a_pose(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Exporting an hour of poses built whole-motion arrays, the whole text and every
+    pose (2.1 GB at one player-hour, about 6 kB more for each pose); it now keeps each
+    pose's time and bone lengths and writes the frames a chunk at a time."""
+    monkeypatch.setattr(recording, "EXPORT_CHUNK_FRAMES", 64)
+    poses = walk_poses(1.0)
+
+    def peak(n: int) -> int:
+        path = tmp_path / f"{n}.pcrec"
+        w = RecordingWriter(path, url="ws://x/", room="r", flush_every=1024)
+        for k in range(n):
+            p = poses[k % len(poses)]
+            w.write(Pose("p-1", k, k / 60.0, p.positions, p.rotations), now=k / 60.0)
+        w.close()
+        gc.collect()
+        tracemalloc.start()
+        try:
+            with open_recording(path) as reader:
+                paths = export_bvh(reader, tmp_path / f"out-{n}")
+            used = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        assert read_bvh(paths["p-1"]).n_frames == n
+        return used
+
+    small, large = peak(500), peak(2000)
+    assert large - small < 600_000, (small, large)  # 0.3 MB more; whole: 14.8 MB more
+
+
+def test_a_reader_read_in_part_exports_the_rest(tmp_path: Path) -> None:
+    path = tmp_path / "r.pcrec"
+    w = RecordingWriter(path, url="ws://x/", room="r")
+    for p in walk_poses(0.5):
+        w.write(p)
+    w.close()
+    rec = read_recording(path)
+    rest = export_bvh(recording.Recording(rec.header, rec.messages[5:]), tmp_path / "rest")
+    with open_recording(path) as reader:
+        for _ in zip(range(5), reader, strict=False):
+            pass
+        exported = export_bvh(reader, tmp_path / "out")
+    assert read_bvh(exported["p-1"]).n_frames == 25
+    assert exported["p-1"].read_bytes() == rest["p-1"].read_bytes()
+
+
+def test_a_recording_that_changes_while_it_is_exported_is_an_error(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The export reads a reader's file twice: if the poses are not all there the second
+    time, it says so (and leaves no file open)."""
+    path, cut = tmp_path / "r.pcrec", tmp_path / "cut.pcrec"
+    w = RecordingWriter(path, url="ws://x/", room="r")
+    for p in walk_poses(0.5):
+        w.write(p)
+    w.close()
+    cut.write_bytes(path.read_bytes()[: -len(path.read_bytes()) // 3])
+    real_open = recording.open_recording
+    monkeypatch.setattr(recording, "open_recording", lambda _: real_open(cut))
+    with real_open(path) as reader, pytest.raises(RecordingError, match="changed while"):
+        export_bvh(reader, tmp_path / "out")

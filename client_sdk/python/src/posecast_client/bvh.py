@@ -5,16 +5,19 @@ on any joint and ``End Site`` leaves; one ``ROOT``. Problems raise
 :class:`~posecast_client.errors.BvhError` with the file and line.
 
 Writing produces what Blender and MotionBuilder import: one ``ROOT`` with six
-channels, three rotation channels on every other joint, degrees, metres by default.
+channels, three rotation channels on every other joint, degrees, metres by default;
+:class:`BvhWriter` writes the motion in parts, as it comes.
 """
 
 from __future__ import annotations
 
 import gzip
 import io
+import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -181,6 +184,117 @@ def _parse_joint(
     return i + 1
 
 
+class BvhWriter:
+    """Writes a BVH file (ZYX rotation channels, metres) frame by frame: the hierarchy
+    and the motion header on opening, then each batch of frames as it comes, so a long
+    motion never has to be in memory whole. ``n_frames`` goes in the header up front,
+    and closing checks that so many were written. A path ending ``.gz`` is written
+    gzip-compressed (the bytes :func:`gzip.compress` with ``mtime=0`` gives).
+
+    Args:
+        names, parents: joints with parents first (``parents[0] == -1``).
+        offsets: ``(J, 3)`` rest offsets, metres.
+        n_frames: the frames that will be written.
+        frame_time_s: seconds per frame.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        names: Sequence[str],
+        parents: Sequence[int],
+        offsets: ArrayLike,
+        n_frames: int,
+        frame_time_s: float,
+    ) -> None:
+        self.n_frames, self.written = n_frames, 0
+        self._gzip = zlib.compressobj(9, zlib.DEFLATED, 31) if str(path).endswith(".gz") else None
+        self._f: BinaryIO = Path(path).open("wb")  # noqa: SIM115 - closed by close()
+        try:
+            self.order = self._write_hierarchy(names, parents, offsets)
+            self._write(f"MOTION\nFrames: {n_frames}\nFrame Time: {frame_time_s:.8f}\n")
+        except BaseException:
+            self._f.close()
+            raise
+
+    def _write_hierarchy(
+        self, names: Sequence[str], parents: Sequence[int], offsets: ArrayLike
+    ) -> list[int]:
+        """Write HIERARCHY; returns the joints depth first, the order of the columns."""
+        off = np.asarray(offsets, dtype=np.float64)
+        kids: list[list[int]] = [[] for _ in parents]
+        for j, p in enumerate(parents):
+            if p >= 0:
+                kids[p].append(j)
+        out = io.StringIO()
+        out.write("HIERARCHY\n")
+        order: list[int] = []
+
+        def emit(j: int, depth: int) -> None:
+            order.append(j)
+            pad = "\t" * depth
+            out.write(f"{pad}{'ROOT' if parents[j] < 0 else 'JOINT'} {names[j]}\n{pad}{{\n")
+            out.write(f"{pad}\tOFFSET {off[j, 0]:.6f} {off[j, 1]:.6f} {off[j, 2]:.6f}\n")
+            pos = "Xposition Yposition Zposition " if parents[j] < 0 else ""
+            out.write(f"{pad}\tCHANNELS {6 if pos else 3} {pos}Zrotation Yrotation Xrotation\n")
+            for c in kids[j]:
+                emit(c, depth + 1)
+            if not kids[j]:  # a leaf: a short End Site along its bone, so the bone shows
+                tip = off[j] * 0.25 if np.linalg.norm(off[j]) > 0 else np.array([0.0, 0.05, 0.0])
+                out.write(f"{pad}\tEnd Site\n{pad}\t{{\n")
+                out.write(f"{pad}\t\tOFFSET {tip[0]:.6f} {tip[1]:.6f} {tip[2]:.6f}\n{pad}\t}}\n")
+            out.write(f"{pad}}}\n")
+
+        emit(0, 0)
+        self._write(out.getvalue())
+        return order
+
+    def _write(self, text: str) -> None:
+        data = text.encode("utf-8")
+        self._f.write(self._gzip.compress(data) if self._gzip is not None else data)
+
+    def write_frames(self, root_pos: ArrayLike, local_quat: ArrayLike) -> None:
+        """Append frames: ``root_pos (F, 3)`` root positions and ``local_quat (F, J, 4)``
+        xyzw local rotations (the root's is its world rotation)."""
+        euler = np.rad2deg(mat2euler_zyx(quat2mat(local_quat)))  # (F, J, 3) as Z, Y, X
+        if self.written + euler.shape[0] > self.n_frames:
+            raise ValueError(f"more than the {self.n_frames} frames the header says")
+        table = np.concatenate(
+            [np.asarray(root_pos, dtype=np.float64)] + [euler[:, j] for j in self.order], 1
+        )
+        out = io.StringIO()
+        np.savetxt(out, table, fmt="%.6f")
+        self._write(out.getvalue())
+        self.written += euler.shape[0]
+
+    def close(self) -> None:
+        """Finish the file; a count of frames other than the header's is a ValueError
+        (the file is closed all the same)."""
+        if self._f.closed:
+            return
+        try:
+            if self._gzip is not None:
+                self._f.write(self._gzip.flush())
+        finally:
+            self._f.close()
+        if self.written != self.n_frames:
+            raise ValueError(f"{self.written} frames written, the header says {self.n_frames}")
+
+    def abandon(self) -> None:
+        """Close the file as it is, unfinished (after an error on the way)."""
+        self._f.close()
+
+    def __enter__(self) -> BvhWriter:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, *exc: object) -> None:
+        if kind is None:
+            self.close()
+        else:  # an error on the way: the count's error must not hide it
+            self.abandon()
+
+
 def write_bvh(
     path: str | Path,
     *,
@@ -191,7 +305,8 @@ def write_bvh(
     local_quat: ArrayLike,
     frame_time_s: float,
 ) -> None:
-    """Write a skeleton and its motion as BVH (ZYX rotation channels, metres).
+    """Write a skeleton and its motion as BVH (ZYX rotation channels, metres); for a
+    motion written in parts, :class:`BvhWriter`.
 
     Args:
         names, parents: joints with parents first (``parents[0] == -1``).
@@ -200,37 +315,13 @@ def write_bvh(
             rotations (the root's is its world rotation).
         frame_time_s: seconds per frame.
     """
-    off = np.asarray(offsets, dtype=np.float64)
-    euler = np.rad2deg(mat2euler_zyx(quat2mat(local_quat)))  # (F, J, 3) as Z, Y, X
-    kids: list[list[int]] = [[] for _ in parents]
-    for j, p in enumerate(parents):
-        if p >= 0:
-            kids[p].append(j)
-    out = io.StringIO()
-    out.write("HIERARCHY\n")
-    order: list[int] = []  # depth-first, the order of the motion columns
-
-    def emit(j: int, depth: int) -> None:
-        order.append(j)
-        pad = "\t" * depth
-        out.write(f"{pad}{'ROOT' if parents[j] < 0 else 'JOINT'} {names[j]}\n{pad}{{\n")
-        out.write(f"{pad}\tOFFSET {off[j, 0]:.6f} {off[j, 1]:.6f} {off[j, 2]:.6f}\n")
-        pos = "Xposition Yposition Zposition " if parents[j] < 0 else ""
-        out.write(f"{pad}\tCHANNELS {6 if pos else 3} {pos}Zrotation Yrotation Xrotation\n")
-        for c in kids[j]:
-            emit(c, depth + 1)
-        if not kids[j]:  # a leaf: a short End Site along its bone, so the bone shows
-            tip = off[j] * 0.25 if np.linalg.norm(off[j]) > 0 else np.array([0.0, 0.05, 0.0])
-            out.write(f"{pad}\tEnd Site\n{pad}\t{{\n")
-            out.write(f"{pad}\t\tOFFSET {tip[0]:.6f} {tip[1]:.6f} {tip[2]:.6f}\n{pad}\t}}\n")
-        out.write(f"{pad}}}\n")
-
-    emit(0, 0)
-    n_frames = euler.shape[0]
-    out.write(f"MOTION\nFrames: {n_frames}\nFrame Time: {frame_time_s:.8f}\n")
-    table = np.concatenate(
-        [np.asarray(root_pos, dtype=np.float64)] + [euler[:, j] for j in order], 1
-    )
-    np.savetxt(out, table, fmt="%.6f")
-    data = out.getvalue().encode("utf-8")
-    Path(path).write_bytes(gzip.compress(data, mtime=0) if str(path).endswith(".gz") else data)
+    n_frames = np.shape(local_quat)[0]
+    with BvhWriter(
+        path,
+        names=names,
+        parents=parents,
+        offsets=offsets,
+        n_frames=n_frames,
+        frame_time_s=frame_time_s,
+    ) as writer:
+        writer.write_frames(root_pos, local_quat)

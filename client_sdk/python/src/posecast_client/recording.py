@@ -16,7 +16,9 @@ bytes that are not a record make the file corrupt.
 
 **Reading.** :func:`open_recording` reads a file record by record (memory stays flat
 however long the recording: hours at 60 Hz); :func:`read_recording` reads all of it
-into a :class:`Recording`. :func:`export_bvh` takes either.
+into a :class:`Recording`. :func:`export_bvh` takes either, and reads it twice: first
+keeping each pose's time and bone lengths (about 170 bytes a pose), then writing the
+frames as their poses come, EXPORT_CHUNK_FRAMES at a time.
 
 **BVH export** writes each player's poses on the canonical 19-joint skeleton at the
 room's pose rate, one frame per tick (``pose.t``; a tick without a pose for that
@@ -34,16 +36,19 @@ leaf its parent's rotation.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import time
-from collections.abc import Generator, Iterator
+from array import array
+from collections.abc import Generator, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
 
 import msgpack
 import numpy as np
+from numpy.typing import NDArray
 
-from posecast_client.bvh import write_bvh
+from posecast_client.bvh import BvhWriter
 from posecast_client.codec import decode, encode
 from posecast_client.errors import PosecastClientError, RecordingError
 from posecast_client.protocol import Message, Pose, Welcome
@@ -126,13 +131,16 @@ class RecordingReader:
             self._f.close()
             raise
         self.header: dict[str, Any] = header
+        self.records_read = 0  # the records iterating has given so far
         self._records = self._read()
 
     def _read(self) -> Generator[tuple[float, Message], None, None]:
         with _corrupt_is_recording_error(self.path):
             for item in self._items:
                 t, data = item
-                yield float(t), decode(data)
+                message = decode(data)
+                self.records_read += 1
+                yield float(t), message
 
     def __iter__(self) -> Iterator[tuple[float, Message]]:
         return self._records
@@ -233,73 +241,193 @@ def world_rotations(positions: F64) -> F64:
     return g
 
 
-def poses2bvh(poses: list[Pose], path: str | Path, rate_hz: float = 60.0) -> int:
-    """Write one player's poses as a BVH file; returns the number of frames."""
-    if not poses:
-        raise ValueError("no poses to export")
-    stretches: list[list[Pose]] = []  # split where pose.t jumps (in order of arrival)
-    for q in poses:
-        if stretches and abs(q.t - stretches[-1][-1].t) <= MAX_GAP_S:
-            stretches[-1].append(q)
-        else:
-            stretches.append([q])
-    ordered: list[Pose] = []
-    ticks: list[int] = []
-    for stretch in stretches:  # each on the tick after the last one's end
-        kept = sorted({q.t: q for q in stretch}.values(), key=lambda q: q.t)  # one per tick
-        start = ticks[-1] + 1 if ticks else 0
-        ordered += kept
-        ticks += [start + round((q.t - kept[0].t) * rate_hz) for q in kept]
-    n = ticks[-1] + 1
-    idx = np.full(n, -1)
+EXPORT_CHUNK_FRAMES = 1024  # frames turned into rotations and written at a time
+
+
+class _Track:
+    """What the first pass keeps of one player's poses, in order of arrival: ``pose.t``,
+    whether it carries rotations and its bone lengths (about 170 bytes a pose, where a
+    decoded pose takes 1.6 kB)."""
+
+    def __init__(self) -> None:
+        self.t = array("d")
+        self.has_rot = bytearray()
+        self.lengths = array("d")  # (poses, 18): joint 1.. to its parent
+        self._pending: list[F64] = []
+
+    def add(self, pose: Pose) -> None:
+        self.t.append(pose.t)
+        self.has_rot.append(pose.rotations is not None)
+        self._pending.append(pose.positions)
+        if len(self._pending) >= EXPORT_CHUNK_FRAMES:
+            self._measure()
+
+    def _measure(self) -> None:
+        if self._pending:
+            pos = np.stack(self._pending)
+            bones = np.linalg.norm(pos[:, _JOINTS] - pos[:, _PARENTS], axis=-1)
+            self.lengths.frombytes(np.ascontiguousarray(bones, dtype=np.float64).tobytes())
+            self._pending.clear()
+
+    def plan(self, rate_hz: float) -> _Plan:
+        """Each frame's pose, whether to use the poses' rotations, and the bone lengths."""
+        self._measure()
+        if not self.t:
+            raise ValueError("no poses to export")
+        ordered, frames = _frames(np.frombuffer(self.t, dtype=np.float64), rate_hz)
+        use_rot = bool(np.frombuffer(self.has_rot, dtype=bool)[ordered].all())
+        measured = np.frombuffer(self.lengths, dtype=np.float64).reshape(-1, len(_JOINTS))
+        ref = reference_offsets()
+        lengths = np.ones(len(PARENTS))
+        for k, j in enumerate(_JOINTS):  # over the frames: a held pose counts each time
+            lengths[j] = np.median(measured[frames, k]) / np.linalg.norm(ref[j])
+        return _Plan(frames, use_rot, ref * lengths[:, None])
+
+
+_JOINTS = [j for j, p in enumerate(PARENTS) if p >= 0]
+_PARENTS = [PARENTS[j] for j in _JOINTS]
+
+
+def _frames(t: F64, rate_hz: float) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """The poses (by index in order of arrival, of poses at times ``t``) on the export's
+    timeline, and for each frame the pose it shows (see the module docstring): split
+    where ``t`` jumps by more than MAX_GAP_S, each stretch in order of ``t`` with one
+    pose a time (the last to arrive) on the tick after the previous stretch's end."""
+    stretch = np.concatenate([[0], np.cumsum(~(np.abs(np.diff(t)) <= MAX_GAP_S))])
+    by_t = np.lexsort((t, stretch))  # stable: of poses at one time, the last comes last
+    s, ts = stretch[by_t], t[by_t]
+    last = np.ones(len(by_t), dtype=bool)
+    last[:-1] = (s[1:] != s[:-1]) | (ts[1:] != ts[:-1])
+    ordered, s, ts = by_t[last], s[last], ts[last]
+    first = np.flatnonzero(np.concatenate([[True], s[1:] != s[:-1]]))  # of each stretch
+    sizes = np.diff(np.append(first, len(s)))
+    local = np.rint((ts - np.repeat(ts[first], sizes)) * rate_hz)  # ticks in the stretch
+    starts = np.concatenate([[0], np.cumsum(local[first + sizes - 1] + 1)[:-1]])
+    ticks = (local + np.repeat(starts, sizes)).astype(np.intp)  # one after another
+    idx = np.full(ticks[-1] + 1, -1)
     np.maximum.at(idx, ticks, np.arange(len(ticks)))  # of two poses on one tick, the later
     idx = np.maximum.accumulate(idx)  # a tick without a pose holds the previous one
-    pos = np.stack([q.positions for q in ordered])[idx]  # (F, 19, 3)
-    rotations = [q.rotations for q in ordered if q.rotations is not None]
-    if len(rotations) == len(ordered):
-        world = quat2mat(np.stack(rotations)[idx])  # (F, 19, 3, 3)
-    else:
-        world = world_rotations(pos)
-    local = world.copy()
-    for j, p in enumerate(PARENTS):
-        if p >= 0:
-            local[:, j] = np.swapaxes(world[:, p], -1, -2) @ world[:, j]
-    ref = reference_offsets()
-    lengths = np.ones(len(PARENTS))
-    for j, p in enumerate(PARENTS):
-        if p >= 0:
-            measured = np.median(np.linalg.norm(pos[:, j] - pos[:, p], axis=-1))
-            lengths[j] = measured / np.linalg.norm(ref[j])
-    write_bvh(
-        path,
-        names=JOINT_NAMES,
-        parents=PARENTS,
-        offsets=ref * lengths[:, None],
-        root_pos=pos[:, 0],
-        local_quat=mat2quat(local),
-        frame_time_s=1.0 / rate_hz,
-    )
-    return n
+    return ordered, ordered[idx]
 
 
-def _poses_and_rate(recording: Recording | RecordingReader) -> tuple[dict[str, list[Pose]], float]:
-    """Each player's poses and the room's pose rate, as :class:`Recording` gives them;
-    of a reader, in one pass that keeps the poses only."""
-    if isinstance(recording, Recording):
-        return recording.poses(), recording.rate_hz
-    poses: dict[str, list[Pose]] = {}
+@dataclass
+class _Plan:
+    frames: NDArray[np.intp]  # (F,) for each frame, the pose's index in order of arrival
+    use_rot: bool  # every pose on the timeline carries rotations: use them
+    offsets: F64  # (19, 3) the player's bones along the reference directions
+
+
+class _PlayerExport:
+    """The second pass for one player: takes its poses in order of arrival and writes
+    the frames as soon as their poses are in, EXPORT_CHUNK_FRAMES at a time. A pose
+    that came before one shown ahead of it waits (poses within a stretch are put in
+    order of ``t``); a pose no frame shows is dropped at once."""
+
+    def __init__(self, path: Path, plan: _Plan, rate_hz: float) -> None:
+        self.path, self.plan, self.rate_hz = path, plan, rate_hz
+        self.frames = array("q", plan.frames.astype(np.int64).tobytes())
+        self.needed = np.zeros(int(plan.frames.max()) + 1, dtype=bool)
+        self.needed[plan.frames] = True
+        self.next = 0  # the next frame to write
+        self.waiting: dict[int, Pose] = {}
+        self.chunk: list[Pose] = []
+        self.writer: BvhWriter | None = None
+
+    @property
+    def done(self) -> bool:
+        return self.next == len(self.frames)
+
+    def add(self, arrival: int, pose: Pose) -> None:
+        if arrival >= len(self.needed) or not self.needed[arrival]:
+            return
+        self.waiting[arrival] = pose
+        frames = self.frames
+        while self.next < len(frames) and frames[self.next] in self.waiting:
+            shown = frames[self.next]
+            self.chunk.append(self.waiting[shown])
+            self.next += 1
+            if self.next == len(frames) or frames[self.next] != shown:
+                del self.waiting[shown]  # no later frame shows it
+            if len(self.chunk) >= EXPORT_CHUNK_FRAMES or self.done:
+                self._write()
+
+    def _write(self) -> None:
+        if self.writer is None:  # opened at the first frame: few files open at once
+            self.writer = BvhWriter(
+                self.path,
+                names=JOINT_NAMES,
+                parents=PARENTS,
+                offsets=self.plan.offsets,
+                n_frames=len(self.frames),
+                frame_time_s=1.0 / self.rate_hz,
+            )
+        pos = np.stack([q.positions for q in self.chunk])  # (C, 19, 3)
+        if self.plan.use_rot:
+            world = quat2mat(np.stack([q.rotations for q in self.chunk]))  # type: ignore[misc]
+        else:
+            world = world_rotations(pos)
+        local = world.copy()
+        for j, p in enumerate(PARENTS):
+            if p >= 0:
+                local[:, j] = np.swapaxes(world[:, p], -1, -2) @ world[:, j]
+        self.writer.write_frames(pos[:, 0], mat2quat(local))
+        self.chunk.clear()
+        if self.done:
+            self.writer.close()
+
+    def abandon(self) -> None:
+        """Close the file unfinished (an error on the way)."""
+        if self.writer is not None:
+            self.writer.abandon()
+
+
+def poses2bvh(poses: list[Pose], path: str | Path, rate_hz: float = 60.0) -> int:
+    """Write one player's poses as a BVH file; returns the number of frames."""
+    track = _Track()
+    for q in poses:
+        track.add(q)
+    export = _PlayerExport(Path(path), track.plan(rate_hz), rate_hz)
+    try:
+        for a, q in enumerate(poses):
+            export.add(a, q)
+    except BaseException:
+        export.abandon()
+        raise
+    return len(export.frames)
+
+
+def _tracks(messages: Iterable[tuple[float, Message]]) -> tuple[dict[str, _Track], float | None]:
+    """The first pass: each player's track and the rate of the first ``welcome``."""
+    tracks: dict[str, _Track] = {}
     rate_hz: float | None = None
-    for _, m in recording:
+    for _, m in messages:
         if isinstance(m, Pose):
-            poses.setdefault(m.player, []).append(m)
+            tracks.setdefault(m.player, _Track()).add(m)
         elif rate_hz is None and isinstance(m, Welcome):
             rate_hz = m.rate_hz
-    return poses, DEFAULT_RATE_HZ if rate_hz is None else rate_hz
+    return tracks, rate_hz
+
+
+@contextlib.contextmanager
+def _read_again(
+    recording: Recording | RecordingReader, skip: int
+) -> Iterator[Iterable[tuple[float, Message]]]:
+    """The recording's messages for the second pass: a reader's file is opened again
+    and read past the ``skip`` records it had given before the first pass."""
+    if isinstance(recording, Recording):
+        yield recording.messages
+        return
+    with open_recording(recording.path) as again:
+        yield itertools.islice(again, skip, None)
 
 
 def export_bvh(recording: Recording | RecordingReader, out_dir: str | Path) -> dict[str, Path]:
     """Write ``<player>.bvh`` for every player in ``recording``; returns their paths.
-    A reader (:func:`open_recording`) is read to its end, keeping only the poses.
+
+    Memory stays small however long the recording: a reader (:func:`open_recording`)
+    is read to its end keeping only each pose's time and bone lengths (and the room's
+    rate), then its file is read once more, writing the frames as their poses come,
+    a chunk at a time.
 
     ``:`` in an id becomes ``_`` (Windows refuses it in file names). Two players whose
     names would then be the same, or differ only in case (a case-insensitive file
@@ -307,17 +435,36 @@ def export_bvh(recording: Recording | RecordingReader, out_dir: str | Path) -> d
     the returned paths say whose file is whose."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    skip = recording.records_read if isinstance(recording, RecordingReader) else 0
+    tracks, rate = _tracks(recording.messages if isinstance(recording, Recording) else recording)
+    rate_hz = DEFAULT_RATE_HZ if rate is None else rate
     paths = {}
     taken: set[str] = set()
-    players, rate_hz = _poses_and_rate(recording)
-    for player, poses in sorted(players.items()):
+    exports: dict[str, _PlayerExport] = {}
+    for player in sorted(tracks):
         stem = base = player.replace(":", "_")
         k = 1
         while stem.lower() in taken:
             k += 1
             stem = f"{base}~{k}"
         taken.add(stem.lower())
-        path = out / (stem + ".bvh")
-        poses2bvh(poses, path, rate_hz)
-        paths[player] = path
+        paths[player] = out / (stem + ".bvh")
+        exports[player] = _PlayerExport(paths[player], tracks.pop(player).plan(rate_hz), rate_hz)
+    arrivals = dict.fromkeys(exports, 0)
+    try:
+        with _read_again(recording, skip) as messages:
+            for _, m in messages:
+                if isinstance(m, Pose) and m.player in exports:
+                    exports[m.player].add(arrivals[m.player], m)
+                    arrivals[m.player] += 1
+        unfinished = sorted(p for p, e in exports.items() if not e.done)
+        if unfinished:
+            raise RecordingError(
+                f"{getattr(recording, 'path', 'the recording')}: changed while it was "
+                f"exported (the poses of {', '.join(unfinished)} are not all there again)"
+            )
+    except BaseException:
+        for e in exports.values():
+            e.abandon()
+        raise
     return paths
