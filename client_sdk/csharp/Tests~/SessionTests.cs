@@ -209,6 +209,27 @@ namespace Posecast.Client.Tests
                 foreach (var ok in new[] { new string('s', 16), string.Concat(Enumerable.Repeat(e, 16)), smile + new string('s', 15) })
                     T.Equal(2, DevTokens.Mint(ok, "r", "p").Split('.').Length, "a token from a secret of 16 characters");
             });
+            T.Run("tokens: ttlS and the room and player are checked as mint_token checks them", () =>
+            {
+                string secret = new string('s', 16), id64 = new string('a', 64);
+                foreach (int ttl in new[] { 0, -1, DevTokens.MaxTtlS + 1, int.MinValue })
+                {
+                    var err = T.Throws<ArgumentException>(() => DevTokens.Mint(secret, "r", "p", ttlS: ttl), "ttlS " + ttl);
+                    T.Equal("ttlS must be in (0, 604800], not " + ttl, err.Message, "ttlS " + ttl);
+                }
+                foreach (int ttl in new[] { 1, DevTokens.MaxTtlS })
+                    T.Equal(2, DevTokens.Mint(secret, "r", "p", ttlS: ttl).Split('.').Length, "ttlS " + ttl);
+                foreach (var bad in new[] { "", "lob by", "a/b", "caf\u00e9", "\u0661", id64 + "a", "r\n" })
+                {
+                    var err = T.Throws<ArgumentException>(() => DevTokens.Mint(secret, bad, "p"), "room " + bad);
+                    T.Equal("room '" + bad + "' is not an id: 1 to 64 of A-Z a-z 0-9 _ . : -", err.Message, "room " + bad);
+                    err = T.Throws<ArgumentException>(() => DevTokens.Mint(secret, "r", bad), "player " + bad);
+                    T.True(err.Message.StartsWith("player '" + bad + "' is not an id"), err.Message);
+                }
+                T.Equal("no room (null)", T.Throws<ArgumentException>(() => DevTokens.Mint(secret, null, "p"), "null room").Message, "null room");
+                T.Equal("no player (null)", T.Throws<ArgumentException>(() => DevTokens.Mint(secret, "r", null), "null player").Message, "null player");
+                T.Equal(2, DevTokens.Mint(secret, id64, "Ab_0.9:-z").Split('.').Length, "64 bytes and every id character");
+            });
         }
     }
 }

@@ -43,8 +43,23 @@ namespace Posecast.Client
             return n;
         }
 
-        /// <summary>A token for `player` in `room` with `role`, valid ttlS seconds from now. A secret
-        /// shorter than any server takes (MinSecretChars) is refused: no server would verify the token.</summary>
+        /// <summary>The longest lifetime a minted token may have, seconds (7 days: the server's minting tool's).</summary>
+        public const int MaxTtlS = 7 * 24 * 3600;
+
+        /// <summary>A room or player the server takes in a token: a wire id, 1..Protocol.MaxIdBytes of A-Z a-z 0-9 _ . : -.</summary>
+        private static void CheckId(string what, string value)
+        {
+            if (value == null) throw new ArgumentException("no " + what + " (null)");
+            if (Encoding.UTF8.GetByteCount(value) > Protocol.MaxIdBytes || !Fields.IsId(value))
+                throw new ArgumentException(what + " '" + value + "' is not an id: 1 to " + Protocol.MaxIdBytes
+                                            + " of A-Z a-z 0-9 _ . : -");
+        }
+
+        /// <summary>A token for `player` in `room` with `role`, valid ttlS seconds from now, refused
+        /// (ArgumentException) as the Python SDK's mint_token refuses it: a secret shorter than any server
+        /// takes (MinSecretChars), for no server would verify the token; a role that is none of
+        /// Protocol.Roles; ttlS not in (0, MaxTtlS]; a room or player that is not a wire id, which the
+        /// server refuses at join.</summary>
         public static string Mint(string secret, string room, string player, string role = "player", int ttlS = 3600)
         {
             if (secret == null) throw new ArgumentException("no token secret (POSECAST_TOKEN_SECRET)");
@@ -53,6 +68,9 @@ namespace Posecast.Client
                 throw new ArgumentException("the secret has " + chars + " characters; a server takes none under "
                                             + MinSecretChars + ", so no server verifies tokens minted with it");
             if (Array.IndexOf(Protocol.Roles, role) < 0) throw new ArgumentException("no role " + role);
+            if (ttlS <= 0 || ttlS > MaxTtlS) throw new ArgumentException("ttlS must be in (0, " + MaxTtlS + "], not " + ttlS);
+            CheckId("room", room);
+            CheckId("player", player);
             long iat = DateTimeOffset.UtcNow.ToUnixTimeSeconds();
             var jti = new byte[12];
             using (var rng = RandomNumberGenerator.Create()) rng.GetBytes(jti);
