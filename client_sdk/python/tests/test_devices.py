@@ -156,6 +156,93 @@ def test_serial_source_reads_a_loop_port(rng: np.random.Generator) -> None:
     assert [s.device_seq for s in got] == list(sent)
 
 
+SERIAL_PERIOD_US = 8_333  # a 120 Hz device
+
+
+def one_frame(kind: str, seq: int, t_us: int) -> bytes:
+    """A version-1 (four slots) or tracker-set serial frame; only its counters matter."""
+    if kind == "slots":
+        return encode_serial_frame(
+            seq, t_us, np.zeros((4, 3)), np.tile([0.0, 0.0, 0.0, 1.0], (4, 1))
+        )
+    return encode_serial_sites(seq, t_us, ["head"], np.zeros((1, 3)), np.array([[0, 0, 0, 1.0]]))
+
+
+@pytest.mark.parametrize("kind", ["slots", "sites"])
+@pytest.mark.parametrize("uptime_s", [5.0, 3000.0, 864_000.0])
+def test_a_serial_device_reset_carries_the_counters_on(kind: str, uptime_s: float) -> None:
+    """A device on a UART resets with nothing failing on the host's side and sends on
+    from seq 0 and t_us 0: device_t went back by its uptime (up to days) and seq to 0.
+    Both carry on instead, by the host's time between the frames and by one, as HID."""
+    dec = SerialFrameDecoder()
+    host, up_us = 100.0, int(uptime_s * 1e6)
+    got = []
+    for k in range(3):
+        got += dec.feed(one_frame(kind, 40 + k, up_us + k * SERIAL_PERIOD_US), host + k / 120)
+    for k in range(3):
+        got += dec.feed(one_frame(kind, k, (k + 1) * SERIAL_PERIOD_US), host + (3 + k) / 120)
+    assert len(got) == 6 and dec.stats.samples == 6
+    assert [s.device_seq for s in got] == [40, 41, 42, 43, 44, 45]
+    steps = np.diff([s.device_t for s in got if s.device_t is not None])
+    np.testing.assert_allclose(steps, [SERIAL_PERIOD_US * 1e-6] * 5, rtol=0, atol=1e-6)
+    assert dec.stats.device_resets == 1
+
+
+def test_serial_without_host_times_a_clock_that_steps_back_is_a_reset() -> None:
+    dec = SerialFrameDecoder()
+    frames = [one_frame("slots", 40 + k, 5_000_000 + k * SERIAL_PERIOD_US) for k in range(3)]
+    frames += [one_frame("slots", k, (k + 1) * SERIAL_PERIOD_US) for k in range(3)]
+    got = dec.feed(b"".join(frames))  # one read, no host time
+    assert [s.device_seq for s in got] == [40, 41, 42, 43, 44, 45]
+    times = [s.device_t for s in got if s.device_t is not None]
+    np.testing.assert_allclose(np.diff(times), [SERIAL_PERIOD_US * 1e-6] * 5, rtol=0, atol=1e-9)
+    assert dec.stats.device_resets == 1
+
+
+def test_a_serial_seq_wrap_is_no_reset_even_for_frames_that_queued() -> None:
+    """The 32-bit seq wraps (every 414 days at 120 Hz): device_seq goes on counting.
+    Frames that waited in the host's buffer come in one read, a period apart in device
+    time; a second of the device's backlog arriving at once is no reset either."""
+    dec = SerialFrameDecoder()
+    start_us = 2**40
+    frames = [one_frame("slots", 2**32 - 2 + k, start_us + k * SERIAL_PERIOD_US) for k in range(4)]
+    got = dec.feed(frames[0], 10.0) + dec.feed(b"".join(frames[1:]), 10.0)
+    assert [s.device_seq for s in got] == [2**32 - 2, 2**32 - 1, 2**32, 2**32 + 1]
+    late = [one_frame("slots", k + 2, start_us + (k + 4) * SERIAL_PERIOD_US) for k in range(120)]
+    got += dec.feed(b"".join(late), 11.0)
+    assert [s.device_seq for s in got] == list(range(2**32 - 2, 2**32 + 122))
+    assert dec.stats.device_resets == 0
+    for k, s in enumerate(got):
+        assert s.device_t == pytest.approx((start_us + k * SERIAL_PERIOD_US) * 1e-6, abs=1e-6)
+
+
+def test_the_serial_source_carries_on_over_a_device_reset() -> None:
+    """The port stays open (no read failed): the decoder re-anchors. A reopened port
+    starts the counters anew (decoder.reset)."""
+    frames = [one_frame("slots", 40 + k, 5_000_000 + k * SERIAL_PERIOD_US) for k in range(3)]
+    frames += [one_frame("slots", k, (k + 1) * SERIAL_PERIOD_US) for k in range(3)]
+
+    class Port:
+        in_waiting = 0
+
+        def read(self, size: int = 1) -> bytes:
+            return frames.pop(0) if frames else b""
+
+        def close(self) -> None:
+            pass
+
+    source = SerialTrackerSource(port=Port(), timeout_s=0.01)
+    got = asyncio.run(asyncio.wait_for(take(source, 6), 10.0))
+    assert [s.device_seq for s in got] == [40, 41, 42, 43, 44, 45]
+    assert source.stats.device_resets == 1 and source.stats.disconnects == 0
+    a, b = got[2], got[3]  # across the reset: the host's time between them
+    assert a.t is not None and b.t is not None and a.device_t is not None and b.device_t is not None
+    assert b.device_t - a.device_t == pytest.approx(max(b.t - a.t, 1e-6), abs=1e-6)
+    source.decoder.reset()  # the device came back on a reopened port: counters anew
+    (s,) = source.decoder.feed(one_frame("slots", 7, 1000), 200.0)
+    assert (s.device_seq, s.device_t) == (7, 0.001)
+
+
 # --- HID ---------------------------------------------------------------------------
 
 

@@ -12,9 +12,9 @@ closed and, when the source opened it (by URL, or by USB ids), reopened every
 ``reopen_s`` seconds until it is back, each failure counted in
 ``stats.disconnects``; the bytes of a frame the failure cut are dropped. A device
 object passed in is not reopened: its failure ends the iteration with the error. A
-HID device that resets with no read failing starts its counters over under the open
-handle: the decoder carries them on (``stats.device_resets``, see
-:class:`~posecast_client.sources.framing.HidReportDecoder`).
+serial or HID device that resets with no read failing starts its counters over under
+the open port or handle: the decoder carries them on (``stats.device_resets``, see
+:class:`~posecast_client.sources.framing.DeviceCounters`).
 
 pyserial and hidapi are optional (``pip install posecast-client[serial,hid]``);
 tests pass a device object instead (pyserial's ``loop://`` port, or any object with

@@ -31,6 +31,7 @@ positional or inertial), each row naming its site::
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import struct
 import zlib
@@ -45,6 +46,7 @@ from posecast_client.sources.base import F64, TrackerSample
 SERIAL_SYNC = b"\xa5\x5a"
 SERIAL_VERSION = 1
 _PAYLOAD = struct.Struct("<IQB28f")  # seq, t_us, valid, 4 x 7 float32
+_SERIAL_COUNTERS = struct.Struct("<IQ")  # seq, t_us: how both versions' payloads start
 SERIAL_PAYLOAD_BYTES = _PAYLOAD.size  # 125
 SERIAL_FRAME_BYTES = 4 + SERIAL_PAYLOAD_BYTES + 4  # 133
 
@@ -176,14 +178,83 @@ class FramingStats:
     bad_checksum: int = 0
     bad_payload: int = 0  # checksum fine but an unknown version/length or absurd values
     disconnects: int = 0  # the device failed (unplugged, reset): reopened when back
-    device_resets: int = 0  # HID: the device's counters started over under an open handle
+    device_resets: int = 0  # the device's counters started over, its port or handle open
+
+
+RESET_SLACK_S = 1.0  # how far a sample's t_us may run ahead of the host's clock (queued)
+
+
+@dataclass
+class DeviceCounters:
+    """A device's frame counter ``seq`` and microsecond clock ``t_us``, sent wrapping at
+    ``seq_bits`` and ``t_bits`` (HID: 8 and 32; serial: 32 and 64), carried on into
+    ever-increasing values.
+
+    Between two samples the device's clock moves as the host's does (the host times
+    each sample with ``now``); it may run ahead by :data:`RESET_SLACK_S`, for samples
+    that waited in the host's queue. A ``t_us`` further ahead than that, or behind, is
+    no wrap but a device reset with the port or handle still open (read as a wrap, a
+    HID clock would run up to 71.6 minutes ahead; a serial one, never wrapping, would
+    go back). Both counters then carry on from where they were (``t_us`` by the host's
+    elapsed time, ``seq`` by one), counted in ``stats.device_resets``. Without host
+    times, only a ``t_us`` behind (by less than half the wrap) is a reset, and the
+    clock carries on by the last step.
+    """
+
+    seq_bits: int
+    t_bits: int
+    _seq: int | None = None  # unwrapped, as the last sample gave them
+    _t_us: int | None = None
+    _raw: tuple[int, int] = (0, 0)  # the last sample's seq and t_us as sent
+    _now: float | None = None  # the host's time of the last sample
+    _step_us: int = 0  # the last step of t_us between samples (not a reset)
+
+    def reset(self) -> None:
+        """Forget the counters: a device that came back starts them anew."""
+        self._seq = self._t_us = self._now = None
+        self._step_us = 0
+
+    def unwrap(self, seq_raw: int, t_raw: int, now: float | None) -> tuple[int, int, bool]:
+        """The unwrapped seq and t_us of a sample, and whether the device reset."""
+        if self._seq is None or self._t_us is None:
+            return seq_raw, t_raw, False
+        step = (t_raw - self._raw[1]) & ((1 << self.t_bits) - 1)
+        host_us = None if now is None or self._now is None else (now - self._now) * 1e6
+        # Without host times, only a clock behind (by less than half the wrap) is a reset.
+        most_us = (1 << (self.t_bits - 1)) - 1 if host_us is None else host_us + RESET_SLACK_S * 1e6
+        if step <= most_us:
+            seq_step = (seq_raw - self._raw[0]) & ((1 << self.seq_bits) - 1)
+            return self._seq + seq_step, self._t_us + step, False
+        gap = self._step_us if host_us is None else round(host_us)
+        return self._seq + 1, self._t_us + max(gap, 1), True
+
+    def keep(
+        self,
+        seq_raw: int,
+        t_raw: int,
+        now: float | None,
+        seq: int,
+        t_us: int,
+        reset: bool,
+        stats: FramingStats,
+    ) -> None:
+        """A good sample's counters become the ones the next sample is read against."""
+        if reset:
+            stats.device_resets += 1
+        elif self._t_us is not None:
+            self._step_us = t_us - self._t_us
+        self._seq, self._t_us, self._raw, self._now = seq, t_us, (seq_raw, t_raw), now
 
 
 @dataclass
 class SerialFrameDecoder:
-    """Incremental decoder: feed it bytes as they arrive, get complete samples back."""
+    """Incremental decoder: feed it bytes as they arrive, get complete samples back.
+    Carries the 32-bit seq and 64-bit microsecond clock on over a wrap of seq and a
+    device reset (:class:`DeviceCounters`): a UART device that resets sends on from
+    a clock at zero, with nothing failing on the host's side."""
 
     stats: FramingStats = field(default_factory=FramingStats)
+    counters: DeviceCounters = field(default_factory=lambda: DeviceCounters(32, 64))
     _buf: bytearray = field(default_factory=bytearray)
 
     def feed(self, data: bytes, now: float | None = None) -> list[TrackerSample]:
@@ -208,21 +279,28 @@ class SerialFrameDecoder:
                 self.stats.skipped_bytes += 1
                 del buf[:1]  # not a frame: hunt again from the next byte
                 continue
-            sample = self._payload(bytes(buf[2:end]), now)
+            body = bytes(buf[2:end])
             del buf[: end + 4]
+            sample = self._payload(body, now)
             if sample is None:
                 self.stats.bad_payload += 1
-            else:
-                self.stats.samples += 1
-                out.append(sample)
+                continue
+            seq_raw, t_raw = _SERIAL_COUNTERS.unpack_from(body, 2)
+            seq, t_us, reset = self.counters.unwrap(seq_raw, t_raw, now)
+            self.counters.keep(seq_raw, t_raw, now, seq, t_us, reset, self.stats)
+            self.stats.samples += 1
+            out.append(dataclasses.replace(sample, device_seq=seq, device_t=t_us * 1e-6))
 
     def reset(self) -> None:
-        """Drop the bytes of a frame a disconnect cut (they are never continued)."""
+        """Drop the bytes of a frame a disconnect cut (they are never continued), and
+        forget the counters: a device that came back starts them anew."""
         self.stats.skipped_bytes += len(self._buf)
         self._buf.clear()
+        self.counters.reset()
 
     @staticmethod
     def _payload(body: bytes, now: float | None) -> TrackerSample | None:
+        """A checked frame's sample (its counters as sent), or None if it is bad."""
         if body[0] == SITES_VERSION:
             return _sites_payload(body[2:], body[1], now)
         if body[0] != SERIAL_VERSION or body[1] != SERIAL_PAYLOAD_BYTES:
@@ -354,57 +432,23 @@ def encode_hid_sites_report(
     return bytes(report)
 
 
-RESET_SLACK_S = 1.0  # how far a report's t_us may run ahead of the host's clock (queued)
-
-
 @dataclass
 class HidReportDecoder:
-    """Decodes reports one by one; unwraps the 8-bit seq and 32-bit microsecond clock.
-
-    Between two reports the device's clock moves as the host's does (the host times
-    each report with ``now``); it may run ahead by :data:`RESET_SLACK_S`, for reports
-    that waited in the host's queue. A ``t_us`` further ahead than that, or behind,
-    is no wrap but a device reset under the open handle: read as a wrap it would put
-    ``device_t`` up to 71.6 minutes ahead. Both counters then carry on from where they
-    were (``t_us`` by the host's elapsed time, ``seq`` by one), counted in
-    ``stats.device_resets``. Without host times, only a ``t_us`` behind (by less than
-    half the wrap) is a reset, and the clock carries on by the last step.
-    """
+    """Decodes reports one by one; unwraps the 8-bit seq and 32-bit microsecond clock,
+    and carries them on over a device reset (:class:`DeviceCounters`)."""
 
     stats: FramingStats = field(default_factory=FramingStats)
-    _seq: int | None = None  # unwrapped, as the last sample gave them
-    _t_us: int | None = None
-    _raw: tuple[int, int] = (0, 0)  # the last report's seq and t_us as sent
-    _now: float | None = None  # the host's time of the last report
-    _step_us: int = 0  # the last step of t_us between reports (not a reset)
+    counters: DeviceCounters = field(default_factory=lambda: DeviceCounters(8, 32))
 
     def reset(self) -> None:
         """Forget the counters: a device that came back starts them anew."""
-        self._seq = self._t_us = self._now = None
-        self._step_us = 0
-
-    def _unwrap(self, seq8: int, t32: int, now: float | None) -> tuple[int, int, bool]:
-        """The unwrapped seq and t_us of a report, and whether the device reset."""
-        if self._seq is None or self._t_us is None:
-            return seq8, t32, False
-        step = (t32 - self._raw[1]) & 0xFFFFFFFF
-        host_us = None if now is None or self._now is None else (now - self._now) * 1e6
-        # Without host times, only a clock behind (by less than half the wrap) is a reset.
-        most_us = (1 << 31) - 1 if host_us is None else host_us + RESET_SLACK_S * 1e6
-        if step <= most_us:
-            return self._seq + ((seq8 - self._raw[0]) & 0xFF), self._t_us + step, False
-        gap = self._step_us if host_us is None else round(host_us)
-        return self._seq + 1, self._t_us + max(gap, 1), True
+        self.counters.reset()
 
     def _keep(
         self, seq8: int, t32: int, now: float | None, seq: int, t_us: int, reset: bool
     ) -> None:
-        """A good sample's counters become the ones the next report is read against."""
-        if reset:
-            self.stats.device_resets += 1
-        elif self._t_us is not None:
-            self._step_us = t_us - self._t_us
-        self._seq, self._t_us, self._raw, self._now = seq, t_us, (seq8, t32), now
+        """A good sample: its counters are the ones the next report is read against."""
+        self.counters.keep(seq8, t32, now, seq, t_us, reset, self.stats)
         self.stats.samples += 1
 
     def decode(self, report: bytes, now: float | None = None) -> TrackerSample | None:
@@ -425,7 +469,7 @@ class HidReportDecoder:
             self.stats.bad_payload += 1
             return None
         _untracked_to_identity(pos, quat, valid)
-        seq, t_us, reset = self._unwrap(seq8, t32, now)
+        seq, t_us, reset = self.counters.unwrap(seq8, t32, now)
         self._keep(seq8, t32, now, seq, t_us, reset)
         return TrackerSample(pos, quat, valid, t=now, device_seq=seq, device_t=t_us * 1e-6)
 
@@ -447,7 +491,7 @@ class HidReportDecoder:
         codes = [r[0] for r in rows]
         unit = [ACC_UNIT if c & INERTIAL_BIT else 0.001 for c in codes]
         values = [[x * u for x in r[1:4]] for r, u in zip(rows, unit, strict=True)]
-        seq, t_us, reset = self._unwrap(seq8, t32, now)
+        seq, t_us, reset = self.counters.unwrap(seq8, t32, now)
         sample = _sites_sample(
             codes, values, [r[4:] for r in rows], valid, n, now, seq, t_us * 1e-6
         )
