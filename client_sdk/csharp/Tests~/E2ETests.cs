@@ -305,6 +305,43 @@ namespace Posecast.Client.Tests
                     lock (a.Events) welcomes = a.Events.Count(e => e.Kind == EventKind.Welcome);
                     T.True(welcomes >= 2, welcomes + " welcomes");
                 });
+                T.Run("e2e: a TokenProvider that returns no token fails the join with ConfigInvalidException", () =>
+                {
+                    var c = PosecastClient.ConnectAsync(server.Url, null, new ClientOptions { TokenProvider = () => null }).Result;
+                    try
+                    {
+                        var e = T.Throws<ConfigInvalidException>(() => c.JoinAsync("cs-room", "nobody").GetAwaiter().GetResult(), "join");
+                        T.True(e.Message.StartsWith("the TokenProvider returned null"), e.Message);
+                    }
+                    finally { c.CloseAsync().Wait(); }
+                });
+                T.Run("e2e: with the server gone for good, reconnects retry, then give up with ConnectFailedException", () =>
+                {
+                    var opts = new ClientOptions { MaxReconnectAttempts = 2, BackoffInitialS = 0.05, BackoffMaxS = 0.1, PingIntervalS = 0 };
+                    var c = PosecastClient.ConnectAsync(server.Url, server.Token("cs-room", "cs-quitter"), opts).Result;
+                    try
+                    {
+                        c.JoinAsync("cs-room", "quitter").Wait();
+                        server.Stop(); // SERVER_SHUTDOWN, then the port refuses
+                        int reconnecting = 0;
+                        Exception end = null;
+                        T.True(WaitFor(() =>
+                        {
+                            try
+                            {
+                                ClientEvent e;
+                                while (c.TryGetEvent(out e)) if (e.Kind == EventKind.Reconnecting) reconnecting++;
+                            }
+                            catch (Exception e) { end = e; }
+                            return end != null;
+                        }, 30), "the client gave up");
+                        var f = end as ConnectFailedException;
+                        T.True(f != null, "gave up with " + end);
+                        T.True(f.Url == server.Url && f.Reason.StartsWith("connection refused"), f.Message);
+                        T.Equal(2, reconnecting, "Reconnecting events, one per attempt");
+                    }
+                    finally { c.CloseAsync().Wait(); }
+                });
                 if (a != null) a.Stop().Wait();
                 if (b != null) b.Stop().Wait();
             }

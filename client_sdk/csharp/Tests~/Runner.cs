@@ -120,6 +120,7 @@ namespace Posecast.Client.Tests
                 new KeyValuePair<string, Action>("interp", InterpTests.Register),
                 new KeyValuePair<string, Action>("clock", ClockTests.Register),
                 new KeyValuePair<string, Action>("session", SessionTests.Register),
+                new KeyValuePair<string, Action>("connect", ConnectTests.Register),
                 new KeyValuePair<string, Action>("unity", UnityTests.Register),
                 new KeyValuePair<string, Action>("e2e", E2ETests.Register),
             };

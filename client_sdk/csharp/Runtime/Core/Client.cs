@@ -25,7 +25,10 @@
 using System;
 using System.Collections.Generic;
 using System.Diagnostics;
+using System.Net.Sockets;
 using System.Net.WebSockets;
+using System.Security.Authentication;
+using System.Text.RegularExpressions;
 using System.Threading;
 using System.Threading.Tasks;
 
@@ -90,6 +93,10 @@ namespace Posecast.Client
         /// <summary>
         /// Open a WebSocket to a posecast server. The token travels in hello, never in the
         /// URL. Several URLs (one cluster's nodes) are tried in order; reconnects move on.
+        /// Throws ConfigInvalidException before dialing for a URL that is not ws:// or wss://
+        /// with a host (http://..., host:port) or no token (null, empty) without a
+        /// TokenProvider; ConnectFailedException (Url, Reason, Hint, Status) when the server
+        /// cannot be reached or refuses the upgrade (with several URLs, the last one's).
         /// </summary>
         public static async Task<PosecastClient> ConnectAsync(string url, string token, ClientOptions options = null)
         {
@@ -98,15 +105,117 @@ namespace Posecast.Client
 
         public static async Task<PosecastClient> ConnectAsync(string[] urls, string token, ClientOptions options = null)
         {
-            if (urls == null || urls.Length == 0) throw new ArgumentException("no server URL");
+            if (urls == null || urls.Length == 0) throw new ConfigInvalidException("no server URL", "pass one, such as " + ExampleUrl);
+            foreach (var u in urls) CheckUrl(u);
+            if ((options == null || options.TokenProvider == null) && string.IsNullOrWhiteSpace(token))
+                throw new ConfigInvalidException("no token (got " + What(token) + ")", TokenHint);
             var c = new PosecastClient(urls, token, options);
             for (int i = 0; i < urls.Length; i++)
             {
                 c._urlIndex = i;
                 try { c._ws = await c.OpenAsync().ConfigureAwait(false); break; }
-                catch (Exception) when (i < urls.Length - 1) { }
+                catch (ConnectFailedException) when (i < urls.Length - 1) { }
             }
             return c;
+        }
+
+        // --- checking the arguments, naming failures -------------------------------------
+
+        private const string ExampleUrl = "ws://127.0.0.1:8765/";
+        private const string TokenHint = "pass the join token: a string your backend minted (DevTokens.Mint for a dev "
+                                         + "server), or set Options.TokenProvider; an unset environment variable?";
+        private const string RunningHint = "is a posecast server running there, and reachable from here? "
+                                           + "`posecast serve --dev` starts one";
+
+        private static string What(string value)
+        {
+            return value == null ? "null" : value.Length == 0 ? "an empty string" : "a blank string";
+        }
+
+        /// <summary>
+        /// `url` if the client can dial it: ws:// or wss://, a host, a port up to 65535
+        /// (absent: 80 or 443), no #fragment; the Python and TypeScript SDKs take the same.
+        /// Throws ConfigInvalidException otherwise, with a hint (an http:// URL: its ws://
+        /// twin; host:port: the ws:// URL).
+        /// </summary>
+        public static string CheckUrl(string url)
+        {
+            if (string.IsNullOrWhiteSpace(url))
+                throw new ConfigInvalidException("no server URL (got " + What(url) + ")",
+                    "pass the server's WebSocket URL, such as " + ExampleUrl + "; an unset environment variable?");
+            string text = url.Trim();
+            var m = Regex.Match(text, "^([A-Za-z][A-Za-z0-9+.-]*):(//)?");
+            string scheme = m.Success ? m.Groups[1].Value.ToLowerInvariant() : "";
+            bool slashes = m.Success && m.Groups[2].Success;
+            string quoted = "'" + url + "'";
+            if ((scheme == "http" || scheme == "https") && slashes)
+                throw new ConfigInvalidException(quoted + " is an HTTP URL, not a WebSocket one",
+                    "use " + (scheme == "http" ? "ws" : "wss") + text.Substring(scheme.Length));
+            if ((scheme != "ws" && scheme != "wss") || !slashes)
+            {
+                bool hostPort = !text.Contains("://") && scheme != "ws" && scheme != "wss" && scheme != "http" && scheme != "https";
+                throw new ConfigInvalidException(quoted + " is not a WebSocket URL: it must start with ws:// (wss:// behind TLS)",
+                    hostPort ? "did you mean ws://" + text + (text.Contains("/") ? "" : "/") + "?" : "such as " + ExampleUrl);
+            }
+            string authority = Regex.Match(text.Substring(scheme.Length + 3), "^[^/?#]*").Value;
+            string hostPortText = authority.Substring(authority.LastIndexOf('@') + 1);
+            int bracket = hostPortText.StartsWith("[", StringComparison.Ordinal) ? hostPortText.IndexOf(']') + 1 : 0;
+            int colon = hostPortText.IndexOf(':', bracket);
+            string host = colon < 0 ? hostPortText : hostPortText.Substring(0, colon);
+            string port = colon < 0 ? "" : hostPortText.Substring(colon + 1);
+            if (host.Length == 0 || host == "[]") throw new ConfigInvalidException(quoted + " names no host", "such as " + ExampleUrl);
+            int p;
+            if (port.Length > 0 && !(Regex.IsMatch(port, "^[0-9]{1,5}$") && int.TryParse(port, out p) && p <= 65535))
+                throw new ConfigInvalidException(quoted + " has a bad port (" + port + ")", "a port is a number from 1 to 65535");
+            if (text.Contains("#"))
+                throw new ConfigInvalidException(quoted + " has a #fragment, which a WebSocket URL may not", "leave out the # and what follows it");
+            Uri uri;
+            if (!Uri.TryCreate(text, UriKind.Absolute, out uri))
+                throw new ConfigInvalidException(quoted + " is not a usable URL", "such as " + ExampleUrl);
+            return url;
+        }
+
+        /// <summary>The ConnectFailedException for what opening `url` threw: reason, hint, HTTP status.</summary>
+        internal static ConnectFailedException ConnectFailure(string url, Exception e, double openTimeoutS)
+        {
+            var socket = Find<SocketException>(e);
+            string text = "";
+            for (var x = e; x != null; x = x.InnerException) text += " " + x.Message;
+            var status = Regex.Match(text, "status code '([0-9]{3})'");
+            if (e is OperationCanceledException || e is TimeoutException)
+                return new ConnectFailedException(url, "no WebSocket handshake within " + openTimeoutS + " s",
+                    "is the host reachable from here (a firewall, a VPN)? Options.OpenTimeoutS allows longer", null, e);
+            if (status.Success)
+            {
+                int code = int.Parse(status.Groups[1].Value);
+                string hint = code == 429 ? "this address connected (or broke the protocol) too often: back off, try again later"
+                            : code == 503 ? "the server is starting, busy or full: try again in a moment, with back-off"
+                            : "is the URL a posecast WebSocket endpoint, such as " + ExampleUrl + "?";
+                return new ConnectFailedException(url, "the server refused the WebSocket upgrade with HTTP " + code, hint, code, e);
+            }
+            if (socket != null && socket.SocketErrorCode == SocketError.ConnectionRefused)
+                return new ConnectFailedException(url, "connection refused (nothing listens at that port)", RunningHint, null, e);
+            if (socket != null && (socket.SocketErrorCode == SocketError.HostNotFound || socket.SocketErrorCode == SocketError.TryAgain
+                                   || socket.SocketErrorCode == SocketError.NoData))
+                return new ConnectFailedException(url, "the host name does not resolve (" + socket.Message + ")",
+                    "check the host in the URL, and this machine's network", null, e);
+            if (Find<AuthenticationException>(e) != null)
+                return new ConnectFailedException(url, "TLS failed (" + Find<AuthenticationException>(e).Message + ")",
+                    "does the server speak TLS at that port, with a certificate trusted here? one without TLS takes ws://", null, e);
+            // Mono says only "Unable to connect to the remote server", for a refused upgrade too.
+            return new ConnectFailedException(url, (socket ?? e).Message, RunningHint + "; a server refusing the upgrade "
+                + "(HTTP 429: this address connects too often, 503: starting or full) ends so here too: back off and retry", null, e);
+        }
+
+        private static void Observe(Task task)
+        {
+            task.ContinueWith(t => t.Exception, TaskContinuationOptions.OnlyOnFaulted);
+        }
+
+        private static TE Find<TE>(Exception e) where TE : Exception
+        {
+            for (var x = e; x != null; x = x.InnerException) if (x is TE) return (TE)x;
+            return null;
         }
 
         // --- state -------------------------------------------------------------------
@@ -134,8 +243,32 @@ namespace Posecast.Client
         {
             var ws = new ClientWebSocket();
             foreach (var v in Options.Versions) ws.Options.AddSubProtocol(Protocol.Subprotocol(v));
-            using (var cts = new CancellationTokenSource(TimeSpan.FromSeconds(Options.OpenTimeoutS)))
-                await ws.ConnectAsync(new Uri(Url), cts.Token).ConfigureAwait(false);
+            try
+            {
+                var limit = TimeSpan.FromSeconds(Options.OpenTimeoutS);
+                using (var cts = new CancellationTokenSource(limit))
+                using (var timer = new CancellationTokenSource())
+                {
+                    var connect = ws.ConnectAsync(new Uri(Url), cts.Token);
+                    // Mono's ClientWebSocket stops heeding the token once TCP is up: a server
+                    // that never answers the upgrade would hold ConnectAsync for good. Race a timer.
+                    if (await Task.WhenAny(connect, Task.Delay(limit, timer.Token)).ConfigureAwait(false) != connect)
+                    {
+                        Observe(connect); // it ends when the server hangs up, if ever
+                        throw new TimeoutException("no WebSocket handshake in time");
+                    }
+                    timer.Cancel();
+                    await connect.ConfigureAwait(false);
+                }
+            }
+            catch (Exception e) when (e is WebSocketException || e is System.IO.IOException || e is SocketException
+                                      || e is OperationCanceledException || e is AuthenticationException
+                                      || e is TimeoutException)
+            {
+                ws.Abort();
+                ws.Dispose();
+                throw ConnectFailure(Url, e, Options.OpenTimeoutS);
+            }
             int version = ws.SubProtocol == Protocol.SubprotocolV2 ? Protocol.V2
                         : ws.SubProtocol == Protocol.SubprotocolV1 ? Protocol.V1 : 0;
             if (version == 0 || Array.IndexOf(Options.Versions, version) < 0)
@@ -150,26 +283,39 @@ namespace Posecast.Client
         private async Task<Welcome> HandshakeAsync(ClientWebSocket ws)
         {
             string token = Options.TokenProvider != null ? Options.TokenProvider() : _token;
+            if (string.IsNullOrWhiteSpace(token))
+                throw new ConfigInvalidException("the TokenProvider returned " + What(token), "it must return the join token, a non-empty string");
             Hello hello;
             lock (_lock) { hello = _hello(); hello.Token = token; }
-            await SendRawAsync(ws, Codec.Encode(hello)).ConfigureAwait(false);
-            using (var cts = CancellationTokenSource.CreateLinkedTokenSource(_closing.Token))
+            try
             {
-                cts.CancelAfter(TimeSpan.FromSeconds(Options.JoinTimeoutS));
-                while (true)
+                await SendRawAsync(ws, Codec.Encode(hello)).ConfigureAwait(false);
+                using (var cts = CancellationTokenSource.CreateLinkedTokenSource(_closing.Token))
                 {
-                    byte[] data = await ReceiveMessageAsync(ws, cts.Token).ConfigureAwait(false);
-                    if (data == null) throw new ConnectionLostException("the server closed the connection during the join");
-                    Received r;
-                    lock (_lock) r = Session.Receive(data, Now);
-                    var reply = ClientSession.ClassifyJoinReply(r);
-                    if (reply is Exception) throw (Exception)reply;
-                    if (reply is Welcome)
+                    cts.CancelAfter(TimeSpan.FromSeconds(Options.JoinTimeoutS));
+                    while (true)
                     {
-                        foreach (var e in r.Events) Push(e);
-                        return (Welcome)reply;
+                        byte[] data = await ReceiveMessageAsync(ws, cts.Token).ConfigureAwait(false);
+                        if (data == null) throw new ConnectionLostException(Url + " closed the connection during the join");
+                        Received r;
+                        lock (_lock) r = Session.Receive(data, Now);
+                        var reply = ClientSession.ClassifyJoinReply(r);
+                        if (reply is Exception) throw (Exception)reply;
+                        if (reply is Welcome)
+                        {
+                            foreach (var e in r.Events) Push(e);
+                            return (Welcome)reply;
+                        }
                     }
                 }
+            }
+            catch (OperationCanceledException e) when (!_closing.IsCancellationRequested)
+            {
+                throw new ConnectionLostException("no welcome from " + Url + " within " + Options.JoinTimeoutS + " s", e);
+            }
+            catch (Exception e) when (e is WebSocketException || e is System.IO.IOException)
+            {
+                throw new ConnectionLostException(Url + " closed the connection during the join (" + e.Message + ")", e);
             }
         }
 

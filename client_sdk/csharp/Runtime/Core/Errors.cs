@@ -7,7 +7,9 @@
 //
 //   PosecastException
 //   ├── ClientClosedException          the client was closed; it sends nothing more
+//   ├── ConfigInvalidException         a URL or token the client cannot use, refused before dialing
 //   ├── ConnectionLostException        the connection dropped without an error  retryable
+//   │   └── ConnectFailedException     no WebSocket opened at Url (refused, DNS, TLS, HTTP 429/503)
 //   └── ProtocolException              one per wire code: Code, Fatal, Field, RefSeq
 //       ├── MalformedException         MALFORMED            fatal   decoder
 //       ├── TooLargeException          TOO_LARGE            fatal   decoder
@@ -61,12 +63,49 @@ namespace Posecast.Client
         public ClientClosedException(string message) : base(message) { }
     }
 
+    /// <summary>
+    /// An argument the client cannot use, refused before it dials: a URL that is not ws://
+    /// or wss:// with a host, or no token (null, empty) without a TokenProvider. Never
+    /// retried. Hint says what to pass instead; the message ends with it.
+    /// </summary>
+    public sealed class ConfigInvalidException : PosecastException
+    {
+        public readonly string Hint;
+
+        public ConfigInvalidException(string message, string hint) : base(message + " (hint: " + hint + ")")
+        {
+            Hint = hint;
+        }
+    }
+
     /// <summary>The connection dropped (or the server said bye) without a fatal error.</summary>
-    public sealed class ConnectionLostException : PosecastException
+    public class ConnectionLostException : PosecastException
     {
         public ConnectionLostException(string message) : base(message) { }
         public ConnectionLostException(string message, Exception inner) : base(message, inner) { }
         public override bool Retryable { get { return true; } }
+    }
+
+    /// <summary>
+    /// No WebSocket opened at Url: the connection was refused or timed out, the host name
+    /// did not resolve, TLS failed, or the server refused the upgrade (Status: its HTTP
+    /// status where the runtime says it, 429 when this address connects too often, 503
+    /// while the server starts or is full). Reason says which, Hint what to check (both
+    /// are in the message); InnerException is the runtime's own. Retryable: reconnects go
+    /// on after it (the first ConnectAsync is not retried).
+    /// </summary>
+    public sealed class ConnectFailedException : ConnectionLostException
+    {
+        public readonly string Url;
+        public readonly string Reason;
+        public readonly string Hint;
+        public readonly int? Status;
+
+        public ConnectFailedException(string url, string reason, string hint, int? status, Exception inner)
+            : base("could not connect to " + url + ": " + reason + " (hint: " + hint + ")", inner)
+        {
+            Url = url; Reason = reason; Hint = hint; Status = status;
+        }
     }
 
     /// <summary>One row of proto/errors.json, plus whether the SDK retries after it.</summary>
