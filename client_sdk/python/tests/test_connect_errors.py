@@ -49,9 +49,10 @@ def url_of(server: Server, scheme: str = "ws") -> str:
 async def peer(
     on_hello: str = "welcome", refuse: Callable[[], int | None] = lambda: None
 ) -> AsyncIterator[Server]:
-    """A posecast v1 server in this process. ``on_hello``: ``welcome`` (join), ``close``
-    (close without a word) or ``silent`` (say nothing). ``refuse``: an HTTP status to
-    refuse the upgrade with, asked at every connection (None: go on)."""
+    """A posecast v1 server in this process. ``on_hello``: ``welcome`` (join), ``drop``
+    (welcome, then close), ``close`` (close without a word) or ``silent`` (say nothing).
+    ``refuse``: an HTTP status to refuse the upgrade with, asked at every connection
+    (None: go on)."""
 
     def gate(conn: ServerConnection, request: Request) -> Response | None:
         status = refuse()
@@ -65,11 +66,13 @@ async def peer(
                     continue
                 if on_hello == "close":
                     await ws.close()
-                elif on_hello == "welcome":
+                elif on_hello in ("welcome", "drop"):
                     members = (Member("p1", msg.name),)
                     welcome = Welcome(1, "p1", "s1", "player", msg.room, 0.0, 60.0, 2, members,
                                       Limits())  # fmt: skip
                     await ws.send(encode(welcome))
+                    if on_hello == "drop":
+                        await ws.close()
 
     async with serve(handler, "127.0.0.1", 0, subprotocols=["posecast.v1"],  # type: ignore[list-item]
                      process_request=gate) as server:  # fmt: skip
@@ -147,6 +150,25 @@ def test_a_token_function_returning_nothing_is_refused_at_join() -> None:
         async with peer() as server, pc.connect(url_of(server), lambda: None) as client:
             with pytest.raises(ConfigInvalidError, match="the token function returned None"):
                 await client.join("lobby", "Ada")
+
+    run(main())
+
+
+def test_a_token_function_giving_no_token_on_a_rejoin_ends_the_session_with_it() -> None:
+    """The reconnect task met an error it did not expect and died unseen: events() waited
+    for good. Now the session ends with the error, as with any a retry cannot fix."""
+    tokens: list[str | None] = ["tok", None]
+
+    async def main() -> None:
+        async with peer("drop") as server:
+            client = await pc.connect(url_of(server), lambda: tokens.pop(0),
+                                      backoff_initial_s=0.01, ping_interval_s=0)  # fmt: skip
+            async with client:
+                await client.join("lobby", "Ada")
+                with pytest.raises(ConfigInvalidError, match="the token function returned None"):
+                    async for _ in client.events():
+                        pass
+        assert tokens == []
 
     run(main())
 

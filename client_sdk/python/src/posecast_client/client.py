@@ -544,7 +544,8 @@ class Client:
                 if ws is not None:
                     ws.transport.abort()
                 raise
-            except (*_TRANSPORT_ERRORS, ProtocolError, ConnectionLostError) as exc:
+            except Exception as exc:  # all: one a retry cannot fix (a token function that
+                # failed or gave no token too) ends the session with it, not this task unseen
                 if ws is not None:
                     await ws.close()
                 if not _retryable(exc):
