@@ -71,3 +71,16 @@ def test_node_clocks_keep_each_players_time_moving_on() -> None:
     assert c.local("b", 10.05, 100.5, "q") == pytest.approx(last + MIN_STEP_S, abs=1e-9)
     c.retain("q", ())
     assert c.guarded == 1
+
+
+def test_node_clocks_drop_the_player_times_of_a_forgotten_node() -> None:
+    from posecast.online.core.clock import FORGET_S, NodeClocks
+
+    c = NodeClocks()
+    c.local("b", 10.0, 100.0, "m")
+    c.local("b", 10.0, 100.0, "q")
+    c.local("c", 10.0, 100.0, "q")
+    assert c.guarded == 3
+    c.local("c", 10.0 + FORGET_S, 100.0 + FORGET_S, "q")  # b silent since
+    c.local("d", 0.0, 101.0 + FORGET_S)  # a new node: b is forgotten, with its players
+    assert c.guarded == 1  # (c, q)

@@ -101,7 +101,8 @@ class NodeClocks:
     """
 
     _nodes: dict[str, tuple[float, float]] = field(default_factory=dict)  # offset, last
-    _players: dict[tuple[str, str], float] = field(default_factory=dict)  # last mapped t
+    # player -> node -> its last mapped t (by player: a join or leave touches one entry)
+    _players: dict[str, dict[str, float]] = field(default_factory=dict)
 
     def local(self, node: str, t: float, now: float, player: str = "") -> float:
         """``t`` on ``node``'s clock, received at ``now`` on this one, as this node's
@@ -109,30 +110,35 @@ class NodeClocks:
         mapped = self._map(node, t, now)
         if not player:
             return mapped
-        key = (node, player)
-        last = self._players.get(key)
+        times = self._players.setdefault(player, {})
+        last = times.get(node)
         if last is not None and mapped <= last and last - mapped < RESET_S:
             mapped = last + MIN_STEP_S
-        self._players[key] = mapped
+        times[node] = mapped
         return mapped
 
     def forget(self, player: str, node: str | None = None) -> None:
         """``player`` (of ``node``, or of any node) left: its next time starts afresh."""
         if node is not None:
-            self._players.pop((node, player), None)
+            self.retain(player, set(self._players.get(player, {})) - {node})
         else:
-            self.retain(player, ())
+            self._players.pop(player, None)
 
     def retain(self, player: str, nodes: Collection[str]) -> None:
         """Keep ``player``'s times only for ``nodes`` (those that still have it in a
         room here); of any other node its next time starts afresh."""
-        for key in [k for k in self._players if k[1] == player and k[0] not in nodes]:
-            del self._players[key]
+        times = self._players.get(player)
+        if times is None:
+            return
+        for node in [n for n in times if n not in nodes]:
+            del times[node]
+        if not times:
+            del self._players[player]
 
     @property
     def guarded(self) -> int:
         """How many (node, player) last times are held."""
-        return len(self._players)
+        return sum(map(len, self._players.values()))
 
     def _map(self, node: str, t: float, now: float) -> float:
         sample = now - t
@@ -151,8 +157,9 @@ class NodeClocks:
         gone = {n for n, (_, last) in self._nodes.items() if now - last > FORGET_S}
         for node in gone:
             del self._nodes[node]
-        for key in [k for k in self._players if k[0] in gone]:
-            del self._players[key]
+        if gone:
+            for player in list(self._players):
+                self.retain(player, self._players[player].keys() - gone)
 
     def __len__(self) -> int:
         return len(self._nodes)
