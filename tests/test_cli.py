@@ -711,6 +711,60 @@ def test_the_first_wrong_word_is_the_one_reported(
     assert "did you mean" in hint or "did you mean" not in err, err
 
 
+@pytest.mark.parametrize(
+    ("argv", "says", "hint"),
+    [
+        (
+            ["token", "--room", "R", "--player", "P", "--secret", "-SuperSecretValue123456"],
+            "argument --secret: expected one argument",
+            "a value that starts with '-' goes after '=' (--secret=VALUE)",
+        ),
+        (
+            ["token", "--room", "R", "--player", "P", "--sec", "-SuperSecretValue123456"],
+            "argument --secret: expected one argument",
+            "(--secret=VALUE)",
+        ),
+        (
+            ["token", "--room", "R", "--player", "P", "--secret", "-hSuperSecretValue123456"],
+            "argument --secret: expected one argument",
+            "(--secret=VALUE)",
+        ),
+        (
+            ["token", "--room", "R", "--player", "-bob"],
+            "argument --player: expected one argument",
+            "(--player=VALUE)",
+        ),
+        (
+            ["serve", "--redis", "-SuperSecretValue123456"],
+            "argument --redis-url/--redis: expected one argument",
+            "(--redis=VALUE)",
+        ),
+        (
+            ["serve", "--re=redis://:SuperSecretValue123456@h/0"],
+            "ambiguous option: --re=<hidden> could match",
+            "see `posecast serve --help` for the options",
+        ),
+    ],
+)
+def test_a_value_that_starts_with_a_dash_is_not_an_unknown_option(
+    capsys, argv: list[str], says: str, hint: str
+) -> None:
+    """The word after an option that takes a value is its value, not an option: the
+    CLI called ``--secret -SuperSecret...`` an unknown option, and so printed the
+    secret on stderr. argparse's own complaint is reported, with the ``--opt=VALUE``
+    form that takes such a value, and a secret's value is never shown."""
+    err = user_error(capsys, main(argv), "CONFIG_INVALID")
+    assert f"posecast: error [CONFIG_INVALID]: {says}" in err, err
+    assert "hint: " in err and hint in err.split("hint: ", 1)[1], err
+    assert "SuperSecretValue123456" not in err and "unknown option" not in err, err
+
+
+def test_a_value_that_starts_with_a_dash_goes_after_an_equals_sign(capsys) -> None:
+    argv = ["token", "--room", "R", "--player", "P", "--secret=-SuperSecretValue123456"]
+    assert main(argv) == 0
+    assert capsys.readouterr().out.count(".") == 1
+
+
 def test_an_unknown_option_with_no_command_prints_no_traceback() -> None:
     out = subprocess.run(
         [sys.executable, "-m", "posecast", "--bogus"],

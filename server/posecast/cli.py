@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import difflib
 import errno
 import logging
@@ -980,7 +981,13 @@ class _Parser(argparse.ArgumentParser):
         ``message``: an unknown option or command, in the order typed, else a missing
         command, else ``message``."""
         commands = self.commands()
+        hidden: list[str] = []  # the values of secret options: never shown
+        dashed = ""  # an option whose value starts with '-' (argparse takes it for one)
+        value_next = False
         for i, arg in enumerate(argv):
+            if value_next:  # the value of the option before it, whatever it looks like
+                value_next = False
+                continue
             if arg == "--":  # every word after it is a value (the first one a command)
                 rest = argv[i + 1 : i + 2]
                 if commands and rest and rest[0] not in commands:
@@ -989,6 +996,20 @@ class _Parser(argparse.ArgumentParser):
             if _is_option(arg):
                 if not self._knows(arg):
                     return self._unknown_option(arg.split("=", 1)[0])
+                actions = self._actions_of(arg)
+                secret = any(a.dest in _secret_dests() for a in actions)
+                attached = _attached_value(arg, actions)
+                if attached is not None:  # --opt=V, -xV
+                    if secret:
+                        hidden.append(attached)
+                elif any(a.nargs != 0 for a in actions) and i + 1 < len(argv):
+                    word = argv[i + 1]
+                    if secret:
+                        hidden.append(word)
+                    if _is_option(word):
+                        dashed = dashed or _typed_option(arg, actions)
+                    if word != "--" and not (_is_option(word) and self._knows(word)):
+                        value_next = True
             elif commands:
                 if arg not in commands:
                     return self._unknown_command(arg, commands)
@@ -999,6 +1020,13 @@ class _Parser(argparse.ArgumentParser):
                     f"`{self.prog}` needs a command: {', '.join(commands)}",
                     f"see `{self.prog} --help` for the commands",
                 )
+        message = _redact(message, hidden)
+        if dashed and "expected one argument" in message:
+            return _config(
+                message,
+                f"a value that starts with '-' goes after '=' ({dashed}=VALUE); "
+                f"see `{self.prog} --help` for the options",
+            )
         return _usage_error(self.prog, message)
 
     def commands(self) -> dict[str, _Parser]:
@@ -1019,6 +1047,17 @@ class _Parser(argparse.ArgumentParser):
         if name.startswith("--"):  # an abbreviation, as argparse takes (or refuses) it
             return self.allow_abbrev and any(o.startswith(name) for o in options)
         return arg[:2] in options  # -vq, -xVALUE
+
+    def _actions_of(self, arg: str) -> list[argparse.Action]:
+        """The options ``arg`` (one :meth:`_knows`) may stand for: one, or those an
+        abbreviation matches."""
+        name = arg.split("=", 1)[0]
+        exact = [a for a in self._actions if name in a.option_strings]
+        if exact:
+            return exact
+        if name.startswith("--"):
+            return [a for a in self._actions if any(o.startswith(name) for o in a.option_strings)]
+        return [a for a in self._actions if arg[:2] in a.option_strings]
 
     def _unknown_option(self, name: str) -> ConfigError:
         # Compared without the dashes, which every option shares (--bogus is not like
@@ -1047,6 +1086,43 @@ class _Parser(argparse.ArgumentParser):
 def _is_option(arg: str) -> bool:
     """``arg`` is an option to argparse (``-x``, ``--name``, ``--name=V``), not a value."""
     return arg.startswith("-") and arg != "-" and not _NEGATIVE_NUMBER.match(arg) and " " not in arg
+
+
+def _attached_value(arg: str, actions: Sequence[argparse.Action]) -> str | None:
+    """The value typed in ``arg`` itself (``--opt=V``, ``-xV``), else ``None``."""
+    if "=" in arg and arg.startswith("--"):
+        return arg.split("=", 1)[1]
+    if not arg.startswith("--") and len(arg) > 2 and all(a.nargs != 0 for a in actions):
+        return arg[3:] if arg[2] == "=" else arg[2:]
+    return None
+
+
+def _typed_option(arg: str, actions: Sequence[argparse.Action]) -> str:
+    """The option ``arg`` names, as typed (``--redis``), an abbreviation of one in
+    full (``--sec``: ``--secret``)."""
+    name = arg.split("=", 1)[0]
+    spelt = [o for a in actions for o in a.option_strings if o.startswith(name)]
+    return name if name in spelt or len(spelt) != 1 else spelt[0]
+
+
+def _secret_dests() -> frozenset[str]:
+    """The options whose values are never shown: ``token --secret`` and the server
+    settings kept out of the config's repr (the token secret; a Redis URL, which may
+    carry a password)."""
+    from posecast.online.config import ServerConfig
+
+    return frozenset({"secret"} | {f.name for f in dataclasses.fields(ServerConfig) if not f.repr})
+
+
+def _redact(message: str, hidden: Sequence[str]) -> str:
+    """``message`` with each word of ``hidden`` shown as ``<hidden>`` where it stands
+    as a value: a word of its own, quoted as argparse quotes one, or after '='."""
+    for word in hidden:
+        if word:
+            message = re.sub(
+                rf"(?:^|(?<=[\s'\"=])){re.escape(word)}(?=$|[\s'\"])", "<hidden>", message
+            )
+    return message
 
 
 def _leaves(parser: _Parser) -> Iterator[_Parser]:
