@@ -24,6 +24,8 @@ from posecast_client.sources.framing import (
     HID_SITES_REPORT_BYTES,
     SERIAL_FRAME_BYTES,
     SERIAL_SYNC,
+    DeviceCounters,
+    FramingStats,
     HidReportDecoder,
     SerialFrameDecoder,
     crc8,
@@ -466,6 +468,76 @@ def test_a_wrap_is_no_reset_even_for_reports_that_queued() -> None:
             (start + k * PERIOD_US) * 1e-6
         )
     assert dec.stats.device_resets == 0
+
+
+def test_a_host_stall_is_no_device_reset() -> None:
+    """The consumer stalls for 5 s; hidraw (64 reports) and the tty buffer drop the
+    newest data when full, so the host reads the queued samples at once and then a
+    fresh one whose clock moved by the whole stall while the host's moved by a
+    millisecond. That is no reset: device_t goes on as the device sent it (it was
+    4.75 s behind for good, counted as a reset)."""
+    c, stats = DeviceCounters(32, 64), FramingStats()
+
+    def feed(seq: int, t_us: int, now: float) -> tuple[int, int]:
+        s, t, reset = c.unwrap(seq, t_us, now)
+        c.keep(seq, t_us, now, s, t, reset, stats)
+        return s, t
+
+    feed(0, 0, 0.0)
+    for k in range(1, 31):
+        feed(k, k * SERIAL_PERIOD_US, 5.0 + k * 1e-6)
+    assert feed(600, 600 * SERIAL_PERIOD_US, 5.001) == (600, 600 * SERIAL_PERIOD_US)
+    assert stats.device_resets == 0
+
+    hid = HidReportDecoder()  # the same through the HID decoder (8-bit seq, 32-bit clock)
+    got = [hid.decode(one_report("slots", 0, 7_000_000), 0.0)]
+    for k in range(1, 65):
+        got.append(hid.decode(one_report("slots", k, 7_000_000 + k * PERIOD_US), 5.0))
+    got.append(hid.decode(one_report("slots", 300, 7_000_000 + 300 * PERIOD_US), 5.001))
+    last = got[-1]
+    assert last is not None and hid.stats.device_resets == 0
+    assert (last.device_seq, last.device_t) == (300, pytest.approx(7.0 + 300 * PERIOD_US * 1e-6))
+
+    ser = SerialFrameDecoder()
+    out = ser.feed(one_frame("sites", 0, 0), 0.0)
+    queued = b"".join(one_frame("sites", k, k * SERIAL_PERIOD_US) for k in range(1, 31))
+    out += ser.feed(queued, 5.0)
+    out += ser.feed(one_frame("sites", 600, 600 * SERIAL_PERIOD_US), 5.001)
+    assert ser.stats.device_resets == 0
+    assert (out[-1].device_seq, out[-1].device_t) == (600, 600 * SERIAL_PERIOD_US * 1e-6)
+    # A real reset after the stall is still one.
+    out = ser.feed(one_frame("sites", 0, 1000), 5.01)
+    assert ser.stats.device_resets == 1 and out[0].device_seq == 601
+
+
+def test_a_serial_frame_ahead_whose_seq_moved_as_far_is_no_reset() -> None:
+    """A port opened on a buffer the device filled before: the first frames are stale,
+    so the smallest offset seen is too high and the fresh frame after them claims a
+    time seconds ahead of it. Its seq moved by as many periods as its clock: no reset.
+    A HID seq (8 bits) cannot tell; there the step, seconds ahead, is a reset."""
+    dec = SerialFrameDecoder()
+    stale = b"".join(one_frame("slots", k, k * SERIAL_PERIOD_US) for k in range(30))
+    got = dec.feed(stale, 5.0) + dec.feed(one_frame("slots", 600, 600 * SERIAL_PERIOD_US), 5.001)
+    assert dec.stats.device_resets == 0
+    assert (got[-1].device_seq, got[-1].device_t) == (600, 600 * SERIAL_PERIOD_US * 1e-6)
+    # From now on the offset is the fresh frame's: a seq that matches no longer hides
+    # a clock that runs seconds ahead of the host's.
+    got = dec.feed(one_frame("slots", 601, 900 * SERIAL_PERIOD_US), 5.01)  # 2.5 s ahead
+    assert dec.stats.device_resets == 1 and got[0].device_seq == 601
+
+
+def test_a_device_clock_slower_than_the_hosts_is_no_reset_and_resets_are_still_seen() -> None:
+    """A device clock 500 ppm slow falls behind the host's by 18 s in 10 hours: no
+    reset, and the smallest offset follows it up, so a reset 5 s short of the clock's
+    wrap (read as a wrap, 5 s ahead) is still seen."""
+    dec = HidReportDecoder()
+    n = 36_000  # 10 hours at 1 Hz
+    start = 2**32 - 5_000_000 - (n - 1) * 999_500  # the last report 5 s short of the wrap
+    for k in range(n):
+        assert dec.decode(one_report("slots", k, (start + k * 999_500) % 2**32), float(k))
+    assert dec.stats.device_resets == 0
+    dec.decode(one_report("slots", 0, 1000), float(n))  # reset: seq and clock from zero
+    assert dec.stats.device_resets == 1
 
 
 def test_the_hid_source_carries_on_over_a_device_reset() -> None:

@@ -181,7 +181,9 @@ class FramingStats:
     device_resets: int = 0  # the device's counters started over, its port or handle open
 
 
-RESET_SLACK_S = 1.0  # how far a sample's t_us may run ahead of the host's clock (queued)
+RESET_SLACK_S = 1.0  # how far a sample's t_us may run ahead of the host's clock
+CLOCK_DRIFT = 1e-3  # how fast (s per host s) the smallest host - device offset may rise
+_SEQ_TRUSTED_BITS = 16  # a seq this wide is checked against the time step (serial: 32)
 
 
 @dataclass
@@ -190,14 +192,24 @@ class DeviceCounters:
     ``seq_bits`` and ``t_bits`` (HID: 8 and 32; serial: 32 and 64), carried on into
     ever-increasing values.
 
-    Between two samples the device's clock moves as the host's does (the host times
-    each sample with ``now``); it may run ahead by :data:`RESET_SLACK_S`, for samples
-    that waited in the host's queue. A ``t_us`` further ahead than that, or behind, is
-    no wrap but a device reset with the port or handle still open (read as a wrap, a
-    HID clock would run up to 71.6 minutes ahead; a serial one, never wrapping, would
-    go back). Both counters then carry on from where they were (``t_us`` by the host's
-    elapsed time, ``seq`` by one), counted in ``stats.device_resets``. Without host
-    times, only a ``t_us`` behind (by less than half the wrap) is a reset, and the
+    The host times each sample with ``now``; the device's clock is judged against the
+    host's in absolute terms. The smallest host - device offset seen (``now`` minus the
+    unwrapped ``t_us``: the device's epoch plus the least latency) says the latest time
+    a sample can claim: a sample that waited in a queue claims an earlier one, never a
+    later one. A sample whose ``t_us`` (read as a wrap) claims a time more than
+    :data:`RESET_SLACK_S` later than ``now`` minus that offset is no wrap but a device
+    reset with the port or handle still open (read as a wrap, a HID clock would run up
+    to 71.6 minutes ahead; a serial one, never wrapping, would step back). The smallest
+    offset may rise by :data:`CLOCK_DRIFT` per second, for a device clock slower than
+    the host's. So a host that stalled (hidraw keeps 64 reports, a tty buffer a few
+    thousand bytes, and both drop the newest when full) reads the queued samples and
+    then a fresh one whose clock moved by the whole stall: no reset. With a seq of 16
+    bits or more (serial), a sample ahead whose seq step matches its time step (at the
+    device's period, as the last steps gave it) is no reset either: a stale first
+    sample, read from a buffer filled before the port was opened, sets the offset too
+    high. On a reset both counters carry on from where they were (``t_us`` by the
+    host's elapsed time, ``seq`` by one), counted in ``stats.device_resets``. Without
+    host times, only a ``t_us`` behind (by less than half the wrap) is a reset, and the
     clock carries on by the last step.
     """
 
@@ -208,25 +220,47 @@ class DeviceCounters:
     _raw: tuple[int, int] = (0, 0)  # the last sample's seq and t_us as sent
     _now: float | None = None  # the host's time of the last sample
     _step_us: int = 0  # the last step of t_us between samples (not a reset)
+    _period_us: float | None = None  # t_us per seq step, as the last such step gave it
+    _min_off: float | None = None  # the smallest host - device offset (s), as of _min_at
+    _min_at: float = 0.0
 
     def reset(self) -> None:
         """Forget the counters: a device that came back starts them anew."""
-        self._seq = self._t_us = self._now = None
+        self._seq = self._t_us = self._now = self._period_us = self._min_off = None
         self._step_us = 0
+
+    def _floor(self, now: float) -> float | None:
+        """The smallest host - device offset seen, risen by the drift allowed since."""
+        if self._min_off is None:
+            return None
+        return self._min_off + CLOCK_DRIFT * max(now - self._min_at, 0.0)
 
     def unwrap(self, seq_raw: int, t_raw: int, now: float | None) -> tuple[int, int, bool]:
         """The unwrapped seq and t_us of a sample, and whether the device reset."""
         if self._seq is None or self._t_us is None:
             return seq_raw, t_raw, False
         step = (t_raw - self._raw[1]) & ((1 << self.t_bits) - 1)
-        host_us = None if now is None or self._now is None else (now - self._now) * 1e6
-        # Without host times, only a clock behind (by less than half the wrap) is a reset.
-        most_us = (1 << (self.t_bits - 1)) - 1 if host_us is None else host_us + RESET_SLACK_S * 1e6
-        if step <= most_us:
-            seq_step = (seq_raw - self._raw[0]) & ((1 << self.seq_bits) - 1)
+        seq_step = (seq_raw - self._raw[0]) & ((1 << self.seq_bits) - 1)
+        floor = None if now is None else self._floor(now)
+        if now is None or floor is None or self._now is None:
+            # Without host times, only a clock behind (by less than half the wrap) is a reset.
+            if step < 1 << (self.t_bits - 1):
+                return self._seq + seq_step, self._t_us + step, False
+            return self._seq + 1, self._t_us + max(self._step_us, 1), True
+        if (self._t_us + step) * 1e-6 <= now - floor + RESET_SLACK_S or self._seq_matches(
+            seq_step, step
+        ):
             return self._seq + seq_step, self._t_us + step, False
-        gap = self._step_us if host_us is None else round(host_us)
-        return self._seq + 1, self._t_us + max(gap, 1), True
+        return self._seq + 1, self._t_us + max(round((now - self._now) * 1e6), 1), True
+
+    def _seq_matches(self, seq_step: int, step: int) -> bool:
+        """A wide seq moved as far as the clock did, at the device's period."""
+        if self.seq_bits < _SEQ_TRUSTED_BITS or self._period_us is None or seq_step == 0:
+            return False
+        if step >= 1 << (self.t_bits - 1) or seq_step >= 1 << (self.seq_bits - 1):
+            return False  # backwards, either of them
+        expect = seq_step * self._period_us
+        return abs(step - expect) <= max(2 * self._period_us, 0.05 * expect)
 
     def keep(
         self,
@@ -241,8 +275,15 @@ class DeviceCounters:
         """A good sample's counters become the ones the next sample is read against."""
         if reset:
             stats.device_resets += 1
-        elif self._t_us is not None:
+        elif self._t_us is not None and self._seq is not None:
             self._step_us = t_us - self._t_us
+            if seq > self._seq and self._step_us > 0:
+                self._period_us = self._step_us / (seq - self._seq)
+        if now is not None:
+            off = now - t_us * 1e-6
+            floor = self._floor(now)
+            if floor is None or off < floor:
+                self._min_off, self._min_at = off, now
         self._seq, self._t_us, self._raw, self._now = seq, t_us, (seq_raw, t_raw), now
 
 
