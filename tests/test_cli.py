@@ -858,6 +858,57 @@ def test_serve_dev_with_a_secret_set_prints_the_viewer_and_never_the_secret(
     ]
 
 
+@pytest.mark.parametrize("host", ["::", "::1", "0.0.0.0", "127.0.0.1", "localhost"])
+def test_serve_dev_prints_urls_that_reach_the_bound_server(host: str) -> None:
+    """``--host ::`` printed 127.0.0.1, but asyncio binds ``::`` IPv6-only: nothing
+    answered there. Each printed URL is dialled on a server bound as posecast binds
+    (asyncio's create_server, which websockets' serve calls)."""
+    import asyncio
+
+    from posecast.cli import _dev_lines
+
+    if ":" in host and not socket.has_ipv6:
+        pytest.skip("no IPv6 here")
+
+    async def dial() -> list[str]:
+        try:
+            server = await asyncio.start_server(lambda r, w: w.close(), host, 0)
+        except OSError as exc:  # pragma: no cover - a machine without that address
+            pytest.skip(f"cannot bind {host}: {exc}")
+        port = server.sockets[0].getsockname()[1]
+        lines = _dev_lines(host, port, "s" * 32)
+        try:
+            for url in (lines[0].split()[4], lines[3].split("=", 1)[1]):
+                address = url.split("//", 1)[1].rsplit(":", 1)[0].strip("[]")
+                _, writer = await asyncio.open_connection(address, port)
+                writer.close()
+        finally:
+            server.close()
+        return lines
+
+    lines = asyncio.run(dial())
+    assert lines[0].endswith("/viewer/ (this machine only)"), lines
+    if host.startswith(":"):
+        assert "http://[::1]:" in lines[0] and lines[3].startswith(
+            "export POSECAST_URL=ws://[::1]:"
+        )
+
+
+def test_serve_dev_on_an_address_that_is_not_loopback_says_there_is_no_viewer() -> None:
+    """The viewer line said "(this machine only)" for ``--host 192.168.x.y`` too, but
+    /viewer/token hands tokens to loopback peers only (shell.http): the page got 403."""
+    from posecast.cli import _dev_lines
+
+    assert _dev_lines("192.0.2.7", 8765, "s" * 32) == [
+        "posecast: --dev: no viewer here: its dev tokens need a loopback bind, and host"
+        " 192.0.2.7 is not one (--host 127.0.0.1, the default, or 0.0.0.0 is)",
+        "posecast: --dev: for a client in another shell, paste:",
+        f"export POSECAST_TOKEN_SECRET={'s' * 32}",
+        "export POSECAST_URL=ws://192.0.2.7:8765/",
+    ]
+    assert _dev_lines("2001:db8::7", 8765, None)[0].startswith("posecast: --dev: no viewer here")
+
+
 def test_serve_logs_each_posecast_variable_that_sets_nothing(capsys, monkeypatch) -> None:
     """POSECAST_REDIS (for POSECAST_REDIS_URL) used to leave a node silently embedded."""
     import posecast.online.shell.app as app

@@ -891,12 +891,20 @@ def _dev_lines(host: str, port: int, secret: str | None) -> list[str]:
     """What ``posecast serve --dev`` prints once it listens: the viewer's URL and, for
     an invented secret, ``export`` lines to paste into a client's shell (the names the
     SDK tools and the README's snippets read). The URLs are loopback ones where the
-    server listens on every interface: the viewer's dev tokens answer loopback only."""
+    bind covers one (:func:`_loopback_at`): the viewer's dev tokens are handed to
+    loopback clients only, so a server bound elsewhere gets no viewer line but a word
+    on why."""
     import shlex
 
-    at = "127.0.0.1" if host in ("", "0.0.0.0", "::") else host
-    at = f"[{at}]" if ":" in at else at
-    lines = [f"posecast: --dev: viewer at http://{at}:{port}/viewer/ (this machine only)"]
+    at = _loopback_at(host)
+    if at is not None:
+        lines = [f"posecast: --dev: viewer at http://{at}:{port}/viewer/ (this machine only)"]
+    else:
+        at = f"[{host}]" if ":" in host else host
+        lines = [
+            f"posecast: --dev: no viewer here: its dev tokens need a loopback bind, and "
+            f"host {host} is not one (--host 127.0.0.1, the default, or 0.0.0.0 is)"
+        ]
     if secret is not None:
         lines += [
             "posecast: --dev: for a client in another shell, paste:",
@@ -904,6 +912,37 @@ def _dev_lines(host: str, port: int, secret: str | None) -> list[str]:
             f"export POSECAST_URL=ws://{at}:{port}/",
         ]
     return lines
+
+
+def _loopback_at(host: str) -> str | None:
+    """The loopback address, as a URL writes it (``127.0.0.1``, ``[::1]``), at which a
+    client on this machine reaches a server bound to ``host``, or ``None`` where the
+    bind covers none. The server binds every address ``host`` resolves to, as asyncio
+    resolves it (``''``: every interface, IPv4 and IPv6), each IPv6 one IPv6-only:
+    ``::`` is reached at ``[::1]``, never at 127.0.0.1. What counts as loopback is the
+    viewer routes' own rule (``shell.http._is_loopback``, which refuses the others)."""
+    import ipaddress
+    from types import SimpleNamespace
+    from typing import cast
+
+    from posecast.online.shell.http import Peer, _is_loopback
+
+    try:
+        infos = socket.getaddrinfo(
+            host or None, 0, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE
+        )
+    except OSError:
+        return None
+    reached = []
+    for *_, sockaddr in infos:
+        ip = ipaddress.ip_address(str(sockaddr[0]).split("%", 1)[0])
+        at = ("127.0.0.1" if ip.version == 4 else "::1") if ip.is_unspecified else str(ip)
+        if _is_loopback(cast(Peer, SimpleNamespace(remote_address=(at, 0)))):
+            reached.append(at)
+    if not reached:
+        return None
+    at = min(reached, key=lambda a: ":" in a)  # IPv4 first
+    return f"[{at}]" if ":" in at else at
 
 
 def _cmd_token(args: argparse.Namespace) -> int:
