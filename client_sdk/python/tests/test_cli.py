@@ -15,6 +15,8 @@ import pytest
 
 from posecast_client.bvh import read_bvh
 from posecast_client.cli import record, sim
+from posecast_client.cli.common import describe
+from posecast_client.errors import ConfigInvalidError
 from posecast_client.protocol import Pose, Presence, Welcome
 from posecast_client.recording import RecordingWriter, read_recording
 from posecast_client.skeleton import JOINT_NAMES
@@ -287,6 +289,14 @@ def test_sim_rejects_bad_churn_options(capsys: pytest.CaptureFixture[str]) -> No
         ("record", ["--room", "r"], "neither a token nor a secret"),
         ("sim", ["--secret", "s" * 32, "--url", "notaurl"], "is not a WebSocket URL"),
         ("record", ["--secret", "s" * 32, "--room", "r", "--url", "http://x/"], "WebSocket"),
+        ("record", ["--secret", "s" * 32, "--room", "r", "--url", "ws://"], "names no host"),
+        ("sim", ["--secret", "s" * 32, "--url", "ws://"], "names no host"),
+        ("record", ["--secret", "s" * 32, "--room", "r", "--url", "ws://:8765/"], "no host"),
+        ("sim", ["--secret", "s" * 32, "--url", "ws://:8765/"], "names no host"),
+        ("record", ["--secret", "s" * 32, "--room", "r", "--url", "ws://h:99999/"], "bad port"),
+        ("sim", ["--secret", "s" * 32, "--url", "ws://h:99999/"], "has a bad port"),
+        ("record", ["--secret", "s" * 32, "--room", "r", "--url", "ws://h/#x"], "#fragment"),
+        ("sim", ["--secret", "s" * 32, "--url", "ws://h/#x"], "has a #fragment"),
         ("sim", ["--secret", "s" * 32, "--room-prefix", "lob by"], "not an id"),
         ("record", ["--secret", "s" * 32, "--room", "lob by"], "not an id"),
     ],
@@ -303,6 +313,27 @@ def test_a_command_line_mistake_prints_a_code_and_a_hint(
     main = {"sim": sim.main, "record": record.main}[tool]
     err = _mistake(capsys, main, argv)
     assert f"posecast-{tool}: error [CONFIG_INVALID]: " in err and says in err, err
+
+
+def test_a_bad_url_from_the_environment_is_named_so(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("POSECAST_URL", "ws://h:99999/")
+    err = _mistake(capsys, record.main, ["--secret", "s" * 32, "--room", "r"])
+    assert "error [CONFIG_INVALID]: POSECAST_URL: 'ws://h:99999/' has a bad port" in err, err
+    assert "hint: a port is a number from 1 to 65535" in err, err
+
+
+def test_describe_knows_the_clients_config_error() -> None:
+    """A URL or token the client refuses at run time is CONFIG_INVALID with its hint,
+    not a bug re-raised (posecast-sim reported it as INTERNAL, posecast-record as a
+    traceback)."""
+    exc = ConfigInvalidError("no token (got None)", hint="an unset environment variable?")
+    assert describe(exc, "ws://h/") == (
+        "CONFIG_INVALID",
+        "no token (got None)",
+        "an unset environment variable?",
+    )
 
 
 def test_recording_a_room_nobody_is_in_says_so_and_names_the_rooms_with_players(

@@ -77,13 +77,15 @@ class ConnectionLostError(PosecastClientError):
 class ConfigInvalidError(PosecastClientError, ValueError):
     """An argument the client cannot use, refused before it dials: a URL that is not
     ``ws://`` or ``wss://`` with a host, or no token (``None``, empty, not a string).
-    Never retried. ``hint`` says what to pass instead; it ends the message too. A
-    ``ValueError`` too, as the client raised one before this class."""
+    Never retried. ``hint`` says what to pass instead; it ends the message too
+    (``reason`` is the message without it). A ``ValueError`` too, as the client raised
+    one before this class."""
 
     retryable: ClassVar[bool] = False
 
     def __init__(self, message: str, *, hint: str) -> None:
         super().__init__(f"{message} (hint: {hint})")
+        self.reason = message  # the message without its hint
         self.hint = hint
 
 

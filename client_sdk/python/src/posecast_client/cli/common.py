@@ -19,10 +19,11 @@ from typing import Any, NoReturn
 
 from websockets.exceptions import InvalidHandshake, InvalidURI
 
-from posecast_client.client import Client, connect
+from posecast_client.client import Client, check_url, connect
 from posecast_client.codec import ID_PATTERN
 from posecast_client.errors import (
     BvhError,
+    ConfigInvalidError,
     ConnectFailedError,
     ConnectionLostError,
     ProtocolError,
@@ -72,8 +73,8 @@ def describe(exc: BaseException, url: str) -> tuple[str, str, str]:
     """``(code, message, hint)`` of a failure a tool met while running: a refusal by
     the server (its wire code), no session with the server at ``url``
     (:data:`UNREACHABLE`), a BVH that cannot be read (:data:`BVH_INVALID`), a file
-    that cannot be read or written (:data:`FILE_INVALID`); anything else is a bug,
-    re-raised."""
+    that cannot be read or written (:data:`FILE_INVALID`), a URL or token the client
+    refused (:data:`CONFIG_INVALID`); anything else is a bug, re-raised."""
     if isinstance(exc, ProtocolError):
         hint = _WIRE_HINTS.get(exc.code, "see proto/README.md for what the code means")
         return exc.code, exc.message, hint
@@ -83,6 +84,8 @@ def describe(exc: BaseException, url: str) -> tuple[str, str, str]:
         return FILE_INVALID, f"{exc.filename}: {exc.strerror}", "check the path"
     if isinstance(exc, RecordingError):
         return FILE_INVALID, exc.message, "pass a file posecast-record wrote"
+    if isinstance(exc, ConfigInvalidError):  # a URL or token the client refused
+        return CONFIG_INVALID, exc.reason, exc.hint
     unreachable = OSError | InvalidURI | InvalidHandshake | ConnectionLostError | TimeoutError
     if isinstance(exc, unreachable):
         return (
@@ -127,13 +130,12 @@ def resolve_server(
 ) -> None:
     """Fill ``url``/``secret``/``token`` from the environment where flags left them out
     (neither anywhere: ``prog``'s :func:`usage_error`)."""
+    source = "--url" if args.url else ENV_PREFIX + "URL"
     args.url = args.url or env.get(ENV_PREFIX + "URL") or "ws://127.0.0.1:8765/"
-    if not args.url.startswith(("ws://", "wss://")):
-        usage_error(
-            prog,
-            f"--url {args.url!r} is not a WebSocket URL",
-            "e.g. --url ws://127.0.0.1:8765/ (wss:// behind TLS)",
-        )
+    try:
+        args.url = check_url(args.url)  # the client's own check: no connect refuses it later
+    except ConfigInvalidError as exc:
+        usage_error(prog, f"{source}: {exc.reason}", exc.hint)
     if not args.secret and not args.token:
         args.secret = env.get(ENV_PREFIX + "TOKEN_SECRET") or None
         args.token = env.get(ENV_PREFIX + "TOKEN") or None
