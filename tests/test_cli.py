@@ -522,7 +522,7 @@ def test_serve_without_a_secret_is_a_config_error(capsys, monkeypatch) -> None:
             "--redis-node-ttl-s 3 must be above timeout + max(heartbeat / 2 + timeout,"
             " heartbeat) = 4.5 s, with --redis-timeout-s 2 and --redis-heartbeat-s 1",
         ),
-        (["--redis", "redis://h:port/0"], {}, "--redis: Port could not be cast"),
+        (["--redis", "redis://h:port/0"], {}, "--redis is not a well-formed URL (not shown"),
     ],
 )
 def test_serve_names_a_bad_setting_as_the_user_gave_it(

@@ -127,7 +127,7 @@ def _flags(*argv: str) -> tuple[dict[str, object], dict[str, str]]:
         (["--log-level", "LOUD"], "--log-level 'LOUD' unknown: one of DEBUG, INFO"),
         (["--node-id", "a b"], "--node-id 'a b' must be 1 to 64 of"),
         # The URL may carry a password: named, never shown; by the alias typed.
-        (["--redis", "redis://u:pw@h:port/0"], "--redis: Port could not"),
+        (["--redis", "redis://u:pw@h:port/0"], "--redis is not a well-formed URL (not shown"),
         (["--redis-url", "http://u:pw@h/0"], "--redis-url must start with redis://"),
     ],
 )
@@ -141,6 +141,56 @@ def test_a_bad_flag_is_named_as_typed_with_its_range(argv: list[str], said: str)
     assert info.value.code == "CONFIG_INVALID"
     assert str(info.value).startswith(said), str(info.value)
     assert "pw" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("argv", "env", "said"),
+    [
+        (["--tick-hz", "240.0000001"], {}, "--tick-hz 240.0000001 must be in [1, 240]"),
+        ([], {"POSECAST_TICK_HZ": "0.9999999999"}, "POSECAST_TICK_HZ=0.9999999999 must be in"),
+        (["--wrist-elbow", "1.000001"], {}, "--wrist-elbow 1.000001 must be in [0, 1]"),
+        (["--token-leeway-s", "300.0000001"], {}, "--token-leeway-s 300.0000001 must be in"),
+    ],
+)
+def test_a_float_just_out_of_range_is_shown_in_full(
+    argv: list[str], env: dict[str, str], said: str
+) -> None:
+    """``--tick-hz 240.0000001`` said ``240 must be in [1, 240]``: ``:g`` rounded the
+    value it refused into its range."""
+    overrides, flags = _flags(*argv)
+    with pytest.raises(ConfigError) as info:
+        ServerConfig.from_sources({"POSECAST_TOKEN_SECRET": SECRET, **env}, overrides, flags)
+    assert str(info.value).startswith(said), str(info.value)
+
+
+@pytest.mark.parametrize(
+    "url",
+    [
+        "redis://default:s3cretPW/0",  # the password where a port goes: no user@
+        "redis://default:s3cretPW@h:99999/0",
+        "rediss://u:s3cretPW@[::1:6379/0",
+        "redis://u:s3cretPW@h:-1/0",
+    ],
+)
+@pytest.mark.parametrize("by", ["--redis", "POSECAST_REDIS_URL"])
+def test_a_malformed_redis_url_is_refused_without_showing_any_of_it(url: str, by: str) -> None:
+    """``--redis redis://default:s3cret/0`` said ``--redis: Port could not be cast to
+    integer value as 's3cret'``: urllib's error quotes the URL, and docs/server.md
+    promises a Redis URL is never shown."""
+    env = {"POSECAST_TOKEN_SECRET": SECRET}
+    overrides: dict[str, object] = {}
+    flags: dict[str, str] = {}
+    if by.startswith("--"):
+        overrides, flags = _flags(by, url)
+    else:
+        env[by] = url
+    with pytest.raises(ConfigError) as info:
+        ServerConfig.from_sources(env, overrides, flags)
+    text = str(info.value)
+    assert info.value.code == "CONFIG_INVALID"
+    assert text.startswith(f"{by} is not a well-formed URL (not shown: it may hold a password)")
+    assert "s3cret" not in text and "default" not in text and "99999" not in text, text
+    assert "redis://user:password@host:6379/0" in text
 
 
 @pytest.mark.parametrize(
@@ -258,7 +308,7 @@ def test_an_unbounded_value_is_refused_by_its_flag(flag: str, raw: str, interval
         ServerConfig.from_sources({"POSECAST_TOKEN_SECRET": SECRET}, overrides, flags)
     assert info.value.code == "CONFIG_INVALID"
     value = overrides[flag[2:].replace("-", "_")]
-    shown = f"{value:g}" if isinstance(value, float) else raw  # as the error writes it
+    shown = repr(value).removesuffix(".0") if isinstance(value, float) else raw  # in full
     assert str(info.value) == f"{flag} {shown} must be in {interval}"
 
 

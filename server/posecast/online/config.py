@@ -260,9 +260,13 @@ class _Named:
 
     def value(self, name: str) -> str:
         """The setting with its value as a user writes it: ``--tick-hz nan``,
-        ``POSECAST_TICK_HZ=nan``, ``tick_hz=nan``."""
+        ``POSECAST_TICK_HZ=nan``, ``tick_hz=nan``. A float is shown in full (its repr,
+        ``240.0000001``; ``:g`` made it ``240``, in range), without a whole one's
+        ``.0`` (``--tick-hz 500``)."""
         value = getattr(self.cfg, name)
-        text = f"{value:g}" if isinstance(value, float) else repr(value)
+        text = repr(value)
+        if isinstance(value, float):
+            text = text.removesuffix(".0")
         label = self(name)
         return f"{label} {text}" if label.startswith("-") else f"{label}={text}"
 
@@ -396,13 +400,18 @@ def _check(cfg: ServerConfig, n: _Named) -> None:
             f" {n.value('redis_heartbeat_s')}: lower {n('redis_timeout_s')} or raise"
             f" {n('redis_node_ttl_s')}"
         )
-    # The URL is never shown: it may carry a password.
+    # The URL is never shown, nor any part of it, nor urllib's errors, which quote it
+    # ('Port could not be cast to integer value as 's3cret''): it may carry a password.
     if cfg.redis_url and not cfg.redis_url.startswith(("redis://", "rediss://", "unix://")):
         raise ConfigError(f"{n('redis_url')} must start with redis://, rediss:// or unix://")
-    try:  # a port that is not a number fails here, not in the bus's endless retries
+    try:  # a malformed URL fails here, not in the bus's endless retries
         _ = urlsplit(cfg.redis_url).port
-    except ValueError as exc:
-        raise ConfigError(f"{n('redis_url')}: {exc}") from None
+    except ValueError:
+        raise ConfigError(
+            f"{n('redis_url')} is not a well-formed URL (not shown: it may hold a password):"
+            " after the host, ':' takes a port number, 0 to 65535; a password goes before"
+            " the host, as in redis://user:password@host:6379/0, an IPv6 host in [ ]"
+        ) from None
     for name in ("node_id", "redis_prefix"):
         value = getattr(cfg, name)
         if (value or name == "redis_prefix") and not _ID.fullmatch(value):
