@@ -47,14 +47,18 @@ def url_of(server: Server, scheme: str = "ws") -> str:
 
 @contextlib.asynccontextmanager
 async def peer(
-    on_hello: str = "welcome", refuse: Callable[[], int | None] = lambda: None
+    on_hello: str = "welcome",
+    refuse: Callable[[], int | None] = lambda: None,
+    paths: list[str] | None = None,
 ) -> AsyncIterator[Server]:
     """A posecast v1 server in this process. ``on_hello``: ``welcome`` (join), ``drop``
     (welcome, then close), ``close`` (close without a word) or ``silent`` (say nothing).
     ``refuse``: an HTTP status to refuse the upgrade with, asked at every connection
-    (None: go on)."""
+    (None: go on). ``paths``: gets each upgrade request's path."""
 
     def gate(conn: ServerConnection, request: Request) -> Response | None:
+        if paths is not None:
+            paths.append(request.path)
         status = refuse()
         return None if status is None else conn.respond(status, "too many connection attempts\n")
 
@@ -107,6 +111,9 @@ def dialing_counted(monkeypatch: pytest.MonkeyPatch) -> Any:
         ("ws://", "names no host"),
         ("ws://127.0.0.1:99999/", "bad port"),
         ("ws://127.0.0.1:8765/#room", "#fragment"),
+        ("ws://127.0.0.1:0/", "bad port (0)"),
+        ("ws://[::1", "not a usable URL"),  # urlsplit's own ValueError
+        ("ws://[::1:8765/", "not a usable URL"),
         ("", "no server URL (got an empty string)"),
         (None, "no server URL (got None)"),  # os.environ.get of an unset variable
     ],
@@ -124,6 +131,58 @@ def test_a_url_the_client_cannot_dial_is_refused_before_dialing(
     assert isinstance(exc, pc.PosecastClientError) and isinstance(exc, ValueError)
     assert words in str(exc) and "(hint: " in str(exc) and exc.hint in str(exc)
     assert not is_retryable(exc)
+
+
+@pytest.mark.parametrize(
+    ("url", "stored"),
+    [
+        ("ws://[::1]:8765/", "ws://[::1]:8765/"),  # an IPv6 literal
+        ("wss://[2001:db8::1]/posecast", "wss://[2001:db8::1]/posecast"),
+        ("ws://127.0.0.1:8765/rooms/lobby?x=1&y=two", "ws://127.0.0.1:8765/rooms/lobby?x=1&y=two"),
+        ("WS://127.0.0.1:8765/", "WS://127.0.0.1:8765/"),  # schemes are case-insensitive
+        ("Wss://posecast.example/", "Wss://posecast.example/"),
+        ("ws://bücher.example:8765/", "ws://bücher.example:8765/"),  # a unicode host
+        ("ws://localhost:65535/", "ws://localhost:65535/"),
+        ("ws://h:1/", "ws://h:1/"),
+        ("ws://user:pw@h/", "ws://user:pw@h/"),
+        ("ws://h:8765/ ", "ws://h:8765/"),  # what the client stores and dials: stripped
+        ("\t ws://h:8765/\n", "ws://h:8765/"),
+    ],
+)
+def test_a_good_url_is_taken(url: str, stored: str) -> None:
+    """A regression refusing URLs a user may well pass must fail here."""
+    assert client_mod.check_url(url) == stored
+    assert client_mod.Client(url, "token").urls == (stored,)
+    assert client_mod.Client([url, "ws://h2/"], "token").urls == (stored, "ws://h2/")
+
+
+def test_the_client_dials_the_stripped_url(monkeypatch: pytest.MonkeyPatch) -> None:
+    """'ws://h:8765/ ' was checked stripped but dialed as given: request path '/ '."""
+    paths: list[str] = []
+
+    async def main() -> None:
+        async with peer(paths=paths) as server:
+            with dialing_counted(monkeypatch) as calls:
+                async with pc.connect(f" {url_of(server)} ", "token") as client:
+                    await client.join("lobby", "Ada")
+            assert calls == [url_of(server)]
+
+    run(main())
+    assert paths == ["/"]
+
+
+def test_several_urls_may_come_as_any_iterable() -> None:
+    """A generator or a set of URLs was taken as one URL and refused as 'a value of
+    type generator'; a multi-URL input is materialised once."""
+    urls = ["ws://a:1/", "ws://b:2/"]
+    assert client_mod.Client(iter(urls), "token").urls == tuple(urls)
+    assert client_mod.Client((u for u in urls), "token").urls == tuple(urls)
+    assert client_mod.Client({"ws://a:1/"}, "token").urls == ("ws://a:1/",)
+    assert client_mod.Client(dict.fromkeys(urls), "token").urls == tuple(urls)
+    with pytest.raises(ConfigInvalidError, match="no server URL"):
+        client_mod.Client(iter([]), "token")
+    with pytest.raises(ConfigInvalidError, match="got a value of type bytes"):
+        client_mod.Client([b"ws://a:1/"], "token")  # type: ignore[list-item]
 
 
 @pytest.mark.parametrize(
@@ -193,10 +252,15 @@ def test_a_refused_port_raises_connect_failed_error() -> None:
 
 
 def test_a_host_that_does_not_resolve_raises_connect_failed_error() -> None:
+    """RFC 6761: a .invalid name never resolves. The machine's resolver says so at once
+    (a gaierror) or, offline, may not answer within open_timeout_s: either is a
+    ConnectFailedError naming the URL."""
+    url = "ws://no-such-host.invalid/"
+
     async def main() -> None:
-        with pytest.raises(ConnectFailedError, match="does not resolve") as info:
-            await pc.connect("ws://no-such-host.invalid/", "token")  # RFC 6761: never resolves
-        assert isinstance(info.value.__cause__, socket.gaierror)
+        with pytest.raises(ConnectFailedError) as info:
+            await pc.connect(url, "token", open_timeout_s=3.0)
+        assert info.value.url == url
 
     run(main())
 

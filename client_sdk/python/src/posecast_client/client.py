@@ -51,7 +51,7 @@ from collections.abc import (
     Awaitable,
     Callable,
     Generator,
-    Sequence,
+    Iterable,
 )
 from types import TracebackType
 from typing import Any
@@ -128,8 +128,9 @@ def _what(value: object) -> str:
 
 
 def check_url(url: object) -> str:
-    """``url`` if the client can dial it: ``ws://`` or ``wss://``, a host, a port that
-    is a number up to 65535 (absent: 80 or 443), no ``#fragment``.
+    """``url`` without leading or trailing whitespace (what the client stores and
+    dials), if the client can dial it: ``ws://`` or ``wss://`` (any case), a host, a
+    port from 1 to 65535 (absent: 80 or 443), no ``#fragment``.
 
     Raises:
         ConfigInvalidError: anything else, before any dialing, with a hint (for an
@@ -142,7 +143,12 @@ def check_url(url: object) -> str:
             "environment variable?",
         )
     text = url.strip()
-    parts = urlsplit(text)
+    try:
+        parts = urlsplit(text)
+    except ValueError as exc:  # an unclosed [ of an IPv6 literal, say
+        raise ConfigInvalidError(
+            f"{url!r} is not a usable URL ({exc})", hint=f"such as {EXAMPLE_URL}"
+        ) from exc
     scheme = parts.scheme.lower()
     slashes = text[len(scheme) + 1 :].startswith("//")
     if scheme in ("http", "https") and slashes:
@@ -159,23 +165,27 @@ def check_url(url: object) -> str:
     if not parts.hostname:
         raise ConfigInvalidError(f"{url!r} names no host", hint=f"such as {EXAMPLE_URL}")
     try:
-        parts.port  # noqa: B018 (a property that checks the port)
+        port = parts.port  # a property that checks the port
     except ValueError as exc:
         raise ConfigInvalidError(
             f"{url!r} has a bad port ({exc})", hint="a port is a number from 1 to 65535"
         ) from exc
+    if port == 0:
+        raise ConfigInvalidError(
+            f"{url!r} has a bad port (0)", hint="a port is a number from 1 to 65535"
+        )
     if parts.fragment or "#" in text:
         raise ConfigInvalidError(
             f"{url!r} has a #fragment, which a WebSocket URL may not",
             hint="leave out the # and what follows it",
         )
     try:
-        parse_uri(url)  # what the WebSocket library itself takes, lest it refuse later
+        parse_uri(text)  # what the WebSocket library itself takes, lest it refuse later
     except (InvalidURI, ValueError) as exc:
         raise ConfigInvalidError(
             f"{url!r} is not a usable URL ({exc})", hint=f"such as {EXAMPLE_URL}"
         ) from exc
-    return url
+    return text
 
 
 def check_token(token: object) -> None:
@@ -248,8 +258,9 @@ class Client:
     :func:`connect`. Options (keyword-only, with their defaults):
 
     Args:
-        url: the server's WebSocket URL, e.g. ``ws://127.0.0.1:8765/``; or a sequence
-            of URLs of one cluster, tried in order (failover): the first connection
+        url: the server's WebSocket URL, e.g. ``ws://127.0.0.1:8765/`` (leading and
+            trailing whitespace dropped); or an iterable (list, tuple, generator) of
+            URLs of one cluster, tried in order (failover): the first connection
             takes the first that opens, and each reconnect attempt moves on to the
             next URL after the one that was lost, wrapping around.
         token: the join token, or a callable returning one (called at every join, so
@@ -271,7 +282,7 @@ class Client:
 
     def __init__(
         self,
-        url: str | Sequence[str],
+        url: str | Iterable[str],
         token: Token,
         *,
         reconnect: bool = True,
@@ -286,8 +297,8 @@ class Client:
         seq0: int = 0,
         protocol: int = PROTOCOL_V2,
     ) -> None:
-        several = isinstance(url, Sequence) and not isinstance(url, str | bytes)
-        urls = tuple(url) if several else (url,)
+        several = isinstance(url, Iterable) and not isinstance(url, str | bytes | bytearray)
+        urls = tuple(url) if several else (url,)  # a generator, a set... read once, here
         if not urls:
             raise ConfigInvalidError("no server URL", hint=f"pass one, such as {EXAMPLE_URL}")
         self.urls: tuple[str, ...] = tuple(check_url(u) for u in urls)
@@ -808,14 +819,15 @@ class Connecting:
         await self._client.close()
 
 
-def connect(url: str | Sequence[str], token: Token, **options: Any) -> Connecting:
+def connect(url: str | Iterable[str], token: Token, **options: Any) -> Connecting:
     """Open a WebSocket to a posecast server (``posecast.v2``, or ``posecast.v1`` when
     that is all the server speaks).
 
     ``await connect(url, token)`` gives a :class:`Client`; then :meth:`Client.join`.
     The token travels in ``hello``, never in the URL. ``options`` are the keyword
     options of :class:`Client` (reconnect, back-off, pings, timeouts). ``url`` may be
-    a sequence of the URLs of one cluster's nodes: failover, see :class:`Client`.
+    an iterable (a list, a tuple...) of the URLs of one cluster's nodes: failover, see
+    :class:`Client`.
 
     Raises:
         ConfigInvalidError: at once, before dialing: a URL that is not ``ws://`` or
