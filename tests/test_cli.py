@@ -482,7 +482,7 @@ def _bench_report(p99: list[float]) -> dict[str, object]:
 @pytest.mark.parametrize(
     ("p99", "said"),
     [
-        ([2.0, 8.0], "≥ 4 (every tested count fit)"),
+        ([2.0, 8.0], ">= 4 (every tested count fit)"),
         ([20.0, 80.0], "none of the tested counts fit (the smallest, 1, took p99 20.0 ms)"),
         ([2.0, 80.0], "1 (4 did not fit)"),
     ],
@@ -499,6 +499,39 @@ def test_bench_engine_says_how_many_players_fit(capsys, monkeypatch, p99, said) 
         f"max players at 60 Hz, both models: {said}",
         f"max players at 60 Hz, mixed sets: {said}",
     ]
+
+
+def test_bench_engine_prints_to_a_stdout_that_is_not_utf8(capsys, monkeypatch) -> None:
+    """'≥ 4 (every tested count fit)' was the CLI's only non-ASCII output: on an ASCII
+    stdout (LANG=C, a pipe on some systems) print raised UnicodeEncodeError."""
+    import io
+
+    import posecast.offline.evaluation.engine_speed as speed
+
+    monkeypatch.setattr(speed, "run_side_by_side", lambda *a: [_bench_report([2.0, 8.0])])
+    out = io.BytesIO()
+    monkeypatch.setattr(sys, "stdout", io.TextIOWrapper(out, encoding="ascii", errors="strict"))
+    assert main(["bench", "engine", "--players", "1,4", "--backend", "onnx"]) == 0
+    sys.stdout.flush()
+    assert b"max players at 60 Hz, mixed sets: >= 4 (every tested count fit)" in out.getvalue()
+
+
+@pytest.mark.parametrize(
+    ("argv", "says"),
+    [
+        (["bench", "engine", "--players", "10,10"], "--players '10,10' names 10 twice"),
+        (["bench", "engine", "--players", "1,10,1"], "--players '1,10,1' names 1 twice"),
+        (["eval-apps", "--data", "d", "--samples", "4,4"], "--samples '4,4' names 4 twice"),
+    ],
+)
+def test_a_count_listed_twice_is_refused(capsys, monkeypatch, argv: list[str], says: str) -> None:
+    """``--players 10,10`` ran the same count twice and printed '10 (10 did not fit)'
+    when one run fit and the other did not."""
+    import posecast.offline.evaluation.engine_speed as speed
+
+    monkeypatch.setattr(speed, "run_side_by_side", lambda *a: pytest.fail("it ran"))
+    err = user_error(capsys, main(argv), "CONFIG_INVALID")
+    assert f"posecast: error [CONFIG_INVALID]: {says}: each count once" in err, err
 
 
 def test_serve_without_a_secret_is_a_config_error(capsys, monkeypatch) -> None:

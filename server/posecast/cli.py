@@ -122,7 +122,7 @@ def _float_or_off(option: str, text: str | None, default: float | None) -> float
 
 
 def _int_list(option: str, text: str, command: str) -> list[int]:
-    """A comma-separated list of integers >= 1 (``"1,10,100"``)."""
+    """A comma-separated list of distinct integers >= 1 (``"1,10,100"``)."""
     try:
         values = [int(p) for p in text.split(",")]
     except ValueError:
@@ -130,6 +130,12 @@ def _int_list(option: str, text: str, command: str) -> list[int]:
     if not values or min(values) < 1:
         raise _config(
             f"{option} {text!r} is not a comma-separated list of integers >= 1",
+            f"e.g. {option} 1,10,100",
+        )
+    twice = [v for i, v in enumerate(values) if v in values[:i]]
+    if twice:  # the same count measured twice: two figures for one row
+        raise _config(
+            f"{option} {text!r} names {twice[0]} twice: each count once",
             f"e.g. {option} 1,10,100",
         )
     return values

@@ -7,7 +7,18 @@ from __future__ import annotations
 
 import math
 
-from posecast.offline.evaluation.engine_speed import FRAME_BUDGET_MS, bench, realtime_summary, run
+import pytest
+
+from posecast.offline.evaluation import engine_speed
+from posecast.offline.evaluation.engine_speed import (
+    FRAME_BUDGET_MS,
+    BenchResult,
+    bench,
+    fits_frame,
+    max_realtime_players,
+    realtime_summary,
+    run,
+)
 
 
 def test_a_mixed_run_splits_players_between_the_models() -> None:
@@ -42,7 +53,7 @@ def test_mixed_tracker_sets_run_beside_the_single_layout() -> None:
 
 def test_every_tested_count_fitting_says_the_limit_is_higher() -> None:
     """``--players 1,4`` with both under the budget printed ``4``, as if 4 were the most."""
-    assert realtime_summary([1, 4], [3.0, 9.0]) == "≥ 4 (every tested count fit)"
+    assert realtime_summary([1, 4], [3.0, 9.0]) == ">= 4 (every tested count fit)"
 
 
 def test_no_tested_count_fitting_names_the_smallest() -> None:
@@ -58,3 +69,39 @@ def test_the_limit_lies_between_the_largest_fit_and_the_next_count() -> None:
     # a count below the largest fit that did not: said, not hidden
     noisy = realtime_summary([1, 10, 25, 50], [1.0, 17.0, 15.0, 30.0])
     assert noisy == "25 (50 did not fit); 10 did not fit either, a noisy run"
+
+
+_JUST_UNDER = math.nextafter(FRAME_BUDGET_MS, 0.0)
+
+
+@pytest.mark.parametrize(
+    ("players", "p99"),
+    [
+        ([1, 4], [3.0, 9.0]),
+        ([1, 2], [_JUST_UNDER, FRAME_BUDGET_MS]),
+        ([10, 1], [40.0, 20.31]),
+        ([1, 10, 25, 50], [1.0, 17.0, 15.0, 30.0]),
+        ([5], [FRAME_BUDGET_MS]),
+    ],
+)
+def test_the_summary_and_the_report_judge_by_one_rule(players: list[int], p99: list[float]) -> None:
+    """realtime_summary (c4ca31e) kept its own copy of the fit rule beside
+    BenchResult.realtime() and the report's max_realtime_players: one rule, fits_frame,
+    now gives all three, so the printed count and the JSON's cannot part."""
+    results = [
+        BenchResult(p, 4, 0, "onnx", t, t, 1.0, 1.0) for p, t in zip(players, p99, strict=True)
+    ]
+    fitting = [r.players for r in results if r.realtime()]
+    assert fitting == [p for p, t in zip(players, p99, strict=True) if fits_frame(t)]
+    best = max_realtime_players(players, p99)
+    assert best == max(fitting, default=0)
+    assert (
+        engine_speed._report("onnx", "onnx", results, [], {}, 4, 1, 0.0)["max_realtime_players"]
+        == best
+    )
+    text = realtime_summary(players, p99)
+    assert text.isascii(), text  # printed: stdout may not be UTF-8
+    if best:
+        assert text.removeprefix(">= ").startswith(f"{best} ("), text
+    else:
+        assert text.startswith("none of the tested counts fit"), text

@@ -63,29 +63,44 @@ class BenchResult:
     rss_mb: float
 
     def realtime(self) -> bool:
-        return self.tick_p99_ms < FRAME_BUDGET_MS
+        return fits_frame(self.tick_p99_ms)
+
+
+def fits_frame(p99_ms: float, budget_ms: float = FRAME_BUDGET_MS) -> bool:
+    """The one rule for a count of players holding 60 Hz: its p99 tick fits the frame
+    (under ``budget_ms``). :meth:`BenchResult.realtime`, :func:`max_realtime_players`
+    and :func:`realtime_summary` all judge by it."""
+    return p99_ms < budget_ms
+
+
+def max_realtime_players(
+    players: list[int], p99_ms: list[float], budget_ms: float = FRAME_BUDGET_MS
+) -> int:
+    """The report's ``max_realtime_players``: the largest tested count that fits the
+    frame (:func:`fits_frame`), 0 when none did."""
+    return max(
+        (p for p, t in zip(players, p99_ms, strict=True) if fits_frame(t, budget_ms)), default=0
+    )
 
 
 def realtime_summary(
     players: list[int], p99_ms: list[float], budget_ms: float = FRAME_BUDGET_MS
 ) -> str:
     """How many players hold 60 Hz, as far as the tested counts tell: the largest count
-    whose p99 tick fits ``budget_ms`` and the next tested count, which did not
-    (``"25 (30 did not fit)"``); ``"≥ 4 (every tested count fit)"`` when the largest
+    that fits (:func:`max_realtime_players`) and the next tested count, which did not
+    (``"25 (30 did not fit)"``); ``">= 4 (every tested count fit)"`` when the largest
     fit, so the real limit is higher; ``"none of the tested counts fit (the smallest,
     1, took p99 20.3 ms)"``. A count below the largest that fits which did not fit is
-    named too (a noisy run). The report's ``max_realtime_players`` stays the largest
-    count that fit (0 for none)."""
+    named too (a noisy run). ASCII only: it is printed, and stdout may not be UTF-8."""
+    best = max_realtime_players(players, p99_ms, budget_ms)
     runs = sorted(zip(players, p99_ms, strict=True))
-    fits = [p for p, t in runs if t < budget_ms]
-    if not fits:
+    if not any(fits_frame(t, budget_ms) for t in p99_ms):
         smallest, took = runs[0]
         return f"none of the tested counts fit (the smallest, {smallest}, took p99 {took:.1f} ms)"
-    best = max(fits)
-    failed = sorted({p for p, t in runs if t >= budget_ms})
+    failed = sorted({p for p, t in runs if not fits_frame(t, budget_ms)})
     above = [p for p in failed if p > best]
     below = [p for p in failed if p < best]
-    text = f"{best} ({above[0]} did not fit)" if above else f"≥ {best} (every tested count fit)"
+    text = f"{best} ({above[0]} did not fit)" if above else f">= {best} (every tested count fit)"
     if below:
         text += f"; {', '.join(map(str, below))} did not fit either, a noisy run"
     return text
@@ -324,7 +339,6 @@ def run_side_by_side(
 
 
 def _sets_report(mixed: list[BenchResult], single: list[BenchResult]) -> dict[str, Any]:
-    fits = [r.players for r in mixed if r.realtime()]
     return {
         "mixed_sets": {
             "backend": mixed[0].backend,
@@ -336,10 +350,14 @@ def _sets_report(mixed: list[BenchResult], single: list[BenchResult]) -> dict[st
                 round(m.tick_p50_ms / max(s.tick_p50_ms, 1e-9), 3)
                 for m, s in zip(mixed, single, strict=True)
             ],
-            "max_realtime_players": max(fits) if fits else 0,
+            "max_realtime_players": _max_realtime(mixed),
             "rss_mb_per_player": [r.rss_mb for r in mixed],
         }
     }
+
+
+def _max_realtime(results: list[BenchResult]) -> int:
+    return max_realtime_players([r.players for r in results], [r.tick_p99_ms for r in results])
 
 
 def _isa(backend: str) -> str | None:
@@ -361,17 +379,15 @@ def _report(
     threads: int,
     hmd3_share: float,
 ) -> dict[str, Any]:
-    ok = [r.players for r in results if r.realtime()]
     mixed: dict[str, Any] = {}
     if both:
-        fits = [r.players for r in both if r.realtime()]
         mixed = {
             "backend": both[0].backend,
             "hmd3_share": hmd3_share,
             "hmd3_players": [r.hmd3_players for r in both],
             "tick_p50_ms": [r.tick_p50_ms for r in both],
             "tick_p99_ms": [r.tick_p99_ms for r in both],
-            "max_realtime_players": max(fits) if fits else 0,
+            "max_realtime_players": _max_realtime(both),
             "rss_mb_per_player": [r.rss_mb for r in both],
         }
     return {
@@ -382,7 +398,7 @@ def _report(
         "samples": samples,
         "tick_p50_ms": [r.tick_p50_ms for r in results],
         "tick_p99_ms": [r.tick_p99_ms for r in results],
-        "max_realtime_players": max(ok) if ok else 0,
+        "max_realtime_players": _max_realtime(results),
         "gflops": [r.gflops for r in results],
         "rss_mb_per_player": [r.rss_mb for r in results],
         "naive_loop": naive,
