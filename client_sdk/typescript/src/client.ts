@@ -155,8 +155,9 @@ function what(value: unknown): string {
 }
 
 /**
- * `url` if the client can dial it: `ws://` or `wss://`, a host, a port up to 65535
- * (absent: 80 or 443), no `#fragment`; the Python and C# SDKs take the same.
+ * `url` without leading or trailing whitespace (what the client keeps and dials), if
+ * the client can dial it: `ws://` or `wss://` (any case), a host, a port from 1 to
+ * 65535 (absent: 80 or 443), no `#fragment`; the Python and C# SDKs take the same.
  *
  * @throws ConfigInvalidError anything else, with a hint (an `http://` URL: its `ws://`
  *   twin; `host:port`: the `ws://` URL).
@@ -193,7 +194,7 @@ export function checkUrl(url: unknown): string {
   if (host === "" || host === "[]") {
     throw new ConfigInvalidError(`${quoted} names no host`, `such as ${EXAMPLE_URL}`);
   }
-  if (port !== "" && !(/^[0-9]{1,5}$/.test(port) && Number(port) <= 65535)) {
+  if (port !== "" && !(/^[0-9]{1,5}$/.test(port) && Number(port) >= 1 && Number(port) <= 65535)) {
     throw new ConfigInvalidError(`${quoted} has a bad port (${port})`, "a port is a number from 1 to 65535");
   }
   if (text.includes("#")) {
@@ -202,7 +203,7 @@ export function checkUrl(url: unknown): string {
       "leave out the # and what follows it",
     );
   }
-  return url;
+  return text;
 }
 
 /**
@@ -316,13 +317,16 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
   private closing = false;
   private closed: Promise<void> | undefined;
 
+  /** The server's URL, as {@link checkUrl} gave it (leading and trailing whitespace dropped). */
+  readonly url: string;
+
   /** Use {@link connect}. */
   constructor(
-    readonly url: string,
+    url: string,
     private readonly token: TokenSource,
     private readonly options: ConnectOptions = {},
   ) {
-    checkUrl(url);
+    this.url = checkUrl(url);
     checkToken(token);
     const ctor = options.WebSocket ?? globalWebSocket();
     if (typeof ctor !== "function") {

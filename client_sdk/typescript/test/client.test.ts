@@ -11,7 +11,13 @@ import { test } from "node:test";
 
 import WebSocket, { WebSocketServer, type WebSocket as ServerSocket } from "ws";
 
-import { connect, type ConnectOptions, PosecastClient, type WebSocketConstructor } from "../src/client.js";
+import {
+  checkUrl,
+  connect,
+  type ConnectOptions,
+  PosecastClient,
+  type WebSocketConstructor,
+} from "../src/client.js";
 import { decode, encode } from "../src/codec.js";
 import {
   ConfigInvalidError,
@@ -259,6 +265,8 @@ test("a URL the client cannot dial is a ConfigInvalidError before dialing", asyn
     ["ftp://127.0.0.1/", "not a WebSocket URL"],
     ["ws://", "names no host"],
     ["ws://127.0.0.1:99999/", "bad port"],
+    ["ws://127.0.0.1:0/", "bad port (0)"],
+    ["ws://[::1", "bad port"],
     ["ws://127.0.0.1:8765/#room", "#fragment"],
     ["", "no server URL (got an empty string)"],
     [undefined, "no server URL (got undefined)"], // process.env of an unset variable
@@ -273,6 +281,39 @@ test("a URL the client cannot dial is a ConfigInvalidError before dialing", asyn
     });
   }
   assert.deepEqual(made, []);
+});
+
+test("good URLs are taken, whitespace around them dropped (a regression refusing them fails here)", () => {
+  const cases: [string, string][] = [
+    ["ws://[::1]:8765/", "ws://[::1]:8765/"], // an IPv6 literal
+    ["wss://[2001:db8::1]/posecast", "wss://[2001:db8::1]/posecast"],
+    ["ws://127.0.0.1:8765/rooms/lobby?x=1&y=two", "ws://127.0.0.1:8765/rooms/lobby?x=1&y=two"],
+    ["WS://127.0.0.1:8765/", "WS://127.0.0.1:8765/"], // schemes are case-insensitive
+    ["Wss://posecast.example/", "Wss://posecast.example/"],
+    ["ws://bücher.example:8765/", "ws://bücher.example:8765/"], // a unicode host
+    ["ws://localhost:65535/", "ws://localhost:65535/"],
+    ["ws://h:1/", "ws://h:1/"],
+    ["ws://user:pw@h/", "ws://user:pw@h/"],
+    ["ws://h:8765/ ", "ws://h:8765/"],
+    ["\t ws://h:8765/\n", "ws://h:8765/"],
+  ];
+  for (const [url, kept] of cases) {
+    assert.equal(checkUrl(url), kept, url);
+    assert.equal(new PosecastClient(url, "tok", FAST).url, kept, url);
+  }
+});
+
+test("the client dials the URL without the whitespace around it", async () => {
+  const server = await new FakeServer().ready();
+  try {
+    const { made, WebSocket: Counting } = countingWebSocket();
+    const client = await connect(` ${server.url} `, "tok", { ...FAST, WebSocket: Counting });
+    assert.deepEqual(made, [server.url]);
+    assert.equal(client.url, server.url);
+    await client.close();
+  } finally {
+    await server.close();
+  }
 });
 
 test("a token that is neither a string nor a function is a ConfigInvalidError before dialing", async () => {
