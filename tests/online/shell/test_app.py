@@ -46,6 +46,8 @@ def test_rooms_see_their_own_players_and_nothing_else(engine_factory: Factory) -
             assert seqs == sorted(seqs) and len(seqs) >= 20
             assert server.metrics.value("posecast_players") == 3
             assert server.metrics.value("posecast_rooms") == 2
+            # The tick's poses went out from _flush itself, not through a woken writer.
+            assert server.inline_writes >= 20
             for cl in (a, b, c):
                 await cl.close()
 

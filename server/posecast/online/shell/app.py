@@ -2,7 +2,9 @@
 
 Per connection, two tasks: the handler reads messages and hands them to the
 :class:`~posecast.online.core.hub.Hub`; the writer sleeps until its outbox has something,
-takes everything (control messages first, then one pose per avatar) and sends it. A
+takes everything (control messages first, then one pose per avatar) and sends it. While
+the writer is idle and the socket takes data, the shell sends an outbox at once
+itself, the same way, without waking the writer (:meth:`PosecastServer._write_now`). A
 writer that a slow client blocks delays nobody else: the tick keeps filling that
 client's latest-wins slots, and the hub cuts the client off when it stays behind.
 
@@ -32,7 +34,7 @@ from dataclasses import dataclass
 from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.exceptions import ConnectionClosed
 from websockets.frames import CloseCode, Frame
-from websockets.protocol import Event
+from websockets.protocol import Event, State
 from websockets.typing import Subprotocol
 
 from posecast.errors import MalformedError, ProtocolError, TooLargeError
@@ -64,6 +66,7 @@ class _Client:
     ws: ServerConnection
     wake: asyncio.Event
     writer: asyncio.Task[None] | None = None
+    idle: bool = False  # the writer waits for wake, holding nothing taken
 
 
 class PosecastServer:
@@ -91,6 +94,7 @@ class PosecastServer:
         self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="posecast-engine")
         self._engine_factory = engine_factory or self._default_engine
         self._clients: dict[int, _Client] = {}
+        self.inline_writes = 0  # batches _flush wrote itself, without waking a writer
         self._server: Server | None = None
         self._ticks: asyncio.Task[None] | None = None
         self._stop_ticks = asyncio.Event()
@@ -248,7 +252,9 @@ class PosecastServer:
         box = self.hub.outbox(conn)
         assert box is not None
         while True:
+            client.idle = True
             await client.wake.wait()
+            client.idle = False
             client.wake.clear()
             batch = box.take(time.monotonic())
             if batch:
@@ -261,14 +267,41 @@ class PosecastServer:
 
     def _flush(self) -> None:
         """Wake the writers the hub queued for, and cut off the clients it gave up on."""
+        now = time.monotonic()
         for conn in self.hub.pop_dirty():
             client = self._clients.get(conn)
-            if client is not None:
+            if client is not None and not self._write_now(conn, client, now):
                 client.wake.set()
         for conn in self.hub.pop_aborts():
             client = self._clients.get(conn)
             if client is not None:
                 asyncio.get_running_loop().create_task(self._cut_off(client))
+
+    def _write_now(self, conn: int, client: _Client, now: float) -> bool:
+        """Send ``conn``'s outbox at once, as its writer would, when nothing can make the
+        writer wait (it is idle, the transport takes data, the outbox is not closing):
+        waking a task per client per tick cost the event loop more than the sending.
+        ``False``: the writer's turn (it waits for the transport, or closes)."""
+        ws = client.ws
+        box = self.hub.outbox(conn)
+        if (
+            box is None
+            or not client.idle
+            or client.wake.is_set()
+            or box.closed
+            or ws.paused
+            or ws.protocol.state is not State.OPEN
+            or ws.protocol.extensions
+            or ws.transport.is_closing()
+        ):
+            return False
+        batch = box.take(now)
+        if batch:
+            ws.transport.write(binary_frames(batch))
+            self.metrics.bytes_out.inc(sum(map(len, batch)))
+            self.inline_writes += 1
+        box.sent(now)
+        return True
 
     async def _cut_off(self, client: _Client) -> None:
         """Give the writer a moment to get the final error out, then drop the socket."""
