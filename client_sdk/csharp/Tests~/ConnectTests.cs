@@ -82,6 +82,8 @@ namespace Posecast.Client.Tests
                     new[] { "ftp://127.0.0.1/", "not a WebSocket URL" },
                     new[] { "ws://", "names no host" },
                     new[] { "ws://127.0.0.1:99999/", "bad port" },
+                    new[] { "ws://127.0.0.1:0/", "bad port (0)" },
+                    new[] { "ws://[::1", "bad port" },
                     new[] { "ws://127.0.0.1:8765/#room", "#fragment" },
                     new[] { "", "no server URL (got an empty string)" },
                     new[] { null, "no server URL (got null)" }, // Environment.GetEnvironmentVariable of an unset one
@@ -94,6 +96,31 @@ namespace Posecast.Client.Tests
                     T.True(!e.Retryable && !ClientSession.IsRetryable(e), "never retried");
                     T.True(Connect(new[] { "ws://127.0.0.1:8765/", c[0] }, "tok") is ConfigInvalidException, c[0] + " in a list");
                 }
+            });
+            T.Run("connect: good URLs are taken, whitespace around them dropped (a regression refusing them fails here)", () =>
+            {
+                var cases = new[]
+                {
+                    new[] { "ws://[::1]:8765/", "ws://[::1]:8765/" }, // an IPv6 literal
+                    new[] { "wss://[2001:db8::1]/posecast", "wss://[2001:db8::1]/posecast" },
+                    new[] { "ws://127.0.0.1:8765/rooms/lobby?x=1&y=two", "ws://127.0.0.1:8765/rooms/lobby?x=1&y=two" },
+                    new[] { "WS://127.0.0.1:8765/", "WS://127.0.0.1:8765/" }, // schemes are case-insensitive
+                    new[] { "Wss://posecast.example/", "Wss://posecast.example/" },
+                    new[] { "ws://b\u00fccher.example:8765/", "ws://b\u00fccher.example:8765/" }, // a unicode host
+                    new[] { "ws://localhost:65535/", "ws://localhost:65535/" },
+                    new[] { "ws://h:1/", "ws://h:1/" },
+                    new[] { "ws://user:pw@h/", "ws://user:pw@h/" },
+                    new[] { "ws://h:8765/ ", "ws://h:8765/" },
+                    new[] { "\t ws://h:8765/\n", "ws://h:8765/" },
+                };
+                foreach (var c in cases) T.Equal(c[1], PosecastClient.CheckUrl(c[0]), c[0]);
+            });
+            T.Run("connect: the client keeps and dials the URL without the whitespace around it", () =>
+            {
+                int port = Server.FreePort(); // refused: the URL dialed is in the exception
+                string url = "ws://127.0.0.1:" + port + "/";
+                Failed(Connect(" " + url + " ", "tok"), url);
+                Failed(Connect(new[] { url + "\n" }, "tok"), url);
             });
             T.Run("connect: no token (null, empty) is a ConfigInvalidException before dialing; a TokenProvider stands in", () =>
             {

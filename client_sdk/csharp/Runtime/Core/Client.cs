@@ -106,10 +106,11 @@ namespace Posecast.Client
         public static async Task<PosecastClient> ConnectAsync(string[] urls, string token, ClientOptions options = null)
         {
             if (urls == null || urls.Length == 0) throw new ConfigInvalidException("no server URL", "pass one, such as " + ExampleUrl);
-            foreach (var u in urls) CheckUrl(u);
+            var checkedUrls = new string[urls.Length]; // what the client keeps and dials: trimmed
+            for (int i = 0; i < urls.Length; i++) checkedUrls[i] = CheckUrl(urls[i]);
             if ((options == null || options.TokenProvider == null) && string.IsNullOrWhiteSpace(token))
                 throw new ConfigInvalidException("no token (got " + What(token) + ")", TokenHint);
-            var c = new PosecastClient(urls, token, options);
+            var c = new PosecastClient(checkedUrls, token, options);
             for (int i = 0; i < urls.Length; i++)
             {
                 c._urlIndex = i;
@@ -133,8 +134,9 @@ namespace Posecast.Client
         }
 
         /// <summary>
-        /// `url` if the client can dial it: ws:// or wss://, a host, a port up to 65535
-        /// (absent: 80 or 443), no #fragment; the Python and TypeScript SDKs take the same.
+        /// `url` without leading or trailing whitespace (what the client keeps in Urls and
+        /// dials), if the client can dial it: ws:// or wss:// (any case), a host, a port from
+        /// 1 to 65535 (absent: 80 or 443), no #fragment; the Python and TypeScript SDKs take the same.
         /// Throws ConfigInvalidException otherwise, with a hint (an http:// URL: its ws://
         /// twin; host:port: the ws:// URL).
         /// </summary>
@@ -165,14 +167,14 @@ namespace Posecast.Client
             string port = colon < 0 ? "" : hostPortText.Substring(colon + 1);
             if (host.Length == 0 || host == "[]") throw new ConfigInvalidException(quoted + " names no host", "such as " + ExampleUrl);
             int p;
-            if (port.Length > 0 && !(Regex.IsMatch(port, "^[0-9]{1,5}$") && int.TryParse(port, out p) && p <= 65535))
+            if (port.Length > 0 && !(Regex.IsMatch(port, "^[0-9]{1,5}$") && int.TryParse(port, out p) && p >= 1 && p <= 65535))
                 throw new ConfigInvalidException(quoted + " has a bad port (" + port + ")", "a port is a number from 1 to 65535");
             if (text.Contains("#"))
                 throw new ConfigInvalidException(quoted + " has a #fragment, which a WebSocket URL may not", "leave out the # and what follows it");
             Uri uri;
             if (!Uri.TryCreate(text, UriKind.Absolute, out uri))
                 throw new ConfigInvalidException(quoted + " is not a usable URL", "such as " + ExampleUrl);
-            return url;
+            return text;
         }
 
         /// <summary>The ConnectFailedException for what opening `url` threw: reason, hint, HTTP status.</summary>
