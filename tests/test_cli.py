@@ -584,6 +584,37 @@ def test_serve_names_a_models_dir_from_the_environment(capsys, monkeypatch) -> N
 
 
 @pytest.mark.parametrize(
+    ("argv", "env", "named"),
+    [
+        (["--models-dir", "/no/such/a"], {}, "--models-dir"),
+        (["--models", "/no/such/a"], {"POSECAST_MODELS_DIR": "/no/such/b"}, "--models-dir"),
+        ([], {"POSECAST_MODELS_DIR": "/no/such/b"}, "POSECAST_MODELS_DIR"),
+    ],
+)
+def test_serve_names_the_models_dir_as_the_config_names_it(
+    capsys, monkeypatch, argv: list[str], env: dict[str, str], named: str
+) -> None:
+    """_cmd_serve worked out the models directory's name from os.environ itself,
+    beside the config's own naming: it asks config.setting_names now."""
+    import os
+
+    import posecast.online.config as config
+
+    def names(*a: object) -> dict[str, str]:  # marked, to tell its name from another
+        out = setting_names(*a)  # type: ignore[arg-type]
+        return out | {"models_dir": f"<{out['models_dir']}>"}
+
+    setting_names = config.setting_names
+    monkeypatch.setattr(config, "setting_names", names)
+    for name in [k for k in os.environ if k.startswith("POSECAST_")]:
+        monkeypatch.delenv(name)
+    for name, value in env.items():
+        monkeypatch.setenv(name, value)
+    err = user_error(capsys, main(["serve", "--dev", *argv]), "MODEL_INVALID")
+    assert f"leave out <{named}> for the shipped models" in err.splitlines()[-1], err
+
+
+@pytest.mark.parametrize(
     ("extra", "code"),
     [
         (["--port", "70000"], "CONFIG_INVALID"),

@@ -850,6 +850,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         FLAGS_GIVEN,
         MIN_SECRET_CHARS,
         ServerConfig,
+        setting_names,
         unknown_variables,
     )
     from posecast.online.shell.app import serve_until_signal
@@ -869,10 +870,8 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         else:
             hint = "set it by its flag or POSECAST_* variable: see `posecast serve --help`"
         raise _hinted(exc, hint + " (docs/server.md)") from None
-    models_dir = flags.get("models_dir") or (
-        "POSECAST_MODELS_DIR" if os.environ.get("POSECAST_MODELS_DIR") else "--models-dir"
-    )
-    _models_dir(Path(cfg.models_dir) if cfg.models_dir else None, models_dir)
+    named = setting_names(os.environ, overrides, flags)["models_dir"]
+    _models_dir(Path(cfg.models_dir) if cfg.models_dir else None, named)
     configure(cfg.log_level)
     for name, meant in unknown_variables(os.environ).items():
         logging.getLogger("posecast.server").warning(

@@ -18,6 +18,7 @@ from posecast.online.config import (
     ServerConfig,
     add_arguments,
     option_help,
+    setting_names,
     unknown_variables,
 )
 
@@ -141,6 +142,34 @@ def test_a_bad_flag_is_named_as_typed_with_its_range(argv: list[str], said: str)
     assert info.value.code == "CONFIG_INVALID"
     assert str(info.value).startswith(said), str(info.value)
     assert "pw" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("argv", "env", "named"),
+    [
+        (["--tick", "500"], {}, "--tick-hz"),  # typed: the flag, in full
+        (["--tick-hz", "500"], {"POSECAST_TICK_HZ": "50"}, "--tick-hz"),  # a flag beats it
+        ([], {"POSECAST_TICK_HZ": "500"}, "POSECAST_TICK_HZ"),
+        ([], {"POSECAST_SAMPLES": "0"}, "POSECAST_SAMPLES"),
+        (["--port", "1"], {"POSECAST_SAMPLES": "0"}, "POSECAST_SAMPLES"),
+        (["--redis", "redis://h:p/0"], {}, "--redis"),  # an alias as typed
+    ],
+)
+def test_setting_names_are_the_names_the_errors_use(
+    argv: list[str], env: dict[str, str], named: str
+) -> None:
+    """One function names each setting as given, for the config's errors and the CLI's
+    (serve's models-directory check computed its own from os.environ)."""
+    overrides, flags = _flags(*argv)
+    env = {"POSECAST_TOKEN_SECRET": SECRET, **env}
+    with pytest.raises(ConfigError) as info:
+        ServerConfig.from_sources(env, overrides, flags)
+    field = {"--tick-hz": "tick_hz", "POSECAST_TICK_HZ": "tick_hz", "--redis": "redis_url"}
+    name = setting_names(env, overrides, flags)[field.get(named, "samples")]
+    assert name == named and str(info.value).startswith((named + " ", named + "=")), info.value
+    # a setting left at its default: by its variable when only variables were given
+    default = setting_names(env, overrides, flags)["max_rooms"]
+    assert default == ("--max-rooms" if argv else "POSECAST_MAX_ROOMS")
 
 
 @pytest.mark.parametrize(

@@ -213,31 +213,21 @@ class ServerConfig:
 
         ``flags`` maps each override the user typed to the flag as typed
         (``{"redis_url": "--redis"}``, what :func:`add_arguments` records), so that an
-        error names the setting as it was given: that flag, else its ``POSECAST_*``
-        variable; other overrides are named by their field. With ``dev`` on and no
+        error names the setting as it was given (:func:`setting_names`). With ``dev`` on and no
         secret anywhere, a random secret is invented (the caller prints it). Raises
         :class:`ConfigError` for any bad value.
         """
         values: dict[str, Any] = {}
-        given: dict[str, str] = {}
         for f in fields(cls):
             raw = env.get(_variable(f.name))
             if raw is not None and raw != "":
                 values[f.name] = _parse(f, raw)
-                given[f.name] = _variable(f.name)
         for name, value in (overrides or {}).items():
             if value is not None:
                 values[name] = value
-                given[name] = (flags or {}).get(name, name)
         if values.get("dev") and not values.get("token_secret"):
             values["token_secret"] = new_secret()
-        # A setting left at its default is named as the user sets the others: by its
-        # variable when they gave only variables (a container), else by its flag.
-        by_variable = bool(given) and all(x.startswith(ENV_PREFIX) for x in given.values())
-        for f in fields(cls):
-            if f.name not in given:
-                flag = _flags(f)
-                given[f.name] = _variable(f.name) if by_variable or not flag else flag[0]
+        given = setting_names(env, overrides, flags)
         try:
             return cls(**values, sources=given)
         except TypeError as exc:  # an unknown override name: a programming error at the edge
@@ -245,6 +235,33 @@ class ServerConfig:
 
     def replace(self, **changes: Any) -> ServerConfig:
         return dataclasses.replace(self, **changes)
+
+
+def setting_names(
+    env: Mapping[str, str],
+    overrides: Mapping[str, Any] | None = None,
+    flags: Mapping[str, str] | None = None,
+) -> dict[str, str]:
+    """How each setting is named to the user, by field, for the sources that
+    :meth:`ServerConfig.from_sources` takes (the same arguments): the flag as typed
+    where one was (``--redis``; an override given without a flag by its field), else
+    its ``POSECAST_*`` variable where that is set, else, left at its default, by its
+    variable when only variables were given (a container), else by its flag. The
+    config's errors name settings so, and so does the CLI's (``posecast serve``'s
+    check of the models directory)."""
+    given: dict[str, str] = {}
+    for f in fields(ServerConfig):
+        if env.get(_variable(f.name)):
+            given[f.name] = _variable(f.name)
+    for name, value in (overrides or {}).items():
+        if value is not None:
+            given[name] = (flags or {}).get(name, name)
+    by_variable = bool(given) and all(x.startswith(ENV_PREFIX) for x in given.values())
+    for f in fields(ServerConfig):
+        if f.name not in given:
+            flag = _flags(f)
+            given[f.name] = _variable(f.name) if by_variable or not flag else flag[0]
+    return given
 
 
 class _Named:
