@@ -287,6 +287,56 @@ def test_docs_table_lists_every_option_with_env_and_default() -> None:
             assert BOUNDS[name].words() in row, (name, BOUNDS[name].words(), row)
 
 
+# The settings that 955c4be gave a top (before: checked from below only).
+_CAPPED_ON_UPGRADE = [
+    "token_leeway_s",
+    "replay_cache",
+    "frame_queue",
+    "rate_burst",
+    "control_rate_hz",
+    "error_rate_hz",
+    "max_watchers_per_room",
+    "max_rooms",
+    "max_connections",
+    "conn_per_ip_per_min",
+    "sockets_per_ip",
+    "fatal_per_ip_per_min",
+    "accepts_per_s",
+    "reliable_queue",
+    "slow_consumer_s",
+    "hello_timeout_s",
+    "idle_timeout_s",
+    "drain_timeout_s",
+    "close_timeout_s",
+    "redis_heartbeat_s",
+    "redis_node_ttl_s",
+    "redis_timeout_s",
+    "redis_backoff_max_s",
+]
+
+
+def test_docs_upgrading_note_lists_every_setting_now_refused_above_a_top() -> None:
+    """The new ranges made a deployment with, say, POSECAST_IDLE_TIMEOUT_S=7200 exit
+    with code 2 where it used to serve; docs/server.md's Upgrading note names each
+    setting that gained a top, with the top it has."""
+    text = DOCS.read_text("utf-8")
+    assert "### Upgrading: numbers now refused" in text
+    note = text.split("### Upgrading: numbers now refused", 1)[1].split("\n#", 1)[0]
+    rows = re.findall(r"^\| `POSECAST_(\w+)`, `(--[\w-]+)` \| ([\d,]+)( s)? \|$", note, re.M)
+    listed = {env.lower(): (flag, int(top.replace(",", "")), bool(s)) for env, flag, top, s in rows}
+    assert list(listed) == _CAPPED_ON_UPGRADE, note
+    for name, (flag, top, seconds) in listed.items():
+        bounds = BOUNDS[name]
+        assert flag == "--" + name.replace("_", "-")
+        assert (top, seconds) == (bounds.high, bounds.unit == "seconds"), name
+    # its example is what the server says
+    with pytest.raises(ConfigError) as info:
+        ServerConfig.from_sources(
+            {"POSECAST_TOKEN_SECRET": SECRET, "POSECAST_IDLE_TIMEOUT_S": "7200"}
+        )
+    assert f"`{info.value}`" in note
+
+
 def test_every_number_has_finite_bounds_that_hold_its_default() -> None:
     """A numeric option added without a range would take inf (a guard turned off)."""
     numeric = {f.name for f in fields(ServerConfig) if str(f.type) in ("int", "float")}
