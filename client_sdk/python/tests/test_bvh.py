@@ -103,6 +103,46 @@ def test_a_motion_written_in_parts_is_the_file_written_whole(
         w.write_frames(root[:3], quat[:3])
 
 
+def test_a_failed_write_leaves_no_broken_file_and_an_earlier_one_as_it_was(
+    tmp_path: Path, rng: np.random.Generator
+) -> None:
+    """BvhWriter truncated its target and wrote 'Frames: N' first, so an export that
+    failed half way left a .bvh that claimed N frames and held fewer, over an earlier
+    good one. It writes <name>.part beside it and renames it when whole."""
+    quat = quat_normalize(rng.normal(size=(4, 19, 4)))
+    root = rng.normal(size=(4, 3))
+
+    def writer(path: Path, n_frames: int) -> BvhWriter:
+        return BvhWriter(path, names=JOINT_NAMES, parents=PARENTS, offsets=reference_offsets(),
+                         n_frames=n_frames, frame_time_s=1 / 60)  # fmt: skip
+
+    for name in ("p.bvh", "p.bvh.gz"):
+        path = tmp_path / name
+        part = tmp_path / (name + ".part")
+        write_bvh(path, names=JOINT_NAMES, parents=PARENTS, offsets=reference_offsets(),
+                  root_pos=root[:2], local_quat=quat[:2], frame_time_s=1 / 60)  # fmt: skip
+        good = path.read_bytes()
+        assert not part.exists()
+        w = writer(path, 4)  # an error on the way: abandoned
+        w.write_frames(root[:2], quat[:2])
+        assert part.exists() and path.read_bytes() == good  # written beside it
+        w.abandon()
+        assert not part.exists() and path.read_bytes() == good
+        with pytest.raises(RuntimeError, match="on the way"), writer(path, 4) as w:
+            w.write_frames(root[:1], quat[:1])
+            raise RuntimeError("on the way")
+        assert not part.exists() and path.read_bytes() == good
+        w = writer(path, 4)  # fewer frames than the header says
+        w.write_frames(root[:3], quat[:3])
+        with pytest.raises(ValueError, match="3 frames written, the header says 4"):
+            w.close()
+        assert not part.exists() and path.read_bytes() == good
+        with writer(path, 4) as w:  # a whole file replaces the earlier one
+            w.write_frames(root, quat)
+        assert not part.exists() and read_bvh(path).n_frames == 4
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.bvh", "p.bvh.gz"]
+
+
 def test_the_server_reads_what_the_sdk_writes(tmp_path: Path, rng: np.random.Generator) -> None:
     server_bvh = pytest.importorskip("posecast.offline.motion.bvh")
     quat = quat_normalize(rng.normal(size=(3, 19, 4)))

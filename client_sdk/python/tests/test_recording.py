@@ -293,7 +293,13 @@ def test_a_recording_that_changes_while_it_is_exported_is_an_error(
         w.write(p)
     w.close()
     cut.write_bytes(path.read_bytes()[: -len(path.read_bytes()) // 3])
+    earlier = export_bvh(read_recording(path), tmp_path / "out")  # a good export before
+    good = earlier["p-1"].read_bytes()
+    monkeypatch.setattr(recording, "EXPORT_CHUNK_FRAMES", 4)  # the file is begun, then fails
     real_open = recording.open_recording
     monkeypatch.setattr(recording, "open_recording", lambda _: real_open(cut))
     with real_open(path) as reader, pytest.raises(RecordingError, match="changed while"):
         export_bvh(reader, tmp_path / "out")
+    # The failed export left no broken file, and the earlier one as it was.
+    assert [p.name for p in (tmp_path / "out").iterdir()] == ["p-1.bvh"]
+    assert earlier["p-1"].read_bytes() == good

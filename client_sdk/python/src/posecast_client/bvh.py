@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import gzip
 import io
+import os
 import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -191,6 +192,11 @@ class BvhWriter:
     and closing checks that so many were written. A path ending ``.gz`` is written
     gzip-compressed (the bytes :func:`gzip.compress` with ``mtime=0`` gives).
 
+    The file is written as ``<path>.part`` beside ``path`` and renamed to ``path`` by
+    :meth:`close` once whole, so a failure on the way (:meth:`abandon`, which deletes
+    the part, or a frame count other than the header's) leaves no broken file behind
+    and a file already at ``path`` (an earlier export) as it was.
+
     Args:
         names, parents: joints with parents first (``parents[0] == -1``).
         offsets: ``(J, 3)`` rest offsets, metres.
@@ -209,13 +215,15 @@ class BvhWriter:
         frame_time_s: float,
     ) -> None:
         self.n_frames, self.written = n_frames, 0
+        self.path = Path(path)
+        self.part = self.path.with_name(self.path.name + ".part")  # renamed to path when whole
         self._gzip = zlib.compressobj(9, zlib.DEFLATED, 31) if str(path).endswith(".gz") else None
-        self._f: BinaryIO = Path(path).open("wb")  # noqa: SIM115 - closed by close()
+        self._f: BinaryIO = self.part.open("wb")  # closed by close() or abandon()
         try:
             self.order = self._write_hierarchy(names, parents, offsets)
             self._write(f"MOTION\nFrames: {n_frames}\nFrame Time: {frame_time_s:.8f}\n")
         except BaseException:
-            self._f.close()
+            self.abandon()
             raise
 
     def _write_hierarchy(
@@ -269,21 +277,26 @@ class BvhWriter:
         self.written += euler.shape[0]
 
     def close(self) -> None:
-        """Finish the file; a count of frames other than the header's is a ValueError
-        (the file is closed all the same)."""
+        """Finish the file and rename it to ``path``; a count of frames other than the
+        header's is a ValueError (the part is deleted, ``path`` left as it was)."""
         if self._f.closed:
             return
         try:
+            if self.written != self.n_frames:
+                raise ValueError(f"{self.written} frames written, the header says {self.n_frames}")
             if self._gzip is not None:
                 self._f.write(self._gzip.flush())
-        finally:
             self._f.close()
-        if self.written != self.n_frames:
-            raise ValueError(f"{self.written} frames written, the header says {self.n_frames}")
+            os.replace(self.part, self.path)
+        except BaseException:
+            self.abandon()
+            raise
 
     def abandon(self) -> None:
-        """Close the file as it is, unfinished (after an error on the way)."""
+        """Close and delete the unfinished part (after an error on the way); a file
+        already at ``path`` stays as it was."""
         self._f.close()
+        self.part.unlink(missing_ok=True)
 
     def __enter__(self) -> BvhWriter:
         return self
