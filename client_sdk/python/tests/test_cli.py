@@ -178,6 +178,27 @@ def test_record_exports_an_existing_recording(
     assert len(list((tmp_path / "out").glob("*.bvh"))) == 1
 
 
+def test_record_exports_a_recording_piped_to_it(tmp_path: Path) -> None:
+    """'posecast-record --export /dev/stdin' (or a process substitution) read a pipe
+    that cannot be read twice: it failed with FILE_INVALID ('not seekable'). It exports
+    what the file gives."""
+    rec_file = tmp_path / "r.pcrec"
+    w = RecordingWriter(rec_file, url="ws://x/", room="r")
+    for k in range(300):  # more than a pipe's buffer
+        w.write(Pose("p-1", k, k / 60.0, np.zeros((19, 3)) + np.arange(19)[:, None] * 0.1))
+    w.close()
+    assert record.main(["--export", str(rec_file), "--bvh", str(tmp_path / "want")]) == 0
+    done = subprocess.run(
+        [sys.executable, "-m", "posecast_client.cli.record", "--export", "/dev/stdin",
+         "--bvh", str(tmp_path / "out")],
+        input=rec_file.read_bytes(), capture_output=True, timeout=60,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert [p.name for p in (tmp_path / "out").iterdir()] == ["p-1.bvh"]
+    want = (tmp_path / "want" / "p-1.bvh").read_bytes()
+    assert (tmp_path / "out" / "p-1.bvh").read_bytes() == want
+
+
 def test_sim_churns_players_and_prints_progress(
     dev_server: DevServer, capsys: pytest.CaptureFixture[str], tmp_path: Path, uid: str
 ) -> None:

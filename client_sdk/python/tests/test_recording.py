@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import gc
 import itertools
+import os
+import threading
 import tracemalloc
 from pathlib import Path
 
@@ -303,3 +305,101 @@ def test_a_recording_that_changes_while_it_is_exported_is_an_error(
     # The failed export left no broken file, and the earlier one as it was.
     assert [p.name for p in (tmp_path / "out").iterdir()] == ["p-1.bvh"]
     assert earlier["p-1"].read_bytes() == good
+
+
+def _recording_at_30_hz(path: Path, seconds: float = 1.0) -> None:
+    """A welcome at 30 Hz, then poses 1/30 s apart."""
+    w = RecordingWriter(path, url="ws://x/", room="r")
+    w.write(Welcome(1, "rec", "s", "spectator", "r", 1.0, 30.0, 10, (Member("p-1", "P"),),
+                    Limits()))  # fmt: skip
+    for k, p in enumerate(walk_poses(seconds)[::2]):
+        w.write(Pose(p.player, p.seq, 50.0 + k / 30.0, p.positions, p.rotations))
+    w.close()
+
+
+def test_a_closed_or_used_up_reader_is_an_error_not_an_empty_export(tmp_path: Path) -> None:
+    """export_bvh of a reader that was closed, or read to its end, returned {} and wrote
+    nothing, as if the recording held no poses."""
+    path = tmp_path / "r.pcrec"
+    _recording_at_30_hz(path)
+    with open_recording(path) as reader:
+        pass
+    with pytest.raises(RecordingError, match="the reader is closed"):
+        export_bvh(reader, tmp_path / "out")
+    with open_recording(path) as reader:
+        n = len(list(reader))
+        with pytest.raises(RecordingError, match=f"read to its end \\({n} records\\)"):
+            export_bvh(reader, tmp_path / "out")
+    with open_recording(path) as reader:  # read up to its last record, not past it
+        for _ in itertools.islice(reader, n):
+            pass
+        with pytest.raises(RecordingError, match="nothing is left to export"):
+            export_bvh(reader, tmp_path / "out")
+    assert list((tmp_path / "out").iterdir()) == []
+    empty = tmp_path / "empty.pcrec"  # a recording of no records: nothing to export
+    RecordingWriter(empty, url="ws://x/", room="r").close()
+    with open_recording(empty) as reader:
+        assert export_bvh(reader, tmp_path / "out") == {}
+
+
+def test_a_reader_read_past_its_welcome_exports_at_the_welcomes_rate(tmp_path: Path) -> None:
+    """A reader whose welcome (30 Hz) was read before the export exported at 60 Hz:
+    the rate is the first welcome the reader gave, before the export or in it."""
+    path = tmp_path / "r.pcrec"
+    _recording_at_30_hz(path)
+    rec = read_recording(path)
+    want = export_bvh(recording.Recording(rec.header, rec.messages), tmp_path / "whole")
+    assert "Frame Time: 0.03333333\n" in want["p-1"].read_text()
+    rest = export_bvh(recording.Recording(rec.header, rec.messages[3:]), tmp_path / "rest")
+    with open_recording(path) as reader:
+        for _ in itertools.islice(reader, 3):  # the welcome and two poses
+            pass
+        assert reader.welcome_rate_hz == 30.0
+        got = export_bvh(reader, tmp_path / "out")
+    text = got["p-1"].read_text()
+    assert "Frame Time: 0.03333333\n" in text and read_bvh(got["p-1"]).n_frames == 28
+    assert text != rest["p-1"].read_text()  # a Recording without its welcome: 60 Hz
+
+
+def _pipe(data: bytes) -> tuple[str, threading.Thread]:
+    """A pipe carrying ``data`` (written by a thread), as a path: /dev/fd/N."""
+    r, w = os.pipe()
+
+    def write() -> None:
+        with os.fdopen(w, "wb") as f:
+            f.write(data)
+
+    thread = threading.Thread(target=write, daemon=True)
+    thread.start()
+    return f"/dev/fd/{r}", thread
+
+
+@pytest.mark.skipif(not Path("/dev/fd").is_dir(), reason="needs /dev/fd (Linux, macOS)")
+def test_a_pipe_is_exported_as_the_file_is(tmp_path: Path) -> None:
+    """A pipe (/dev/stdin, a process substitution) cannot be read twice: the second pass
+    found nothing (and the first failed at its end, seeking to check the tail). The
+    first pass copies it to a hidden file in the export's directory, removed after."""
+    path = tmp_path / "r.pcrec"
+    _recording_at_30_hz(path, 6.0)  # more than a pipe's buffer
+    data = path.read_bytes()
+    with open_recording(path) as reader:  # the same file, read in part the same way
+        assert reader.regular
+        for _ in itertools.islice(reader, 5):
+            pass
+        want = export_bvh(reader, tmp_path / "want")["p-1"].read_bytes()
+    for tail in (b"", b"\x92\xcb\x41"):  # and a record cut short: ignored, as in a file
+        where, thread = _pipe(data + tail)
+        with open_recording(where) as reader:
+            assert not reader.regular
+            for _ in itertools.islice(reader, 5):  # read in part: the rest is exported
+                pass
+            got = export_bvh(reader, tmp_path / "out")
+        thread.join()
+        assert [p.name for p in (tmp_path / "out").iterdir()] == ["p-1.bvh"]  # no spool
+        assert got["p-1"].read_bytes() == want
+        assert read_bvh(got["p-1"]).n_frames == 180 - 4  # 6 s at 30 Hz, 4 poses read before
+    where, thread = _pipe(data + b"garbage!")
+    with open_recording(where) as reader, pytest.raises(RecordingError, match="corrupt"):
+        export_bvh(reader, tmp_path / "bad")
+    thread.join()
+    assert list((tmp_path / "bad").iterdir()) == []

@@ -18,7 +18,8 @@ bytes that are not a record make the file corrupt.
 however long the recording: hours at 60 Hz); :func:`read_recording` reads all of it
 into a :class:`Recording`. :func:`export_bvh` takes either, and reads it twice: first
 keeping each pose's time and bone lengths (about 170 bytes a pose), then writing the
-frames as their poses come, EXPORT_CHUNK_FRAMES at a time.
+frames as their poses come, EXPORT_CHUNK_FRAMES at a time (a pipe, which cannot be
+read twice, is copied to a file as the first pass reads it).
 
 **BVH export** writes each player's poses on the canonical 19-joint skeleton at the
 room's pose rate, one frame per tick (``pose.t``; a tick without a pose for that
@@ -37,9 +38,13 @@ from __future__ import annotations
 
 import contextlib
 import itertools
+import os
+import stat
+import tempfile
 import time
 from array import array
-from collections.abc import Generator, Iterable, Iterator
+from collections import deque
+from collections.abc import Callable, Generator, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -111,12 +116,24 @@ class RecordingReader:
     """A recording read one record at a time (see :func:`open_recording`).
 
     ``header`` is read on opening; iterating gives each ``(t_s, message)`` (decoded)
-    as the file is read, once. Close it (or use ``with``) when done.
+    as the file is read, once. Close it (or use ``with``) when done. The path may be
+    a pipe (``/dev/stdin``, a process substitution): read once, as a file.
+
+    Attributes:
+        records_read: the records iterating has given so far.
+        welcome_rate_hz: the rate of the first ``welcome`` iterating has given (None
+            before one).
+        regular: whether the path is a regular file (one that can be opened again
+            and read from the start; a pipe cannot).
     """
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self._f: BinaryIO = self.path.open("rb")
+        self.regular = stat.S_ISREG(os.fstat(self._f.fileno()).st_mode)
+        self.records_read = 0
+        self.welcome_rate_hz: float | None = None
+        self._tee: Callable[[float, bytes], object] | None = None  # export_bvh's spool
         try:
             with _corrupt_is_recording_error(self.path):
                 self._items = _unpack(self._f)
@@ -131,7 +148,6 @@ class RecordingReader:
             self._f.close()
             raise
         self.header: dict[str, Any] = header
-        self.records_read = 0  # the records iterating has given so far
         self._records = self._read()
 
     def _read(self) -> Generator[tuple[float, Message], None, None]:
@@ -139,11 +155,19 @@ class RecordingReader:
             for item in self._items:
                 t, data = item
                 message = decode(data)
+                if self.welcome_rate_hz is None and isinstance(message, Welcome):
+                    self.welcome_rate_hz = message.rate_hz
+                if self._tee is not None:
+                    self._tee(float(t), data)
                 self.records_read += 1
                 yield float(t), message
 
     def __iter__(self) -> Iterator[tuple[float, Message]]:
         return self._records
+
+    @property
+    def closed(self) -> bool:
+        return self._f.closed
 
     def close(self) -> None:
         self._records.close()
@@ -192,16 +216,45 @@ def _corrupt_is_recording_error(path: Path) -> Iterator[None]:
 MAX_RECORD_BYTES = 1 << 20  # what the reader buffers: no message the recorder writes is near
 
 
+class _KeepsTail:
+    """A stream that cannot seek (a pipe), read through this to keep its last bytes:
+    those the unpacker read but did not use (at most its buffer, and a read more)."""
+
+    KEEP = 2 * MAX_RECORD_BYTES + (1 << 16)
+
+    def __init__(self, f: BinaryIO) -> None:
+        self._f, self.total = f, 0
+        self._chunks: deque[bytes] = deque()
+        self._kept = 0
+
+    def read(self, n: int = -1) -> bytes:
+        data = self._f.read(n)
+        self.total += len(data)
+        self._chunks.append(data)
+        self._kept += len(data)
+        while self._kept - len(self._chunks[0]) >= self.KEEP:
+            self._kept -= len(self._chunks.popleft())
+        return data
+
+    def after(self, end: int) -> bytes:
+        """The bytes after the first ``end`` ones (the stream read to its end)."""
+        return b"".join(self._chunks)[max(self._kept - (self.total - end), 0) :]
+
+
 def _unpack(f: BinaryIO) -> Iterator[Any]:
     """The file's msgpack values. Bytes left over at the end are ignored only when they
     can be a record cut short; anything else undecodable is a corrupt file."""
-    unpacker = msgpack.Unpacker(f, raw=False, max_buffer_size=MAX_RECORD_BYTES)
+    src = f if f.seekable() else _KeepsTail(f)
+    unpacker = msgpack.Unpacker(src, raw=False, max_buffer_size=MAX_RECORD_BYTES)
     end = 0
     for value in unpacker:  # raises on a byte no value starts with, ends on a cut one
         yield value
         end = unpacker.tell()
-    f.seek(end)
-    tail = f.read(MAX_RECORD_BYTES + 16)
+    if isinstance(src, _KeepsTail):
+        tail = src.after(end)[: MAX_RECORD_BYTES + 16]
+    else:
+        f.seek(end)
+        tail = f.read(MAX_RECORD_BYTES + 16)
     if end and tail and not _cut_record(tail):  # (no header at all: not a recording)
         raise RecordingError(f"{f.name}: a corrupt posecast recording (no record at byte {end})")
 
@@ -396,28 +449,57 @@ def poses2bvh(poses: list[Pose], path: str | Path, rate_hz: float = 60.0) -> int
     return len(export.frames)
 
 
-def _tracks(messages: Iterable[tuple[float, Message]]) -> tuple[dict[str, _Track], float | None]:
-    """The first pass: each player's track and the rate of the first ``welcome``."""
+def _tracks(
+    messages: Iterable[tuple[float, Message]],
+) -> tuple[dict[str, _Track], float | None, int]:
+    """The first pass: each player's track, the rate of the first ``welcome``, and the
+    number of records read."""
     tracks: dict[str, _Track] = {}
     rate_hz: float | None = None
+    n = 0
     for _, m in messages:
+        n += 1
         if isinstance(m, Pose):
             tracks.setdefault(m.player, _Track()).add(m)
         elif rate_hz is None and isinstance(m, Welcome):
             rate_hz = m.rate_hz
-    return tracks, rate_hz
+    return tracks, rate_hz, n
+
+
+class _Spool:
+    """The records a reader of a pipe gives in the first pass, written to a recording
+    file in the export's directory (removed after), for the second pass to read."""
+
+    def __init__(self, out: Path, reader: RecordingReader) -> None:
+        fd, name = tempfile.mkstemp(prefix=".posecast-export-", suffix=".pcrec", dir=out)
+        self.path, self.reader = Path(name), reader
+        self._f = os.fdopen(fd, "wb")
+        self._f.write(msgpack.packb(reader.header, use_bin_type=True))
+        reader._tee = self._write
+
+    def _write(self, t: float, data: bytes) -> None:
+        self._f.write(msgpack.packb([t, data], use_bin_type=True))
+
+    def finish(self) -> None:
+        """The first pass is over: stop copying, and close the file."""
+        self.reader._tee = None
+        self._f.close()
+
+    def remove(self) -> None:
+        self.finish()
+        self.path.unlink(missing_ok=True)
 
 
 @contextlib.contextmanager
 def _read_again(
-    recording: Recording | RecordingReader, skip: int
+    recording: Recording | RecordingReader, path: Path | None, skip: int
 ) -> Iterator[Iterable[tuple[float, Message]]]:
-    """The recording's messages for the second pass: a reader's file is opened again
-    and read past the ``skip`` records it had given before the first pass."""
-    if isinstance(recording, Recording):
-        yield recording.messages
+    """The recording's messages for the second pass: a reader's file (or its spool) is
+    opened again and read past the ``skip`` records it had given before the first pass."""
+    if isinstance(recording, Recording) or path is None:
+        yield recording.messages if isinstance(recording, Recording) else ()
         return
-    with open_recording(recording.path) as again:
+    with open_recording(path) as again:
         yield itertools.islice(again, skip, None)
 
 
@@ -427,16 +509,58 @@ def export_bvh(recording: Recording | RecordingReader, out_dir: str | Path) -> d
     Memory stays small however long the recording: a reader (:func:`open_recording`)
     is read to its end keeping only each pose's time and bone lengths (and the room's
     rate), then its file is read once more, writing the frames as their poses come,
-    a chunk at a time.
+    a chunk at a time. A reader of a pipe (``/dev/stdin``, a process substitution),
+    which cannot be read again, is copied to a hidden file in ``out_dir`` as it is
+    read, and that is read the second time (then removed).
+
+    A reader read in part exports the rest, at the rate of the first ``welcome`` it
+    gave before or after (a recording with none at all: 60 Hz). A closed reader, or
+    one read to its end (nothing left, though it gave records), is a
+    :class:`~posecast_client.errors.RecordingError`: open the recording again.
 
     ``:`` in an id becomes ``_`` (Windows refuses it in file names). Two players whose
     names would then be the same, or differ only in case (a case-insensitive file
     system), get ``~2``, ``~3``, ... on the later one in id order (``~`` is in no id):
     the returned paths say whose file is whose."""
+    reader = recording if isinstance(recording, RecordingReader) else None
+    if reader is not None and reader.closed:
+        raise RecordingError(
+            f"{reader.path}: the reader is closed; export_bvh reads it: pass it open "
+            "(inside its 'with'), or open the recording again"
+        )
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    skip = recording.records_read if isinstance(recording, RecordingReader) else 0
-    tracks, rate = _tracks(recording.messages if isinstance(recording, Recording) else recording)
+    skip = reader.records_read if reader is not None else 0
+    with contextlib.ExitStack() as cleanup:
+        spool: _Spool | None = None
+        if reader is not None and not reader.regular:
+            spool = _Spool(out, reader)
+            cleanup.callback(spool.remove)
+        first = recording.messages if isinstance(recording, Recording) else recording
+        tracks, rate, n = _tracks(first)
+        if spool is not None:
+            spool.finish()
+        if reader is not None:
+            if n == 0 and skip > 0:
+                raise RecordingError(
+                    f"{reader.path}: the reader was read to its end ({skip} records) before "
+                    "export_bvh: nothing is left to export; open the recording again"
+                )
+            rate = reader.welcome_rate_hz  # the first it gave, before the export or in it
+        again = None if reader is None else (spool.path if spool is not None else reader.path)
+        return _export(recording, out, tracks, rate, again, 0 if spool is not None else skip)
+
+
+def _export(
+    recording: Recording | RecordingReader,
+    out: Path,
+    tracks: dict[str, _Track],
+    rate: float | None,
+    again: Path | None,
+    skip: int,
+) -> dict[str, Path]:
+    """The second pass: each player's file, from the recording's messages (``again``:
+    a file to open and read past its first ``skip`` records)."""
     rate_hz = DEFAULT_RATE_HZ if rate is None else rate
     paths = {}
     taken: set[str] = set()
@@ -452,7 +576,7 @@ def export_bvh(recording: Recording | RecordingReader, out_dir: str | Path) -> d
         exports[player] = _PlayerExport(paths[player], tracks.pop(player).plan(rate_hz), rate_hz)
     arrivals = dict.fromkeys(exports, 0)
     try:
-        with _read_again(recording, skip) as messages:
+        with _read_again(recording, again, skip) as messages:
             for _, m in messages:
                 if isinstance(m, Pose) and m.player in exports:
                     exports[m.player].add(arrivals[m.player], m)
