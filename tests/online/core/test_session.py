@@ -97,6 +97,15 @@ def test_a_layout_the_server_does_not_serve_is_fatal() -> None:
     )
 
 
+def test_a_bad_token_learns_nothing_of_the_layouts_served() -> None:
+    # The token is checked first: the served layouts and the option that serves
+    # them are for clients the server admits, not for anyone who opens a socket.
+    s = _session(layouts="hmd3+waist")
+    with pytest.raises(UnauthenticatedError) as e:
+        s.handle(Hello(1, "garbage", "r1", "A", layout="hmd3"), time.time())
+    assert "layouts" not in e.value.message
+
+
 def test_expired_token() -> None:
     s = _session(token_leeway_s=1.0)
     with pytest.raises(TokenExpiredError):

@@ -208,6 +208,14 @@ class Session:
 
     def _hello(self, hello: Hello, now: float) -> Join:
         layout = requested_layout(hello)
+        claims = verify(
+            self.cfg.secret_bytes,
+            hello.token,
+            now=now + self.wall_offset_s,
+            leeway_s=self.cfg.token_leeway_s,
+        )
+        # After the token: what this server serves and how it is started is for
+        # clients it admits, not for anyone who can open a socket.
         model = model_layout(layout)
         if model not in self.cfg.served_layouts:
             what = "tracker sets are" if isinstance(layout, TrackerSet) else f"{layout!r} is"
@@ -217,12 +225,6 @@ class Session:
                 f" {model} in its layouts, --layouts {served},{model} (POSECAST_LAYOUTS)",
                 field="layout",
             )
-        claims = verify(
-            self.cfg.secret_bytes,
-            hello.token,
-            now=now + self.wall_offset_s,
-            leeway_s=self.cfg.token_leeway_s,
-        )
         if not claims.allows_room(hello.room):
             raise ForbiddenError("the token does not admit this room", field="room", fatal=True)
         if hello.watch and claims.role != "backend":
