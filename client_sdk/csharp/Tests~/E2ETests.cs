@@ -283,14 +283,43 @@ namespace Posecast.Client.Tests
                     T.True(run.Item2.Contains("joined as ada on v2"), "joined: " + run.Item2);
                     T.True(run.Item2.Contains("head at ("), "printed its head: " + run.Item2);
                 });
-                T.Run("e2e: after a server restart the client reconnects, rejoins and seq carries on", () =>
+                T.Run("e2e: after a server restart the client reconnects, rejoins and seq carries on; "
+                      + "a TokenProvider that throws at the rejoin is retried", () =>
                 {
                     T.True(a != null, "the clients joined");
+                    int calls = 0; // a spectator whose token endpoint fails twice when the server is back
+                    var flakyOptions = new ClientOptions { BackoffInitialS = 0.1, BackoffMaxS = 0.5, PingIntervalS = 0 };
+                    flakyOptions.TokenProvider = () =>
+                    {
+                        int n = Interlocked.Increment(ref calls);
+                        if (n == 2 || n == 3) throw new InvalidOperationException("token endpoint: HTTP 503");
+                        return server.Token("cs-room", "cs-flaky", "spectator");
+                    };
+                    var flaky = PosecastClient.ConnectAsync(server.Url, null, flakyOptions).Result;
+                    flaky.JoinAsync("cs-room", "flaky").Wait();
                     long before;
                     lock (a.Events) before = a.SeqsSent.Last();
                     int poses0 = a.PosesOf("cs-b").Count;
                     server.Stop();
                     server.Start(server.Port);
+                    var causes = new List<Exception>();
+                    Exception flakyEnd = null;
+                    T.True(WaitFor(() =>
+                    {
+                        try
+                        {
+                            ClientEvent e;
+                            while (flaky.TryGetEvent(out e)) if (e.Kind == EventKind.Reconnecting) causes.Add(e.Cause);
+                        }
+                        catch (Exception e) { flakyEnd = e; return true; }
+                        return flaky.Stats.Reconnects >= 1;
+                    }, 30), "the flaky client rejoined");
+                    T.True(flakyEnd == null, "the flaky client went on, not ended by " + flakyEnd);
+                    T.Equal(4, calls, "TokenProvider calls: the join, two that threw, the rejoin");
+                    var threw = causes.OfType<TokenProviderException>().ToList();
+                    T.Equal(2, threw.Count, "reconnecting after each throw: " + string.Join(", ", causes.Select(c => c.GetType().Name)));
+                    T.True(threw[0].InnerException is InvalidOperationException && threw[0].Message.Contains("HTTP 503"), threw[0].Message);
+                    flaky.CloseAsync().Wait();
                     T.True(WaitFor(() => a.Saw(EventKind.Reconnecting), 10), "a Reconnecting event");
                     T.True(WaitFor(() => a.Client.Connected && a.PosesOf("cs-b").Count > poses0 + 30, 30),
                            "poses of b again: " + (a.PosesOf("cs-b").Count - poses0));
@@ -304,6 +333,20 @@ namespace Posecast.Client.Tests
                     int welcomes;
                     lock (a.Events) welcomes = a.Events.Count(e => e.Kind == EventKind.Welcome);
                     T.True(welcomes >= 2, welcomes + " welcomes");
+                });
+                T.Run("e2e: a TokenProvider that throws fails the first join with TokenProviderException", () =>
+                {
+                    var c = PosecastClient.ConnectAsync(server.Url, null, new ClientOptions
+                    {
+                        TokenProvider = () => { throw new InvalidOperationException("no session cookie"); },
+                    }).Result;
+                    try
+                    {
+                        var e = T.Throws<TokenProviderException>(() => c.JoinAsync("cs-room", "nobody").GetAwaiter().GetResult(), "join");
+                        T.True(e.InnerException is InvalidOperationException, "the provider's exception inside");
+                        T.True(e.Message == "the TokenProvider threw InvalidOperationException: no session cookie", e.Message);
+                    }
+                    finally { c.CloseAsync().Wait(); }
                 });
                 T.Run("e2e: a TokenProvider that returns no token fails the join with ConfigInvalidException", () =>
                 {

@@ -34,6 +34,12 @@ namespace Posecast.Client.Tests
                 T.True(!ProtocolException.FromWire("MALFORMED", "m", fatal: false).Fatal, "override");
                 T.True(new ServerShutdownException("x").Retryable && !new KickedException("x").Retryable, "retryable");
             });
+            T.Run("errors: a TokenProvider that threw is retried; one that returned no token is not", () =>
+            {
+                var e = new TokenProviderException("the TokenProvider threw", new InvalidOperationException("503"));
+                T.True(e.Retryable && ClientSession.IsRetryable(e), "TokenProviderException is retryable");
+                T.True(!ClientSession.IsRetryable(new ConfigInvalidException("the TokenProvider returned null", "h")), "ConfigInvalid is not");
+            });
             T.Run("schema: constants, bounds, limits and v2 record constants match proto/schema.json", () =>
             {
                 var s = T.Load("proto", "schema.json");

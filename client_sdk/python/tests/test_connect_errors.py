@@ -23,7 +23,12 @@ import posecast_client as pc
 import posecast_client.client as client_mod
 from posecast_client.cli.common import connect_patiently
 from posecast_client.codec import decode, encode
-from posecast_client.errors import ConfigInvalidError, ConnectFailedError, ConnectionLostError
+from posecast_client.errors import (
+    ConfigInvalidError,
+    ConnectFailedError,
+    ConnectionLostError,
+    TokenProviderError,
+)
 from posecast_client.protocol import Hello, Limits, Member, Welcome
 from posecast_client.session import is_retryable
 
@@ -228,6 +233,78 @@ def test_a_token_function_giving_no_token_on_a_rejoin_ends_the_session_with_it()
                     async for _ in client.events():
                         pass
         assert tokens == []
+
+    run(main())
+
+
+def test_a_token_function_that_raises_is_retried_on_a_rejoin() -> None:
+    """A brief outage of the backend's token endpoint killed the client: the token
+    function's error ended the session. It is a TokenProviderError now, retried as a
+    lost connection: the rejoin after two failures goes on."""
+    calls: list[int] = []
+
+    def token() -> str:
+        calls.append(1)
+        if len(calls) in (2, 3):  # the first rejoin's two tries
+            raise RuntimeError("token endpoint: HTTP 503")
+        return "tok"
+
+    async def main() -> None:
+        async with peer("drop") as server:
+            client = await pc.connect(url_of(server), token, backoff_initial_s=0.01,
+                                      ping_interval_s=0, max_reconnect_attempts=5)  # fmt: skip
+            async with client:
+                await client.join("lobby", "Ada")
+                causes = []
+                async for event in client.events():
+                    if isinstance(event, pc.Reconnecting):
+                        causes.append(event.cause)
+                    elif isinstance(event, Welcome):
+                        break  # rejoined
+        assert len(calls) == 4
+        assert [type(c) for c in causes] == [ConnectionLostError, TokenProviderError,
+                                             TokenProviderError]  # fmt: skip
+        assert isinstance(causes[1].__cause__, RuntimeError) and causes[1].retryable
+        assert "the token function raised RuntimeError('token endpoint: HTTP 503')" in str(
+            causes[1]
+        )
+
+    run(main())
+
+
+def test_a_token_function_that_keeps_raising_gives_up_with_its_error_as_cause() -> None:
+    calls: list[int] = []
+
+    def token() -> str:
+        calls.append(1)
+        if len(calls) > 1:
+            raise RuntimeError("token endpoint down")
+        return "tok"
+
+    async def main() -> None:
+        async with peer("drop") as server:
+            client = await pc.connect(url_of(server), token, backoff_initial_s=0.01,
+                                      ping_interval_s=0, max_reconnect_attempts=3)  # fmt: skip
+            async with client:
+                await client.join("lobby", "Ada")
+                with pytest.raises(TokenProviderError) as info:
+                    async for _ in client.events():
+                        pass
+        assert isinstance(info.value.__cause__, RuntimeError)
+        assert len(calls) == 1 + 3
+
+    run(main())
+
+
+def test_the_first_join_raises_token_provider_error() -> None:
+    async def fails() -> str:
+        raise OSError("token endpoint unreachable")
+
+    async def main() -> None:
+        async with peer() as server, pc.connect(url_of(server), fails) as client:
+            with pytest.raises(TokenProviderError) as info:
+                await client.join("lobby", "Ada")
+        assert isinstance(info.value.__cause__, OSError) and is_retryable(info.value)
 
     run(main())
 

@@ -41,6 +41,7 @@ import {
   PosecastError,
   ProtocolError,
   ServerShutdownError,
+  TokenProviderError,
 } from "./errors.js";
 import { clearTimer, globalWebSocket, monotonicS, setTimer, type TimerId } from "./env.js";
 import { type ClientEvent, EventQueue } from "./events.js";
@@ -80,7 +81,11 @@ export interface WebSocketLike {
 /** A WebSocket class: `globalThis.WebSocket` in browsers, or `WebSocket` from `ws` in Node. */
 export type WebSocketConstructor = abstract new (url: string, protocols?: string[]) => object;
 
-/** A join token, or a function that fetches a fresh one (asked again on each reconnect). */
+/**
+ * A join token, or a function that fetches a fresh one (asked again on each reconnect).
+ * A function that throws gives {@link TokenProviderError}, retried on a rejoin; one
+ * that returns no token, {@link ConfigInvalidError}, which ends the session.
+ */
 export type TokenSource = string | (() => string | Promise<string>);
 
 export interface ReconnectOptions {
@@ -127,6 +132,7 @@ export type ClientState = "open" | "joining" | "joined" | "reconnecting" | "clos
 /** Codes a reconnect can cure: the server went away or gave up on this connection. */
 const RETRYABLE_CODES: ReadonlySet<string> = new Set([
   "CONNECTION_CLOSED",
+  "TOKEN_PROVIDER_FAILED", // the token function threw: its backend may be back soon
   "SERVER_SHUTDOWN",
   "TIMED_OUT",
   "SLOW_CONSUMER",
@@ -146,6 +152,11 @@ const STATUS_HINTS: ReadonlyMap<number, string> = new Map([
   [429, "this address connected (or broke the protocol) too often: back off, try again later"],
   [503, "the server is starting, busy or full: try again in a moment, with back-off"],
 ]);
+
+/** What a function threw, for a message: `Error: why`, or the value itself. */
+function describeThrown(err: unknown): string {
+  return err instanceof Error ? `${err.name}: ${err.message}` : String(err);
+}
 
 /** How an unusable argument is named in an error: `undefined`, `an empty string`... */
 function what(value: unknown): string {
@@ -423,6 +434,8 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
    *   {@link SitesInput} and sends one row per site of the set.
    * @throws ProtocolError the server's answer (e.g. UnauthenticatedError, RoomFullError)
    * @throws ConnectionClosedError the socket closed or no welcome came in `timeoutS`
+   * @throws TokenProviderError the token function threw (`cause`)
+   * @throws ConfigInvalidError the token function returned no token
    * @throws RangeError `layout` names no layout or tracker set (nothing is sent)
    */
   async join(
@@ -635,7 +648,14 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
 
   private async handshake(): Promise<Welcome> {
     const args = this.joinArgs!;
-    const token: unknown = typeof this.token === "string" ? this.token : await this.token();
+    let token: unknown = this.token;
+    if (typeof this.token === "function") {
+      try {
+        token = await this.token();
+      } catch (err) {
+        throw new TokenProviderError(`the token function threw ${describeThrown(err)}`, { cause: err });
+      }
+    }
     if (typeof token !== "string" || token.trim() === "") {
       throw new ConfigInvalidError(
         `the token function returned ${what(token)}`,

@@ -12,6 +12,7 @@
  * ├── ConfigInvalidError            CONFIG_INVALID     (hint; local: a URL or token refused before dialing)
  * ├── ConnectionClosedError         CONNECTION_CLOSED  (closeCode, closeReason; local)
  * │   └── ConnectFailedError        CONNECTION_CLOSED  (url, reason, hint, status: no socket opened)
+ * ├── TokenProviderError            TOKEN_PROVIDER_FAILED (cause: the token function threw; local, retried)
  * └── ProtocolError                 (one per wire code; field, refSeq, fatal)
  *     ├── MalformedError            MALFORMED            fatal
  *     ├── TooLargeError             TOO_LARGE            fatal
@@ -119,6 +120,20 @@ export class ConnectFailedError extends ConnectionClosedError {
     this.reason = reason;
     this.hint = hint;
     this.status = more.status;
+  }
+}
+
+/**
+ * The token function (`connect`'s `token` when it is a function) threw or rejected:
+ * the backend's token endpoint may be briefly down. `cause` is what it threw. Retried:
+ * a rejoin calls the function again, up to `reconnect.maxAttempts`, after which the
+ * event stream throws this error; the first `join` rejects with it (not retried). A
+ * function that returns no token is a {@link ConfigInvalidError}, never retried. Not
+ * a wire code.
+ */
+export class TokenProviderError extends PosecastError {
+  constructor(message: string, options?: { readonly cause?: unknown }) {
+    super("TOKEN_PROVIDER_FAILED", message, options);
   }
 }
 

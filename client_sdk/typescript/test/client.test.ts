@@ -27,6 +27,7 @@ import {
   KickedError,
   NotNormalisedError,
   OutOfRangeError,
+  TokenProviderError,
   UnauthenticatedError,
 } from "../src/errors.js";
 import type { ClientEvent } from "../src/events.js";
@@ -451,6 +452,73 @@ test("giving up after maxAttempts throws the last cause", async () => {
   assert.deepEqual(attempts, [1, 2, 3, 4]);
   assert.ok(!(causes[0] instanceof ConnectFailedError)); // the drop itself
   assert.ok(causes.slice(1).every((c) => c instanceof ConnectFailedError && c.url === url));
+});
+
+test("a token function that throws is retried on a rejoin (TokenProviderError), then works", async () => {
+  const server = await new FakeServer().ready();
+  try {
+    let calls = 0;
+    const token = (): string => {
+      calls++;
+      if (calls === 2 || calls === 3) throw new Error("token endpoint: HTTP 503"); // the first rejoin's two tries
+      return `tok${calls}`;
+    };
+    const client = await connect(server.url, token, FAST);
+    await client.join("lobby", "Ada");
+    const it = client.events();
+    await take(it, "welcome");
+    (await server.peer(1)).ws.terminate();
+    const causes: unknown[] = [];
+    for (;;) {
+      const ev = (await it.next()).value as ClientEvent;
+      if (ev.type === "reconnecting") causes.push(ev.cause);
+      if (ev.type === "welcome") {
+        assert.ok(ev.resumed);
+        break;
+      }
+    }
+    assert.equal(calls, 4);
+    assert.ok(causes[0] instanceof ConnectionClosedError);
+    assert.ok(causes.slice(1).every((c) => c instanceof TokenProviderError), String(causes));
+    const e = causes[1] as TokenProviderError;
+    assert.equal(e.code, "TOKEN_PROVIDER_FAILED");
+    assert.ok(e.cause instanceof Error && e.message.includes("HTTP 503"), e.message);
+    assert.equal((await server.peer(2)).hello.token, "tok4");
+    await client.close();
+  } finally {
+    await server.close();
+  }
+});
+
+test("a token function that keeps throwing gives up with TokenProviderError; the first join rejects with it", async () => {
+  const server = await new FakeServer().ready();
+  try {
+    let calls = 0;
+    const token = async (): Promise<string> => {
+      calls++;
+      if (calls > 1) throw new Error("token endpoint down");
+      return "tok";
+    };
+    const client = await connect(server.url, token, FAST);
+    await client.join("lobby", "Ada");
+    (await server.peer(1)).ws.terminate();
+    await assert.rejects(async () => {
+      for await (const _ of client) {
+        // drain
+      }
+    }, (err: unknown) => err instanceof TokenProviderError && err.cause instanceof Error);
+    assert.equal(calls, 1 + 4); // FAST: maxAttempts 4
+    const first = await connect(server.url, () => {
+      throw new TypeError("no session cookie");
+    }, FAST);
+    await assert.rejects(first.join("lobby", "Bea"), (err: unknown) => {
+      assert.ok(err instanceof TokenProviderError && err.cause instanceof TypeError, String(err));
+      assert.ok(err.message.includes("TypeError: no session cookie"), err.message);
+      return true;
+    });
+  } finally {
+    await server.close();
+  }
 });
 
 test("spectators may not send frames; a missing WebSocket class is explained", async () => {

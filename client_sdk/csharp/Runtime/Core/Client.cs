@@ -37,7 +37,12 @@ namespace Posecast.Client
     /// <summary>The options of a PosecastClient, with their defaults.</summary>
     public sealed class ClientOptions
     {
-        /// <summary>Called at every join for a fresh token (else the token given to ConnectAsync).</summary>
+        /// <summary>
+        /// Called at every join for a fresh token (else the token given to ConnectAsync). One
+        /// that throws gives TokenProviderException (InnerException: what it threw), retried on
+        /// a rejoin like a lost connection; one that returns no token, ConfigInvalidException,
+        /// which ends the session.
+        /// </summary>
         public Func<string> TokenProvider;
         /// <summary>Protocol versions offered, best first ({2, 1}); {1} pins posecast.v1.</summary>
         public int[] Versions = { Protocol.V2, Protocol.V1 };
@@ -284,7 +289,15 @@ namespace Posecast.Client
 
         private async Task<Welcome> HandshakeAsync(ClientWebSocket ws)
         {
-            string token = Options.TokenProvider != null ? Options.TokenProvider() : _token;
+            string token = _token;
+            if (Options.TokenProvider != null)
+            {
+                try { token = Options.TokenProvider(); }
+                catch (Exception e) // the backend's token endpoint down, say: worth a retry
+                {
+                    throw new TokenProviderException("the TokenProvider threw " + e.GetType().Name + ": " + e.Message, e);
+                }
+            }
             if (string.IsNullOrWhiteSpace(token))
                 throw new ConfigInvalidException("the TokenProvider returned " + What(token), "it must return the join token, a non-empty string");
             Hello hello;

@@ -10,6 +10,7 @@
 //   ├── ConfigInvalidException         a URL or token the client cannot use, refused before dialing
 //   ├── ConnectionLostException        the connection dropped without an error  retryable
 //   │   └── ConnectFailedException     no WebSocket opened at Url (refused, DNS, TLS, HTTP 429/503)
+//   ├── TokenProviderException         the TokenProvider threw (InnerException)  retryable
 //   └── ProtocolException              one per wire code: Code, Fatal, Field, RefSeq
 //       ├── MalformedException         MALFORMED            fatal   decoder
 //       ├── TooLargeException          TOO_LARGE            fatal   decoder
@@ -83,6 +84,19 @@ namespace Posecast.Client
     {
         public ConnectionLostException(string message) : base(message) { }
         public ConnectionLostException(string message, Exception inner) : base(message, inner) { }
+        public override bool Retryable { get { return true; } }
+    }
+
+    /// <summary>
+    /// The TokenProvider threw: the backend's token endpoint may be briefly down.
+    /// InnerException is what it threw. Retryable: a rejoin calls it again, up to
+    /// MaxReconnectAttempts, after which TryGetEvent throws this; the first JoinAsync
+    /// throws it (not retried). A TokenProvider that returns no token is a
+    /// ConfigInvalidException, never retried.
+    /// </summary>
+    public sealed class TokenProviderException : PosecastException
+    {
+        public TokenProviderException(string message, Exception inner) : base(message, inner) { }
         public override bool Retryable { get { return true; } }
     }
 

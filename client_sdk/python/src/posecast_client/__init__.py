@@ -47,6 +47,7 @@ from posecast_client.errors import (
     PosecastClientError,
     ProtocolError,
     RecordingError,
+    TokenProviderError,
 )
 from posecast_client.interp import (
     DEFAULT_INTERP,
@@ -156,6 +157,7 @@ __all__ = [
     "SerialTrackerSource",
     "Skeleton",
     "Stats",
+    "TokenProviderError",
     "TrackerSample",
     "TrackerSlot",
     "TrackerSource",

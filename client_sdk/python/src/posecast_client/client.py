@@ -79,6 +79,7 @@ from posecast_client.errors import (
     ConnectFailedError,
     ConnectionLostError,
     ProtocolError,
+    TokenProviderError,
     VersionUnsupportedError,
 )
 from posecast_client.protocol import (
@@ -264,7 +265,10 @@ class Client:
             takes the first that opens, and each reconnect attempt moves on to the
             next URL after the one that was lost, wrapping around.
         token: the join token, or a callable returning one (called at every join, so
-            a long session can fetch a fresh token before rejoining).
+            a long session can fetch a fresh token before rejoining). A callable that
+            raises gives :class:`~posecast_client.errors.TokenProviderError` (its
+            error as ``__cause__``), retried on a rejoin like a lost connection; one
+            that returns no token, :class:`ConfigInvalidError`, which ends the session.
         reconnect: rejoin after retryable losses (True).
         backoff_initial_s: the first reconnect delay (0.25 s), doubling per attempt...
         backoff_max_s: ...up to this (8 s).
@@ -398,9 +402,12 @@ class Client:
     async def _handshake(self, ws: ClientConnection) -> Welcome:
         """Send ``hello`` on ``ws`` and read up to its ``welcome`` (or refusal)."""
         assert self._hello_args is not None
-        token = self._token() if callable(self._token) else self._token
-        if inspect.isawaitable(token):
-            token = await token
+        try:
+            token = self._token() if callable(self._token) else self._token
+            if inspect.isawaitable(token):
+                token = await token
+        except Exception as exc:  # the backend's token endpoint down, say: worth a retry
+            raise TokenProviderError(f"the token function raised {exc!r}") from exc
         if not (isinstance(token, str) and token.strip()):
             raise ConfigInvalidError(
                 f"the token function returned {_what(token)}",
@@ -556,7 +563,8 @@ class Client:
                     ws.transport.abort()
                 raise
             except Exception as exc:  # all: one a retry cannot fix (a token function that
-                # failed or gave no token too) ends the session with it, not this task unseen
+                # gave no token too) ends the session with it, not this task unseen; one
+                # that raised (TokenProviderError) is retried, as a lost connection
                 if ws is not None:
                     await ws.close()
                 if not _retryable(exc):

@@ -10,6 +10,7 @@ refuses) are :class:`ProtocolError` subclasses, exactly one per code of
     ├── ConfigInvalidError            a URL or token the client cannot use (also a ValueError)
     ├── ConnectionLostError           the connection dropped without an error  retryable
     │   └── ConnectFailedError        no WebSocket opened at url (refused, DNS, TLS, HTTP 429/503)
+    ├── TokenProviderError            the token function raised (its error as cause)  retryable
     ├── BvhError                      a BVH file cannot be read (file, line)
     ├── RecordingError                a file is not a posecast recording (also a ValueError)
     └── ProtocolError                 one per wire code: code, fatal, field, ref_seq
@@ -87,6 +88,19 @@ class ConfigInvalidError(PosecastClientError, ValueError):
         super().__init__(f"{message} (hint: {hint})")
         self.reason = message  # the message without its hint
         self.hint = hint
+
+
+class TokenProviderError(PosecastClientError):
+    """The token function (``connect``'s ``token`` when callable) raised: the backend's
+    token endpoint may be briefly down. ``__cause__`` is what it raised.
+
+    Retryable: a rejoin calls the function again, up to ``max_reconnect_attempts``,
+    after which ``events()`` raises this error. The first ``join`` is not retried. A
+    function that returns no token (``None``, an empty string) is a programming error:
+    :class:`ConfigInvalidError`, never retried.
+    """
+
+    retryable: ClassVar[bool] = True
 
 
 class ConnectFailedError(ConnectionLostError):
