@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import subprocess
@@ -9,6 +10,7 @@ import sys
 import time
 from importlib.metadata import entry_points
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -407,6 +409,42 @@ def test_no_poses_hint_without_the_servers_rooms(capsys: pytest.CaptureFixture[s
     err = capsys.readouterr().err
     assert "warning: no player's pose was seen in room lobby in 2.0 s" in err
     assert "(players were in it: p-1, p-2; none streamed)" in err and "\nhint: " in err
+
+
+@pytest.mark.parametrize(
+    ("url", "asked"),
+    [
+        ("ws://127.0.0.1:8765/", True),
+        ("ws://127.8.9.10:8765/", True),
+        ("ws://[::1]:8765/", True),
+        ("ws://localhost:8765/", True),
+        ("WS://LOCALHOST:8765/", True),
+        ("wss://localhost./", True),
+        ("wss://posecast.example.com/", False),  # a production server: never asked
+        ("ws://10.0.0.5:8765/", False),
+        ("ws://[2001:db8::1]:8765/", False),
+        ("ws://localhost.example.com/", False),
+        ("ws://127.0.0.1.nip.io/", False),  # a name, however it looks: no DNS lookup
+    ],
+)
+def test_the_rooms_are_asked_of_a_server_on_this_machine_only(
+    monkeypatch: pytest.MonkeyPatch, url: str, asked: bool
+) -> None:
+    """The empty-room hint asked /viewer/rooms of any host, production servers too,
+    and a host name's DNS lookup is not covered by the 2 s timeout."""
+    opened: list[str] = []
+
+    class Opener:
+        def open(self, http: str, timeout: float) -> Any:
+            opened.append(http)
+            return io.BytesIO(b'[{"room": "sim-0", "players": 2}]')
+
+    monkeypatch.setattr(record.urllib.request, "build_opener", lambda *a: Opener())
+    rooms = record.server_rooms(url)
+    assert (opened != []) == asked and record.is_loopback_host(url) == asked
+    assert rooms == ([("sim-0", 2)] if asked else None)
+    if asked:
+        assert opened[0].endswith("/viewer/rooms") and opened[0].startswith("http")
 
 
 def test_exporting_a_recording_without_poses_warns(

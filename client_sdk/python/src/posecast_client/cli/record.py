@@ -15,7 +15,8 @@ one per player (``out/<player>.bvh``).
 A recording in which no player's pose arrived (a misspelt room, or one nobody was in)
 ends with a ``warning:`` naming the room and a ``hint:``: the rooms that have players
 when the server says so (a ``--dev`` server answers ``/viewer/rooms`` to a loopback
-client), otherwise to check the room name; no BVH file is written. The exit status is
+client; only a server at ``localhost`` or a loopback address is asked), otherwise to
+check the room name; no BVH file is written. The exit status is
 still 0: the recording is whole, and a room can be empty (1 and 2 stay for what kept
 the tool from doing its work: a refusal, no server, a bad file; a command-line
 mistake). ``--export`` of a recording without poses warns the same way.
@@ -26,6 +27,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import ipaddress
 import json
 import sys
 import time
@@ -33,7 +35,7 @@ import urllib.request
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from urllib.parse import urljoin
+from urllib.parse import urljoin, urlsplit, urlunsplit
 
 from posecast_client.cli.common import (
     Parser,
@@ -120,11 +122,34 @@ async def record(args: argparse.Namespace) -> tuple[Path, Seen]:
 MAX_ROOMS_LISTED = 8
 
 
+def is_loopback_host(url: str) -> bool:
+    """Whether ``url``'s host is ``localhost`` or a loopback address literal
+    (127.0.0.0/8, ``[::1]``): a server on this machine, asked without a DNS lookup."""
+    try:
+        host = urlsplit(url).hostname
+    except ValueError:
+        return False
+    if host is None:
+        return False
+    if host.rstrip(".") == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:  # a name: not resolved here (the 2 s timeout does not cover DNS)
+        return False
+
+
 def server_rooms(url: str, timeout_s: float = 2.0) -> list[tuple[str, int]] | None:
     """The server's open rooms and their player counts, as a ``--dev`` server tells a
     loopback client (``/viewer/rooms`` beside the WebSocket URL); None where it does
-    not (a production server, another host, no answer in ``timeout_s``)."""
-    http = urljoin("http" + url.removeprefix("ws"), "viewer/rooms")
+    not (a production server, no answer in ``timeout_s``). Only a server on this
+    machine (:func:`is_loopback_host`) is asked: a dev server answers nobody else, and
+    another host's name would need a DNS lookup no timeout covers."""
+    if not is_loopback_host(url):
+        return None
+    parts = urlsplit(url)
+    scheme = "https" if parts.scheme.lower() == "wss" else "http"
+    http = urljoin(urlunsplit((scheme, parts.netloc, parts.path or "/", "", "")), "viewer/rooms")
     direct = urllib.request.build_opener(urllib.request.ProxyHandler({}))  # loopback only
     try:
         with direct.open(http, timeout=timeout_s) as response:
