@@ -922,6 +922,12 @@ def test_serve_dev_with_a_secret_set_prints_the_viewer_and_never_the_secret(
     ]
 
 
+def test_serve_writes_an_ipv6_host_in_brackets(capsys, monkeypatch) -> None:
+    # It printed ws://:::8765, which no URL parser reads.
+    out = _serve_output(monkeypatch, capsys, ["--host", "::"], {"POSECAST_TOKEN_SECRET": "k" * 32})
+    assert out == ["posecast: listening on ws://[::]:8765"]
+
+
 @pytest.mark.parametrize("host", ["::", "::1", "0.0.0.0", "127.0.0.1", "localhost"])
 def test_serve_dev_prints_urls_that_reach_the_bound_server(host: str) -> None:
     """``--host ::`` printed 127.0.0.1, but asyncio binds ``::`` IPv6-only: nothing

@@ -882,7 +882,9 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         print(f"posecast: --dev: token secret for this run: {cfg.token_secret}", flush=True)
 
     def ready(port: int) -> None:
-        print(f"posecast: listening on ws://{cfg.host}:{port}", flush=True)
+        # An IPv6 host in brackets, as a URL writes it (ws://[::]:8765, not ws://:::8765).
+        host = f"[{cfg.host}]" if ":" in cfg.host else cfg.host
+        print(f"posecast: listening on ws://{host}:{port}", flush=True)
         if cfg.dev:
             secret = cfg.token_secret if invented else None
             print("\n".join(_dev_lines(cfg.host, port, secret)), flush=True)
