@@ -458,3 +458,18 @@ def test_exporting_a_recording_without_poses_warns(
     err = capsys.readouterr().err
     assert f"warning: {rec} (room lobby) holds no player's pose; no BVH written" in err, err
     assert not list((tmp_path / "out").glob("*.bvh"))
+
+
+@pytest.mark.parametrize("main", [sim.main, record.main])
+def test_a_secret_that_starts_with_a_dash_is_never_echoed_and_gets_the_equals_hint(
+    capsys: pytest.CaptureFixture[str], main: Any
+) -> None:
+    # argparse takes "-Secret..." for an option: the tools must not print it, and must
+    # say how to pass such a value (the server CLI says the same).
+    value = "-SuperSecretValue123456"
+    with pytest.raises(SystemExit) as exit_:
+        main(["--url", "ws://127.0.0.1:9/", "--secret", value])
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2, err
+    assert value not in err and "Traceback" not in err, err
+    assert "(--secret=VALUE)" in err, err

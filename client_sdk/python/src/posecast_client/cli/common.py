@@ -11,6 +11,7 @@ import argparse
 import asyncio
 import contextlib
 import os
+import re
 import secrets
 import signal
 import sys
@@ -108,7 +109,11 @@ class Parser(argparse.ArgumentParser):
 
     def error(self, message: str) -> NoReturn:
         self.print_usage(sys.stderr)
-        usage_error(self.prog, message, f"see `{self.prog} --help` for the options")
+        hint = f"see `{self.prog} --help` for the options"
+        missing = re.fullmatch(r"argument (--?[\w-]+)(?:/[\w-]+)*: expected one argument", message)
+        if missing:  # often a value that starts with '-' (a secret can): argparse took it
+            hint = f"a value that starts with '-' goes after '=' ({missing[1]}=VALUE); {hint}"
+        usage_error(self.prog, message, hint)
 
 
 def add_server_arguments(parser: argparse.ArgumentParser) -> None:
