@@ -1,7 +1,7 @@
 """The lean load generator: every player of a ramp in one process, as cheap as it gets.
 
     python benchmarks/lean_clients.py --url ws://127.0.0.1:PORT/ --secret SECRET \\
-                                      --room-size 8 [--room-prefix lean]
+                                      --room-size 8 [--room-prefix lean] [--protocol 2]
 
 ``load.py ramp`` (its default ``--clients lean``) runs this as a subprocess and drives
 it over stdin/stdout, one JSON line each way per command (:class:`LeanClients` in
@@ -24,19 +24,29 @@ Why it is cheap, against ``posecast-sim`` (an SDK ``Client`` per player):
   (:class:`FrameCycle`). A uint32 ``seq`` is not canonical (that is its smallest
   int form) but every decoder accepts any int width (``proto/README.md``,
   *Encoding*); the first frame is decoded once with the SDK's codec as a check;
-* incoming poses are **counted, never decoded**: :class:`CountingConnection` looks
-  at the ten bytes after the map header of each message as the frames are parsed
-  (the server writes ``type`` first, so a pose starts ``a4 "type" a4 "pose"``), and
-  skips ``recv()`` and its queue. Only the rare other messages (presence, errors)
-  are unpacked;
+* incoming poses are **counted, never decoded**, as the frames are parsed, skipping
+  ``recv()`` and its queue (:class:`CountingConnection`). ``--protocol 2`` (the
+  default, what the SDKs speak: they offer ``posecast.v2`` first) gets one ``poses``
+  message per tick whose ``data`` is the concatenation of that tick's pose records
+  (``proto/README.md``, *Pose records*); they carry no count, so :func:`count_records`
+  walks them: a record's handle and flags, then a keyframe's fixed 130 bytes or a
+  delta's 20 two-bit classes (which give its length), nothing dequantised and no
+  reference state kept. A v2 receiver owes the server nothing back (no acks: the
+  server keeps each client's reference itself; ``resync`` only after a record it could
+  not apply, which a counter never has). ``--protocol 1`` gets one ``pose`` message per
+  avatar per tick, recognised by the ten bytes after its map header (the server writes
+  ``type`` first: ``a4 "type" a4 "pose"``). Only the rare other messages (presence,
+  errors) are unpacked;
 * its own CPU is in every ``stats`` answer: ``time.process_time()`` (user + system
   time of this process, all threads) beside ``time.monotonic()``, so a window's
   generator CPU share is their ratio of differences.
 
 The server sends every pose of a room to every member, its sender included, so over
 ``dt`` seconds a player in a room of ``m`` members at the room's pose rate ``r``
-(``welcome.rate_hz``) should receive ``r * m * dt`` poses; ``stats`` gives each
-player's count, ``m`` (``welcome.members``, then presence ``join``/``leave``) and ``r``.
+(``welcome.rate_hz``; in v2 at most the client's ``welcome.pose_rate_hz``, 60 here)
+should receive ``r * m * dt`` poses (v1 ``pose`` messages, v2 records); ``stats``
+gives each player's count, ``m`` (``welcome.members``, then presence
+``join``/``leave``) and ``r``.
 """
 
 from __future__ import annotations
@@ -54,7 +64,7 @@ from typing import Any
 import msgpack
 import numpy as np
 from posecast_client.codec import decode
-from posecast_client.protocol import SUBPROTOCOL
+from posecast_client.protocol import SUBPROTOCOLS
 from posecast_client.protocol import Frame as FrameMessage
 from posecast_client.sources import WalkSource
 from posecast_client.tokens import mint_token
@@ -82,6 +92,66 @@ _HEAD = b"\x84" + _p("type") + _p("frame") + _p("seq") + b"\xce"  # fixmap(4) ..
 _SEQ_T = struct.Struct(">I3sd")  # seq, then "t" and the float64 marker, then t
 _T_KEY = _p("t") + b"\xcb"
 POSE_PREFIX = _p("type") + _p("pose")  # bytes 1..10 of a pose (byte 0: its fixmap header)
+# v2: {"type": "poses", "t": float64, "data": bin}, as the server writes it (canonical
+# order, t always a float64): data's bin header sits at byte 28.
+POSES_PREFIX = b"\x83" + _p("type") + _p("poses") + _p("t") + b"\xcb"  # bytes 0..14
+_DATA_KEY = _p("data")  # bytes 23..27
+
+
+# --- v2 pose records, counted ----------------------------------------------------------------
+
+# A delta's bitstream: per item a 2-bit class, then 3 components of the class's width;
+# these are the bits each class takes, the class included (proto/README.md, *Delta*).
+_ROOT_BITS = tuple(2 + 3 * w for w in (0, 5, 8, 14))
+_ROT_BITS = tuple(2 + 3 * w for w in (0, 4, 7, 12))
+_MAX_DELTA_BYTES = 110  # 20 items of the widest class, rounded up to bytes
+KEYFRAME_BYTES = 130  # after the flags: seq, root, 19 smallest-three items
+
+
+def count_records(data: bytes) -> int:
+    """The number of pose records in a v2 ``poses.data``: each is walked to its end
+    (handle, flags, then a keyframe's 130 bytes or a delta's seq step and bitstream),
+    nothing else read. Raises ``ValueError`` for records cut short or running over."""
+    n = pos = 0
+    end = len(data)
+    try:
+        while pos < end:
+            while data[pos] & 0x80:  # the handle, LEB128
+                pos += 1
+            flags = data[pos + 1]
+            pos += 2
+            if flags & 1:
+                pos += KEYFRAME_BYTES
+            else:
+                acc = int.from_bytes(data[pos + 1 : pos + 1 + _MAX_DELTA_BYTES], "little")
+                bit = _ROOT_BITS[acc & 3]
+                for _ in range(19):
+                    bit += _ROT_BITS[acc >> bit & 3]
+                pos += 1 + ((bit + 7) >> 3)
+            n += 1
+    except IndexError:
+        pos = end + 1
+    if pos != end:
+        raise ValueError("pose records cut short or running over the data")
+    return n
+
+
+def poses_data(message: bytes) -> bytes | None:
+    """``data`` of a v2 ``poses`` message, read at its fixed place (the server's
+    canonical bytes), else by unpacking; ``None`` for any other message."""
+    if message[:15] == POSES_PREFIX and message[23:28] == _DATA_KEY:
+        marker = message[28]
+        if marker == 0xC4:
+            return message[30 : 30 + message[29]]
+        if marker == 0xC5:
+            return message[31 : 31 + int.from_bytes(message[29:31], "big")]
+    try:  # the rare other messages (presence, errors), or poses written another way
+        m = msgpack.unpackb(message)
+    except ValueError:
+        return None  # on_message's unpacking says what is wrong
+    if isinstance(m, dict) and m.get("type") == "poses" and isinstance(m.get("data"), bytes):
+        return m["data"]
+    return None
 
 
 class FrameCycle:
@@ -111,7 +181,9 @@ def check_frame_bytes(cycle: FrameCycle) -> None:
 
 class CountingConnection(ClientConnection):
     """A client connection that counts poses as its frames are parsed, instead of
-    queueing them for ``recv()``; other messages go to ``on_message``.
+    queueing them for ``recv()``: v1 ``pose`` messages, or the records of v2 ``poses``
+    (``malformed`` counts batches whose records do not add up); other messages go to
+    ``on_message``.
 
     It overrides ``process_event``, the method ``ClientConnection`` itself overrides to
     handle the handshake: not public API, checked with websockets 17.4. Were it to stop
@@ -123,14 +195,20 @@ class CountingConnection(ClientConnection):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.poses = 0
+        self.malformed = 0
         self.on_message: Any = None  # Callable[[bytes], None], set before hello
 
     def process_event(self, event: Any) -> None:
         binary = isinstance(event, Frame) and event.opcode is Opcode.BINARY and event.fin
         if not (binary and self.response is not None):  # the handshake, control frames
             super().process_event(event)
-        elif event.data[1:11] == POSE_PREFIX:
+        elif event.data[1:11] == POSE_PREFIX:  # v1
             self.poses += 1
+        elif (data := poses_data(event.data)) is not None:  # v2
+            try:
+                self.poses += count_records(data)
+            except ValueError:
+                self.malformed += 1
         elif self.on_message is not None:
             self.on_message(bytes(event.data))
 
@@ -156,6 +234,8 @@ class Player:
         kind = m.get("type")
         if kind == "welcome":
             self.rate_hz, self.members = float(m["rate_hz"]), len(m["members"])
+            if "pose_rate_hz" in m:  # v2: this client's rate, a divisor of the room's tick
+                self.rate_hz = min(self.rate_hz, float(m["pose_rate_hz"]))
             if self.welcome is not None and not self.welcome.done():
                 self.welcome.set_result(None)
         elif kind == "presence" and m.get("room") == self.room:
@@ -167,8 +247,11 @@ class Player:
 
 
 class Generator:
-    def __init__(self, url: str, secret: str, room_size: int, prefix: str) -> None:
+    def __init__(
+        self, url: str, secret: str, room_size: int, prefix: str, protocol: int = 2
+    ) -> None:
         self.url, self.secret, self.room_size, self.prefix = url, secret, room_size, prefix
+        self.protocol = protocol
         self.players: list[Player] = []
         self.streaming: list[Player] = []
         self.failed: dict[str, str] = {}
@@ -201,7 +284,7 @@ class Generator:
 
     async def _join(self, p: Player, timeout_s: float) -> None:
         token = mint_token(self.secret, room=p.room, player=p.player, ttl_s=3600)
-        hello = {"type": "hello", "version": 1, "token": token, "room": p.room,
+        hello = {"type": "hello", "version": self.protocol, "token": token, "room": p.room,
                  "name": f"Lean {p.index}"}  # fmt: skip
         try:
             async with asyncio.timeout(timeout_s):
@@ -227,7 +310,7 @@ class Generator:
             try:
                 ws = await connect(
                     self.url,
-                    subprotocols=[Subprotocol(SUBPROTOCOL)],
+                    subprotocols=[Subprotocol(SUBPROTOCOLS[self.protocol])],
                     compression=None,
                     max_size=65_536,
                     ping_interval=None,  # the server pings; pongs are answered as usual
@@ -278,7 +361,9 @@ class Generator:
             [p.player, p.room, p.ws.poses if p.ws else 0, p.members, p.rate_hz, p.open]
             for p in self.players
         ]
+        malformed = sum(p.ws.malformed for p in self.players if p.ws is not None)
         return {
+            "protocol": self.protocol,
             "t": time.monotonic(),
             "cpu_s": time.process_time(),
             "frames_sent": self.frames_sent,
@@ -286,8 +371,11 @@ class Generator:
             "late_ticks": self.late_ticks,
             "joined": len(self.streaming),
             "connection_losses": sum(p.lost for p in self.players),
-            "errors": sum(len(p.errors) for p in self.players),
-            "error_codes": sorted({c for p in self.players for c in p.errors}),
+            "errors": sum(len(p.errors) for p in self.players) + malformed,
+            "error_codes": sorted(
+                {c for p in self.players for c in p.errors}
+                | ({"MALFORMED_RECORDS"} if malformed else set())
+            ),
             "failed": self.failed,
             "players": rows,
         }
@@ -309,7 +397,7 @@ def _answer(obj: dict[str, Any]) -> None:
 
 
 async def run(args: argparse.Namespace) -> None:
-    gen = Generator(args.url, args.secret, args.room_size, args.room_prefix)
+    gen = Generator(args.url, args.secret, args.room_size, args.room_prefix, args.protocol)
     check_frame_bytes(gen._cycle(0, 0))
     loop = asyncio.get_running_loop()
     reader = asyncio.StreamReader()
@@ -339,6 +427,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--secret", required=True, help="the server's token secret")
     ap.add_argument("--room-size", type=int, default=4, help="players per room (4)")
     ap.add_argument("--room-prefix", default="lean", help="rooms are PREFIX-room0, ... (lean)")
+    ap.add_argument(
+        "--protocol", type=int, choices=(1, 2), default=2,
+        help="2: posecast.v2, pose records in one poses message per tick, as the SDKs; "
+        "1: posecast.v1, a pose message per avatar per tick (2)",
+    )  # fmt: skip
     asyncio.run(run(ap.parse_args(argv)))
     return 0
 

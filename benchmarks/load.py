@@ -15,9 +15,12 @@ The ramp's clients (``--clients``):
 
 * ``lean`` (the default): every player in one ``lean_clients.py`` process (one
   asyncio loop on ``websockets``; frames pre-encoded once per player, 60 Hz, seq
-  counting up; poses counted from their first bytes, never decoded), so that the load
-  generator takes as little of the server's CPU as it can: about 0.008 of a core per
-  player (0.15 at 20 players), against 0.025 for SDK clients. Rooms are filled in
+  counting up; poses counted, never decoded), so that the load generator takes as
+  little of the server's CPU as it can: about 0.008 of a core per player (0.15 at 20
+  players), against 0.025 for SDK clients. ``--protocol 2`` (the default) speaks
+  ``posecast.v2`` as the SDKs do (one ``poses`` message of pose records per tick, the
+  records counted by walking their lengths); ``--protocol 1`` speaks ``posecast.v1``
+  (a ``pose`` message per avatar per tick, counted from its first bytes). Rooms are filled in
   order across steps, so ``--room-size 8 --step 4`` really gives rooms of 8. It
   reports its own CPU (``process_time`` over wall time) and, per player, the poses
   received against the expected ``welcome.rate_hz x room members x seconds``.
@@ -120,7 +123,9 @@ class RampLoad:
         self.lean: LeanClients | None = None
         if args.clients == "lean":
             cpus, nice = args.client_cpus, args.client_nice
-            self.lean = LeanClients.start(server, workdir, args.room_size, cpus=cpus, nice=nice)
+            self.lean = LeanClients.start(
+                server, workdir, args.room_size, protocol=args.protocol, cpus=cpus, nice=nice
+            )
 
     def add(self, n: int) -> bool:
         """``n`` more players; whether every player has joined (the server's count)."""
@@ -162,6 +167,9 @@ def ramp(args: argparse.Namespace, workdir: Path) -> dict[str, Any]:
     rows: list[dict[str, Any]] = []
     failing = 0
     min_delivery = MIN_DELIVERY if args.clients == "lean" else None
+    clients = f"lean, posecast.v{args.protocol}" if args.clients == "lean" else args.clients
+    print(f"ramp: N={args.samples}, rooms of {args.room_size}, +{args.step} players a step, "
+          f"clients {clients}", flush=True)  # fmt: skip
     with serve(args.samples, workdir, args.server_arg, args.server_cpus) as server:
         load = RampLoad(args, server, workdir)
         try:
@@ -202,6 +210,7 @@ def ramp(args: argparse.Namespace, workdir: Path) -> dict[str, Any]:
     return {
         "mode": "ramp",
         "clients": args.clients,
+        "protocol": args.protocol if args.clients == "lean" else None,
         "samples": args.samples,
         "room_size": args.room_size,
         "step": args.step,
@@ -215,6 +224,12 @@ def ramp(args: argparse.Namespace, workdir: Path) -> dict[str, Any]:
         "client_failures": sum(len(s.get("failed", {})) for s in summaries),
         "version": version(),
     }
+
+
+def _clients(report: dict[str, Any]) -> str:
+    if report["clients"] == "lean":
+        return f"lean clients (posecast.v{report['protocol']})"
+    return f"{report['clients']} clients"
 
 
 def _pinning(args: argparse.Namespace) -> dict[str, Any]:
@@ -539,6 +554,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="lean: every player in one lean_clients.py process (pre-encoded frames, poses "
         "counted, not decoded); sdk: a posecast-sim process of SDK clients per step (lean)",
     )  # fmt: skip
+    r.add_argument(
+        "--protocol", type=int, choices=(1, 2), default=2,
+        help="lean clients' wire protocol: 2, posecast.v2 pose records (what the SDKs speak); "
+        "1, posecast.v1, one pose message per avatar per tick (2)",
+    )  # fmt: skip
     r.add_argument("--step", type=int, default=4, help="players added per step (4)")
     r.add_argument("--max-players", type=int, default=256, help="stop before passing this")
     r.add_argument("--settle", type=float, default=3.0, help="seconds after joining (3)")
@@ -569,7 +589,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.mode == "ramp":
             report = ramp(args, Path(tmp))
             print(
-                f"N={report['samples']}, rooms of {report['room_size']}: max sustainable "
+                f"N={report['samples']}, rooms of {report['room_size']}, "
+                f"{_clients(report)}: max sustainable "
                 f"{report['max_sustainable_players']} players ({report['criteria']})"
             )
             ok = report["server_alive"]

@@ -217,12 +217,13 @@ class LeanClients:
         workdir: Path,
         room_size: int,
         *,
+        protocol: int = 2,
         cpus: set[int] | None = None,
         nice: int = 0,
     ) -> LeanClients:
         log = workdir / "lean.log"
         cmd = [sys.executable, str(LEAN_CLIENTS), "--url", server.url, "--secret", SECRET,
-               "--room-size", str(room_size)]  # fmt: skip
+               "--room-size", str(room_size), "--protocol", str(protocol)]  # fmt: skip
         with log.open("wb") as err:
             proc = subprocess.Popen(
                 cmd,
@@ -279,6 +280,9 @@ class LeanClients:
         except subprocess.TimeoutExpired:
             self.proc.kill()
             self.proc.wait()
+        for pipe in (self.proc.stdin, self.proc.stdout):
+            if pipe is not None:
+                pipe.close()
         return final
 
 
@@ -377,7 +381,8 @@ def lean_window(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
     The server sends each of a room's poses to every member, the sender included, once
     per tick, so a player in a room of ``m`` members (itself included) at the room's pose
     rate ``r`` (``welcome.rate_hz``, 60) should receive ``r * m * dt`` poses in ``dt``
-    seconds (``dt`` on the generator's clock, read with the counts). ``delivery`` is
+    seconds (v1 ``pose`` messages; v2 records, ``m`` of them in each tick's ``poses``;
+    ``dt`` on the generator's clock, read with the counts). ``delivery`` is
     what all players received over what they all should have; ``delivery_worst`` the
     lowest player's share. Players that joined within the window are left out.
     """
