@@ -927,12 +927,10 @@ def _loopback_at(host: str) -> str | None:
     bind covers none. The server binds every address ``host`` resolves to, as asyncio
     resolves it (``''``: every interface, IPv4 and IPv6), each IPv6 one IPv6-only:
     ``::`` is reached at ``[::1]``, never at 127.0.0.1. What counts as loopback is the
-    viewer routes' own rule (``shell.http._is_loopback``, which refuses the others)."""
+    viewer routes' own rule (``shell.http.is_loopback_address``, which refuses the others)."""
     import ipaddress
-    from types import SimpleNamespace
-    from typing import cast
 
-    from posecast.online.shell.http import Peer, _is_loopback
+    from posecast.online.shell.http import is_loopback_address
 
     try:
         infos = socket.getaddrinfo(
@@ -944,7 +942,7 @@ def _loopback_at(host: str) -> str | None:
     for *_, sockaddr in infos:
         ip = ipaddress.ip_address(str(sockaddr[0]).split("%", 1)[0])
         at = ("127.0.0.1" if ip.version == 4 else "::1") if ip.is_unspecified else str(ip)
-        if _is_loopback(cast(Peer, SimpleNamespace(remote_address=(at, 0)))):
+        if is_loopback_address(at):
             reached.append(at)
     if not reached:
         return None

@@ -220,8 +220,13 @@ def _asset_gzip(name: str) -> bytes:
 
 def _is_loopback(connection: Peer) -> bool:
     addr = connection.remote_address
+    return addr is not None and is_loopback_address(str(addr[0]))
+
+
+def is_loopback_address(host: str) -> bool:
+    """Whether ``host`` is a loopback IP address (what the dev-only routes serve)."""
     try:
-        return addr is not None and ipaddress.ip_address(str(addr[0])).is_loopback
+        return ipaddress.ip_address(host).is_loopback
     except ValueError:
         return False
 
