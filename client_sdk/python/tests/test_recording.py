@@ -41,6 +41,16 @@ def walk_poses(seconds: float = 1.0, with_rotations: bool = True) -> list[Pose]:
     ]
 
 
+def write_looped(path: Path, poses: list[Pose], n: int) -> Path:
+    """A recording of ``n`` poses of one player at 60 Hz, ``poses`` looped."""
+    w = RecordingWriter(path, url="ws://x/", room="r", flush_every=1024)
+    for k in range(n):
+        p = poses[k % len(poses)]
+        w.write(Pose("p-1", k, k / 60.0, p.positions, p.rotations), now=k / 60.0)
+    w.close()
+    return path
+
+
 def test_write_then_read(tmp_path: Path) -> None:
     path = tmp_path / "r.pcrec"
     w = RecordingWriter(path, url="ws://x/", room="lobby", flush_every=2)
@@ -170,12 +180,7 @@ def test_a_recording_is_read_record_by_record_in_memory_that_does_not_grow(
     poses = walk_poses(1.0)
 
     def peak(n: int) -> int:
-        path = tmp_path / f"{n}.pcrec"
-        w = RecordingWriter(path, url="ws://x/", room="r", flush_every=1024)
-        for k in range(n):
-            p = poses[k % len(poses)]
-            w.write(Pose("p-1", k, k / 60.0, p.positions, p.rotations), now=k / 60.0)
-        w.close()
+        path = write_looped(tmp_path / f"{n}.pcrec", poses, n)
         tracemalloc.start()
         try:
             with open_recording(path) as reader:
@@ -247,12 +252,7 @@ def test_the_export_takes_memory_that_grows_by_bytes_a_pose(
     poses = walk_poses(1.0)
 
     def peak(n: int) -> int:
-        path = tmp_path / f"{n}.pcrec"
-        w = RecordingWriter(path, url="ws://x/", room="r", flush_every=1024)
-        for k in range(n):
-            p = poses[k % len(poses)]
-            w.write(Pose("p-1", k, k / 60.0, p.positions, p.rotations), now=k / 60.0)
-        w.close()
+        path = write_looped(tmp_path / f"{n}.pcrec", poses, n)
         gc.collect()
         tracemalloc.start()
         try:
