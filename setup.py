@@ -15,6 +15,7 @@ SOURCES = [
     "server/native/pc_isa_avx512.c",
     "server/native/pc_isa_avx512bf16.c",
     "server/native/pc_upper.c",
+    "server/native/pc_records.c",
 ]
 
 setup(
@@ -23,6 +24,7 @@ setup(
             "posecast._native",
             sources=SOURCES,
             depends=["server/native/pc_kernels.h", "server/native/pc_impl.h", "server/native/pc_upper.h",
+                     "server/native/pc_records.h",
                      "server/native/pc_geom.h"],
             include_dirs=["server/native"],
             extra_compile_args=["-O3", "-std=gnu11", "-fno-math-errno", "-Wall", "-Wextra",

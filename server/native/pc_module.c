@@ -19,6 +19,7 @@
 #include <string.h>
 
 #include "pc_kernels.h"
+#include "pc_records.h"
 #include "pc_upper.h"
 
 /* --- levels ---------------------------------------------------------------------- */
@@ -727,6 +728,61 @@ static PyObject *py_pool_stats(PyObject *self, PyObject *noargs) {
     return out;
 }
 
+static PyObject *py_encode_deltas(PyObject *self, PyObject *args) {
+    PyObject *o[14];
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOO", &o[0], &o[1], &o[2], &o[3], &o[4], &o[5], &o[6], &o[7],
+                          &o[8], &o[9], &o[10], &o[11], &o[12], &o[13]))
+        return NULL;
+    Buf b[14];
+    memset(b, 0, sizeof(b));
+    PcDeltaArgs a;
+    if (get_buf(o[0], &b[0], "parents", I64, PC_REC_ITEMS, 0) || get_buf(o[1], &b[1], "seq", I64, -1, 0))
+        goto fail;
+    Py_ssize_t M = b[1].view.len / 8;
+    if (get_buf(o[2], &b[2], "ref_seq", I64, M, 0) || get_buf(o[3], &b[3], "flags", I64, M, 0) ||
+        get_buf(o[4], &b[4], "ref_items", F64, M * PC_REC_ITEMS * 4, 0) ||
+        get_buf(o[5], &b[5], "step_rot", I64, M * PC_REC_ITEMS * 3, 0) ||
+        get_buf(o[6], &b[6], "world", F64, M * PC_REC_ITEMS * 4, 0) ||
+        get_buf(o[7], &b[7], "ref_root", I64, M * 3, 0) || get_buf(o[8], &b[8], "step_root", I64, M * 3, 0) ||
+        get_buf(o[9], &b[9], "root", I64, M * 3, 0) ||
+        get_buf(o[10], &b[10], "new_items", F64, M * PC_REC_ITEMS * 4, 1) ||
+        get_buf(o[11], &b[11], "d_rot", I64, M * PC_REC_ITEMS * 3, 1) ||
+        get_buf(o[12], &b[12], "body", "B", 1, M * PC_REC_MAX_BYTES, 1) ||
+        get_buf(o[13], &b[13], "len", I64, M, 1))
+        goto fail;
+    /* Parents before children, checked while the GIL is held. */
+    int64_t parents[PC_REC_ITEMS];
+    memcpy(parents, b[0].view.buf, sizeof(parents));
+    for (int j = 0; j < PC_REC_ITEMS; j++)
+        if (!(j == 0 ? parents[j] == -1 : parents[j] >= 0 && parents[j] < j)) {
+            PyErr_SetString(PyExc_ValueError, "parents: not a tree in joint order");
+            goto fail;
+        }
+    a.m = M;
+    a.parents = parents;
+    a.seq = b[1].view.buf;
+    a.ref_seq = b[2].view.buf;
+    a.flags = b[3].view.buf;
+    a.ref_items = b[4].view.buf;
+    a.step_rot = b[5].view.buf;
+    a.world = b[6].view.buf;
+    a.ref_root = b[7].view.buf;
+    a.step_root = b[8].view.buf;
+    a.root = b[9].view.buf;
+    a.new_items = b[10].view.buf;
+    a.d_rot = b[11].view.buf;
+    a.body = b[12].view.buf;
+    a.len = b[13].view.buf;
+    Py_BEGIN_ALLOW_THREADS;
+    pc_encode_deltas(&a);
+    Py_END_ALLOW_THREADS;
+    release(b, 14);
+    Py_RETURN_NONE;
+fail:
+    release(b, 14);
+    return NULL;
+}
+
 static PyMethodDef METHODS[] = {
     {"isa", py_isa, METH_NOARGS, "The instruction-set level in use."},
     {"isas", py_isas, METH_NOARGS, "Levels this CPU runs, best first."},
@@ -741,6 +797,7 @@ static PyMethodDef METHODS[] = {
     {"emit", py_emit, METH_VARARGS, "The shown poses: FK, display IK, quaternions."},
     {"upper_body", py_upper_body, METH_VARARGS, "Head and hands onto their trackers (upper_ik)."},
     {"hinge", py_hinge, METH_VARARGS, "Limbs onto their hinges, in place (hinge)."},
+    {"encode_deltas", py_encode_deltas, METH_VARARGS, "Protocol v2 delta records (records.encode_deltas)."},
     {NULL, NULL, 0, NULL},
 };
 

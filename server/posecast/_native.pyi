@@ -98,3 +98,20 @@ def emit(
     /,
 ) -> None: ...
 def pool_stats() -> tuple[int, ...]: ...
+def encode_deltas(
+    parents: Any,
+    seq: Any,
+    ref_seq: Any,
+    flags: Any,
+    ref_items: Any,
+    step_rot: Any,
+    world: Any,
+    ref_root: Any,
+    step_root: Any,
+    root: Any,
+    new_items: Any,
+    d_rot: Any,
+    body: Any,
+    length: Any,
+    /,
+) -> None: ...

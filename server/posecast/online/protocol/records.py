@@ -30,8 +30,8 @@ Glossary as in :mod:`posecast.geometry.rotations`: quaternions xyzw, Hamilton pr
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
+from types import ModuleType
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,6 +39,12 @@ from numpy.typing import NDArray
 from posecast.errors import BadFieldError, OutOfRangeError
 from posecast.online.protocol.messages import MAX_COORD_M, UINT32_MAX
 from posecast.skeleton import NUM_JOINTS, PARENTS, reference_offsets
+
+_native: ModuleType | None
+try:  # the C encoder of deltas (optional, as the native engine backend is)
+    from posecast import _native
+except ImportError:  # pragma: no cover - an install without a C compiler
+    _native = None
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -151,44 +157,46 @@ def bytes2skeleton(blob: bytes) -> F64:
 
 
 def smallest3_pack(q: F64) -> bytes:
-    """Quaternions ``(19, 4)`` -> 19 x 6 bytes.
+    """Quaternions ``(n, 4)`` -> n x 6 bytes.
 
     Each 48-bit little-endian word holds, from bit 0: three 15-bit two's-complement
     components (the quaternion without its largest-magnitude one, in xyzw order,
-    times 23168, rounded), the 2-bit index of the dropped component at bits 45-46,
-    and a zero bit 47. The quaternion's sign is chosen so the dropped one is positive.
+    times 23168, rounded half to even), the 2-bit index of the dropped component at
+    bits 45-46, and a zero bit 47. The quaternion's sign is chosen so the dropped one
+    is positive.
     """
-    idx = np.argmax(np.abs(q), axis=-1)  # (19,) the first largest on ties
+    n = len(q)
+    idx = np.argmax(np.abs(q), axis=-1)  # (n,) the first largest on ties
     sign = np.where(np.take_along_axis(q, idx[:, None], -1) < 0.0, -1.0, 1.0)
-    out = bytearray()
-    for i in range(len(q)):
-        k = int(idx[i])
-        rest = [q[i, c] * sign[i, 0] for c in range(4) if c != k]
-        word = k << 45
-        for n, c in enumerate(rest):
-            word |= (round(c * SMALLEST3_SCALE) & 0x7FFF) << (15 * n)
-        out += word.to_bytes(6, "little")
-    return bytes(out)
+    rest = (q * sign)[idx[:, None] != _COMPONENTS].reshape(n, 3)
+    c = np.rint(rest * SMALLEST3_SCALE).astype(np.int64) & 0x7FFF
+    word = idx.astype(np.int64) << 45 | c[:, 0] | c[:, 1] << 15 | c[:, 2] << 30
+    out: bytes = word.astype("<u8").view(np.uint8).reshape(n, 8)[:, :6].tobytes()
+    return out
 
 
 def smallest3_unpack(blob: bytes) -> F64:
-    """19 x 6 bytes -> quaternions ``(19, 4)``: the dropped component is
+    """n x 6 bytes -> quaternions ``(n, 4)``: the dropped component is
     ``sqrt(max(0, 1 - (a*a + b*b + c*c)))``; BAD_FIELD for a set bit 47."""
-    q = np.empty((len(blob) // 6, 4))
-    for i in range(len(q)):
-        word = int.from_bytes(blob[6 * i : 6 * i + 6], "little")
-        if word >> 47:
-            raise BadFieldError("a keyframe rotation has its reserved bit set", field="data")
-        k = word >> 45 & 3
-        comps: list[float] = []
-        for n in range(3):
-            bits = word >> (15 * n) & 0x7FFF
-            comps.append((bits - 0x8000 if bits & 0x4000 else bits) / SMALLEST3_SCALE)
-        a, b, c = comps
-        big = math.sqrt(max(0.0, 1.0 - (a * a + b * b + c * c)))
-        comps.insert(k, big)
-        q[i] = comps
+    n = len(blob) // 6
+    raw = np.zeros((n, 8), np.uint8)
+    raw[:, :6] = np.frombuffer(blob, np.uint8, 6 * n).reshape(n, 6)
+    word = raw.view("<u8")[:, 0].astype(np.int64)
+    if (word >> 47).any():
+        raise BadFieldError("a keyframe rotation has its reserved bit set", field="data")
+    bits = word[:, None] >> _SHIFTS & 0x7FFF  # (n, 3)
+    comps = np.where(bits & 0x4000, bits - 0x8000, bits) / SMALLEST3_SCALE
+    a, b, c = comps[:, 0], comps[:, 1], comps[:, 2]
+    big = np.sqrt(np.maximum(0.0, 1.0 - (a * a + b * b + c * c)))
+    dropped = (word >> 45 & 3)[:, None] == _COMPONENTS  # (n, 4)
+    q = np.empty((n, 4))
+    q[dropped] = big
+    q[~dropped] = comps.reshape(-1)
     return q
+
+
+_COMPONENTS = np.arange(4)
+_SHIFTS = np.array([0, 15, 30], np.int64)
 
 
 # --- the state a client reconstructs ------------------------------------------------------
@@ -389,6 +397,9 @@ def _levels() -> list[NDArray[np.intp]]:
     ]
 
 
+_PARENTS_ALL = np.array(PARENTS, np.int64)  # (19,) -1 for PELVIS
+DELTA_ENCODERS: tuple[str, ...] = ("native", "numpy") if _native is not None else ("numpy",)
+DELTA_ENCODER = DELTA_ENCODERS[0]  # the encoder the server uses: C where it loads
 _LEVELS = _levels()  # joints by depth: [PELVIS], [SPINE, LEFT_THIGH, RIGHT_THIGH], ...
 _PARENT_OF = np.array([max(p, 0) for p in PARENTS])
 
@@ -399,9 +410,75 @@ def encode_deltas(
     roots: list[tuple[int, int, int]],
     world: F64,
     flags: list[int],
+    encoder: str | None = None,
 ) -> list[tuple[bytes, Recon] | None]:
-    """:func:`encode_delta` of ``M`` poses at once (``world (M, 19, 4)``): one numpy pass
-    for the residuals, the width classes and the bit packing of all of them.
+    """:func:`encode_delta` of ``M`` poses at once (``world (M, 19, 4)``), by the
+    encoder named (``DELTA_ENCODERS``; by default :data:`DELTA_ENCODER`, ``native``
+    where the C extension loads)."""
+    name = DELTA_ENCODER if encoder is None else encoder
+    if name == "native":
+        return _encode_deltas_native(refs, seqs, roots, world, flags)
+    if name == "numpy":
+        return _encode_deltas_numpy(refs, seqs, roots, world, flags)
+    raise ValueError(f"no delta encoder {name!r}: one of {', '.join(DELTA_ENCODERS)}")
+
+
+def _encode_deltas_native(
+    refs: list[Recon],
+    seqs: list[int],
+    roots: list[tuple[int, int, int]],
+    world: F64,
+    flags: list[int],
+) -> list[tuple[bytes, Recon] | None]:
+    """:func:`_encode_deltas_numpy` in C (``server/native/pc_records.c``), the same
+    operations in the same order, one pose at a time; the GIL is released meanwhile."""
+    assert _native is not None
+    m = len(refs)
+    if not m:
+        return []
+    new_items = np.empty((m, NUM_ITEMS, 4))
+    d_rot = np.empty((m, NUM_ITEMS, 3), np.int64)
+    body = np.empty((m, _MAX_DELTA_BYTES), np.uint8)
+    length = np.empty(m, np.int64)
+    _native.encode_deltas(
+        _PARENTS_ALL,
+        np.array(seqs, np.int64),
+        np.array([r.seq for r in refs], np.int64),
+        np.array(flags, np.int64),
+        np.stack([r.items for r in refs]),
+        np.stack([r.step_rot for r in refs]).astype(np.int64, copy=False),
+        np.ascontiguousarray(world, dtype=np.float64),
+        np.array([r.root for r in refs], np.int64),
+        np.array([r.step_root for r in refs], np.int64),
+        np.array(roots, np.int64),
+        new_items,
+        d_rot,
+        body,
+        length,
+    )
+    blob = body.tobytes()
+    lens: list[int] = length.tolist()
+    out: list[tuple[bytes, Recon] | None] = []
+    for i, (ref, n) in enumerate(zip(refs, lens, strict=True)):
+        if not n:
+            out.append(None)
+            continue
+        root = roots[i]
+        d = (root[0] - ref.root[0], root[1] - ref.root[1], root[2] - ref.root[2])
+        at = i * _MAX_DELTA_BYTES
+        out.append((blob[at : at + n], Recon(seqs[i], root, new_items[i], d, d_rot[i])))
+    return out
+
+
+def _encode_deltas_numpy(
+    refs: list[Recon],
+    seqs: list[int],
+    roots: list[tuple[int, int, int]],
+    world: F64,
+    flags: list[int],
+) -> list[tuple[bytes, Recon] | None]:
+    """The reference encoder: one numpy pass for the residuals, the width classes and
+    the bit packing of all ``M`` poses.
 
     Each item's residual is taken against the prediction ``q_ref * exp(v * step)`` and
     aims at the *reconstructed* parent: item ``j`` targets ``conj(W'[parent]) *
