@@ -35,6 +35,7 @@ from posecast.online.protocol import (
     Selector,
     Skeleton,
     Welcome,
+    codec,
     decode,
     encode,
     from_wire,
@@ -223,6 +224,30 @@ def test_pose_encoder_refuses_what_int16_cannot_hold() -> None:
     with pytest.raises(ProtocolError) as info:
         encode(Pose("p", 1, 0.0, np.zeros((19, 3)), np.full((19, 4), 2.0)))
     assert info.value.code == "NOT_NORMALISED"
+
+
+def test_a_ticks_poses_encode_in_one_pass_as_one_at_a_time(rng: np.random.Generator) -> None:
+    """codec.encode_poses (the engine thread's) writes the bytes encode(Pose) writes,
+    float32 engine output included, and refuses what encode refuses, pose by pose."""
+    e = 9
+    pos = (rng.normal(size=(e, 19, 3)) * 0.5 + [0, 1, 0]).astype(np.float32)
+    pos += rng.uniform(-900, 900, size=(e, 1, 3)).astype(np.float32)  # anywhere in the world
+    q = rng.normal(size=(e, 19, 4))
+    rot = (q / np.linalg.norm(q, axis=-1, keepdims=True)).astype(np.float32)
+    pos[2, 7, 0] = pos[2, 0, 0] + 32.768  # a joint beyond int16 millimetres
+    pos[4, 3, 1] = np.nan
+    rot[6, 5] = 2.0  # far from unit length
+    players, seqs = [f"p-{i}" for i in range(e)], [2**32 - 1 - i for i in range(e)]
+    got = codec.encode_poses(players, seqs, 12.25, pos, rot)
+    refused = 0
+    for i in range(e):
+        one = Pose(players[i], seqs[i], 12.25, pos[i].astype(np.float64), rot[i].astype(np.float64))
+        try:
+            want: bytes | None = encode(one)
+        except ProtocolError:
+            want, refused = None, refused + 1
+        assert got[i] == want, i
+    assert refused == 3 and [i for i, b in enumerate(got) if b is None] == [2, 4, 6]
 
 
 def test_frame_errors_carry_the_seq() -> None:

@@ -22,6 +22,8 @@ import struct
 from typing import Any, NoReturn
 
 import msgpack
+import numpy as np
+from numpy.typing import NDArray
 
 from posecast.errors import (
     BadFieldError,
@@ -30,6 +32,7 @@ from posecast.errors import (
     TooLargeError,
     UnknownTypeError,
 )
+from posecast.online.protocol import quantize
 from posecast.online.protocol.messages import (
     DEFAULT_LIMITS,
     MAX_ARRAY_LEN,
@@ -57,6 +60,28 @@ def encode(msg: Message) -> bytes:
     pelvis, or a rotation far from unit length, raises :class:`ProtocolError`.
     """
     out: bytes = msgpack.packb(to_wire(msg), use_bin_type=True)
+    return out
+
+
+def encode_poses(
+    players: list[str], seqs: list[int], t: float, positions: NDArray[Any], rotations: NDArray[Any]
+) -> list[bytes | None]:
+    """:func:`encode` of one tick's ``pose`` messages, the same bytes as one
+    :class:`~posecast.online.protocol.messages.Pose` at a time, quantised in one numpy
+    pass (``positions (E, 19, 3)``, ``rotations (E, 19, 4)``); ``None`` for a pose that
+    quantising refuses (where :func:`encode` raises)."""
+    pos = np.asarray(positions, dtype=np.float64)
+    roots, offsets = quantize.pos2mm_many(pos)
+    rots = quantize.quat2snorm_many(np.asarray(rotations, dtype=np.float64))
+    tf = float(t)
+    out: list[bytes | None] = []
+    for player, seq, root, pos_mm, rot in zip(players, seqs, roots, offsets, rots, strict=True):
+        if pos_mm is None or rot is None:
+            out.append(None)
+            continue
+        d = {"type": "pose", "player": player, "seq": seq, "t": tf, "root": root}
+        d["pos_mm"], d["rot"] = pos_mm, rot
+        out.append(msgpack.packb(d, use_bin_type=True))
     return out
 
 

@@ -50,6 +50,28 @@ def pos2mm(positions: ArrayLike) -> tuple[list[float], bytes]:
     return root.tolist(), mm.astype(_I16).tobytes()
 
 
+def pos2mm_many(positions: F64) -> tuple[list[list[float]], list[bytes | None]]:
+    """:func:`pos2mm` of ``E`` poses at once (``positions (E, 19, 3)`` float64): the
+    roots, and each pose's offset bytes or ``None`` where :func:`pos2mm` refuses it."""
+    roots = positions[:, 0]
+    mm = np.rint((positions[:, 1:] - roots[:, None]) / POS_UNIT_M)  # (E, 18, 3)
+    ok: NDArray[np.bool_] = np.all(np.abs(mm) <= _I16_MAX, axis=(1, 2))  # NaN fails too
+    blob = np.where(ok[:, None, None], mm, 0.0).astype(_I16).tobytes()
+    return roots.tolist(), _rows(blob, POS_BYTES, ok)
+
+
+def quat2snorm_many(quats: F64) -> list[bytes | None]:
+    """:func:`quat2snorm` of ``E`` poses at once (``quats (E, 19, 4)`` float64); ``None``
+    where :func:`quat2snorm` refuses a pose."""
+    s = np.rint(quats * ROT_SCALE)
+    ok: NDArray[np.bool_] = np.all(np.abs(s) <= _I16_MAX, axis=(1, 2))  # NaN fails too
+    return _rows(np.where(ok[:, None, None], s, 0.0).astype(_I16).tobytes(), ROT_BYTES, ok)
+
+
+def _rows(blob: bytes, size: int, ok: NDArray[np.bool_]) -> list[bytes | None]:
+    return [blob[i * size : (i + 1) * size] if good else None for i, good in enumerate(ok.tolist())]
+
+
 def mm2pos(root: ArrayLike, blob: bytes) -> F64:
     """``(root [3], 108 offset bytes)`` -> world positions ``(19, 3)`` metres."""
     r = np.asarray(root, dtype=np.float64)

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from types import ModuleType
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -289,8 +290,8 @@ class PoseState:
         players: list[str],
         seqs: list[int],
         t: float,
-        positions: F64,
-        rotations: F64,
+        positions: NDArray[np.floating[Any]],
+        rotations: NDArray[np.floating[Any]],
         scales: list[float],
         reach_limited: list[bool],
     ) -> list[PoseState | None]:

@@ -24,11 +24,9 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from posecast.errors import ProtocolError
 from posecast.online.core.tick import EngineOp, TickInput, TickOutput
 from posecast.online.engine.multi import MultiEngine
-from posecast.online.protocol.codec import encode
-from posecast.online.protocol.messages import Pose
+from posecast.online.protocol.codec import encode_poses
 from posecast.online.protocol.records import PoseState
 
 log = logging.getLogger("posecast.ticker")
@@ -60,29 +58,26 @@ class EngineWorker:
         # one pose per source frame: nothing new over a gap or when stale
         states: dict[str, PoseState] = {}
         if shown:
+            players, seqs = [p.player for p in shown], [p.seq for p in shown]
+            positions = np.stack([p.positions for p in shown])
+            rotations = np.stack([p.rotations for p in shown])
             batch = PoseState.batch(
-                [p.player for p in shown],
-                [p.seq for p in shown],
+                players,
+                seqs,
                 server_t,
-                np.stack([p.positions for p in shown]),
-                np.stack([p.rotations for p in shown]),
+                positions,
+                rotations,
                 [p.scale for p in shown],
                 [p.reach_limited for p in shown],
             )
             states = {st.player: st for st in batch if st is not None}
-        for p in shown:
-            limited += p.reach_limited
-            pose = Pose(
-                player=p.player,
-                seq=p.seq,
-                t=server_t,
-                positions=p.positions.astype(np.float64),
-                rotations=p.rotations.astype(np.float64),
-            )
-            try:
-                poses.append((p.player, encode(pose)))
-            except ProtocolError:
-                self.unencodable += 1
+            encoded = encode_poses(players, seqs, server_t, positions, rotations)
+            for p, data in zip(shown, encoded, strict=True):
+                limited += p.reach_limited
+                if data is None:  # quantising refused it (a joint 32 m from the pelvis)
+                    self.unencodable += 1
+                else:
+                    poses.append((p.player, data))
         return TickOutput(
             poses,
             result.events,
