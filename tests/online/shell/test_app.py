@@ -282,3 +282,22 @@ def test_http_endpoints_and_connection_limits(engine_factory: Factory) -> None:
             assert (await asyncio.to_thread(get, base + "/readyz"))[0] == 503
 
     run(scenario())
+
+
+def test_port_zero_is_one_port_on_every_address(engine_factory: Factory) -> None:
+    """``--host "" --port 0`` listens on every IPv4 and IPv6 interface; each address
+    got its own ephemeral port, and the port the server names reached one of them."""
+
+    async def scenario() -> None:
+        async with serving(make_cfg(host=""), engine_factory) as server:
+            assert server._server is not None
+            ports = {sock.getsockname()[1] for sock in server._server.sockets}
+            assert ports == {server.port}
+            families = {sock.family for sock in server._server.sockets}
+            for family, host in ((socket.AF_INET, "127.0.0.1"), (socket.AF_INET6, "::1")):
+                if family in families:  # the named port answers on each family it serves
+                    with socket.socket(family) as probe:
+                        probe.settimeout(5)
+                        probe.connect((host, server.port))
+
+    run(scenario())

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
 import logging
 import signal
 import socket
@@ -128,26 +129,9 @@ class PosecastServer:
 
     async def start(self) -> None:
         loop = asyncio.get_running_loop()
-        self._server = await serve(
-            self._handle,
-            self.cfg.host,
-            self.cfg.port,
-            process_request=self.http,
-            create_connection=_paced_connection(
-                *self._read_pace(),
-                paced=self.metrics.reads_paced.inc,
-                sockets=SocketCount(self.cfg.sockets_per_ip),
-                refused=self.metrics.connects.labels("ip_sockets").inc,
-            ),
-            # The highest version the client offers (posecast.v2, then posecast.v1); a
-            # client offering neither gets HTTP 400. v1 clients keep working unchanged.
-            subprotocols=[Subprotocol(SUBPROTOCOLS[v]) for v in sorted(SUBPROTOCOLS, reverse=True)],
-            compression=None,  # poses are quantised binary; deflate per client costs CPU
-            max_size=max(4 * self.cfg.max_message_bytes, 65_536),  # the codec says TOO_LARGE
-            max_queue=64,
-            open_timeout=self.cfg.hello_timeout_s,
-            close_timeout=self.cfg.close_timeout_s,
-        )
+        self._server = await self._listen(self.cfg.port)
+        if self.cfg.port == 0:
+            self._server = await self._one_port(self._server)
         self.port = self._server.sockets[0].getsockname()[1]
         engine = await loop.run_in_executor(self.executor, self._engine_factory)
         if isinstance(engine, Engine):  # one model: its layout's batch only
@@ -171,6 +155,48 @@ class PosecastServer:
         log.info(
             "listening", extra={"host": self.cfg.host, "port": self.port, "node": self.bus.node}
         )
+
+    async def _listen(self, port: int) -> Server:
+        return await serve(
+            self._handle,
+            self.cfg.host,
+            port,
+            process_request=self.http,
+            create_connection=_paced_connection(
+                *self._read_pace(),
+                paced=self.metrics.reads_paced.inc,
+                sockets=SocketCount(self.cfg.sockets_per_ip),
+                refused=self.metrics.connects.labels("ip_sockets").inc,
+            ),
+            # The highest version the client offers (posecast.v2, then posecast.v1); a
+            # client offering neither gets HTTP 400. v1 clients keep working unchanged.
+            subprotocols=[Subprotocol(SUBPROTOCOLS[v]) for v in sorted(SUBPROTOCOLS, reverse=True)],
+            compression=None,  # poses are quantised binary; deflate per client costs CPU
+            max_size=max(4 * self.cfg.max_message_bytes, 65_536),  # the codec says TOO_LARGE
+            max_queue=64,
+            open_timeout=self.cfg.hello_timeout_s,
+            close_timeout=self.cfg.close_timeout_s,
+        )
+
+    async def _one_port(self, server: Server, tries: int = 5) -> Server:
+        """With ``--port 0`` a host of several addresses (``""``: every IPv4 and IPv6
+        interface) got an ephemeral port per address, and the port the log names would
+        reach only one of them: listen again on the first one's port for all (another
+        ephemeral port where some address has it taken meanwhile)."""
+        for _ in range(tries):
+            ports = {sock.getsockname()[1] for sock in server.sockets}
+            if len(ports) <= 1:
+                return server
+            port = server.sockets[0].getsockname()[1]
+            server.close()
+            await server.wait_closed()
+            try:
+                server = await self._listen(port)
+            except OSError:  # taken on another address in between: a new port for all
+                server = await self._listen(0)
+        server.close()
+        await server.wait_closed()
+        raise OSError(errno.EADDRINUSE, f"no one free port on every address of {self.cfg.host!r}")
 
     async def stop(self) -> None:
         """Graceful shutdown: stop accepting, ``bye`` to all, drain, close."""
