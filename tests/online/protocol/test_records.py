@@ -143,6 +143,15 @@ def test_the_server_encodes_with_the_first_encoder_that_loads() -> None:
         records.encode_deltas([], [], [], np.zeros((0, 19, 4)), [], encoder="fast")
 
 
+def test_an_install_without_the_extension_names_only_numpy(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Asked for ``native`` where the C extension did not load: a ValueError naming
+    what there is, not an AssertionError from inside the encoder."""
+    monkeypatch.setattr(records, "DELTA_ENCODERS", ("numpy",))
+    monkeypatch.setattr(records, "_native", None)
+    with pytest.raises(ValueError, match="no delta encoder 'native': one of numpy"):
+        records.encode_deltas([], [], [], np.zeros((0, 19, 4)), [], encoder="native")
+
+
 def _pack_word_by_word(q: np.ndarray) -> bytes:
     """The smallest-three layout read off proto/README.md, one word at a time."""
     out = bytearray()

@@ -417,11 +417,11 @@ def encode_deltas(
     encoder named (``DELTA_ENCODERS``; by default :data:`DELTA_ENCODER`, ``native``
     where the C extension loads)."""
     name = DELTA_ENCODER if encoder is None else encoder
+    if name not in DELTA_ENCODERS:  # native too, where the extension did not load
+        raise ValueError(f"no delta encoder {name!r}: one of {', '.join(DELTA_ENCODERS)}")
     if name == "native":
         return _encode_deltas_native(refs, seqs, roots, world, flags)
-    if name == "numpy":
-        return _encode_deltas_numpy(refs, seqs, roots, world, flags)
-    raise ValueError(f"no delta encoder {name!r}: one of {', '.join(DELTA_ENCODERS)}")
+    return _encode_deltas_numpy(refs, seqs, roots, world, flags)
 
 
 def _encode_deltas_native(
