@@ -94,6 +94,7 @@ static void encode_one(const PcDeltaArgs *a, int64_t i) {
     double *items = a->new_items + i * PC_REC_ITEMS * 4;
     int64_t *d_rot = a->d_rot + i * PC_REC_ITEMS * 3;
     double new_world[PC_REC_ITEMS][4];
+    int finite = 1;
     int64_t res[PC_REC_ITEMS + 1][3]; /* the root's residual, then the rotations' */
     for (int j = 0; j < PC_REC_ITEMS; j++) {
         /* The prediction: the reference times its last step. */
@@ -116,7 +117,14 @@ static void encode_one(const PcDeltaArgs *a, int64_t i) {
         int64_t *r = res[j + 1];
         double rv[3], er[4], q[4];
         for (int c = 0; c < 3; c++) {
-            r[c] = (int64_t)rint(w[c] / ROT_STEP_RAD);
+            double steps = rint(w[c] / ROT_STEP_RAD);
+            /* A NaN (a degenerate pose) has no integer: converting it is undefined in C
+             * (numpy gives INT64_MIN). Such a pose does not fit a delta. */
+            if (!(fabs(steps) <= 1e9)) {
+                steps = 0.0;
+                finite = 0;
+            }
+            r[c] = (int64_t)steps;
             rv[c] = (double)r[c] * ROT_STEP_RAD;
         }
         rotvec2quat(rv, er);
@@ -135,7 +143,7 @@ static void encode_one(const PcDeltaArgs *a, int64_t i) {
     memset(body, 0, PC_REC_MAX_BYTES);
     a->len[i] = 0;
     int64_t dseq = (a->seq[i] - a->ref_seq[i]) & 0xFFFFFFFFLL;
-    if (dseq < 1 || dseq > 255) return;
+    if (dseq < 1 || dseq > 255 || !finite) return;
     Bits b = {body + 2, 0};
     for (int k = 0; k <= PC_REC_ITEMS; k++) {
         const int *widths = k == 0 ? ROOT_WIDTHS : ROT_WIDTHS;

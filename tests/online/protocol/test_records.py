@@ -186,3 +186,20 @@ def test_smallest_three_packs_and_unpacks_as_the_spec_reads() -> None:
     bad[5] |= 0x80
     with pytest.raises(BadFieldError, match="reserved bit"):
         records.smallest3_unpack(bytes(bad))
+
+
+@needs_native
+def test_a_rotation_step_without_an_integer_is_no_delta() -> None:
+    """A pelvis rotation with an infinite component (a degenerate pose) has a residual
+    of no integer steps (NaN): converting that is undefined in C (numpy gives
+    INT64_MIN), so the pose makes no delta and the server sends a keyframe instead."""
+    rng = np.random.default_rng(9)
+    world = _unit(rng, (2, 19))
+    states = PoseState.batch(
+        ["a", "b"], [1, 1], 0.0, np.zeros((2, 19, 3)), world, [1.0] * 2, [0, 0]
+    )
+    refs = [s.keyframe()[1] for s in states if s is not None]
+    bad = world.copy()
+    bad[1, 0] = [np.inf, 0.0, 0.0, 1.0]
+    got = records.encode_deltas(refs, [2, 2], [refs[0].root] * 2, bad, [0, 0], encoder="native")
+    assert got[0] is not None and got[1] is None
