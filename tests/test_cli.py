@@ -928,6 +928,12 @@ def test_serve_writes_an_ipv6_host_in_brackets(capsys, monkeypatch) -> None:
     assert out == ["posecast: listening on ws://[::]:8765"]
 
 
+def test_serve_names_both_families_for_every_interface(capsys, monkeypatch) -> None:
+    # --host "" (every IPv4 and IPv6 interface) printed ws://:8765, which names neither.
+    out = _serve_output(monkeypatch, capsys, ["--host", ""], {"POSECAST_TOKEN_SECRET": "k" * 32})
+    assert out == ["posecast: listening on ws://0.0.0.0:8765 and ws://[::]:8765"]
+
+
 @pytest.mark.parametrize("host", ["::", "::1", "0.0.0.0", "127.0.0.1", "localhost"])
 def test_serve_dev_prints_urls_that_reach_the_bound_server(host: str) -> None:
     """``--host ::`` printed 127.0.0.1, but asyncio binds ``::`` IPv6-only: nothing

@@ -882,9 +882,11 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         print(f"posecast: --dev: token secret for this run: {cfg.token_secret}", flush=True)
 
     def ready(port: int) -> None:
-        # An IPv6 host in brackets, as a URL writes it (ws://[::]:8765, not ws://:::8765).
+        # An IPv6 host in brackets, as a URL writes it (ws://[::]:8765, not ws://:::8765);
+        # "" is every IPv4 and every IPv6 interface (ws://:8765 named neither).
         host = f"[{cfg.host}]" if ":" in cfg.host else cfg.host
-        print(f"posecast: listening on ws://{host}:{port}", flush=True)
+        where = f"ws://{host}:{port}" if host else f"ws://0.0.0.0:{port} and ws://[::]:{port}"
+        print(f"posecast: listening on {where}", flush=True)
         if cfg.dev:
             secret = cfg.token_secret if invented else None
             print("\n".join(_dev_lines(cfg.host, port, secret)), flush=True)
