@@ -170,6 +170,14 @@ def one_frame(kind: str, seq: int, t_us: int) -> bytes:
     return encode_serial_sites(seq, t_us, ["head"], np.zeros((1, 3)), np.array([[0, 0, 0, 1.0]]))
 
 
+def _assert_carried_on(samples: list[TrackerSample], period_us: int, atol: float) -> None:
+    """Three samples from seq 40, a device reset, three from seq 0: seq carries on by
+    one and device_t by one device period a step (the serial and HID cases alike)."""
+    assert [s.device_seq for s in samples] == [40, 41, 42, 43, 44, 45]
+    times = [s.device_t for s in samples if s.device_t is not None]
+    np.testing.assert_allclose(np.diff(times), [period_us * 1e-6] * 5, rtol=0, atol=atol)
+
+
 @pytest.mark.parametrize("kind", ["slots", "sites"])
 @pytest.mark.parametrize("uptime_s", [5.0, 3000.0, 864_000.0])
 def test_a_serial_device_reset_carries_the_counters_on(kind: str, uptime_s: float) -> None:
@@ -184,9 +192,7 @@ def test_a_serial_device_reset_carries_the_counters_on(kind: str, uptime_s: floa
     for k in range(3):
         got += dec.feed(one_frame(kind, k, (k + 1) * SERIAL_PERIOD_US), host + (3 + k) / 120)
     assert len(got) == 6 and dec.stats.samples == 6
-    assert [s.device_seq for s in got] == [40, 41, 42, 43, 44, 45]
-    steps = np.diff([s.device_t for s in got if s.device_t is not None])
-    np.testing.assert_allclose(steps, [SERIAL_PERIOD_US * 1e-6] * 5, rtol=0, atol=1e-6)
+    _assert_carried_on(got, SERIAL_PERIOD_US, atol=1e-6)
     assert dec.stats.device_resets == 1
 
 
@@ -195,9 +201,7 @@ def test_serial_without_host_times_a_clock_that_steps_back_is_a_reset() -> None:
     frames = [one_frame("slots", 40 + k, 5_000_000 + k * SERIAL_PERIOD_US) for k in range(3)]
     frames += [one_frame("slots", k, (k + 1) * SERIAL_PERIOD_US) for k in range(3)]
     got = dec.feed(b"".join(frames))  # one read, no host time
-    assert [s.device_seq for s in got] == [40, 41, 42, 43, 44, 45]
-    times = [s.device_t for s in got if s.device_t is not None]
-    np.testing.assert_allclose(np.diff(times), [SERIAL_PERIOD_US * 1e-6] * 5, rtol=0, atol=1e-9)
+    _assert_carried_on(got, SERIAL_PERIOD_US, atol=1e-9)
     assert dec.stats.device_resets == 1
 
 
@@ -439,9 +443,7 @@ def test_a_device_reset_under_an_open_handle_carries_the_counters_on(
     ]
     samples = [s for s in got if s is not None]
     assert len(samples) == 6 and dec.stats.samples == 6
-    assert [s.device_seq for s in samples] == [40, 41, 42, 43, 44, 45]
-    steps = np.diff([s.device_t for s in samples if s.device_t is not None])
-    np.testing.assert_allclose(steps, [PERIOD_US * 1e-6] * 5, rtol=0, atol=1e-6)
+    _assert_carried_on(samples, PERIOD_US, atol=1e-6)
     assert dec.stats.device_resets == 1
 
 
@@ -450,9 +452,7 @@ def test_without_host_times_a_clock_that_steps_back_is_a_reset() -> None:
     reports = [one_report("slots", 40 + k, 5_000_000 + k * PERIOD_US) for k in range(3)]
     reports += [one_report("slots", k, (k + 1) * PERIOD_US) for k in range(3)]
     samples = [dec.decode(r) for r in reports]
-    assert [s.device_seq for s in samples if s is not None] == [40, 41, 42, 43, 44, 45]
-    times = [s.device_t for s in samples if s is not None and s.device_t is not None]
-    np.testing.assert_allclose(np.diff(times), [PERIOD_US * 1e-6] * 5, rtol=0, atol=1e-9)
+    _assert_carried_on([s for s in samples if s is not None], PERIOD_US, atol=1e-9)
     assert dec.stats.device_resets == 1
 
 
