@@ -47,7 +47,7 @@ from posecast.online.protocol.messages import (
     Limits,
     Message,
 )
-from posecast.online.protocol.wire import DECODERS, ENCODERS
+from posecast.online.protocol.wire import DECODERS, ENCODERS, pose_map
 
 Map = dict[str, Any]
 
@@ -79,9 +79,7 @@ def encode_poses(
         if pos_mm is None or rot is None:
             out.append(None)
             continue
-        d = {"type": "pose", "player": player, "seq": seq, "t": tf, "root": root}
-        d["pos_mm"], d["rot"] = pos_mm, rot
-        out.append(msgpack.packb(d, use_bin_type=True))
+        out.append(msgpack.packb(pose_map(player, seq, tf, root, pos_mm, rot), use_bin_type=True))
     return out
 
 

@@ -43,11 +43,10 @@ def pos2mm(positions: ArrayLike) -> tuple[list[float], bytes]:
     p = np.asarray(positions, dtype=np.float64)
     if p.shape != (NUM_JOINTS, 3):
         raise ValueError(f"positions must be ({NUM_JOINTS}, 3), got {p.shape}")
-    root = p[0]
-    mm = np.rint((p[1:] - root) / POS_UNIT_M)  # (18, 3)
-    if not (np.abs(mm) <= _I16_MAX).all():
+    roots, offsets = pos2mm_many(p[None])
+    if offsets[0] is None:
         raise OutOfRangeError("a joint is more than 32.767 m from the pelvis", field="pos_mm")
-    return root.tolist(), mm.astype(_I16).tobytes()
+    return roots[0], offsets[0]
 
 
 def pos2mm_many(positions: F64) -> tuple[list[list[float]], list[bytes | None]]:
@@ -86,10 +85,10 @@ def quat2snorm(quats: ArrayLike) -> bytes:
     q = np.asarray(quats, dtype=np.float64)
     if q.shape != (NUM_JOINTS, 4):
         raise ValueError(f"rotations must be ({NUM_JOINTS}, 4), got {q.shape}")
-    s = np.rint(q * ROT_SCALE)
-    if not (np.abs(s) <= _I16_MAX).all():  # also catches NaN
+    blob = quat2snorm_many(q[None])[0]
+    if blob is None:  # a component past +-1 (or NaN)
         raise NotNormalisedError("a rotation is not a unit quaternion", field="rot")
-    return s.astype(_I16).tobytes()
+    return blob
 
 
 def snorm2quat(blob: bytes) -> F64:

@@ -325,10 +325,18 @@ def _member(p: Member) -> Map:
 
 def _enc_pose(p: Pose) -> Map:
     root, pos_mm = quantize.pos2mm(p.positions)
-    d = {"type": "pose", "player": p.player, "seq": p.seq, "t": float(p.t), "root": root}
+    rot = None if p.rotations is None else quantize.quat2snorm(p.rotations)
+    return pose_map(p.player, p.seq, float(p.t), root, pos_mm, rot)
+
+
+def pose_map(
+    player: str, seq: int, t: float, root: list[float], pos_mm: bytes, rot: bytes | None
+) -> Map:
+    """A quantised ``pose``'s wire map, keys in canonical order (``rot`` when given)."""
+    d: Map = {"type": "pose", "player": player, "seq": seq, "t": t, "root": root}
     d["pos_mm"] = pos_mm
-    if p.rotations is not None:
-        d["rot"] = quantize.quat2snorm(p.rotations)
+    if rot is not None:
+        d["rot"] = rot
     return d
 
 
