@@ -5,9 +5,9 @@ the server's handler, so the handler's read pacing (which counts messages) never
 them: one connection from 127.0.0.2 that sent nothing but pings, no token needed,
 took the event loop (the healthy players' tick fell to 16 Hz, 0.27 of baseline) and,
 not reading its pongs, piled them up in the server's memory (+400 MB in 18 s). The
-server now paces frames, control frames included (``shell/app.py``,
-``_paced_connection``): at most twice the protocol's rates are read, so at most that
-many pongs are written, and the flood waits on the flooder's side.
+server now counts frames from their headers before websockets parses them
+(``shell/paced.py``, read budgets): a few control frames a second are read, so at
+most that many pongs are written, and the flood waits on the flooder's side.
 
 The flooder is a raw socket in a process of its own (``python -m
 tests.reliability.test_hostile_control_frames PORT SECONDS READ``).

@@ -62,7 +62,24 @@ class Metrics:
         self.frames_in = Counter("posecast_frames", "Tracker frames accepted", registry=r)
         self.reads_paced = Counter(
             "posecast_reads_paced",
-            "Times a connection's reading paused: it sent faster than twice its limits",
+            "Times a connection's reading paused: it sent faster than its read budget",
+            registry=r,
+        )
+        self.frame_times_odd = Counter(
+            "posecast_frame_times_odd",
+            "Frames accepted whose t repeats, goes back, or jumps (proto/README.md, Time)",
+            ["kind"],
+            registry=r,
+        )
+        self.server_late = Counter(
+            "posecast_server_late_seconds",
+            "Seconds the timeout checks came late (event loop or tick held up); "
+            "the clients' timeouts stop for them",
+            registry=r,
+        )
+        self.floods_cut_off = Counter(
+            "posecast_floods_cut_off",
+            "Connections cut off (RATE_LIMITED) for staying past their read budget",
             registry=r,
         )
         self.frames_dropped = Counter(
@@ -83,7 +100,7 @@ class Metrics:
         self.bytes_out = Counter("posecast_bytes_out", "WebSocket payload bytes out", registry=r)
         self.clock_drift = Histogram(
             "posecast_clock_drift_ppm",
-            "Absolute client clock drift at session end, ppm",
+            "Absolute client clock drift at session end, ppm (capped at 10,000)",
             buckets=_DRIFT_BUCKETS,
             registry=r,
         )

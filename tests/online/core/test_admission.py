@@ -214,23 +214,55 @@ def test_non_fatal_error_replies_are_budgeted_but_all_counted() -> None:
     assert h.hub.metrics.value("posecast_errors_total", {"code": "FORBIDDEN"}) == 20
 
 
+def _ticks(h: Harness, start: float, until: float) -> None:
+    """check_timeouts once a tick from ``start`` to ``until``, as the ticker calls it."""
+    t = start
+    while t <= until:
+        h.hub.check_timeouts(t)
+        t += 1.0 / h.hub.cfg.tick_hz
+
+
 def test_timeouts_and_slow_consumers() -> None:
     h = Harness(hello_timeout_s=1.0, slow_consumer_s=2.0, idle_timeout_s=30.0)
     silent = h.hub.connect("10.0.0.2", h.now)
     slow = h.join("slow")
-    h.hub.check_timeouts(h.now + 1.5)
+    _ticks(h, h.now, h.now + 1.5)
     assert h.codes(silent) == ["TIMED_OUT"]
     box = h.hub.outbox(slow)
     assert box is not None
     box.take()  # the writer took the welcome and is stuck sending it
-    h.hub.check_timeouts(h.now + 2.5)
+    _ticks(h, h.now + 1.5, h.now + 2.5)
     assert slow in h.hub.pop_aborts()
     assert h.hub.metrics.value("posecast_errors_total", {"code": "SLOW_CONSUMER"}) == 1
     idle = h.join("idle")
     quiet = h.join("quiet", role="spectator")  # watchers only receive; pings keep them
     h.inbox(idle), h.inbox(quiet)
-    h.hub.check_timeouts(h.now + 31.0)
+    _ticks(h, h.now + 2.5, h.now + 31.0)
     assert h.codes(idle) == ["TIMED_OUT"] and h.codes(quiet) == []
+
+
+def test_a_server_stall_is_not_charged_to_its_clients() -> None:
+    """After the event loop or the tick was held up, the clients' timeouts leave that
+    time out: a writer that could not run was not a slow consumer, a hello or a frame
+    that waited in the kernel did not time out. Time that passes tick by tick still
+    counts (the test above)."""
+    h = Harness(hello_timeout_s=1.0, slow_consumer_s=2.0, idle_timeout_s=3.0)
+    silent = h.hub.connect("10.0.0.2", h.now)
+    slow = h.join("slow")
+    idle = h.join("idle")
+    h.inbox(idle)
+    box = h.hub.outbox(slow)
+    assert box is not None
+    box.take()  # in flight when the server stalls
+    h.hub.check_timeouts(h.now)
+    h.hub.check_timeouts(h.now + 5.0)  # the next check, 5 s later: the server was late
+    assert h.hub.pop_aborts() == set()
+    assert h.codes(silent) == [] and h.codes(idle) == []
+    assert h.hub.metrics.value("posecast_errors_total", {"code": "SLOW_CONSUMER"}) == 0
+    assert h.hub.metrics.value("posecast_server_late_seconds_total") > 4.9
+    _ticks(h, h.now + 5.0, h.now + 8.5)  # then time the clients own
+    assert slow in h.hub.pop_aborts()
+    assert h.codes(silent) == ["TIMED_OUT"]
 
 
 def test_shutdown_says_bye_to_everyone() -> None:

@@ -84,3 +84,57 @@ def test_node_clocks_drop_the_player_times_of_a_forgotten_node() -> None:
     c.local("c", 10.0 + FORGET_S, 100.0 + FORGET_S, "q")  # b silent since
     c.local("d", 0.0, 101.0 + FORGET_S)  # a new node: b is forgotten, with its players
     assert c.guarded == 1  # (c, q)
+
+
+def test_frames_that_queued_during_a_stall_are_judged_by_their_own_times() -> None:
+    from posecast.online.core.clock import FrameTimes
+
+    ft = FrameTimes()
+    offset = 500.0  # the server's clock is 500 s ahead of the client's
+    judged = [ft.judge(k / 60, offset + k / 60 + 0.003)[0] for k in range(60)]
+    # a 3 s stall: the next 180 frames all reach the event loop at once
+    arrive = offset + 60 / 60 + 3.0
+    burst = [ft.judge(k / 60, arrive) for k in range(60, 240)]
+    assert [odd for _, odd in burst] == [None] * 180
+    times = np.array(judged + [j for j, _ in burst])
+    np.testing.assert_allclose(np.diff(times), 1 / 60, atol=1e-9)  # spaced as sampled
+    assert times[-1] <= arrive
+
+
+def test_a_frame_clock_that_runs_ahead_or_lies_gains_nothing_over_arrival() -> None:
+    from posecast.online.core.clock import FrameTimes
+
+    ft = FrameTimes()
+    last = float("-inf")
+    for k in range(1000):
+        now = 10.0 + k * 0.001  # 1,000 frames a second
+        judged, _ = ft.judge(k * 0.1, now)  # claiming 10 Hz-spaced... at 100x speed
+        assert last <= judged <= now
+        last = judged
+
+
+@pytest.mark.parametrize(
+    ("t2", "odd"),
+    [(1.0, "repeat"), (0.9, "backwards"), (-5.0, "jump"), (1e6, "jump"), (1.0 + 1 / 60, None)],
+)
+def test_odd_frame_times_are_named_and_judged_on_arrival(t2: float, odd: str | None) -> None:
+    from posecast.online.core.clock import FrameTimes
+
+    ft = FrameTimes()
+    ft.judge(1.0, 100.0)
+    judged, got = ft.judge(t2, 100.5)
+    assert got == odd
+    assert judged == (100.5 if odd else pytest.approx(100.0 + 1 / 60))
+
+
+def test_a_client_clock_set_ahead_starts_a_new_epoch_and_no_absurd_drift() -> None:
+    """One session whose frame times jumped 1e6 s ahead added 1.08e16 ppm to the drift
+    histogram's sum: the estimator fitted one line across the jump."""
+    clock = ClockEstimator()
+    for i in range(60 * 10):
+        clock.add(1000.0 + i / 60, i / 60)
+    for i in range(60 * 10, 60 * 20):
+        clock.add(1000.0 + i / 60, i / 60 + 1e6)
+    assert clock.offset_s == pytest.approx(1000.0 - 1e6, abs=0.01)
+    drift = clock.drift_ppm
+    assert drift is None or abs(drift) < 1.0

@@ -318,3 +318,34 @@ def test_a_sets_tpose_calibrates_every_present_site() -> None:
 
     with pytest.raises(BadFieldError):
         s.handle(Calibrate(pos=pos[:4], quat=quat[:4]), time.time())  # trackers, not sites
+
+
+def test_frames_that_arrive_together_after_a_stall_are_no_burst_of_the_players() -> None:
+    """Three seconds of 60 Hz frames that waited in the kernel while the server was busy
+    reach the session at one instant: judged on their own times, none is over the rate.
+    The same frames claiming one instant (t repeated) are judged on arrival: the bucket's
+    burst, then RATE_LIMITED."""
+    s = _joined(max_rate_hz=120, rate_burst=30)
+    flat = _joined(max_rate_hz=120, rate_burst=30)
+    for seq in range(60):  # a second at 60 Hz, on time
+        s.handle(walk_frame(seq, t=seq / 60), 1000.0 + seq / 60)
+        flat.handle(walk_frame(seq, t=5.0), 1000.0 + seq / 60)
+    now, limited = 1004.0, 0  # then a 3 s stall, and its frames at once
+    for seq in range(60, 240):
+        assert isinstance(s.handle(walk_frame(seq, t=seq / 60), now), FrameIn)
+        try:
+            flat.handle(walk_frame(seq, t=5.0), now)
+        except RateLimitedError:
+            limited += 1
+    assert limited == 180 - 30
+
+
+def test_a_frame_clock_set_ahead_restarts_the_drift_estimate() -> None:
+    s = _joined()
+    for seq in range(600):
+        s.handle(walk_frame(seq, t=seq / 60), 1000.0 + seq / 60)
+    out = s.handle(walk_frame(600, t=1e6), 1010.0)
+    assert isinstance(out, FrameIn) and out.odd_time == "jump"
+    for seq in range(601, 1200):
+        s.handle(walk_frame(seq, t=1e6 + (seq - 600) / 60), 1000.0 + seq / 60)
+    assert s.clock.drift_ppm is None or abs(s.clock.drift_ppm) < 10.0

@@ -19,6 +19,8 @@ from posecast.online.engine.types import TrackerFrame
 from posecast.online.protocol import decode
 from posecast.online.protocol.messages import Pose
 from posecast.online.shell.ticker import EngineOp, EngineWorker, TickInput, TickOutput, run_ticks
+from posecast.skeleton import Joint
+from posecast.tracking.layouts import Layout
 from tests.online.conftest import make_cfg, walk_frame
 
 
@@ -187,3 +189,63 @@ def _tick(
             await task
 
     asyncio.run(main())
+
+
+@pytest.fixture(scope="module")
+def both_layouts() -> MultiEngine:
+    from posecast.online.engine.config import EngineConfig
+    from posecast.online.inference.loader import load_engine
+
+    ecfg = EngineConfig(samples=8, lookahead=1)
+    return MultiEngine({lay: load_engine(ecfg, layout=lay, backend="onnx")
+                        for lay in ("hmd3+waist", "hmd3")})  # fmt: skip
+
+
+def _at_edge(seq: int, edge: np.ndarray, yaw_deg: float, layout: str) -> TrackerFrame:
+    """A walk frame turned by ``yaw_deg`` and moved so that its head tracker sits at
+    ``edge`` (on the wire's +-1000 m bounds), as a headset there sends it."""
+    from posecast.geometry.rotations import quat_apply, quat_mul, yaw2quat
+    from posecast.tracking.layouts import TrackerSlot
+
+    f = walk_frame(seq)
+    turn = yaw2quat(np.radians(yaw_deg))
+    head = f.pos[TrackerSlot.HEAD]
+    pos = quat_apply(turn, f.pos - head) + edge
+    quat = quat_mul(np.broadcast_to(turn, f.quat.shape), f.quat)
+    pos = np.clip(pos, -1000.0, 1000.0)  # what a decoder lets in
+    if layout == "hmd3":
+        pos[TrackerSlot.WAIST], quat[TrackerSlot.WAIST] = 0.0, (0.0, 0.0, 0.0, 1.0)
+    return TrackerFrame(f.seq, pos, quat)
+
+
+@pytest.mark.parametrize("layout", ["hmd3+waist", "hmd3"])
+def test_poses_at_the_edges_of_the_tracking_space_stay_on_the_wire(
+    both_layouts: MultiEngine, layout: str
+) -> None:
+    """A headset-only player at x = 1000 m facing 90 or 135 degrees got a pelvis beyond
+    +-1000 m: v1 clients received a root their SDK refused, v2 clients no pose at all.
+    Every pose at every edge, facing every way, is now one the wire carries: the v1
+    message decodes, the v2 state exists, the root is inside, the head within a metre
+    of its tracker."""
+    from posecast.tracking.layouts import TrackerSlot
+
+    worker = EngineWorker(both_layouts)
+    edges = [np.array(e) * 1000.0 for e in ((1, 1.6e-3, 0), (-1, 1.6e-3, 0), (0, 1.6e-3, 1),
+                                             (0, 1.6e-3, -1), (1, 1.6e-3, 1))]  # fmt: skip
+    players = {f"p{i}-{yaw}": (edge, yaw) for i, edge in enumerate(edges)
+               for yaw in (0, 90, 135, 180, 270)}  # fmt: skip
+    ops = [EngineOp("add", p, layout=Layout(layout)) for p in players]
+    shown = 0
+    for seq in range(12):
+        frames = {p: _at_edge(seq, e, y, layout) for p, (e, y) in players.items()}
+        out = worker.step(TickInput(ops if seq == 0 else [], frames), 1.0)
+        for player, data in out.poses:
+            pose = decode(data)
+            assert isinstance(pose, Pose)
+            assert np.abs(pose.positions[0]).max() <= 1000.0, (player, pose.positions[0])
+            head = frames[player].pos[TrackerSlot.HEAD]
+            assert np.linalg.norm(pose.positions[Joint.HEAD] - head) < 1.0
+            assert player in out.states
+            shown += 1
+    assert worker.unencodable == 0
+    assert shown >= len(players) * 8

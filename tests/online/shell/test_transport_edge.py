@@ -16,8 +16,9 @@ from typing import Any
 import pytest
 from websockets.exceptions import InvalidMessage, InvalidStatus
 
-from posecast.online.protocol import encode
-from posecast.online.protocol.messages import Hello, Ping, Welcome
+from posecast.online.protocol import decode, encode
+from posecast.online.protocol.messages import Error, Hello, Ping, Welcome
+from posecast.online.shell.paced import CONTROL_FRAMES_BURST, CONTROL_FRAMES_HZ, FLOOD_CUTOFF_S
 from tests.online.conftest import make_cfg, token
 from tests.online.wsclient import Client, Factory, serving
 
@@ -131,33 +132,73 @@ def test_a_close_the_client_begins_is_not_an_error_of_the_client(
     run(scenario())
 
 
-def test_ping_frames_are_paced_like_messages(engine_factory: Factory) -> None:
-    """websockets answers each ping frame with a pong before any message reaches the
-    handler's read pacing: one connection, no hello needed, that sent only pings took
-    the event loop and, reading no pongs, the server's memory. Frames, control frames
-    included, are now read at most at the messages' pace: 2 * (120 + 20) a second, a
-    burst of 2 * (30 + 20), and what one socket read holds (256 KiB) before the pause."""
+async def _frames_until_closed(
+    reader: asyncio.StreamReader, timeout_s: float
+) -> tuple[int, list[str]]:
+    """Pongs the server sent, and the codes of its error messages, until it closed (or
+    ``timeout_s`` passed without a frame)."""
+    pongs, codes = 0, []
+    with contextlib.suppress(TimeoutError, asyncio.IncompleteReadError, ConnectionError):
+        while True:
+            opcode, payload = await asyncio.wait_for(_server_frame(reader), timeout_s)
+            pongs += opcode == 0xA
+            if opcode == 0x2:
+                msg = decode(payload)
+                if isinstance(msg, Error):
+                    codes.append(msg.code)
+            if opcode == 0x8:
+                break
+    return pongs, codes
+
+
+def test_ping_frames_are_counted_before_they_are_parsed(engine_factory: Factory) -> None:
+    """websockets parses a whole socket read, and answers every ping in it, before any
+    message reaches the handler: 256 KiB holds 2,000 pings of 125 bytes (43,690 empty
+    ones). The read budget counts frames from their headers before websockets sees
+    them: before hello, a client's control frames are read at CONTROL_FRAMES_HZ with a
+    burst of CONTROL_FRAMES_BURST, whatever one read holds; and a client held back
+    for FLOOD_CUTOFF_S on end is cut off with RATE_LIMITED, counted."""
 
     async def scenario() -> None:
-        cfg = make_cfg()
-        async with serving(cfg, engine_factory) as server:
+        async with serving(make_cfg(), engine_factory) as server:
             reader, writer = await _raw(server.port)
-            ping = _frame(0x9, b"x" * 125)
             t0 = time.monotonic()
-            writer.write(ping * 8000)  # 1 MiB of pings
-            pongs = 0
-            with pytest.raises(TimeoutError):
-                while True:
-                    head = await asyncio.wait_for(reader.readexactly(2), 1.0)
-                    assert head == b"\x8a\x7d"  # a pong, 125 bytes, nothing else
-                    await reader.readexactly(125)
-                    pongs += 1
+            writer.write(_frame(0x9, b"x" * 125) * 8000)  # 1 MiB of pings
+            pongs, codes = await _frames_until_closed(reader, 5.0)
             window_s = time.monotonic() - t0
-            rate_hz = 2.0 * (cfg.max_rate_hz + cfg.control_rate_hz)
-            burst = 2.0 * (cfg.rate_burst + cfg.control_rate_hz)
-            one_read = 256 * 1024 // len(ping) + 1
-            assert 0 < pongs <= rate_hz * window_s + burst + one_read < 8000
+            assert 0 < pongs <= CONTROL_FRAMES_BURST + CONTROL_FRAMES_HZ * window_s
+            assert codes == ["RATE_LIMITED"]
+            assert FLOOD_CUTOFF_S <= window_s < FLOOD_CUTOFF_S + 3.0
             assert server.metrics.value("posecast_reads_paced_total") >= 1
+            assert server.metrics.value("posecast_floods_cut_off_total") == 1
+            writer.transport.abort()
+
+    run(scenario())
+
+
+def test_frames_sent_with_the_upgrade_request_wait_for_the_budget(
+    engine_factory: Factory,
+) -> None:
+    """Frames that ride in the same socket read as the HTTP request are not parsed with
+    it: they wait for the handshake's end and then for the budget, as any other."""
+
+    async def scenario() -> None:
+        async with serving(make_cfg(), engine_factory) as server:
+            reader, writer = await asyncio.open_connection("127.0.0.1", server.port)
+            key = base64.b64encode(os.urandom(16)).decode()
+            request = (
+                f"GET / HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
+                f"Sec-WebSocket-Protocol: posecast.v1\r\n\r\n"
+            ).encode()
+            writer.write(request + _frame(0x9, b"") * 40_000)  # 240 kB of empty pings
+            head = await reader.readuntil(b"\r\n\r\n")
+            assert head.startswith(b"HTTP/1.1 101"), head
+            t0 = time.monotonic()
+            pongs, codes = await _frames_until_closed(reader, 5.0)
+            window_s = time.monotonic() - t0
+            assert 0 < pongs <= CONTROL_FRAMES_BURST + CONTROL_FRAMES_HZ * window_s
+            assert codes == ["RATE_LIMITED"]
             writer.transport.abort()
 
     run(scenario())
@@ -169,7 +210,8 @@ def test_pings_between_messages_stay_paced_when_the_message_queue_drains(
     """websockets resumes reading when its queue of messages drains below its low mark,
     which undid the read pacing's pause: a client sending a message every few hundred
     pings had each drained queue buy it another socket read, about 40,000 pings
-    answered, several times a second. The queue's resume now waits for the budget."""
+    answered, several times a second. The queue's resume now waits for the budget,
+    and a joined player's control frames keep their own budget."""
 
     async def scenario() -> None:
         cfg = make_cfg()
@@ -187,21 +229,18 @@ def test_pings_between_messages_stay_paced_when_the_message_queue_drains(
                         await writer.drain()
 
             flooding = asyncio.create_task(flood())
-            window_s, pongs = 3.0, 0
-            deadline = time.monotonic() + window_s
-            with contextlib.suppress(TimeoutError):
-                while True:
-                    left = max(0.0, deadline - time.monotonic())
-                    opcode, _ = await asyncio.wait_for(_server_frame(reader), left)
-                    pongs += opcode == 0xA
+            t0 = time.monotonic()
+            pongs, codes = await _frames_until_closed(reader, 5.0)
+            window_s = time.monotonic() - t0
             flooding.cancel()
             writer.transport.abort()
             with contextlib.suppress(asyncio.CancelledError):
                 await flooding
-            rate_hz = 2.0 * (cfg.max_rate_hz + cfg.control_rate_hz)
-            burst = 2.0 * (cfg.rate_burst + cfg.control_rate_hz)
-            one_read = 256 * 1024 // len(ping) + 1
-            assert 0 < pongs <= rate_hz * window_s + burst + one_read, pongs
+            # The before-hello burst, then the joined one, then the rate.
+            bound = 2 * CONTROL_FRAMES_BURST + CONTROL_FRAMES_HZ * window_s
+            assert 0 < pongs <= bound, pongs
+            assert codes[-1] == "RATE_LIMITED", codes
+            assert server.metrics.value("posecast_floods_cut_off_total") == 1
 
     run(scenario())
 
@@ -254,5 +293,42 @@ def test_sockets_that_send_nothing_are_capped_per_address(engine_factory: Factor
             for _, w in more + idle + [(reader, writer)]:
                 w.close()
             await cl.close()
+
+    run(scenario())
+
+
+@pytest.mark.parametrize(
+    ("request_bytes", "status", "body"),
+    [
+        (b"GET /healthz HTTP/1.1\r\nHost: x\r\nContent-Length: 5\r\n\r\nhello", 400, b"no body"),
+        (b"POST /readyz HTTP/1.1\r\nHost: x\r\nTransfer-Encoding: chunked\r\n\r\n0\r\n\r\n",
+         400, b"no body"),
+        (b"GET /healthz HTTP/1.1\r\nHost: x\r\n\r\nGET /readyz HTTP/1.1\r\nHost: x\r\n\r\n",
+         200, b"ok\n"),
+        (b"GET /healthz HTTP/1.1\r\nHost: x\r\nContent-Length: 0\r\n\r\n", 200, b"ok\n"),
+    ],
+)  # fmt: skip
+def test_health_requests_with_a_body_or_pipelined_get_an_answer(
+    engine_factory: Factory, request_bytes: bytes, status: int, body: bytes
+) -> None:
+    """A request with a body got 0 bytes back (websockets closes on one without a word),
+    and so did two pipelined requests. A body is now answered 400; of pipelined
+    requests the first is answered, with ``Connection: close`` (the client sends the
+    rest again, RFC 9112 section 9.3.2); either way the connection then closes."""
+
+    async def scenario() -> None:
+        async with serving(make_cfg(), engine_factory) as server:
+            reader, writer = await asyncio.open_connection("127.0.0.1", server.port)
+            writer.write(request_bytes)
+            answer = await asyncio.wait_for(reader.read(), 5.0)  # to the close
+            writer.close()
+            head, _, got = answer.partition(b"\r\n\r\n")
+            assert head.startswith(b"HTTP/1.1 %d" % status), answer
+            assert b"connection: close" in head.lower()
+            assert body in got and answer.count(b"HTTP/1.1") == 1
+            if status == 400:
+                assert (
+                    server.metrics.value("posecast_connects_total", {"result": "bad_request"}) == 1
+                )
 
     run(scenario())

@@ -30,6 +30,7 @@ from posecast.errors import (
     MalformedError,
     NotFoundError,
     ProtocolError,
+    RateLimitedError,
     ReplacedError,
     RoomFullError,
     ServerShutdownError,
@@ -39,6 +40,7 @@ from posecast.errors import (
 from posecast.online.auth.tokens import ReplayGuard
 from posecast.online.cluster.bus import Bus
 from posecast.online.config import ServerConfig
+from posecast.online.core.clock import DRIFT_CAP_PPM
 from posecast.online.core.connections import Conn, Connections
 from posecast.online.core.outbox import Outbox
 from posecast.online.core.posestream import PoseStream
@@ -79,6 +81,8 @@ log = logging.getLogger("posecast.core")
 _DROP_REASON = {"OUT_OF_ORDER": "out_of_order", "DUPLICATE": "duplicate", "RATE_LIMITED": "rate"}
 # Fatal errors a conforming client can meet (the server's decision, the room's state,
 # a slow network or an idle headset): they never spend the address's fatal budget.
+LATE_S = 0.05  # check_timeouts this much later than a tick: the server was late
+
 _NOT_THE_CLIENTS_FAULT = frozenset(
     c.code
     for c in (
@@ -120,6 +124,7 @@ class Admission:
         self.fatal = FatalBudget(cfg.fatal_per_ip_per_min)
         self._bug_logs = TokenBucket(1.0, 10.0)  # tracebacks logged: 10, then one a second
         self.shutting_down = False
+        self._checked_at: float | None = None  # the last check_timeouts
         self._superseded = metrics.frames_dropped.labels("superseded")  # hot path: bind once
 
     # --- connections ------------------------------------------------------------------
@@ -187,6 +192,25 @@ class Admission:
         if c is not None:
             self._charge(c, exc, now)
 
+    def flooded(self, conn: int, now: float) -> None:
+        """The shell held ``conn``'s reads back past its read budget for seconds on end
+        (``shell/paced.py``): it is cut off with ``RATE_LIMITED`` (fatal; no frame of
+        it is counted dropped), charged to its address, and its socket dropped once
+        the error is out."""
+        c = self.conns.get(conn)
+        self.metrics.floods_cut_off.inc()
+        if c is None or c.session.phase is Phase.CLOSED:
+            return
+        exc = RateLimitedError(
+            "sent past the read budget (twice the protocol's limits) for seconds on end: cut off",
+            fatal=True,
+        )
+        self.metrics.errors.labels(exc.code).inc()
+        log.info("refused", extra={"code": exc.code, "ip": c.session.ip, "detail": exc.message})
+        self._charge(c, exc, now)
+        self.end(c, now, final=Error.from_exception(exc))
+        self.conns.abort(conn)
+
     def disconnect(self, conn: int, now: float) -> None:
         """The socket is gone (after any close): forget the connection."""
         c = self.conns.get(conn)
@@ -205,6 +229,8 @@ class Admission:
             if superseded:
                 self._superseded.inc(superseded)
             self.metrics.frames_in.inc()
+            if action.odd_time is not None:
+                self.metrics.frame_times_odd.labels(action.odd_time).inc()
         elif isinstance(action, Join):
             self._join(c, action, now)
         elif isinstance(action, Reply):
@@ -362,7 +388,7 @@ class Admission:
             self.bus.burned(s.claims.jti, s.claims.exp)
         drift = s.clock.drift_ppm
         if drift is not None:
-            self.metrics.clock_drift.observe(abs(drift))
+            self.metrics.clock_drift.observe(min(abs(drift), DRIFT_CAP_PPM))
         log.info(
             "leave",
             extra={"player": s.player, "role": s.role, "frames": s.frames,
@@ -380,7 +406,20 @@ class Admission:
         self._changed()
 
     def check_timeouts(self, now: float) -> None:
-        """Hello and idle timeouts, and slow consumers; call about once a tick."""
+        """Hello and idle timeouts, and slow consumers; call about once a tick.
+
+        A client is judged by what it did, not by the server's stalls: when this
+        call comes :data:`LATE_S` later than a tick after the last one (the event
+        loop or the engine was held up), the clocks of every timeout stop for the
+        excess (:meth:`Outbox.pause`, :meth:`Session.paused`)."""
+        if self._checked_at is not None:
+            late = now - self._checked_at - 1.0 / self.cfg.tick_hz
+            if late > LATE_S:
+                self.metrics.server_late.inc(late)
+                for c in self.conns.conns.values():
+                    c.outbox.pause(late)
+                    c.session.paused(late)
+        self._checked_at = now
         for c in list(self.conns.conns.values()):
             s, box = c.session, c.outbox
             if box.overflowed or box.stalled_for(now) > self.cfg.slow_consumer_s:

@@ -36,6 +36,12 @@ class ClockEstimator:
 
     def add(self, server_t: float, client_t: float) -> None:
         offset = server_t - client_t
+        current = self.offset_s
+        if current is not None and offset < current - JUMP_S:
+            # Delay only adds to an offset: one this far below was a client clock set
+            # ahead. A new epoch, no drift fitted across it (a clock set back shows as
+            # frame times going back: Session restarts the estimator for those).
+            self.restart()
         self.samples += 1
         if self._window_start is None:
             self._window_start = server_t
@@ -43,6 +49,11 @@ class ClockEstimator:
             self._close_window()
             self._window_start = server_t
         self._window_min = min(self._window_min, offset)
+
+    def restart(self) -> None:
+        """Forget every sample (the client's clock jumped)."""
+        self._window_start, self._window_min = None, float("inf")
+        self._minima.clear()
 
     def _close_window(self) -> None:
         if self._window_min < float("inf") and self._window_start is not None:
@@ -74,6 +85,53 @@ class ClockEstimator:
             return None
         cov = sum((t - t_mean) * (o - o_mean) for t, o in zip(ts, os_, strict=True))
         return cov / var * 1e6
+
+
+JUMP_S = 1.0  # a client clock that moves this much against the server's: it jumped
+DRIFT_CAP_PPM = 1e4  # a drift past this is a broken clock, not drift: reported as the cap
+
+
+@dataclass
+class FrameTimes:
+    """A player's frame times (``frame.t``, client clock) judged on the server's clock,
+    for the frame rate limit: a player is judged by when it says it sampled each frame,
+    not by when the frame reached the event loop, so frames that queued in the kernel
+    while the server was busy, and arrive together, are no burst of the player's.
+
+    The judged time of a frame is ``t + base``, ``base`` the least ``server - client``
+    offset seen (the offset plus the least delay): never after the frame's arrival,
+    never before the previous frame's judged time. So a clock that runs ahead, jumps
+    or lies gains nothing over judging by arrival: the judged times of a connection
+    advance no faster than the server's clock, and a rate limit on them allows no more
+    than one on arrival times.
+
+    :meth:`judge` also says what is odd about ``t`` (``proto/README.md``, Time):
+    ``"repeat"`` (the previous frame's ``t`` again), ``"backwards"`` (before it), or
+    ``"jump"`` (ahead of the server's clock, or back, by more than :data:`JUMP_S`: the
+    client's clock was set; the offset starts over). A frame with an odd time is
+    judged on its arrival, as before; only a frame with nothing odd is a clock sample.
+    """
+
+    base: float | None = None
+    last_t: float | None = None
+    judged: float = float("-inf")
+
+    def judge(self, t: float, now: float) -> tuple[float, str | None]:
+        offset = now - t
+        odd: str | None = None
+        if self.base is None:
+            self.base = offset
+        elif offset < self.base - JUMP_S or (self.last_t is not None and t < self.last_t - JUMP_S):
+            odd, self.base = "jump", offset
+        else:
+            self.base = min(self.base, offset)
+            if self.last_t is not None and t <= self.last_t:
+                odd = "repeat" if t == self.last_t else "backwards"
+        self.last_t = t if self.last_t is None or odd == "jump" else max(self.last_t, t)
+        # An odd time says nothing of when the frame was sampled: judged on arrival,
+        # as a client that ignores t (always 0, say) is.
+        self.judged = max(self.judged, now if odd else min(now, t + self.base))
+        return self.judged, odd
 
 
 RISE_S_PER_S = 1e-3  # how fast a node's offset may grow (drift, a slower path)

@@ -38,6 +38,7 @@ from posecast.online.core.outbox import Outbox
 from posecast.online.core.remote import RemoteRooms
 from posecast.online.core.rooms import Rooms
 from posecast.online.core.routing import Router
+from posecast.online.core.session import Phase
 from posecast.online.core.tick import EngineInbox, TickInput, TickOutput
 
 if TYPE_CHECKING:
@@ -90,6 +91,14 @@ class Hub:
 
     def refused_by_transport(self, conn: int, exc: ProtocolError, now: float) -> None:
         self.admission.refused_by_transport(conn, exc, now)
+
+    def flooded(self, conn: int, now: float) -> None:
+        self.admission.flooded(conn, now)
+
+    def joined(self, conn: int) -> bool:
+        """Whether ``conn``'s ``hello`` has been admitted (and it has not ended)."""
+        c = self.connections.get(conn)
+        return c is not None and c.session.phase is Phase.JOINED
 
     def check_timeouts(self, now: float) -> None:
         self.admission.check_timeouts(now)

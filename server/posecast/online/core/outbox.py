@@ -114,6 +114,12 @@ class Outbox:
         """Seconds the writer has had data and made no progress (0 when drained)."""
         return 0.0 if self._pending_since is None else max(0.0, now - self._pending_since)
 
+    def pause(self, late_s: float) -> None:
+        """The server was ``late_s`` late: its writers could not run, so that time
+        is not the client's (the slow-consumer clock stops for it)."""
+        if self._pending_since is not None:
+            self._pending_since += late_s
+
     def _mark(self, now: float) -> None:
         if self._pending_since is None:
             self._pending_since = now

@@ -59,6 +59,11 @@ class TokenBucket:
         self.tokens -= n
         return max(0.0, -self.tokens / self.rate_hz)
 
+    def available(self, now: float) -> float:
+        """The tokens saved up at ``now`` (negative: a debt), taking none."""
+        self._refill(now)
+        return self.tokens
+
     def _refill(self, now: float) -> None:
         if self.stamp is None:
             self.tokens, self.stamp = self.burst, now

@@ -36,7 +36,7 @@ from posecast.errors import (
 from posecast.geometry.rotations import quat_identity
 from posecast.online.auth.tokens import Claims, verify
 from posecast.online.config import ServerConfig
-from posecast.online.core.clock import ClockEstimator
+from posecast.online.core.clock import ClockEstimator, FrameTimes
 from posecast.online.core.ratelimit import TokenBucket
 from posecast.online.engine.calibration import Calibration
 from posecast.online.engine.selectors import DefaultSelector, ObstacleSelector, TargetSelector
@@ -90,6 +90,7 @@ class Join:
 @dataclass(frozen=True)
 class FrameIn:
     frame: TrackerFrame
+    odd_time: str | None = None  # what FrameTimes found odd about frame.t, if anything
 
 
 @dataclass(frozen=True)
@@ -153,6 +154,7 @@ class Session:
     last_seq: int | None = None
     last_message_at: float = 0.0
     clock: ClockEstimator = field(default_factory=ClockEstimator)
+    frame_times: FrameTimes = field(default_factory=FrameTimes)
     frames: int = 0
     _held: tuple[np.ndarray, np.ndarray] | None = None  # last accepted (pos, quat)
     _frame_bucket: TokenBucket | None = None
@@ -246,9 +248,18 @@ class Session:
         self.rate_hz = join.hello.rate_hz
         self.rooms = join.rooms
 
+    def paused(self, late_s: float) -> None:
+        """The server was ``late_s`` late (its event loop or tick held up): the
+        timeouts that judge this client leave that time out."""
+        self.opened_at += late_s
+        self.last_message_at += late_s
+
     def _frame(self, msg: Frame, now: float) -> FrameIn:
         assert self._frame_bucket is not None
-        if not self._frame_bucket.allow(now):
+        # The rate is judged on the frames' own times (FrameTimes): frames that waited
+        # in the kernel while the server was busy arrive together and are no burst.
+        judged, odd = self.frame_times.judge(msg.t, now)
+        if not self._frame_bucket.allow(judged):
             raise RateLimitedError(
                 f"more than {self.cfg.max_rate_hz} frames/s", ref_seq=msg.seq, field="seq"
             )
@@ -264,7 +275,10 @@ class Session:
         _check_rows(msg.sites, len(msg.pos), tracker_set, msg.seq)  # refused: nothing counts
         self.last_seq = msg.seq
         self.frames += 1
-        self.clock.add(now, msg.t)
+        if odd == "jump":
+            self.clock.restart()  # the client's clock was set: no drift across it
+        if odd is None or odd == "jump":
+            self.clock.add(now, msg.t)
         pos, quat = msg.pos, msg.quat
         if msg.valid != (1 << len(pos)) - 1 and self._held is not None:
             # A lost tracker holds its last pose rather than jumping to the origin (a
@@ -278,7 +292,7 @@ class Session:
         self._held = (pos, quat)
         if tracker_set is not None:
             pos, quat = tracker_set.to_rows(pos, _ORIGIN), tracker_set.to_rows(quat, _IDENT)
-        return FrameIn(TrackerFrame(msg.seq, pos, quat))
+        return FrameIn(TrackerFrame(msg.seq, pos, quat), odd)
 
     def close(self) -> None:
         self.phase = Phase.CLOSED

@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from posecast.errors import NotNormalisedError, OutOfRangeError
-from posecast.online.protocol.messages import QUAT_TOLERANCE
+from posecast.online.protocol.messages import MAX_COORD_M, QUAT_TOLERANCE
 from posecast.skeleton import NUM_JOINTS
 
 F64 = NDArray[np.float64]
@@ -36,6 +36,21 @@ POS_BYTES = (NUM_JOINTS - 1) * 3 * 2  # 108
 ROT_BYTES = NUM_JOINTS * 4 * 2  # 152
 _I16 = np.dtype("<i2")
 _I16_MAX = 32767
+
+
+def roots_on_wire(positions: F64) -> F64:
+    """``positions (E, 19, 3)`` with each pose moved whole, where its pelvis is past
+    the wire's +-MAX_COORD_M on some axis, back to that edge: a headset-only player at
+    the tracking space's edge (its head at 1000 m, allowed) facing outward gets a
+    pelvis beyond it, which no client would accept. The body keeps its shape and lands
+    within a pelvis-to-head offset (under a metre) of its trackers, where the world
+    ends. ``positions`` itself when nothing is past the edge."""
+    roots = positions[:, 0]
+    inside = np.clip(roots, -MAX_COORD_M, MAX_COORD_M)
+    if np.array_equal(inside, roots):  # the usual case, NaN aside (refused later)
+        return positions
+    shift = np.where(np.isnan(roots), 0.0, inside - roots)
+    return positions + shift[:, None, :]
 
 
 def pos2mm(positions: ArrayLike) -> tuple[list[float], bytes]:

@@ -34,15 +34,15 @@ from dataclasses import dataclass
 
 from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.exceptions import ConnectionClosed
-from websockets.frames import CloseCode, Frame
-from websockets.protocol import Event, State
+from websockets.frames import CloseCode
+from websockets.protocol import State
 from websockets.typing import Subprotocol
 
 from posecast.errors import MalformedError, ProtocolError, TooLargeError
 from posecast.online.cluster.auto import create_bus
 from posecast.online.config import ServerConfig
 from posecast.online.core.hub import Hub
-from posecast.online.core.ratelimit import SocketCount, TokenBucket
+from posecast.online.core.ratelimit import SocketCount
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.multi import MultiEngine
 from posecast.online.engine.ssi import Engine
@@ -50,6 +50,7 @@ from posecast.online.inference.loader import load_multi_engine
 from posecast.online.metrics import Metrics
 from posecast.online.protocol.messages import SUBPROTOCOLS
 from posecast.online.shell.http import HttpRoutes, peer_ip
+from posecast.online.shell.paced import Budgets, PacedConnection, paced_connection
 from posecast.online.shell.ticker import EngineWorker, run_ticks
 
 log = logging.getLogger("posecast.server")
@@ -162,17 +163,18 @@ class PosecastServer:
             self.cfg.host,
             port,
             process_request=self.http,
-            create_connection=_paced_connection(
-                *self._read_pace(),
+            create_connection=paced_connection(
+                self._budgets(),
                 paced=self.metrics.reads_paced.inc,
                 sockets=SocketCount(self.cfg.sockets_per_ip),
                 refused=self.metrics.connects.labels("ip_sockets").inc,
+                bad_request=self.metrics.connects.labels("bad_request").inc,
             ),
             # The highest version the client offers (posecast.v2, then posecast.v1); a
             # client offering neither gets HTTP 400. v1 clients keep working unchanged.
             subprotocols=[Subprotocol(SUBPROTOCOLS[v]) for v in sorted(SUBPROTOCOLS, reverse=True)],
             compression=None,  # poses are quantised binary; deflate per client costs CPU
-            max_size=max(4 * self.cfg.max_message_bytes, 65_536),  # the codec says TOO_LARGE
+            max_size=self._max_frame_bytes(),  # the codec says TOO_LARGE
             max_queue=64,
             open_timeout=self.cfg.hello_timeout_s,
             close_timeout=self.cfg.close_timeout_s,
@@ -235,19 +237,18 @@ class PosecastServer:
         client = _Client(ws, asyncio.Event())
         client.writer = asyncio.create_task(self._write(conn, client))
         self._clients[conn] = client
-        # Read pacing: whatever a connection sends, this server decodes at most twice
-        # what the protocol allows it (frames plus control messages). Beyond that it
-        # stops reading, so a flood waits in the flooder's own socket buffers and
-        # TCP window instead of in this process's CPU time (docs/reliability.md).
-        pace = TokenBucket(*self._read_pace())
+        # Read budgets (shell/paced.py): whatever a connection sends, websockets parses
+        # only the frames and bytes its budget allows, counted before parsing; past it
+        # the socket's reading pauses, and a connection held back for seconds on end
+        # is cut off (docs/reliability.md, "Read budgets").
+        paced = ws if isinstance(ws, PacedConnection) else None
+        if paced is not None:
+            paced.flooded = lambda: self._flooded(conn)
         try:
             async for data in ws:
-                wait = pace.wait_s(time.monotonic())
-                if wait > 0.0:
-                    self.metrics.reads_paced.inc()
-                    await asyncio.sleep(wait)
-                    pace.allow(time.monotonic())
                 self.hub.receive(conn, data, time.monotonic())
+                if paced is not None and paced.before_hello and self.hub.joined(conn):
+                    paced.joined()
                 self._flush()
         except ConnectionClosed as exc:
             # websockets itself refused what the client sent, and closed first, before the
@@ -268,11 +269,26 @@ class PosecastServer:
                 await client.writer
             self._flush()
 
-    def _read_pace(self) -> tuple[float, float]:
-        """Rate and burst of read pacing: twice what the protocol allows a connection."""
+    def _budgets(self) -> Budgets:
+        """Read budgets: a few frames before ``hello``, then twice what the protocol
+        allows a connection (frames plus control messages)."""
         cfg = self.cfg
-        rate_hz = 2.0 * (cfg.max_rate_hz + cfg.control_rate_hz)
-        return rate_hz, 2.0 * (cfg.rate_burst + cfg.control_rate_hz)
+        return Budgets.for_limits(
+            max_rate_hz=cfg.max_rate_hz,
+            rate_burst=cfg.rate_burst,
+            control_rate_hz=cfg.control_rate_hz,
+            max_frame_bytes=self._max_frame_bytes(),
+            max_message_bytes=cfg.max_message_bytes,
+        )
+
+    def _max_frame_bytes(self) -> int:
+        """websockets' frame cap: above the codec's, so the codec says TOO_LARGE."""
+        return max(4 * self.cfg.max_message_bytes, 65_536)
+
+    def _flooded(self, conn: int) -> None:
+        """``conn`` stayed past its read budget: cut off, counted, charged."""
+        self.hub.flooded(conn, time.monotonic())
+        self._flush()
 
     async def _write(self, conn: int, client: _Client) -> None:
         box = self.hub.outbox(conn)
@@ -339,81 +355,6 @@ class PosecastServer:
     def _after_tick(self, now: float) -> None:
         self.hub.check_timeouts(now)
         self._flush()
-
-
-def _paced_connection(
-    rate_hz: float,
-    burst: float,
-    *,
-    paced: Callable[[], None],
-    sockets: SocketCount,
-    refused: Callable[[], None],
-) -> type[ServerConnection]:
-    """A ``ServerConnection`` that reads at most ``rate_hz`` WebSocket frames a second
-    (``burst`` saved up), control frames and fragments included, and that is dropped
-    at once when its address already holds ``sockets.per_ip`` sockets (``refused``):
-    sockets that connect and send nothing reach no HTTP check, and each held a
-    coroutine and a file descriptor until the opening handshake timed out.
-
-    The handler's read pacing counts messages, but websockets answers every ping frame
-    with a pong, and collects a message's fragments, before any message reaches the
-    handler: one client sending nothing but pings (no ``hello`` needed) took the event
-    loop (the tick fell to 16 Hz) and, not reading its pongs, piled them up in the
-    server's memory (+400 MB in 18 s). Past the budget this stops reading the socket
-    until the debt is paid back, so the flood waits on the client's side.
-
-    Reading resumes only when both allow it: the pace, and websockets' queue of
-    messages (which pauses reading above its high mark and resumes it below its low
-    one, and would otherwise resume a paced read as soon as the handler drained it).
-    """
-
-    class PacedConnection(ServerConnection):
-        def connection_made(self, transport: asyncio.BaseTransport) -> None:
-            super().connection_made(transport)
-            self.pace = TokenBucket(rate_hz, burst)
-            self.frames_read = 0
-            self.read_again: asyncio.TimerHandle | None = None
-            self.recv_messages.resume = self._queue_drained
-            peer = transport.get_extra_info("peername")
-            self.counted = str(peer[0]) if isinstance(peer, tuple) and peer else None
-            if self.counted is not None and not sockets.open(self.counted):
-                self.counted = None
-                refused()
-                self.transport.abort()  # the handshake fails at once; connection_lost follows
-
-        def process_event(self, event: Event) -> None:
-            super().process_event(event)
-            self.frames_read += isinstance(event, Frame)
-
-        def data_received(self, data: bytes) -> None:
-            self.frames_read = 0
-            super().data_received(data)  # parses every frame in data, answers its pings
-            wait = self.pace.take(time.monotonic(), self.frames_read)
-            if wait > 0.0:
-                paced()
-                self.transport.pause_reading()
-                if self.read_again is not None:
-                    self.read_again.cancel()
-                self.read_again = self.loop.call_later(wait, self._read_again)
-
-        def _read_again(self) -> None:
-            self.read_again = None
-            if not self.recv_messages.paused:  # the queue's back-pressure
-                self.transport.resume_reading()
-
-        def _queue_drained(self) -> None:
-            if self.read_again is None:  # else the pace resumes reading when it allows
-                self.transport.resume_reading()
-
-        def connection_lost(self, exc: Exception | None) -> None:
-            if self.read_again is not None:
-                self.read_again.cancel()
-            if self.counted is not None:
-                sockets.close(self.counted)
-                self.counted = None
-            super().connection_lost(exc)
-
-    return PacedConnection
 
 
 async def _send_batch(ws: ServerConnection, batch: list[bytes]) -> None:

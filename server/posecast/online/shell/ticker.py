@@ -27,6 +27,7 @@ import numpy as np
 from posecast.online.core.tick import EngineOp, TickInput, TickOutput
 from posecast.online.engine.multi import MultiEngine
 from posecast.online.protocol.codec import encode_poses
+from posecast.online.protocol.quantize import roots_on_wire
 from posecast.online.protocol.records import PoseState
 
 log = logging.getLogger("posecast.ticker")
@@ -59,7 +60,7 @@ class EngineWorker:
         states: dict[str, PoseState] = {}
         if shown:
             players, seqs = [p.player for p in shown], [p.seq for p in shown]
-            positions = np.stack([p.positions for p in shown])
+            positions = roots_on_wire(np.stack([p.positions for p in shown]))
             rotations = np.stack([p.rotations for p in shown])
             batch = PoseState.batch(
                 players,
