@@ -176,11 +176,13 @@ def test_ping_frames_are_counted_before_they_are_parsed(engine_factory: Factory)
     run(scenario())
 
 
+@pytest.mark.parametrize("apart", [False, True])
 def test_frames_sent_with_the_upgrade_request_wait_for_the_budget(
-    engine_factory: Factory,
+    engine_factory: Factory, apart: bool
 ) -> None:
-    """Frames that ride in the same socket read as the HTTP request are not parsed with
-    it: they wait for the handshake's end and then for the budget, as any other."""
+    """Frames that ride in the same socket read as the HTTP request, or come in the
+    next read before the handshake is over (``apart``), are not parsed with it: they
+    wait for the handshake's end and then for the budget, as any other."""
 
     async def scenario() -> None:
         async with serving(make_cfg(), engine_factory) as server:
@@ -191,7 +193,13 @@ def test_frames_sent_with_the_upgrade_request_wait_for_the_budget(
                 f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
                 f"Sec-WebSocket-Protocol: posecast.v1\r\n\r\n"
             ).encode()
-            writer.write(request + _frame(0x9, b"") * 40_000)  # 240 kB of empty pings
+            pings = _frame(0x9, b"") * 40_000  # 240 kB of empty pings
+            if apart:
+                writer.write(request)
+                await writer.drain()
+                writer.write(pings)
+            else:
+                writer.write(request + pings)
             head = await reader.readuntil(b"\r\n\r\n")
             assert head.startswith(b"HTTP/1.1 101"), head
             t0 = time.monotonic()
@@ -306,6 +314,9 @@ def test_sockets_that_send_nothing_are_capped_per_address(engine_factory: Factor
         (b"GET /healthz HTTP/1.1\r\nHost: x\r\n\r\nGET /readyz HTTP/1.1\r\nHost: x\r\n\r\n",
          200, b"ok\n"),
         (b"GET /healthz HTTP/1.1\r\nHost: x\r\nContent-Length: 0\r\n\r\n", 200, b"ok\n"),
+        (b"GET /healthz HTTP/1.1\r\n"
+         + b"".join(b"X-%d: %s\r\n" % (i, b"p" * 90) for i in range(200)) + b"\r\n",
+         431, b"128 headers"),  # a head past 16 KiB: websockets' own refusal
     ],
 )  # fmt: skip
 def test_health_requests_with_a_body_or_pipelined_get_an_answer(

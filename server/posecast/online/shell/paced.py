@@ -222,7 +222,8 @@ class PacedConnection(ServerConnection):
         self.scanner = FrameScanner()
         self.held = b""  # read from the socket, not yet passed to websockets
         self.held_back_since: float | None = None
-        self.request_head: bytes | None = b""  # the HTTP request read so far
+        self.request_head: bytes | None = b""  # the HTTP request read so far (None: passed)
+        self.oversized = False  # a request head past MAX_HEAD_BYTES: websockets' to refuse
         self.read_again: asyncio.TimerHandle | None = None
         self.recv_messages.resume = self._queue_drained
         peer = transport.get_extra_info("peername")
@@ -242,7 +243,10 @@ class PacedConnection(ServerConnection):
         self._read_again()  # frames that came with the request, held until now
 
     def data_received(self, data: bytes) -> None:
-        if self.protocol.state is State.CONNECTING and not self.held:
+        if self.oversized:  # websockets refuses the request and discards the rest
+            super().data_received(data)
+            return
+        if self.request_head is not None:  # still reading the HTTP request
             data = self._request(data)
             if not data:
                 return
@@ -254,14 +258,12 @@ class PacedConnection(ServerConnection):
         follows it is frames, returned, to wait for the handshake's end. A request
         with a body is answered 400 here (websockets would close without a word);
         a head past :data:`MAX_HEAD_BYTES` goes on as it is, for websockets to refuse."""
-        if self.request_head is None:
-            super().data_received(data)
-            return b""
+        assert self.request_head is not None
         head = self.request_head + data
         blank = head.find(b"\r\n\r\n")
         if blank < 0:
             if len(head) > MAX_HEAD_BYTES:
-                self.request_head = None
+                self.request_head, self.oversized = None, True
                 super().data_received(head)
             else:
                 self.request_head = head
