@@ -107,3 +107,13 @@ def test_before_hello_a_few_frames_then_twice_the_protocol() -> None:
     assert b.before_hello.bytes_burst == 65536  # the largest frame passes at once
     assert b.joined.frames_hz == 2 * (120 + 20)
     assert b.joined.frames_burst == 2 * (30 + 20)
+
+
+def test_a_raised_budget_keeps_what_was_saved_not_a_full_burst() -> None:
+    """A hundred flooders admitted together must not each be handed the joined burst
+    (100 frames) at once: the joined budget starts from the tokens saved before."""
+    before = ReadBudget(Budget(4.0, 8.0, 1000.0, 1000.0), now=0.0)
+    before.spend(0.0, 6, 2, 900)
+    up = before.raised(Budget(280.0, 100.0, 1e6, 1e5), now=0.0)
+    assert up.allowance(0.0) == (2, CONTROL_FRAMES_BURST - 2, 100)
+    assert up.allowance(0.1) == (30, CONTROL_FRAMES_BURST - 2, 100_000)  # its rates, its burst

@@ -20,14 +20,16 @@ what the protocol allows a player (frames plus control messages). The figures
 behind them, microseconds a frame and nanoseconds a byte, are from
 ``benchmarks/frame_cost.py``; docs/reliability.md ("Read budgets") gives them.
 
-A connection held back by its budget for :data:`FLOOD_CUTOFF_S` on end (a conforming
-client never is: the budget is twice its allowance) is reported through ``flooded``,
-and the server cuts it off with ``RATE_LIMITED``, charged to its address.
+A connection held back by its budget for :data:`FLOOD_CUTOFF_S` on end (2-3 s, drawn
+per connection; a conforming client never is: the budget is twice its allowance) is
+reported through ``flooded``, and the server cuts it off with ``RATE_LIMITED``,
+charged to its address.
 """
 
 from __future__ import annotations
 
 import asyncio
+import random
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -38,7 +40,8 @@ from websockets.protocol import State
 
 from posecast.online.core.ratelimit import SocketCount, TokenBucket
 
-FLOOD_CUTOFF_S = 2.0  # held back this long without a break: cut off (RATE_LIMITED)
+FLOOD_CUTOFF_S = 2.0  # held back this long without a break: cut off (RATE_LIMITED) ...
+FLOOD_CUTOFF_SPREAD = 0.5  # ... or up to this share longer, at random per connection
 RESUME_S = 0.05  # a held-back connection is read again once this much budget is back
 PRE_HELLO_FRAMES_HZ = 4.0  # before hello: a client owes one message (hello)
 PRE_HELLO_FRAMES_BURST = 8.0
@@ -118,6 +121,16 @@ class ReadBudget:
         self.frames = TokenBucket(budget.frames_hz, budget.frames_burst)
         self.control = TokenBucket(budget.control_hz, budget.control_burst)
         self.bytes = TokenBucket(budget.bytes_hz, budget.bytes_burst)
+
+    def raised(self, budget: Budget, now: float) -> ReadBudget:
+        """The same connection on ``budget`` from ``now``: faster rates and larger
+        bursts, but only the tokens it had saved, not a full burst (a hundred flooders
+        admitted together would each be handed a hundred frames at once)."""
+        out = ReadBudget(budget, now)
+        for old, new in ((self.frames, out.frames), (self.control, out.control),
+                         (self.bytes, out.bytes)):  # fmt: skip
+            new.tokens, new.stamp = min(new.burst, old.available(now)), now
+        return out
 
     def allowance(self, now: float) -> tuple[int, int, int]:
         """Whole frames, control frames and bytes that may be read now."""
@@ -222,6 +235,9 @@ class PacedConnection(ServerConnection):
         self.scanner = FrameScanner()
         self.held = b""  # read from the socket, not yet passed to websockets
         self.held_back_since: float | None = None
+        # Flooders that connected together are cut off over a second, not in one
+        # instant: their reconnections (a handshake each) then come spread out too.
+        self.cutoff_s = FLOOD_CUTOFF_S * (1.0 + FLOOD_CUTOFF_SPREAD * random.random())
         self.request_head: bytes | None = b""  # the HTTP request read so far (None: passed)
         self.oversized = False  # a request head past MAX_HEAD_BYTES: websockets' to refuse
         self.read_again: asyncio.TimerHandle | None = None
@@ -234,8 +250,9 @@ class PacedConnection(ServerConnection):
             self.transport.abort()  # the handshake fails at once; connection_lost follows
 
     def joined(self) -> None:
-        """The ``hello`` was admitted: the joined budget, full, from now on."""
-        self.budget = ReadBudget(self.budgets.joined, self.clock())
+        """The ``hello`` was admitted: the joined budget from now on (with the tokens
+        saved before it, :meth:`ReadBudget.raised`)."""
+        self.budget = self.budget.raised(self.budgets.joined, self.clock())
         self.before_hello = False
 
     async def handshake(self, *args: Any, **kwargs: Any) -> None:
@@ -296,7 +313,7 @@ class PacedConnection(ServerConnection):
         self.paced()
         if self.held_back_since is None:
             self.held_back_since = now
-        elif now - self.held_back_since >= FLOOD_CUTOFF_S and self.flooded is not None:
+        elif now - self.held_back_since >= self.cutoff_s and self.flooded is not None:
             flooded, self.flooded = self.flooded, None
             flooded()
         self.transport.pause_reading()
