@@ -502,7 +502,12 @@ class Arena:
     to it from a process of their own (``tests/reliability/healthy_players.py``).
     Only the attacker runs in the test's process."""
 
-    def __init__(self, cfg: ServerConfig) -> None:
+    def __init__(self, cfg: ServerConfig, *, nice: int = 0) -> None:
+        """``nice``: the niceness of the server and the healthy players' process. A
+        negative one (where the test may set it: root, as in CI) keeps whatever else
+        runs on the machine, outside the test, from taking their CPU: what the arena
+        measures is the hostile traffic's cost, not the machine's other load."""
+        self._nice = nice
         # The tracker passes (head and hands on their trackers, the elbows' hinges) are
         # numpy run per tick, whose cost the engine benchmarks measure; what an arena
         # measures is whether hostile traffic reaches the healthy players, so it runs
@@ -523,6 +528,7 @@ class Arena:
             samples=self.cfg.samples,
             lookahead=self.cfg.lookahead,
             env={"POSECAST_LAYOUTS": Layout.HMD3_WAIST.value},  # one model: a faster start
+            preexec_fn=self._renice,
         )
         if split:  # this process, the attackers it starts and the healthy players
             os.sched_setaffinity(0, split[1])
@@ -532,6 +538,7 @@ class Arena:
             self._players = subprocess.Popen(
                 [sys.executable, "-m", "tests.reliability.healthy_players", str(self.port)],
                 cwd=REPO, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                preexec_fn=self._renice,
             )  # fmt: skip
             assert self._players.stdout is not None
             line = self._players.stdout.readline()
@@ -542,6 +549,11 @@ class Arena:
             self.__exit__()
             raise
         return self
+
+    def _renice(self) -> None:
+        if self._nice:
+            with contextlib.suppress(PermissionError):
+                os.nice(self._nice)
 
     def __exit__(self, *exc: object) -> None:
         os.sched_setaffinity(0, self._affinity)
