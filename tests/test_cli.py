@@ -358,6 +358,17 @@ def test_eval_user_error(tmp_path: Path, capsys, extra: list[str], code: str) ->
     user_error(capsys, rc, code)
 
 
+def test_eval_takes_every_engine_switch_of_the_server() -> None:
+    """``posecast eval --no-*`` are the server's engine switches, mapped to EngineConfig
+    by the one mapping (config.engine_settings): a switch added to the server without
+    its eval flag fails here, not with an AttributeError in a run."""
+    from posecast.cli import build_parser
+    from posecast.online.config import ENGINE_SWITCHES
+
+    args = build_parser().parse_args(["eval", "--data", "d"])
+    assert all(getattr(args, name) is False for name in ENGINE_SWITCHES)
+
+
 def test_data_clearance_prints_the_engines_table(bvh_dir: Path, tmp_path: Path, capsys) -> None:
     out = tmp_path / "prepared"
     assert main(["data", "prepare", "--bvh", str(bvh_dir), "--out", str(out)]) == 0

@@ -582,6 +582,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
     from posecast.offline.dataset.split import SPLITS
     from posecast.offline.evaluation.runner import VARIANTS, evaluate, format_table
+    from posecast.online.config import ENGINE_SWITCHES, engine_settings
     from posecast.online.engine.config import EngineConfig
     from posecast.tracking.layouts import parse_layout
     from posecast.tracking.sites import TrackerSetError
@@ -628,22 +629,11 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     if args.ik_release_frames is not None:
         _at_least("--ik-release-frames", args.ik_release_frames, 1, "eval")
         release = args.ik_release_frames
+    switches = {name: getattr(args, name) for name in ENGINE_SWITCHES}  # --no-upper-ik, ...
     engine_cfg = EngineConfig(  # a ConfigError for a bad --samples or --home-factor
-        samples=args.samples,
+        **engine_settings({**switches, "samples": args.samples, "wrist_elbow": wrist}),
         outlier_baseline=args.outlier_baseline,
         outlier_factor=args.outlier_factor,
-        upper_body_ik=not args.no_upper_ik,
-        floor_ik=not args.no_floor_ik,
-        swing_clearance=not args.no_swing_clearance,
-        knee_hinge=not args.no_knee_hinge,
-        wrist_elbow=wrist,
-        elbow_hinge=not args.no_elbow_hinge,
-        hand_reach=not args.no_hand_reach,
-        torso_span=not args.no_torso_span,
-        legs_apart=not args.no_legs_apart,
-        pelvis_lean=not args.no_pelvis_lean,
-        pelvis_smoothing=not args.no_pelvis_smoothing,
-        floor_select=not args.no_floor_select,
         ik_max_drift_m=drift,
         ik_release_frames=release,
         latent_scale=latent_scale,
