@@ -267,12 +267,12 @@ def test_the_entry_point_prints_no_traceback() -> None:
 
 def test_a_bug_keeps_its_traceback(monkeypatch) -> None:
     """Only PosecastError is turned into a message; anything else is a bug to see."""
-    import posecast.cli as cli
+    from posecast.cli import serve
 
     def broken(args: object) -> int:
         raise RuntimeError("a bug")
 
-    monkeypatch.setattr(cli, "_cmd_token", broken)
+    monkeypatch.setattr(serve, "cmd_token", broken)
     with pytest.raises(RuntimeError, match="a bug"):
         main(["token", "--room", "R", "--player", "P"])
 
@@ -605,7 +605,7 @@ def test_serve_names_a_models_dir_from_the_environment(capsys, monkeypatch) -> N
 def test_serve_names_the_models_dir_as_the_config_names_it(
     capsys, monkeypatch, argv: list[str], env: dict[str, str], named: str
 ) -> None:
-    """_cmd_serve worked out the models directory's name from os.environ itself,
+    """cmd_serve worked out the models directory's name from os.environ itself,
     beside the config's own naming: it asks config.setting_names now."""
     import os
 
@@ -673,15 +673,15 @@ def test_demo_on_a_port_in_use_is_a_config_error(capsys) -> None:
 def test_train_device_auto_takes_cuda_only_where_torch_sees_one(monkeypatch) -> None:
     import torch
 
-    import posecast.cli as cli
+    from posecast.cli.train import train_device
     from posecast.errors import PosecastError
 
     monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
-    assert cli._train_device("auto") == cli._train_device("cpu") == "cpu"
+    assert train_device("auto") == train_device("cpu") == "cpu"
     with pytest.raises(PosecastError, match="no CUDA device"):
-        cli._train_device("cuda")
+        train_device("cuda")
     monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
-    assert cli._train_device("auto") == cli._train_device("cuda") == "cuda"
+    assert train_device("auto") == train_device("cuda") == "cuda"
 
 
 @pytest.mark.parametrize(
@@ -952,7 +952,7 @@ def test_serve_dev_prints_urls_that_reach_the_bound_server(host: str) -> None:
     (asyncio's create_server, which websockets' serve calls)."""
     import asyncio
 
-    from posecast.cli import _dev_lines
+    from posecast.cli.serve import dev_lines
 
     if ":" in host and not socket.has_ipv6:
         pytest.skip("no IPv6 here")
@@ -963,7 +963,7 @@ def test_serve_dev_prints_urls_that_reach_the_bound_server(host: str) -> None:
         except OSError as exc:  # pragma: no cover - a machine without that address
             pytest.skip(f"cannot bind {host}: {exc}")
         port = server.sockets[0].getsockname()[1]
-        lines = _dev_lines(host, port, "s" * 32)
+        lines = dev_lines(host, port, "s" * 32)
         try:
             for url in (lines[0].split()[4], lines[3].split("=", 1)[1]):
                 address = url.split("//", 1)[1].rsplit(":", 1)[0].strip("[]")
@@ -984,16 +984,16 @@ def test_serve_dev_prints_urls_that_reach_the_bound_server(host: str) -> None:
 def test_serve_dev_on_an_address_that_is_not_loopback_says_there_is_no_viewer() -> None:
     """The viewer line said "(this machine only)" for ``--host 192.168.x.y`` too, but
     /viewer/token hands tokens to loopback peers only (shell.http): the page got 403."""
-    from posecast.cli import _dev_lines
+    from posecast.cli.serve import dev_lines
 
-    assert _dev_lines("192.0.2.7", 8765, "s" * 32) == [
+    assert dev_lines("192.0.2.7", 8765, "s" * 32) == [
         "posecast: --dev: no viewer here: its dev tokens need a loopback bind, and host"
         " 192.0.2.7 is not one (--host 127.0.0.1, the default, or 0.0.0.0 is)",
         "posecast: --dev: for a client in another shell, paste:",
         f"export POSECAST_TOKEN_SECRET={'s' * 32}",
         "export POSECAST_URL=ws://192.0.2.7:8765/",
     ]
-    assert _dev_lines("2001:db8::7", 8765, None)[0].startswith("posecast: --dev: no viewer here")
+    assert dev_lines("2001:db8::7", 8765, None)[0].startswith("posecast: --dev: no viewer here")
 
 
 def test_serve_logs_each_posecast_variable_that_sets_nothing(capsys, monkeypatch) -> None:

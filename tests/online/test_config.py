@@ -474,7 +474,7 @@ ENGINE_SETTINGS = {
 def test_every_engine_setting_is_a_server_setting_or_left_at_its_default() -> None:
     """A new EngineConfig field cannot be forgotten: it gets a server setting (a flag
     and a POSECAST_* variable, declared with config._engine) or is listed as one the
-    server leaves at the engine's default. app.py and cli.py mapped eleven by hand."""
+    server leaves at the engine's default (shell/app.py and posecast eval mapped eleven by hand)."""
     engine = {f.name for f in fields(EngineConfig)}
     served = list(ENGINE_SETTINGS.values())
     assert len(set(served)) == len(served), "two server settings set one engine field"
