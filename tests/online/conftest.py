@@ -20,7 +20,6 @@ from posecast.offline.dataset.frames import derive_frames
 from posecast.offline.motion.synthetic import walk_clip
 from posecast.online.auth.tokens import mint
 from posecast.online.config import ServerConfig
-from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.ssi import Engine
 from posecast.online.inference.backends import Backend, load_backend
 from posecast.online.protocol.messages import Frame
@@ -77,7 +76,7 @@ def engine_factory(onnx_backend: Backend) -> Callable[[ServerConfig], Callable[[
     dec, pool = onnx_backend.decoder, onnx_backend.pool
 
     def for_cfg(cfg: ServerConfig) -> Callable[[], Engine]:
-        ecfg = EngineConfig(samples=cfg.samples, lookahead=cfg.lookahead, fps=cfg.tick_hz)
+        ecfg = cfg.engine_config()
         return lambda: Engine(dec, pool, ecfg, backend_name=onnx_backend.name)
 
     return for_cfg

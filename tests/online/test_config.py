@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import re
 from dataclasses import fields
@@ -14,13 +15,17 @@ from posecast.errors import ConfigError, TokenExpiredError
 from posecast.online.auth.tokens import mint, verify
 from posecast.online.config import (
     BOUNDS,
+    ENGINE_DEFAULTS_ONLY,
+    ENGINE_SWITCHES,
     FLAGS_GIVEN,
     ServerConfig,
     add_arguments,
+    engine_settings,
     option_help,
     setting_names,
     unknown_variables,
 )
+from posecast.online.engine.config import EngineConfig
 
 SECRET = "s" * 32
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "server.md"
@@ -458,6 +463,59 @@ def test_a_no_option_turns_its_engine_step_off(option: str, attr: str) -> None:
     ):
         multi = PosecastServer(cfg)._default_engine()
         assert all(getattr(e.cfg, attr) is on for e in multi.engines.values())
+
+
+# The server settings that set an engine field, with the field each sets.
+ENGINE_SETTINGS = {
+    f.name: f.metadata["engine"] for f in fields(ServerConfig) if f.metadata.get("engine")
+}
+
+
+def test_every_engine_setting_is_a_server_setting_or_left_at_its_default() -> None:
+    """A new EngineConfig field cannot be forgotten: it gets a server setting (a flag
+    and a POSECAST_* variable, declared with config._engine) or is listed as one the
+    server leaves at the engine's default (shell/app.py and posecast eval mapped eleven by hand)."""
+    engine = {f.name for f in fields(EngineConfig)}
+    served = list(ENGINE_SETTINGS.values())
+    assert len(set(served)) == len(served), "two server settings set one engine field"
+    assert set(served) | ENGINE_DEFAULTS_ONLY == engine
+    assert not set(served) & ENGINE_DEFAULTS_ONLY
+    assert tuple(n for n in ENGINE_SETTINGS if n.startswith("no_")) == ENGINE_SWITCHES
+    assert len(ENGINE_SWITCHES) == 11
+
+
+def test_the_servers_engine_defaults_are_the_engines() -> None:
+    assert ServerConfig(token_secret=SECRET).engine_config() == EngineConfig()
+
+
+def _other(value: object) -> object:
+    """A valid value other than a setting's default ``value``."""
+    if isinstance(value, bool):
+        return not value
+    if isinstance(value, int):
+        return value + 1
+    assert isinstance(value, float)
+    return value / 2
+
+
+@pytest.mark.parametrize("name", sorted(ENGINE_SETTINGS))
+def test_each_engine_setting_reaches_the_engine_by_its_flag_and_its_variable(name: str) -> None:
+    """Every server setting of the engine, given by the flag and by the POSECAST_*
+    variable generated from its field, sets its EngineConfig field, and only that."""
+    (f,) = [f for f in fields(ServerConfig) if f.name == name]
+    target = ENGINE_SETTINGS[name]
+    value = _other(f.default)
+    want = (not value) if f.metadata["off"] else value
+    assert engine_settings({name: value}) == {target: want}
+    flag = "--" + name.replace("_", "-")
+    overrides, typed = _flags(*([flag] if value is True else [flag, str(value)]))
+    base = {"POSECAST_TOKEN_SECRET": SECRET}
+    variable = {"POSECAST_" + name.upper(): "1" if value is True else str(value)}
+    for cfg in (
+        ServerConfig.from_sources(base, overrides, typed),
+        ServerConfig.from_sources({**base, **variable}),
+    ):
+        assert cfg.engine_config() == dataclasses.replace(EngineConfig(), **{target: want})
 
 
 def test_the_node_key_must_outlive_the_slowest_round_trips() -> None:

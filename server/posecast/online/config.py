@@ -7,6 +7,14 @@ reads either; nothing below it looks at ``os.environ``. A bad value is named as 
 user gave it (``--tick-hz nan``, ``POSECAST_TICK_HZ=nan``): the edge passes in where
 each value came from. ``docs/server.md`` lists every option (a test keeps the table
 in sync with this class).
+
+The engine's settings among them (``samples``, ``lookahead``, ``tick_hz``,
+``wrist_elbow`` and the ``no_*`` switches) are declared with :func:`_engine`, which
+names the :class:`~posecast.online.engine.config.EngineConfig` field each one sets and
+takes its default from there; :meth:`ServerConfig.engine_config` builds the engine's
+config from those declarations, so no module maps them by hand. The engine's other
+settings (:data:`ENGINE_DEFAULTS_ONLY`) are research knobs the server leaves at their
+defaults.
 """
 
 from __future__ import annotations
@@ -22,8 +30,7 @@ from urllib.parse import urlsplit
 from posecast.errors import ConfigError
 from posecast.online.auth.tokens import new_secret
 from posecast.online.engine.backend import BACKENDS, MAX_THREADS
-from posecast.online.engine.config import MAX_SAMPLES
-from posecast.online.engine.upper_ik import WRIST_ELBOW_SHARE
+from posecast.online.engine.config import MAX_SAMPLES, EngineConfig
 from posecast.online.protocol.messages import LIMIT_RANGES, MAX_LOOKAHEAD_FRAMES, Limits
 from posecast.tracking.layouts import Layout
 
@@ -39,6 +46,17 @@ def _opt(default: Any, help: str, flags: tuple[str, ...] = (), **extra: Any) -> 
     return field(default=default, metadata={"help": help, "flags": flags}, **extra)
 
 
+_ENGINE_DEFAULTS = {f.name: f.default for f in fields(EngineConfig)}
+
+
+def _engine(name: str, help: str, *, off: bool = False) -> Any:
+    """A config field that sets :class:`EngineConfig`'s field ``name``, with its
+    default; ``off``: a ``no_*`` switch, on (``True``) to turn ``name`` off."""
+    default = _ENGINE_DEFAULTS[name]
+    meta = {"help": help, "flags": (), "engine": name, "off": off}
+    return field(default=(not default) if off else default, metadata=meta)
+
+
 @dataclass(frozen=True)
 class ServerConfig:
     """Every knob of ``posecast serve``, with safe defaults (units in the names)."""
@@ -49,73 +67,84 @@ class ServerConfig:
     dev: bool = _opt(False, "development mode: invent and print a secret if none is set")
     token_leeway_s: float = _opt(5.0, "clock skew allowed on token iat/exp, seconds")
     replay_cache: int = _opt(100_000, "ended-session token ids remembered (replay guard)")
-    tick_hz: float = _opt(60.0, "engine ticks per second (the shipped model runs at 60)")
-    samples: int = _opt(100, "latent samples per player, N")
-    lookahead: int = _opt(10, "look-ahead tau in frames; poses lag frames by tau ticks")
-    no_upper_ik: bool = _opt(
-        False,
+    tick_hz: float = _engine("fps", "engine ticks per second (the shipped model runs at 60)")
+    samples: int = _engine("samples", "latent samples per player, N")
+    lookahead: int = _engine("lookahead", "look-ahead tau in frames; poses lag frames by tau ticks")
+    no_upper_ik: bool = _engine(
+        "upper_body_ik",
         "stream the poses without the upper-body pass (head on the headset, hands on the "
         "controllers): about twice the players per node, hands where the network puts them",
+        off=True,
     )
-    no_floor_ik: bool = _opt(
-        False,
+    no_floor_ik: bool = _engine(
+        "floor_ik",
         "stream the feet where the network and the contact IK put them, below the floor "
         "(y = 0) included, instead of lifting them onto it",
+        off=True,
     )
-    no_swing_clearance: bool = _opt(
-        False,
+    no_swing_clearance: bool = _engine(
+        "swing_clearance",
         "lift only feet that are below the floor, not a toe that moves over it to the "
         "height real toes keep at its speed (the swing clearance)",
+        off=True,
     )
-    no_knee_hinge: bool = _opt(
-        False,
+    no_knee_hinge: bool = _engine(
+        "knee_hinge",
         "stream the knees as the network and the leg passes bend them, partly sideways "
         "included, instead of turning thigh and shin so each knee bends as a hinge",
+        off=True,
     )
-    no_elbow_hinge: bool = _opt(
-        False,
+    no_elbow_hinge: bool = _engine(
+        "elbow_hinge",
         "stream the elbows as the upper-body pass bends them, twisted about the upper arm "
         "included, instead of turning upper arm and forearm so each elbow bends as a hinge",
+        off=True,
     )
-    wrist_elbow: float = _opt(
-        WRIST_ELBOW_SHARE,
+    wrist_elbow: float = _engine(
+        "wrist_elbow",
         "share of each shown elbow's placement taken from its controller's rotation (a "
         "straight wrist), the rest from the network's elbow; 0 for the network's alone",
     )
-    no_hand_reach: bool = _opt(
-        False,
+    no_hand_reach: bool = _engine(
+        "hand_reach",
         "leave a guessed pelvis (a headset-only player, a tracker set without a waist) "
         "where the headset puts it, after the feet are planted, instead of moving it "
         "beforehand, horizontally toward a controller beyond the arm's reach too",
+        off=True,
     )
-    no_torso_span: bool = _opt(
-        False,
+    no_torso_span: bool = _engine(
+        "torso_span",
         "leave a guessed body (a headset-only player, a tracker set without a waist) "
         "where the reach put it, the spine chain folding or stretching to the headset, "
         "instead of moving it along the line to the headset until the network's torso "
         "spans the distance",
+        off=True,
     )
-    no_legs_apart: bool = _opt(
-        False,
+    no_legs_apart: bool = _engine(
+        "legs_apart",
         "let the contact IK hold a planted foot where the other leg swings through it, "
         "instead of letting that foot give way toward the network's own just as far as "
         "keeps the legs apart",
+        off=True,
     )
-    no_pelvis_lean: bool = _opt(
-        False,
+    no_pelvis_lean: bool = _engine(
+        "pelvis_lean",
         "leave a guessed pelvis (a headset-only player, a tracker set without a waist) "
         "as the network turned it instead of leaning it so that the line to the head "
         "points at the headset, before the feet are planted",
+        off=True,
     )
-    no_floor_select: bool = _opt(
-        False,
+    no_floor_select: bool = _engine(
+        "floor_select",
         "let SSI move to a sample with a foot deeper below the floor than the floor pass "
         "lifts (0.4 m), and stay on one, instead of leaving such samples out of the pool",
+        off=True,
     )
-    no_pelvis_smoothing: bool = _opt(
-        False,
+    no_pelvis_smoothing: bool = _engine(
+        "pelvis_smoothing",
         "stream each pose on its own frame's pelvis instead of the 1-2-1 average with "
         "the frames either side (which takes the pelvis's shake out of the legs)",
+        off=True,
     )
     engine_threads: int = _opt(
         2,
@@ -198,6 +227,13 @@ class ServerConfig:
             max_watch_rooms=self.max_watch_rooms,
         )
 
+    def engine_config(self) -> EngineConfig:
+        """The engine's settings: the engine's defaults, with each of this config's
+        engine settings (``--samples``, ``--no-upper-ik``, ...) set as it declares."""
+        return EngineConfig(
+            **engine_settings({f.name: getattr(self, f.name) for f in fields(self)})
+        )
+
     @property
     def secret_bytes(self) -> bytes:
         return self.token_secret.encode("utf-8")
@@ -235,6 +271,45 @@ class ServerConfig:
 
     def replace(self, **changes: Any) -> ServerConfig:
         return dataclasses.replace(self, **changes)
+
+
+def engine_settings(values: Mapping[str, Any]) -> dict[str, Any]:
+    """:class:`EngineConfig` keyword arguments from server settings by field name, as
+    each setting declares (:func:`_engine`): ``{"no_upper_ik": True, "tick_hz": 30.0}``
+    gives ``{"upper_body_ik": False, "fps": 30.0}``; names that set no engine field are
+    left out. The one mapping of these settings, for :meth:`ServerConfig.engine_config`
+    and for ``posecast eval``, whose ``--no-*`` flags are the same switches."""
+    out: dict[str, Any] = {}
+    for f in fields(ServerConfig):
+        target = f.metadata.get("engine")
+        if target and f.name in values:
+            value = values[f.name]
+            out[target] = (not value) if f.metadata["off"] else value
+    return out
+
+
+# The ``no_*`` switches, each of which turns one of the engine's steps off (``posecast
+# serve`` and ``posecast eval`` take a ``--no-*`` flag for each).
+ENGINE_SWITCHES: tuple[str, ...] = tuple(
+    f.name for f in fields(ServerConfig) if f.metadata.get("off")
+)
+
+# The engine's settings that the server leaves at the engine's defaults: research
+# knobs (``posecast eval`` sets some) and constants of the model. A new EngineConfig
+# field belongs here or gets a server setting (:func:`_engine`); a test holds this.
+ENGINE_DEFAULTS_ONLY = frozenset(
+    {
+        "transition_frames",
+        "outlier_factor",
+        "outlier_baseline",
+        "ik_release_frames",
+        "ik_max_drift_m",
+        "stale_after_frames",
+        "waist_filter_hz",
+        "latent_scale",
+        "home_factor",
+    }
+)
 
 
 def setting_names(

@@ -12,7 +12,6 @@ import pytest
 from websockets.exceptions import ConnectionClosed
 
 from posecast.online.config import ServerConfig
-from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.multi import MultiEngine
 from posecast.online.inference.loader import load_engine
 from posecast.online.protocol.messages import Error, Frame, Welcome
@@ -26,7 +25,7 @@ BOTH = "hmd3+waist,hmd3"
 
 
 def _factory(cfg: ServerConfig) -> Callable[[], MultiEngine]:
-    ecfg = EngineConfig(samples=cfg.samples, lookahead=cfg.lookahead, fps=cfg.tick_hz)
+    ecfg = cfg.engine_config()
     engines = {
         layout: load_engine(ecfg, layout=layout, backend="onnx")
         for layout in ("hmd3+waist", "hmd3")

@@ -43,7 +43,6 @@ from posecast.online.cluster.auto import create_bus
 from posecast.online.config import ServerConfig
 from posecast.online.core.hub import Hub
 from posecast.online.core.ratelimit import SocketCount
-from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.multi import MultiEngine
 from posecast.online.engine.ssi import Engine
 from posecast.online.inference.loader import load_multi_engine
@@ -106,23 +105,7 @@ class PosecastServer:
 
     def _default_engine(self) -> MultiEngine:
         """One engine per served layout, each on its model (``--layouts``)."""
-        ecfg = EngineConfig(
-            samples=self.cfg.samples,
-            lookahead=self.cfg.lookahead,
-            fps=self.cfg.tick_hz,
-            upper_body_ik=not self.cfg.no_upper_ik,
-            floor_ik=not self.cfg.no_floor_ik,
-            swing_clearance=not self.cfg.no_swing_clearance,
-            knee_hinge=not self.cfg.no_knee_hinge,
-            wrist_elbow=self.cfg.wrist_elbow,
-            elbow_hinge=not self.cfg.no_elbow_hinge,
-            hand_reach=not self.cfg.no_hand_reach,
-            torso_span=not self.cfg.no_torso_span,
-            legs_apart=not self.cfg.no_legs_apart,
-            pelvis_lean=not self.cfg.no_pelvis_lean,
-            pelvis_smoothing=not self.cfg.no_pelvis_smoothing,
-            floor_select=not self.cfg.no_floor_select,
-        )
+        ecfg = self.cfg.engine_config()
         layouts, threads = self.cfg.served_layouts, self.cfg.engine_threads
         return load_multi_engine(ecfg, layouts, self.cfg.models_dir, threads, self.cfg.backend)
 

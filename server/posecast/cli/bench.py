@@ -1,0 +1,178 @@
+"""``posecast bench engine``: the per-tick cost of the SSI engine at each player count
+(:mod:`posecast.offline.evaluation.engine_speed`, ``docs/engine.md``)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from posecast.cli.common import (
+    at_least,
+    backend_names,
+    check_json_out,
+    check_samples,
+    config_error,
+    int_list,
+)
+
+
+def cmd_bench_engine(args: argparse.Namespace) -> int:
+    import json
+
+    cmd = "bench engine"
+    counts = int_list("--players", args.players, cmd)
+    check_samples("--samples", [args.samples], cmd)
+    for option, value in (
+        ("--threads", args.threads),
+        ("--ticks", args.ticks),
+        ("--naive-players", args.naive_players),
+    ):
+        at_least(option, value, 1, cmd)
+    if not 0.0 <= args.hmd3_share <= 1.0:
+        raise config_error(
+            f"--hmd3-share {args.hmd3_share} outside [0, 1]",
+            "the share of players on the headset-only model, e.g. 0.5 (0: none)",
+        )
+    backends = backend_names("--backend", args.backend, cmd, many=True)
+    check_json_out(args.json)
+    from posecast.offline.evaluation.engine_speed import run_side_by_side
+
+    reports = run_side_by_side(
+        list(backends),
+        counts,
+        args.samples,
+        args.threads,
+        args.ticks,
+        args.naive_players,
+        args.hmd3_share,
+        args.sets,
+    )
+    for report in reports:
+        _print_bench(report, args.samples)
+    if len(reports) > 1:
+        _print_ratios(reports)
+    if args.json is not None:
+        out = reports[0] if len(reports) == 1 else reports
+        args.json.write_text(json.dumps(out, indent=1) + "\n", encoding="utf-8")
+    return 0
+
+
+def _print_ratios(reports: list[dict[str, Any]]) -> None:
+    """p50 and p99 of every backend per player count, and each one's speed-up over
+    the last (measured side by side, count by count)."""
+    names = [r["backend"] for r in reports]
+    ref = reports[-1]
+    print(f"side by side (speed-up over {names[-1]}, p50):")
+    head = "".join(f" {n + ' p50':>12s} {n + ' p99':>12s}" for n in names)
+    print(f"{'players':>8s}{head} {'speed-up':>9s}")
+    for i, p in enumerate(ref["players"]):
+        cells = "".join(
+            f" {r['tick_p50_ms'][i]:12.2f} {r['tick_p99_ms'][i]:12.2f}" for r in reports
+        )
+        ratio = ref["tick_p50_ms"][i] / max(reports[0]["tick_p50_ms"][i], 1e-9)
+        print(f"{p:8d}{cells} {ratio:8.2f}x")
+
+
+def _print_bench(report: dict[str, Any], samples: int) -> None:
+    """One backend's tables of ``posecast bench engine``."""
+    from posecast.offline.evaluation.engine_speed import realtime_summary
+
+    used, asked = report["backend"], report["backend_asked"]
+    print(f"backend {used}" + (f" ({asked} asked for; unavailable)" if used != asked else ""))
+    print(f"{'players':>8s} {'p50 ms':>8s} {'p99 ms':>8s} {'GFLOP/s':>8s} {'MB/player':>10s}")
+    for i, p in enumerate(report["players"]):
+        print(
+            f"{p:8d} {report['tick_p50_ms'][i]:8.2f} {report['tick_p99_ms'][i]:8.2f} "
+            f"{report['gflops'][i]:8.1f} {report['rss_mb_per_player'][i]:10.2f}"
+        )
+    fit = realtime_summary(report["players"], report["tick_p99_ms"])
+    print(f"max players at 60 Hz (p99 < 16.7 ms), N={samples}: {fit}")
+    if report["native_isa"]:
+        print(f"native kernels: {report['native_isa']}")
+    print(f"naive loop: {report['naive_loop']}")
+    both = report.get("both_models")
+    if both:
+        print(
+            f"both models loaded (backend {both['backend']}), {both['hmd3_share']:.0%} of the "
+            "players headset-only:"
+        )
+        print(f"{'players':>8s} {'hmd3':>5s} {'p50 ms':>8s} {'p99 ms':>8s} {'MB/player':>10s}")
+        for i, p in enumerate(report["players"]):
+            print(
+                f"{p:8d} {both['hmd3_players'][i]:5d} {both['tick_p50_ms'][i]:8.2f} "
+                f"{both['tick_p99_ms'][i]:8.2f} {both['rss_mb_per_player'][i]:10.2f}"
+            )
+        fit = realtime_summary(report["players"], both["tick_p99_ms"])
+        print(f"max players at 60 Hz, both models: {fit}")
+    sets = report.get("mixed_sets")
+    if sets:
+        print(
+            f"mixed tracker sets on the sites model (backend {sets['backend']}), players on "
+            f"{', '.join(sets['sets'])} in turn, beside hmd3+waist (p50 ratio):"
+        )
+        print(f"{'players':>8s} {'p50 ms':>8s} {'p99 ms':>8s} {'ratio':>6s} {'MB/player':>10s}")
+        for i, p in enumerate(report["players"]):
+            print(
+                f"{p:8d} {sets['tick_p50_ms'][i]:8.2f} {sets['tick_p99_ms'][i]:8.2f} "
+                f"{sets['p50_ratio'][i]:6.2f} {sets['rss_mb_per_player'][i]:10.2f}"
+            )
+        fit = realtime_summary(report["players"], sets["tick_p99_ms"])
+        print(f"max players at 60 Hz, mixed sets: {fit}")
+
+
+def add_parsers(sub: argparse._SubParsersAction[Any]) -> None:
+    """Add ``posecast bench engine`` to ``sub`` (``posecast``'s commands)."""
+    bench = sub.add_parser("bench", help="benchmarks")
+    bench_sub = bench.add_subparsers(dest="bench_command", required=True)
+    be = bench_sub.add_parser(
+        "engine",
+        help="per-tick cost of the SSI engine",
+        description="The engine's whole per-tick cost at each player count, and how many "
+        "players hold 60 Hz (p99 tick under 16.7 ms) as far as the counts tested tell.",
+    )
+    be.add_argument(
+        "--players",
+        default="1,10,50,100,200",
+        help="player counts, comma-separated, each measured in turn (default %(default)s)",
+    )
+    be.add_argument(
+        "--samples", type=int, default=100, help="latent samples N (default %(default)s)"
+    )
+    be.add_argument(
+        "--threads",
+        type=int,
+        default=2,
+        help="the backend's intra-op threads (default %(default)s)",
+    )
+    be.add_argument(
+        "--backend",
+        default="native",
+        help="inference backend, or a comma-separated list to run each in turn, one table "
+        "each (native, onnx, torch; default native, which falls back to onnx where the "
+        "extension does not load; --json then writes a list)",
+    )
+    be.add_argument(
+        "--ticks", type=int, default=120, help="measured ticks per count (default %(default)s)"
+    )
+    be.add_argument(
+        "--naive-players",
+        type=int,
+        default=10,
+        help="players for the per-player loop it is compared with (default %(default)s)",
+    )
+    be.add_argument(
+        "--hmd3-share",
+        type=float,
+        default=0.5,
+        help="also load the headset-only model and run this share of players on it "
+        "(default 0.5; 0: the 4-point model only)",
+    )
+    be.add_argument(
+        "--sets",
+        action="store_true",
+        help="also run every player on the one model of every tracker set, the six sets of "
+        "the evaluation table in turn, beside the 4-point figure count by count",
+    )
+    be.add_argument("--json", type=Path, help="write the report here")
+    be.set_defaults(func=cmd_bench_engine)
