@@ -144,7 +144,7 @@ def _int_list(option: str, text: str, command: str) -> list[int]:
 def _backends(option: str, text: str, command: str, *, many: bool = False) -> list[str]:
     """Backend names (``native``, ``onnx``, ``torch``); with ``many``, a comma-separated
     list of distinct ones (``"native,onnx"``)."""
-    from posecast.online.engine.backend import BACKENDS
+    from posecast.online.engine.ports import BACKENDS
 
     names = [n.strip() for n in text.split(",")] if many else [text]
     if not all(n in BACKENDS for n in names) or len(set(names)) < len(names):
@@ -711,7 +711,7 @@ def _cmd_eval_apps(args: argparse.Namespace) -> int:
     _manifest(args.data)
     from posecast.offline.dataset.store import load_split
     from posecast.offline.evaluation.applications import table3
-    from posecast.online.inference.backends import load_backend
+    from posecast.online.inference.auto import load_backend
 
     kick = None
     names: list[str] = []

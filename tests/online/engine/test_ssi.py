@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from posecast.online.engine.backend import Decoder, Pool
 from posecast.online.engine.calibration import Calibration
+from posecast.online.engine.ports import Decoder, Pool
 from posecast.online.engine.selectors import AnomalySelector, Selector
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import EngineEvent, PoseOut, TrackerFrame

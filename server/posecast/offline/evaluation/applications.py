@@ -28,7 +28,7 @@ from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.selectors import ObstacleSelector, Selector, TargetSelector
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
-from posecast.online.inference.backends import Backend
+from posecast.online.inference.auto import Backend
 from posecast.skeleton import Joint
 from posecast.tracking.features import TrackerSlot, from_character_frame, to_character_frame
 

@@ -25,8 +25,8 @@ Per tick, for all ``P`` players x ``N`` samples at once:
 
 The engine is pure: frames go in with :meth:`Engine.push`, :meth:`Engine.tick`
 returns poses and events (:mod:`posecast.online.engine.types`). No sockets, no
-clocks, no threads; steps 2 and 3 are a backend's :class:`~posecast.online.engine.backend.Decoder`
-and :class:`~posecast.online.engine.backend.Pool`, which arrive built
+clocks, no threads; steps 2 and 3 are a backend's :class:`~posecast.online.engine.ports.Decoder`
+and :class:`~posecast.online.engine.ports.Pool`, which arrive built
 (:func:`posecast.online.inference.loader.load_engine` loads the shipped models on the backend
 named). One engine serves one model (one layout);
 :class:`posecast.online.engine.multi.MultiEngine` batches each model's players together
@@ -53,7 +53,6 @@ from numpy.typing import NDArray
 from posecast.geometry.fk import fk_positions
 from posecast.geometry.rotations import mat2quat, quat2mat
 from posecast.online.engine.apart import MAX_OVERLAP_M, keep_apart, overlap
-from posecast.online.engine.backend import Decoder, Pool, PoolIK
 from posecast.online.engine.batch_fk import fk32, pelvis_from_head32
 from posecast.online.engine.calibration import (
     Calibration,
@@ -68,6 +67,7 @@ from posecast.online.engine.hinge import ELBOW_LIMBS, KNEE_LIMBS
 from posecast.online.engine.ik import LEGS, floor_ik, floor_lift
 from posecast.online.engine.leg_ik import senses_legs, solve_legs, tracks_legs
 from posecast.online.engine.pelvis import smooth_pelvis
+from posecast.online.engine.ports import Decoder, Pool, PoolIK
 from posecast.online.engine.selectors import (
     AnomalySelector,
     DefaultSelector,
@@ -130,7 +130,7 @@ class Engine:
 
     Args:
         decoder, pool: a backend's two halves (``load_backend`` in
-            :mod:`posecast.online.inference.backends`); the pool's contact-IK settings
+            :mod:`posecast.online.inference.auto`); the pool's contact-IK settings
             should be this ``cfg``'s.
         cfg: sample selection and interpolation settings (defaults: :class:`EngineConfig`).
         capacity: player slots preallocated (doubles when full).

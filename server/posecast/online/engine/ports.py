@@ -1,4 +1,7 @@
-"""What the engine asks of an inference backend (STYLE principle 5: backends by name).
+"""The engine's ports: what it asks of an inference backend (STYLE principle 5).
+
+The protocols here are what a backend implements; :mod:`posecast.online.inference.auto`
+builds one by name.
 
 A tick needs two things done for all ``R = P * N`` candidate rows: the decoder step
 (:class:`Decoder`) and the candidate pool's FK, contact IK and anomaly error
