@@ -24,7 +24,7 @@ from posecast.offline.dataset.frames import derive_frames
 from posecast.offline.motion.synthetic import walk_clip
 from posecast.online.engine.anomaly import AnomalyScorer
 from posecast.online.engine.config import EngineConfig
-from posecast.online.engine.ports import Decoder, Pool
+from posecast.online.engine.ports import Pool, StepDecoder
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import PoseOut, TrackerFrame
 from posecast.online.inference.artifact import Artifact, load_artifact
@@ -75,7 +75,7 @@ class BackendLoader:
         layout: str = Layout.HMD3_WAIST,
         models_dir: Path | None = None,
         *,
-        decoder: Decoder | None = None,
+        decoder: StepDecoder | None = None,
         pool: Pool | None = None,
         capacity: int = 8,
         **cfg: Any,

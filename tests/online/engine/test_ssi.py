@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from posecast.online.engine.calibration import Calibration
-from posecast.online.engine.ports import Decoder, Pool
+from posecast.online.engine.ports import Pool, StepDecoder
 from posecast.online.engine.selectors import AnomalySelector, Selector
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import EngineEvent, PoseOut, TrackerFrame
@@ -72,7 +72,7 @@ class NoContacts:
     """The backend's decoder with its foot contacts forced to 0, so no contact IK runs
     and positions show the decoder's poses (and the SSI interpolation) alone."""
 
-    def __init__(self, decoder: Decoder) -> None:
+    def __init__(self, decoder: StepDecoder) -> None:
         self.decoder, self.meta, self.name = decoder, decoder.meta, decoder.name
         self.cache_width = decoder.cache_width
 

@@ -4,7 +4,7 @@ The protocols here are what a backend implements; :mod:`posecast.online.inferenc
 builds one by name.
 
 A tick needs two things done for all ``R = P * N`` candidate rows: the decoder step
-(:class:`Decoder`) and the candidate pool's FK, contact IK and anomaly error
+(:class:`StepDecoder`) and the candidate pool's FK, contact IK and anomaly error
 (:class:`Pool`), and then the shown pose of each player (``Pool.emit``, and the
 upper-body pass and the hinges on it, ``Pool.upper_body`` and ``Pool.hinge``). A backend
 supplies both; the engine calls nothing else. Backends:
@@ -13,7 +13,7 @@ supplies both; the engine calls nothing else. Backends:
   on one thread pool; :mod:`posecast.online.inference.native`), the default where it
   loads;
 * ``onnx``: ONNX Runtime for the networks, numpy for the geometry (the reference);
-* ``torch``: the training code's own ``Decoder.step`` (parity and research).
+* ``torch``: the training code's own ``CVAEDecoder.step`` (parity and research).
 
 All read the same artifacts (ONNX + JSON sidecar): the ONNX file is the one source of
 weights. This module imports no inference library.
@@ -49,7 +49,7 @@ class PoolIK:
     suppressed: NDArray[np.bool_]
 
 
-class Decoder(Protocol):
+class StepDecoder(Protocol):
     """One step of the CVAE decoder for ``R`` rows."""
 
     name: str

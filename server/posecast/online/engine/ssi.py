@@ -25,7 +25,7 @@ Per tick, for all ``P`` players x ``N`` samples at once:
 
 The engine is pure: frames go in with :meth:`Engine.push`, :meth:`Engine.tick`
 returns poses and events (:mod:`posecast.online.engine.types`). No sockets, no
-clocks, no threads; steps 2 and 3 are a backend's :class:`~posecast.online.engine.ports.Decoder`
+clocks, no threads; steps 2 and 3 are a backend's :class:`~posecast.online.engine.ports.StepDecoder`
 and :class:`~posecast.online.engine.ports.Pool`, which arrive built
 (:func:`posecast.online.inference.loader.load_engine` loads the shipped models on the backend
 named). One engine serves one model (one layout);
@@ -67,7 +67,7 @@ from posecast.online.engine.hinge import ELBOW_LIMBS, KNEE_LIMBS
 from posecast.online.engine.ik import LEGS, floor_ik, floor_lift
 from posecast.online.engine.leg_ik import senses_legs, solve_legs, tracks_legs
 from posecast.online.engine.pelvis import smooth_pelvis
-from posecast.online.engine.ports import Decoder, Pool, PoolIK
+from posecast.online.engine.ports import Pool, PoolIK, StepDecoder
 from posecast.online.engine.selectors import (
     AnomalySelector,
     DefaultSelector,
@@ -139,7 +139,7 @@ class Engine:
 
     def __init__(
         self,
-        decoder: Decoder,
+        decoder: StepDecoder,
         pool: Pool,
         cfg: EngineConfig | None = None,
         capacity: int = 8,

@@ -17,7 +17,7 @@ from typing import NamedTuple
 
 from posecast.errors import ConfigError, ModelError
 from posecast.online.engine.config import EngineConfig
-from posecast.online.engine.ports import BACKENDS, MAX_THREADS, Decoder, Pool
+from posecast.online.engine.ports import BACKENDS, MAX_THREADS, Pool, StepDecoder
 from posecast.tracking.layouts import Layout, spec
 
 log = logging.getLogger("posecast.engine")
@@ -28,7 +28,7 @@ class Backend(NamedTuple):
     ``native`` was asked for and fell back)."""
 
     name: str
-    decoder: Decoder
+    decoder: StepDecoder
     pool: Pool
 
 

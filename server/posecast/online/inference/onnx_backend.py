@@ -30,7 +30,7 @@ from posecast.online.inference.artifact import Artifact, load_artifact
 
 
 class OnnxDecoder:
-    """A :class:`~posecast.online.engine.ports.Decoder` over an ONNX decoder artifact."""
+    """A :class:`~posecast.online.engine.ports.StepDecoder` over an ONNX decoder artifact."""
 
     def __init__(self, artifact: Artifact) -> None:
         self.artifact = artifact
