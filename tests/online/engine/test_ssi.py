@@ -11,7 +11,7 @@ import pytest
 
 from posecast.online.engine.calibration import Calibration
 from posecast.online.engine.ports import Pool, StepDecoder
-from posecast.online.engine.selectors import AnomalySelector, Selector
+from posecast.online.engine.selectors import AnomalySelector, SampleSelector
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import EngineEvent, PoseOut, TrackerFrame
 from posecast.skeleton import NUM_JOINTS, Joint
@@ -412,7 +412,7 @@ def test_transition_jumps_stay_bounded(
     T = 10
     no_contacts = NoContacts(backend().decoder)
 
-    def show(selector: Selector) -> list[PoseOut]:
+    def show(selector: SampleSelector) -> list[PoseOut]:
         engine = backend.engine(decoder=no_contacts, samples=20, lookahead=tau, transition_frames=T)
         engine.add_player("p", seed=3, selector=selector)
         return run(engine, frames)["p"]
@@ -495,7 +495,7 @@ def test_batched_players_equal_single_player_runs(
     players = {"p0": (10, 0), "p1": (11, 1), "p2": (12, 2)}  # id: (seed, walk)
     frames = {pid: walk_frames(walk) for pid, (_, walk) in players.items()}
 
-    def selector(pid: str) -> Selector:
+    def selector(pid: str) -> SampleSelector:
         if pid == "p0":
             return AnomalySelector(baseline="zero")
         return Forced(at=10) if pid == "p1" else Forced(at=20, to=3)

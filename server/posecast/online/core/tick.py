@@ -35,7 +35,7 @@ from collections import deque
 from dataclasses import dataclass, field
 
 from posecast.online.engine.calibration import Calibration
-from posecast.online.engine.selectors import Selector
+from posecast.online.engine.selectors import SampleSelector
 from posecast.online.engine.types import EngineEvent, TrackerFrame
 from posecast.online.protocol.records import PoseState
 from posecast.tracking.layouts import Layout, PlayerLayout
@@ -52,7 +52,7 @@ class EngineOp:
     player: str
     seed: int = 0
     layout: PlayerLayout = Layout.HMD3_WAIST  # add: the player's layout (picks the batch)
-    selector: Selector | None = None
+    selector: SampleSelector | None = None
     calibration: Calibration | None = None
 
 

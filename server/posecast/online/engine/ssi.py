@@ -71,7 +71,7 @@ from posecast.online.engine.ports import Pool, PoolIK, StepDecoder
 from posecast.online.engine.selectors import (
     AnomalySelector,
     DefaultSelector,
-    Selector,
+    SampleSelector,
     choose_anomaly_rows,
     off_the_floor,
 )
@@ -105,7 +105,7 @@ class _Transition:
 class _Player:
     id: str
     slot: int
-    selector: Selector
+    selector: SampleSelector
     calibration: Calibration
     waist_filter: WaistFilter | None
     frames: int = 0  # frames stepped so far
@@ -198,7 +198,7 @@ class Engine:
         self,
         player: str,
         seed: int,
-        selector: Selector | None = None,
+        selector: SampleSelector | None = None,
         calibration: Calibration | None = None,
         tracker_set: TrackerSet | None = None,
     ) -> None:
@@ -253,12 +253,12 @@ class Engine:
         shape = self.slots["zc"][slot, samples].shape
         self.slots["zc"][slot, samples] = self.decoder.cache_latents(rows).reshape(shape)
 
-    def set_selector(self, player: str, selector: Selector) -> None:
+    def set_selector(self, player: str, selector: SampleSelector) -> None:
         """``player`` selects with ``selector`` from the next tick (a
         :class:`~.selectors.DefaultSelector`: the engine's configured anomaly selector)."""
         self.players[player].selector = self._resolve(selector)
 
-    def _resolve(self, selector: Selector) -> Selector:
+    def _resolve(self, selector: SampleSelector) -> SampleSelector:
         if not isinstance(selector, DefaultSelector):
             return selector
         factor = self.cfg.outlier_factor if selector.factor is None else selector.factor
