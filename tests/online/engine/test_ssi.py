@@ -13,7 +13,7 @@ from posecast.online.engine.calibration import Calibration
 from posecast.online.engine.ports import Pool, StepDecoder
 from posecast.online.engine.selectors import AnomalySelector, SampleSelector
 from posecast.online.engine.ssi import Engine
-from posecast.online.engine.types import EngineEvent, PoseOut, TrackerFrame
+from posecast.online.engine.types import EngineEvent, EngineEventKind, PoseOut, TrackerFrame
 from posecast.skeleton import NUM_JOINTS, Joint
 from tests.online.engine.conftest import BackendLoader
 
@@ -597,9 +597,10 @@ def test_missing_frames_are_held_then_stale_then_active(
     assert [poses[t].seq for t in range(12, 19)] == [9] * 7
     assert poses[19].seq == 17 and not poses[19].held
     assert {t: e for t, e in events.items() if e} == {
-        14: [EngineEvent("stale", "p")],
-        17: [EngineEvent("active", "p")],
+        14: [EngineEvent(EngineEventKind.STALE, "p")],
+        17: [EngineEvent(EngineEventKind.ACTIVE, "p")],
     }
+    assert events[14][0].kind is EngineEventKind.STALE  # the member, not an equal string
 
 
 def test_a_frame_after_missing_ones_reads_its_velocity_over_the_gap(
@@ -682,7 +683,7 @@ def test_a_player_without_any_frame_stands_at_the_origin(make_engine: MakeEngine
         assert pose.held and pose.seq == -1
         assert np.all(np.isfinite(pose.positions))
         assert abs(pose.positions[0, 0]) < 1e-6 and abs(pose.positions[0, 2]) < 1e-6
-    assert [r.events for r in results] == [[], [], [EngineEvent("stale", "p")]]
+    assert [r.events for r in results] == [[], [], [EngineEvent(EngineEventKind.STALE, "p")]]
 
 
 # --- calibration ------------------------------------------------------------------------

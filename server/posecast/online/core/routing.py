@@ -215,7 +215,7 @@ class Router:
             room = self.rooms.room_of(ev.player)
             if room is not None:
                 name = self.rooms.name_of(ev.player)
-                data = encode(Presence(ev.kind, room, ev.player, name))
+                data = encode(Presence(ev.kind.value, room, ev.player, name))
                 batches.setdefault(room, ([], []))[1].append(data)
                 self.bytes_to_room(room, data, now)
         for room, (poses, events) in batches.items():

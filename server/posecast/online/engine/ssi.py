@@ -76,7 +76,13 @@ from posecast.online.engine.selectors import (
     off_the_floor,
 )
 from posecast.online.engine.slots import SlotArrays
-from posecast.online.engine.types import EngineEvent, PoseOut, TickResult, TrackerFrame
+from posecast.online.engine.types import (
+    EngineEvent,
+    EngineEventKind,
+    PoseOut,
+    TickResult,
+    TrackerFrame,
+)
 from posecast.online.engine.upper_ik import (
     LEAN_JOINTS,
     SPAN_SHARE,
@@ -438,7 +444,7 @@ class Engine:
                 p.missing += 1
                 if p.missing >= self.cfg.stale_after_frames and not p.stale:
                     p.stale = True
-                    events.append(EngineEvent("stale", pid))
+                    events.append(EngineEvent(EngineEventKind.STALE, pid))
                 if p.last is None:
                     # Nothing ever arrived: stand still at the origin in the rest pose.
                     fresh.append((p, self._rest))
@@ -450,7 +456,7 @@ class Engine:
             p.missing = 0
             if p.stale:
                 p.stale = False
-                events.append(EngineEvent("active", pid))
+                events.append(EngineEvent(EngineEventKind.ACTIVE, pid))
             fresh.append((p, frame))
         s["ring_held"][k, : s.count] = False
         s["ring_held"][k, held] = True
