@@ -196,7 +196,7 @@ class Engine:
         self.players: dict[str, _Player] = {}
         self._order: list[str] = []  # player id per slot
         self._world = np.empty((0, NUM_JOINTS, 3), np.float32)  # the pool's output, grown
-        self._rest = _rest_frame(rows)
+        self._rest = rest_frame(rows)
 
     # --- membership -----------------------------------------------------------------
 
@@ -837,7 +837,7 @@ _IK_SHAPES: dict[str, tuple[int, ...]] = {
 }
 
 
-def _rest_frame(rows: int) -> TrackerFrame:
+def rest_frame(rows: int) -> TrackerFrame:
     """What a player that never sent a frame stands on (seq -1: never kept as its
     last): the reference body in its rest pose at the origin, tracked on ``rows`` rows
     (4 tracker slots, or every site; ``_gather_inputs`` zeroes an inertial site's row,
