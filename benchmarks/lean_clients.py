@@ -29,7 +29,7 @@ Why it is cheap, against ``posecast-sim`` (an SDK ``Client`` per player):
   default, what the SDKs speak: they offer ``posecast.v2`` first) gets one ``poses``
   message per tick whose ``data`` is the concatenation of that tick's pose records
   (``proto/README.md``, *Pose records*); they carry no count, so :func:`count_records`
-  walks them: a record's handle and flags, then a keyframe's fixed 130 bytes or a
+  walks them: a record's avatar id and flags, then a keyframe's fixed 130 bytes or a
   delta's 20 two-bit classes (which give its length), nothing dequantised and no
   reference state kept. A v2 receiver owes the server nothing back (no acks: the
   server keeps each client's reference itself; ``resync`` only after a record it could
@@ -110,13 +110,13 @@ KEYFRAME_BYTES = 130  # after the flags: seq, root, 19 smallest-three items
 
 def count_records(data: bytes) -> int:
     """The number of pose records in a v2 ``poses.data``: each is walked to its end
-    (handle, flags, then a keyframe's 130 bytes or a delta's seq step and bitstream),
+    (avatar id, flags, then a keyframe's 130 bytes or a delta's seq step and bitstream),
     nothing else read. Raises ``ValueError`` for records cut short or running over."""
     n = pos = 0
     end = len(data)
     try:
         while pos < end:
-            while data[pos] & 0x80:  # the handle, LEB128
+            while data[pos] & 0x80:  # the avatar id, LEB128
                 pos += 1
             flags = data[pos + 1]
             pos += 2

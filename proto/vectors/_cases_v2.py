@@ -84,12 +84,12 @@ def welcome_cases() -> list[dict[str, Any]]:
     )
     base = codec.to_wire(w)
     first = dict(base["members"][0])
-    no_handle = {k: v for k, v in first.items() if k != "handle"}
+    no_avatar_id = {k: v for k, v in first.items() if k != "handle"}
     return [
         _v2("welcome_v2", w, "members carry a handle and a skeleton; this client gets 30 Hz"),
         _bad(
             "welcome_v2_no_handle",
-            {**base, "members": [no_handle]},
+            {**base, "members": [no_avatar_id]},
             "BAD_FIELD",
             "a member without its handle",
             "members[0].handle",
@@ -277,10 +277,10 @@ def _state(
     return PoseState.from_engine(player, seq, 2.0, pos, world, reach_limited=limited)
 
 
-def _expect(handle: int, rec: records.Record, skeleton: bytes) -> dict[str, Any]:
+def _expect(avatar_id: int, rec: records.Record, skeleton: bytes) -> dict[str, Any]:
     r = rec.recon
     return {
-        "handle": handle,
+        "handle": avatar_id,
         "seq": r.seq,
         "keyframe": rec.keyframe,
         "reach_limited": rec.reach_limited,
@@ -314,7 +314,10 @@ def _stream(
                 raise AssertionError(f"{name}: decoded")
             break
         expect.append(
-            [_expect(r.handle, r, skel[r.handle]) for r in records.decode_records(msg.data, refs)]
+            [
+                _expect(r.avatar_id, r, skel[r.avatar_id])
+                for r in records.decode_records(msg.data, refs)
+            ]
         )
     case: dict[str, Any] = {
         "name": name,
@@ -335,7 +338,7 @@ def _poses(t: float, *recs: bytes) -> bytes:
 
 
 def _encode_run(
-    handle: int, player: str, frames: list[tuple[np.ndarray, np.ndarray]], seq0: int
+    avatar_id: int, player: str, frames: list[tuple[np.ndarray, np.ndarray]], seq0: int
 ) -> list[bytes]:
     """Records of one avatar, the way the server makes them: a keyframe, then deltas
     (a keyframe again whenever a delta does not fit)."""
@@ -344,7 +347,7 @@ def _encode_run(
         s = _state(player, seq0 + k, root, items, limited=k == 3)
         got = None if ref is None else s.delta(ref)
         body, ref = s.keyframe() if got is None else got
-        out.append(write_leb128(handle) + body)
+        out.append(write_leb128(avatar_id) + body)
     return out
 
 
@@ -352,7 +355,7 @@ def poses_cases() -> list[dict[str, Any]]:
     walk = _motion(8, seed=1)
     fast = _motion(4, seed=2, speed=40.0)  # residuals too wide for a delta: keyframes
     a = _encode_run(3, "p-3", walk, 1000)
-    b = _encode_run(200, "p-200", _motion(8, seed=3), 2**32 - 4)  # a 2-byte handle; seq wraps
+    b = _encode_run(200, "p-200", _motion(8, seed=3), 2**32 - 4)  # a 2-byte avatar id; seq wraps
     still_state = [_state("p-3", 50 + k, walk[0][0], walk[0][1]) for k in range(3)]
     _, ref = still_state[0].keyframe()
     still = [write_leb128(3) + still_state[0].keyframe()[0]]

@@ -7,7 +7,7 @@ and ``clock.json``.
 These are not wire vectors (the codec readers glob ``proto/vectors/*.json``, so they
 live one folder down): they pin what both SDKs do with decoded poses.
 
-``interp.json``: the jitter buffer (``PoseBuffer``, ``docs/engines.md`` and the SDKs'
+``interp.json``: the jitter buffer (``PoseBuffer``, ``docs/game-engines.md`` and the SDKs'
 interp modules). Each case is a config and a list of steps: a push (a pose, a keyframe
 flag, whether the buffer keeps it) or a query (a server time and the pose expected
 then, or ``null``). The expected poses are worked out here from the rules with other
@@ -20,7 +20,7 @@ converted by the rotation-matrix route ``R' = M R M^T`` (the SDKs flip quaternio
 components), the WebXR view turn, and the joint -> bone-name table, which is defined
 here and copied by both SDKs.
 
-``clock.json``: ``ClockSync``'s display clock (``display_time``; ``docs/engines.md``,
+``clock.json``: ``ClockSync``'s display clock (``display_time``; ``docs/game-engines.md``,
 "Interpolation"). Each case is a config and a list of steps: an exchange added (its
 four times and the estimate after it), a display query (a client time and the display
 time expected then, ``null`` before the first pong: Python and C# return the client
@@ -591,7 +591,7 @@ def clock() -> dict[str, Any]:
     rules = {s["rule"] for c in cases for s in c["steps"] if "rule" in s}
     assert rules == CLOCK_RULES, rules
     return {
-        "description": "ClockSync's display clock (docs/engines.md, Interpolation): run "
+        "description": "ClockSync's display clock (docs/game-engines.md, Interpolation): run "
         "the steps in order on one ClockSync with the case's config; after each add the "
         "estimate is offset_s, each display query returns expect within tolerance "
         "(null: before the first pong, each SDK's to_server convention); rule names "
@@ -696,7 +696,7 @@ def conventions() -> dict[str, Any]:
     for v, c in zip(views, xr, strict=True):
         assert np.allclose(quat2mat(c) @ [0, 0, -1.0], quat2mat(v) @ [0, 0, 1.0])
     return {
-        "description": "posecast poses in engine frames (docs/engines.md); compare "
+        "description": "posecast poses in engine frames (docs/game-engines.md); compare "
         "positions within tolerance.position_m (engine units) and rotations up to sign",
         "tolerance": {"position": 1e-9, "rotation": 1e-9},
         "engines": {k: {**v, "basis": basis(k).round(12).tolist()} for k, v in ENGINES.items()},
@@ -710,7 +710,7 @@ def conventions() -> dict[str, Any]:
 
 def interp() -> dict[str, Any]:
     return {
-        "description": "PoseBuffer behaviour (docs/engines.md, Interpolation): run the "
+        "description": "PoseBuffer behaviour (docs/game-engines.md, Interpolation): run the "
         "steps in order on one buffer with the case's config; compare positions within "
         "tolerance.position_m and rotations per joint up to sign within tolerance.rotation",
         "tolerance": TOLERANCE,

@@ -21,7 +21,7 @@ from posecast.offline.motion.synthetic import walk_clip
 from posecast.online.auth.tokens import mint
 from posecast.online.config import ServerConfig
 from posecast.online.engine.ssi import Engine
-from posecast.online.inference.backends import Backend, load_backend
+from posecast.online.inference.auto import Backend, load_backend
 from posecast.online.protocol.messages import Frame
 
 SECRET = "test-secret-" + "x" * 20

@@ -104,10 +104,10 @@ def test_unknown_engine_is_refused() -> None:
 
 
 def test_the_docs_bone_table_is_the_sdk_table() -> None:
-    """docs/engines.md's bone table says what BONES holds, row for row."""
-    doc = Path(__file__).resolve().parents[3] / "docs" / "engines.md"
+    """docs/game-engines.md's bone table says what BONES holds, row for row."""
+    doc = Path(__file__).resolve().parents[3] / "docs" / "game-engines.md"
     if not doc.exists():
-        pytest.skip("docs/engines.md not found (repo only)")
+        pytest.skip("docs/game-engines.md not found (repo only)")
     rows = [
         [cell.strip() for cell in line.strip("|").split("|")]
         for line in doc.read_text("utf-8").splitlines()

@@ -13,7 +13,7 @@ Motion: the SDK's built-in walk (the motion of the golden BVH files) on the cano
 skeleton, and, where ``../shared/data`` is present, CMU captures read with the SDK's
 own BVH reader (every joint of the 31-joint rig).
 
-``pytest -s`` prints the figures docs/engines.md quotes.
+``pytest -s`` prints the figures docs/game-engines.md quotes.
 """
 
 from __future__ import annotations

@@ -55,7 +55,7 @@ def test_v2_poses_match_the_v1_ones_within_the_bounds(dev_server: DevServer, uid
             await ada.calibrate(height_m=1.62)  # a short user: the skeleton changes
             w_new, w_old = await new.join(room, "New"), await old.join(room, "Old")
             assert (new.version, old.version, w_new.version, w_old.version) == (2, 1, 2, 1)
-            assert all(m.handle is not None and m.skeleton is not None for m in w_new.members)
+            assert all(m.avatar_id is not None and m.skeleton is not None for m in w_new.members)
             logs = EventLog(new), EventLog(old)
             source = pc.BvhReplaySource(DATA / "walk_cmu_mb.bvh", loop=True)
             streaming = asyncio.create_task(ada.stream(_for(source, 3.0)))

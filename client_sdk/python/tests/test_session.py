@@ -100,7 +100,7 @@ def test_what_server_messages_mean() -> None:
     assert s.clock.offset_s == pytest.approx(9.999)
 
 
-def test_a_skeleton_announces_its_handle_and_keeps_the_same_players_reference() -> None:
+def test_a_skeleton_announces_its_avatar_id_and_keeps_the_same_players_reference() -> None:
     import json
     from pathlib import Path
 
@@ -157,7 +157,7 @@ def test_a_bad_record_drops_every_reference_and_asks_for_a_resync_now_and_then()
     assert isinstance(first, Poses) and isinstance(second, Poses)
     good, _ = s.receive_all(first, 0.0)
     assert len(good) >= 2 and not s.want_resync
-    bad, _ = s.receive_all(Poses(first.t, first.data + b"\x7f\x01"), 1.0)  # handle 127
+    bad, _ = s.receive_all(Poses(first.t, first.data + b"\x7f\x01"), 1.0)  # avatar id 127
     assert bad == [] and s.want_resync and s.stats.bad_records == 1
     s.want_resync = False  # the client sent it
     refused, _ = s.receive_all(second, 1.1)  # deltas: no reference to apply them to

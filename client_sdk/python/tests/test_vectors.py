@@ -79,13 +79,15 @@ def test_stream_vector(case: dict[str, Any]) -> None:
             return
         got = decode_records(msg.data, avatars)
         want = case["expect"][k]
-        assert [(r.handle, r.state.seq, r.keyframe, r.reach_limited) for r in got] == [
+        assert [(r.avatar_id, r.state.seq, r.keyframe, r.reach_limited) for r in got] == [
             (w["handle"], w["seq"], w["keyframe"], w["reach_limited"]) for w in want
         ]
         for r, w in zip(got, want, strict=True):
             np.testing.assert_allclose(np.array(r.state.root) * ROOT_UNIT_M, w["root"], atol=tol)
             np.testing.assert_allclose(r.state.items, w["items"], atol=tol)
-            np.testing.assert_allclose(r.state.positions(bones[r.handle]), w["positions"], atol=tol)
+            np.testing.assert_allclose(
+                r.state.positions(bones[r.avatar_id]), w["positions"], atol=tol
+            )
     assert "error" not in case
 
 

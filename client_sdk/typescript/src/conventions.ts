@@ -2,7 +2,7 @@
  * Engine conventions: a posecast pose in Unity's, Unreal's and three.js's frames, and
  * posecast's 19 joints by their Unity, VRM and Unreal mannequin bone names. The same
  * tables as the Python SDK's `posecast_client.conventions`, checked by the shared
- * vectors `proto/vectors/sdk/conventions.json`; the reasoning is in `docs/engines.md`.
+ * vectors `proto/vectors/sdk/conventions.json`; the reasoning is in `docs/game-engines.md`.
  *
  * posecast's world is right-handed, +Y up, metres; a character faces +Z and its left
  * is +X; quaternions are xyzw. Each engine is a change of basis

@@ -102,7 +102,7 @@ def int_list(option: str, text: str, command: str) -> list[int]:
 def backend_names(option: str, text: str, command: str, *, many: bool = False) -> list[str]:
     """Backend names (``native``, ``onnx``, ``torch``); with ``many``, a comma-separated
     list of distinct ones (``"native,onnx"``)."""
-    from posecast.online.engine.backend import BACKENDS
+    from posecast.online.engine.ports import BACKENDS
 
     names = [n.strip() for n in text.split(",")] if many else [text]
     if not all(n in BACKENDS for n in names) or len(set(names)) < len(names):

@@ -153,7 +153,7 @@ def cmd_eval_apps(args: argparse.Namespace) -> int:
     dataset_manifest(args.data)
     from posecast.offline.dataset.store import load_split
     from posecast.offline.evaluation.applications import table3
-    from posecast.online.inference.backends import load_backend
+    from posecast.online.inference.auto import load_backend
 
     kick = None
     names: list[str] = []

@@ -29,8 +29,8 @@ from urllib.parse import urlsplit
 
 from posecast.errors import ConfigError
 from posecast.online.auth.tokens import new_secret
-from posecast.online.engine.backend import BACKENDS, MAX_THREADS
 from posecast.online.engine.config import MAX_SAMPLES, EngineConfig
+from posecast.online.engine.ports import BACKENDS, MAX_THREADS
 from posecast.online.protocol.messages import LIMIT_RANGES, MAX_LOOKAHEAD_FRAMES, Limits
 from posecast.tracking.layouts import Layout
 

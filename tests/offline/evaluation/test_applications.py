@@ -8,7 +8,7 @@ import pytest
 from posecast.offline.dataset.frames import derive_frames
 from posecast.offline.evaluation.applications import kick_targets, table3
 from posecast.offline.motion.synthetic import walk_clip
-from posecast.online.inference.backends import load_backend
+from posecast.online.inference.auto import load_backend
 from posecast.skeleton import Joint
 
 

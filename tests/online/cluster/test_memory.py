@@ -144,7 +144,7 @@ def test_a_token_burned_on_one_node_is_refused_on_the_others() -> None:
 
 
 def test_a_v2_client_gets_a_remote_players_poses_as_records() -> None:
-    """A v2 client on node B: the player on node A is announced with a handle and
+    """A v2 client on node B: the player on node A is announced with an avatar id and
     skeleton (the snapshot's presence), and its v1 poses from the bus reach the client
     as v2 records, decoded once on B, within the v1 pose's own rounding."""
     from posecast.online.protocol import records
@@ -161,8 +161,8 @@ def test_a_v2_client_gets_a_remote_players_poses_as_records() -> None:
     assert box is not None
     got = [decode(d, version=2) for d in box.take(b.now)]
     joins = [m for m in got if isinstance(m, Presence) and m.player == "pa"]
-    assert joins and joins[0].handle is not None and joins[0].skeleton is not None
-    refs: dict[int, records.Recon | None] = {joins[0].handle: None}
+    assert joins and joins[0].avatar_id is not None and joins[0].skeleton is not None
+    refs: dict[int, records.Recon | None] = {joins[0].avatar_id: None}
     for seq in range(1, 4):
         a.tick("pa", seq=seq)
         b.tick(seq=seq)  # B's own tick (no local poses): its v2 clients' pose clock
@@ -192,8 +192,8 @@ def test_a_remote_players_calibration_reaches_v2_clients_as_its_skeleton() -> No
     assert box is not None
     (join,) = [m for m in map(lambda d: decode(d, version=2), box.take(b.now))
                if isinstance(m, Presence) and m.player == "pa"]  # fmt: skip
-    assert join.handle is not None
-    refs: dict[int, records.Recon | None] = {join.handle: None}
+    assert join.avatar_id is not None
+    refs: dict[int, records.Recon | None] = {join.avatar_id: None}
     bones = records.bytes2skeleton(join.skeleton or b"")
     short = records.skeleton_offsets(1.25)  # a short user: every bone / 1.25
     q = np.tile([0.0, 0.0, 0.0, 1.0], (19, 1))
@@ -219,8 +219,8 @@ def test_a_remote_players_calibration_reaches_v2_clients_as_its_skeleton() -> No
 
 def test_a_node_forgets_the_avatars_of_a_room_it_stops_watching() -> None:
     """B watches r1 only while a client of its own is there; each time the last one
-    leaves, the remote players it knew of there give back their handles (200 rounds of
-    a v2 client coming and going beside a player of A held 200 handles before)."""
+    leaves, the remote players it knew of there give back their avatar ids (200 rounds of
+    a v2 client coming and going beside a player of A held 200 avatar ids before)."""
     broker = MemoryBroker()
     a, b = Node(broker, "A"), Node(broker, "B")
     for i in range(50):
@@ -234,4 +234,4 @@ def test_a_node_forgets_the_avatars_of_a_room_it_stops_watching() -> None:
         b.hub.disconnect(conn, b.now)  # B's last client in r1 leaves: B stops watching it
         a.hub.disconnect(pa, a.now)
     assert b.hub.remote.total == 0
-    assert len(b.hub.router.avatars) == 0  # every handle given back (50 held before)
+    assert len(b.hub.router.avatars) == 0  # every avatar id given back (50 held before)

@@ -11,6 +11,7 @@ import pytest
 from posecast.errors import TooLargeError
 from posecast.online.core.hub import Hub
 from posecast.online.core.session import Phase, Session
+from posecast.online.core.tick import EngineOpKind
 from posecast.online.metrics import Metrics
 from posecast.online.protocol import decode, encode
 from posecast.online.protocol.messages import (
@@ -114,7 +115,7 @@ def test_a_reconnect_with_another_name_or_input_rate_leaves_and_joins_again(
     a1, b = h.join("a"), h.join("b")
     h.send(a1, walk_frame(0))
     h.inbox(a1), h.inbox(b)
-    assert [op.kind for op in h.hub.take_tick_input().ops] == ["add"]
+    assert [op.kind for op in h.hub.take_tick_input().ops] == [EngineOpKind.ADD]
     a2 = h.hub.connect("10.0.0.1", h.now)
     h.send(a2, Hello(1, token(room="r1", player="a"), "r1", name, rate_hz=rate_hz))
     assert h.codes(a1) == ["REPLACED"]
@@ -124,7 +125,10 @@ def test_a_reconnect_with_another_name_or_input_rate_leaves_and_joins_again(
     for seq in (1, 2):  # two frames in one tick: a fast sender keeps only its newest
         h.send(a2, walk_frame(seq))
     ops = h.hub.take_tick_input().ops
-    assert [(op.kind, op.player) for op in ops] == [("remove", "a"), ("add", "a")]
+    assert [(op.kind, op.player) for op in ops] == [
+        (EngineOpKind.REMOVE, "a"),
+        (EngineOpKind.ADD, "a"),
+    ]
     superseded = {"reason": "superseded"}
     assert h.hub.metrics.value("posecast_frames_dropped_total", superseded) == (rate_hz == 90)
 
@@ -154,7 +158,9 @@ def test_backend_kicks_a_player_it_watches_but_no_other() -> None:
     (kicked,) = h.inbox(a)
     assert isinstance(kicked, Error) and (kicked.code, kicked.message) == ("KICKED", "cheating")
     assert h.hub.rooms.room_of("a") is None
-    assert ("remove", "a") in [(op.kind, op.player) for op in h.hub.take_tick_input().ops]
+    assert (EngineOpKind.REMOVE, "a") in [
+        (op.kind, op.player) for op in h.hub.take_tick_input().ops
+    ]
 
 
 def test_fatal_errors_end_the_session_and_leave_the_room() -> None:

@@ -147,8 +147,8 @@ def test_a_remote_pose_goes_out_on_this_nodes_clock() -> None:
 
 def test_a_player_that_moved_rooms_keeps_its_avatar_until_it_is_gone_from_all() -> None:
     """Player m moves from room r1 (node B) to room r2 (node C), and this node hears of
-    the join in r2 before the leave in r1: m's handle must stay while r2 holds it (a
-    handle released there goes to the next player, whom r2's clients would take for m),
+    the join in r2 before the leave in r1: m's avatar id must stay while r2 holds it (an
+    avatar id released there goes to the next player, whom r2's clients would take for m),
     and go once m has left everywhere."""
     h = Harness()
     a, b = h.join("a", version=2), h.join("b", room="r2", version=2)

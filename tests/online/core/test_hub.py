@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from posecast.online.core.tick import EngineOpKind
 from posecast.online.protocol.messages import (
     Member,
     Presence,
@@ -24,7 +25,10 @@ def test_joining_gives_welcome_with_members_and_tells_the_room() -> None:
     h.send(b, walk_frame(0))
     h.send(a, walk_frame(0))
     tick = h.hub.take_tick_input()
-    assert [(op.kind, op.player) for op in tick.ops] == [("add", "b"), ("add", "a")]
+    assert [(op.kind, op.player) for op in tick.ops] == [
+        (EngineOpKind.ADD, "b"),
+        (EngineOpKind.ADD, "a"),
+    ]
     assert set(tick.frames) == {"a", "b"}
 
 

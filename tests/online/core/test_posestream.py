@@ -118,7 +118,7 @@ def test_after_a_resync_a_paused_avatar_resumes_with_a_keyframe() -> None:
         if k >= 6:  # b was paused for three ticks
             _put([box], b[k], k / 60)
         client.read(box, k / 60)
-    got = [(r.handle, r.keyframe) for r in client.got[6:]]
+    got = [(r.avatar_id, r.keyframe) for r in client.got[6:]]
     assert got == [(0, True), (0, False), (0, False), (0, False), (1, True), (0, False),
                    (1, False)]  # fmt: skip
 
@@ -130,9 +130,9 @@ def test_pose_rate_takes_every_kth_tick_and_unknown_avatars_wait() -> None:
     state = _walk(1)[0]
     assert prepare([(s, state)], 0.0) == [None]  # not announced: nothing for it yet
     avatars = Avatars()
-    assert [avatars.handle(p) for p in ("a", "b", "c")] == [0, 1, 2]
+    assert [avatars.avatar_id(p) for p in ("a", "b", "c")] == [0, 1, 2]
     avatars.release("b")
-    assert avatars.handle("d") == 1  # the smallest free handle
+    assert avatars.avatar_id("d") == 1  # the smallest free avatar id
     assert avatars.rescale("a", 1.0) is None
     tall = avatars.rescale("a", 0.8)
     assert tall is not None and avatars.skeleton("a") == tall
@@ -143,11 +143,11 @@ def test_clients_that_joined_apart_fall_into_step_at_the_shared_keyframe_tick() 
     avatars = Avatars()
     early, late = Outbox(8, PoseStream()), Outbox(8, PoseStream())
     assert early.stream is not None and late.stream is not None
-    early.stream.announce("a", avatars.handle("a"))
+    early.stream.announce("a", avatars.avatar_id("a"))
     poses = _walk(130)
     for tick, state in enumerate(poses, start=1):
         if tick == 11:
-            late.stream.announce("a", avatars.handle("a"))  # joins 10 ticks later
+            late.stream.announce("a", avatars.avatar_id("a"))  # joins 10 ticks later
         now = tick / 60
         keyed = frozenset({"a"}) if avatars.keyframe_tick("a", tick) else frozenset()
         streams = [b.stream for b in (early, late) if b.stream and "a" in b.stream.known]
@@ -176,16 +176,16 @@ def test_records_past_one_message_go_out_in_several_within_the_limit() -> None:
     assert stream is not None
     client = Client()
     rng = np.random.default_rng(1)
-    for handle in range(160):
-        stream.announce(f"p{handle}", handle)
-        client.refs[handle] = None
+    for avatar_id in range(160):
+        stream.announce(f"p{avatar_id}", avatar_id)
+        client.refs[avatar_id] = None
     for seq in (1, 2):
-        for handle in range(160):
+        for avatar_id in range(160):
             items = records.rotvec2quat(rng.normal(size=(19, 3)) * 0.5)
             pos = np.zeros((19, 3))
-            pos[0] = (0.1 * handle, 0.95, 0.0)
+            pos[0] = (0.1 * avatar_id, 0.95, 0.0)
             world = records.items2world(items)
-            state = PoseState.from_engine(f"p{handle}", seq, seq / 60, pos, world)
+            state = PoseState.from_engine(f"p{avatar_id}", seq, seq / 60, pos, world)
             (slot,) = prepare([(stream, state)], seq / 60)
             assert slot is not None
             box.put_pose(state.player, slot, seq / 60)
@@ -220,5 +220,5 @@ def test_a_record_that_waited_since_an_earlier_tick_keeps_that_ticks_time() -> N
     for data in box.take(1 / 60):
         msg = decode(data, version=2)
         assert isinstance(msg, Poses)
-        got += [(msg.t, r.handle, r.recon.seq) for r in records.decode_records(msg.data, refs)]
+        got += [(msg.t, r.avatar_id, r.recon.seq) for r in records.decode_records(msg.data, refs)]
     assert got == [(0.0, 0, 0), (1 / 60, 1, 1)]

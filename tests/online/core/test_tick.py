@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from posecast.online.core.tick import EngineInbox, EngineOp
+from posecast.online.core.tick import EngineInbox, EngineOp, EngineOpKind
 from posecast.online.engine.types import TrackerFrame
 from posecast.tracking.layouts import Layout
 
@@ -28,19 +28,20 @@ def test_the_first_frame_adds_the_player_with_its_seed_and_layout_then_leave_rem
     inbox.joined("p", seed=7, layout=Layout.HMD3)
     inbox.frame("p", _frame(0))
     tick = inbox.take()
-    assert tick.ops == [EngineOp("add", "p", seed=7, layout=Layout.HMD3)]
+    assert tick.ops == [EngineOp(EngineOpKind.ADD, "p", seed=7, layout=Layout.HMD3)]
+    assert tick.ops[0].kind is EngineOpKind.ADD  # the member itself, not an equal string
     assert tick.frames["p"].seq == 0
     inbox.frame("p", _frame(1))
     inbox.left("p")
     tick = inbox.take()
-    assert tick.ops == [EngineOp("remove", "p")] and tick.frames == {}
+    assert tick.ops == [EngineOp(EngineOpKind.REMOVE, "p")] and tick.frames == {}
 
 
 def test_a_setting_before_any_frame_adds_the_player_first() -> None:
     inbox = EngineInbox()
     inbox.joined("p", seed=1, layout=Layout.HMD3_WAIST)
-    inbox.setting(EngineOp("calibration", "p"))
-    assert [op.kind for op in inbox.take().ops] == ["add", "calibration"]
+    inbox.setting(EngineOp(EngineOpKind.CALIBRATION, "p"))
+    assert [op.kind for op in inbox.take().ops] == [EngineOpKind.ADD, EngineOpKind.CALIBRATION]
 
 
 def test_the_queue_keeps_the_newest_frames_up_to_its_depth() -> None:

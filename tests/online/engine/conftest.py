@@ -23,12 +23,12 @@ import pytest
 from posecast.offline.dataset.frames import derive_frames
 from posecast.offline.motion.synthetic import walk_clip
 from posecast.online.engine.anomaly import AnomalyScorer
-from posecast.online.engine.backend import Decoder, Pool
 from posecast.online.engine.config import EngineConfig
+from posecast.online.engine.ports import Pool, StepDecoder
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import PoseOut, TrackerFrame
 from posecast.online.inference.artifact import Artifact, load_artifact
-from posecast.online.inference.backends import Backend, load_backend
+from posecast.online.inference.auto import Backend, load_backend
 from posecast.tracking.layouts import Layout
 
 FPS = 60.0
@@ -75,7 +75,7 @@ class BackendLoader:
         layout: str = Layout.HMD3_WAIST,
         models_dir: Path | None = None,
         *,
-        decoder: Decoder | None = None,
+        decoder: StepDecoder | None = None,
         pool: Pool | None = None,
         capacity: int = 8,
         **cfg: Any,

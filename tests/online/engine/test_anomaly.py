@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from posecast.geometry.rotations import normalize, quat2mat, quat_apply, quat_mul, yaw2quat
-from posecast.online.engine.anomaly import AnomalyScorer, _rotate_y
-from posecast.online.engine.backend import PoolIK
+from posecast.online.engine.anomaly import AnomalyScorer, rotate_y
 from posecast.online.engine.batch_fk import fk32
+from posecast.online.engine.ports import PoolIK
 from posecast.skeleton import NUM_JOINTS, Joint
 from posecast.tracking.features import TrackerSlot, character_frame, to_character_frame
 from tests.online.engine.conftest import BackendLoader
@@ -57,7 +57,7 @@ def test_rotate_y_matches_to_character_frame(rng: np.random.Generator) -> None:
     waist_quat = normalize(rng.normal(size=(16, 4)))
     origin, inv_yaw = character_frame(waist_pos, waist_quat)
     angle = 2.0 * np.arctan2(inv_yaw[:, 1], inv_yaw[:, 3])
-    got = _rotate_y(points - origin[:, None, :], angle)
+    got = rotate_y(points - origin[:, None, :], angle)
     np.testing.assert_allclose(got, to_character_frame(points, waist_pos, waist_quat), atol=1e-12)
 
 

@@ -12,7 +12,7 @@ from posecast.online.engine.ik import FLOOR_MAX_LIFT_M
 from posecast.online.engine.selectors import (
     AnomalySelector,
     ObstacleSelector,
-    Selector,
+    SampleSelector,
     TargetSelector,
     choose_anomaly_rows,
     off_the_floor,
@@ -264,7 +264,7 @@ def test_obstacle_inside_the_radius_but_already_farthest_stays() -> None:
     "selector",
     [AnomalySelector(), TargetSelector(Joint.HEAD, TARGET), ObstacleSelector(Joint.HEAD, OBSTACLE)],
 )
-def test_selectors_are_immutable_values(selector: Selector) -> None:
+def test_selectors_are_immutable_values(selector: SampleSelector) -> None:
     with pytest.raises(AttributeError):
         selector.factor = 1.0  # type: ignore[attr-defined]
 
@@ -282,7 +282,7 @@ class Never:
 class Recording:
     """Wraps a selector and keeps every call and answer."""
 
-    def __init__(self, inner: Selector) -> None:
+    def __init__(self, inner: SampleSelector) -> None:
         self.inner = inner
         self.calls: list[tuple[int, np.ndarray, np.ndarray, int | None]] = []
 
@@ -304,7 +304,7 @@ def test_set_selector_takes_effect_for_that_player_only(
     N = 10
     frames = walk_frames(2)
 
-    def play(selector: Selector, ticks: int) -> Engine:
+    def play(selector: SampleSelector, ticks: int) -> Engine:
         engine = make_engine(samples=N, lookahead=3)
         engine.add_player("a", seed=5, selector=Never())
         engine.add_player("b", seed=5, selector=Never())

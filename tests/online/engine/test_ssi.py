@@ -9,11 +9,11 @@ from typing import Any
 import numpy as np
 import pytest
 
-from posecast.online.engine.backend import Decoder, Pool
 from posecast.online.engine.calibration import Calibration
-from posecast.online.engine.selectors import AnomalySelector, Selector
+from posecast.online.engine.ports import Pool, StepDecoder
+from posecast.online.engine.selectors import AnomalySelector, SampleSelector
 from posecast.online.engine.ssi import Engine
-from posecast.online.engine.types import EngineEvent, PoseOut, TrackerFrame
+from posecast.online.engine.types import EngineEvent, EngineEventKind, PoseOut, TrackerFrame
 from posecast.skeleton import NUM_JOINTS, Joint
 from tests.online.engine.conftest import BackendLoader
 
@@ -72,7 +72,7 @@ class NoContacts:
     """The backend's decoder with its foot contacts forced to 0, so no contact IK runs
     and positions show the decoder's poses (and the SSI interpolation) alone."""
 
-    def __init__(self, decoder: Decoder) -> None:
+    def __init__(self, decoder: StepDecoder) -> None:
         self.decoder, self.meta, self.name = decoder, decoder.meta, decoder.name
         self.cache_width = decoder.cache_width
 
@@ -412,7 +412,7 @@ def test_transition_jumps_stay_bounded(
     T = 10
     no_contacts = NoContacts(backend().decoder)
 
-    def show(selector: Selector) -> list[PoseOut]:
+    def show(selector: SampleSelector) -> list[PoseOut]:
         engine = backend.engine(decoder=no_contacts, samples=20, lookahead=tau, transition_frames=T)
         engine.add_player("p", seed=3, selector=selector)
         return run(engine, frames)["p"]
@@ -495,7 +495,7 @@ def test_batched_players_equal_single_player_runs(
     players = {"p0": (10, 0), "p1": (11, 1), "p2": (12, 2)}  # id: (seed, walk)
     frames = {pid: walk_frames(walk) for pid, (_, walk) in players.items()}
 
-    def selector(pid: str) -> Selector:
+    def selector(pid: str) -> SampleSelector:
         if pid == "p0":
             return AnomalySelector(baseline="zero")
         return Forced(at=10) if pid == "p1" else Forced(at=20, to=3)
@@ -597,9 +597,10 @@ def test_missing_frames_are_held_then_stale_then_active(
     assert [poses[t].seq for t in range(12, 19)] == [9] * 7
     assert poses[19].seq == 17 and not poses[19].held
     assert {t: e for t, e in events.items() if e} == {
-        14: [EngineEvent("stale", "p")],
-        17: [EngineEvent("active", "p")],
+        14: [EngineEvent(EngineEventKind.STALE, "p")],
+        17: [EngineEvent(EngineEventKind.ACTIVE, "p")],
     }
+    assert events[14][0].kind is EngineEventKind.STALE  # the member, not an equal string
 
 
 def test_a_frame_after_missing_ones_reads_its_velocity_over_the_gap(
@@ -682,7 +683,7 @@ def test_a_player_without_any_frame_stands_at_the_origin(make_engine: MakeEngine
         assert pose.held and pose.seq == -1
         assert np.all(np.isfinite(pose.positions))
         assert abs(pose.positions[0, 0]) < 1e-6 and abs(pose.positions[0, 2]) < 1e-6
-    assert [r.events for r in results] == [[], [], [EngineEvent("stale", "p")]]
+    assert [r.events for r in results] == [[], [], [EngineEvent(EngineEventKind.STALE, "p")]]
 
 
 # --- calibration ------------------------------------------------------------------------

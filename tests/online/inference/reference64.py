@@ -1,6 +1,6 @@
 """A float64 reference of one SSI tick's math, from the shipped ONNX weights.
 
-Written out from the decoder graph (posecast/offline/nets/cvae.py ``Decoder.step``),
+Written out from the decoder graph (posecast/offline/nets/cvae.py ``CVAEDecoder.step``),
 the float64 FK of :mod:`posecast.geometry.fk`, :class:`posecast.online.engine.ik.ContactIK`
 on float64 arrays and the anomaly score of :mod:`posecast.online.engine.anomaly`, so
 the native kernels are checked against something that shares none of their code.

@@ -83,7 +83,7 @@ def test_stream_vector(case: dict[str, Any]) -> None:
             return
         got = records.decode_records(msg.data, refs)
         want = case["expect"][k]
-        assert [r.handle for r in got] == [w["handle"] for w in want]
+        assert [r.avatar_id for r in got] == [w["handle"] for w in want]
         for r, w in zip(got, want, strict=True):
             assert (r.recon.seq, r.keyframe, r.reach_limited) == (
                 w["seq"], w["keyframe"], w["reach_limited"]
@@ -92,7 +92,9 @@ def test_stream_vector(case: dict[str, Any]) -> None:
                 np.asarray(r.recon.root) * records.ROOT_UNIT_M, w["root"], atol=tol
             )
             np.testing.assert_allclose(r.recon.items, w["items"], atol=tol)
-            np.testing.assert_allclose(r.recon.positions(bones[r.handle]), w["positions"], atol=tol)
+            np.testing.assert_allclose(
+                r.recon.positions(bones[r.avatar_id]), w["positions"], atol=tol
+            )
     assert "error" not in case
 
 

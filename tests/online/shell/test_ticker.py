@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from posecast.online.config import ServerConfig
+from posecast.online.core.tick import EngineOp, EngineOpKind, TickInput, TickOutput
 from posecast.online.engine.calibration import Calibration
 from posecast.online.engine.multi import MultiEngine
 from posecast.online.engine.selectors import AnomalySelector
@@ -18,7 +19,7 @@ from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
 from posecast.online.protocol import decode
 from posecast.online.protocol.messages import Pose
-from posecast.online.shell.ticker import EngineOp, EngineWorker, TickInput, TickOutput, run_ticks
+from posecast.online.shell.ticker import EngineWorker, run_ticks
 from posecast.skeleton import Joint
 from posecast.tracking.layouts import Layout
 from tests.online.conftest import make_cfg, walk_frame
@@ -35,7 +36,7 @@ def worker(engine_factory: Callable[[ServerConfig], Callable[[], Engine]]) -> En
 
 
 def test_one_step_batches_every_player_and_encodes_their_poses(worker: EngineWorker) -> None:
-    ops = [EngineOp("add", p, seed=i) for i, p in enumerate("abc")]
+    ops = [EngineOp(EngineOpKind.ADD, p, seed=i) for i, p in enumerate("abc")]
     out = worker.step(TickInput(ops, {p: _frame(0, i) for i, p in enumerate("abc")}), 5.0)
     assert out.batch == 3 and out.poses == []  # tau = 2: nothing out yet
     for seq in (1, 2):
@@ -49,18 +50,30 @@ def test_one_step_batches_every_player_and_encodes_their_poses(worker: EngineWor
 
 def test_ops_apply_in_order_and_tolerate_races(worker: EngineWorker) -> None:
     e = worker.engine
-    worker.step(TickInput([EngineOp("add", "a"), EngineOp("remove", "a")], {}), 0.0)
+    worker.step(
+        TickInput([EngineOp(EngineOpKind.ADD, "a"), EngineOp(EngineOpKind.REMOVE, "a")], {}), 0.0
+    )
     assert e.player_count == 0
-    worker.step(TickInput([EngineOp("remove", "ghost"), EngineOp("selector", "ghost")], {}), 0.0)
-    worker.step(TickInput([EngineOp("add", "a"), EngineOp("add", "a")], {"zz": _frame(0)}), 0.0)
+    worker.step(
+        TickInput(
+            [EngineOp(EngineOpKind.REMOVE, "ghost"), EngineOp(EngineOpKind.SELECTOR, "ghost")], {}
+        ),
+        0.0,
+    )
+    worker.step(
+        TickInput(
+            [EngineOp(EngineOpKind.ADD, "a"), EngineOp(EngineOpKind.ADD, "a")], {"zz": _frame(0)}
+        ),
+        0.0,
+    )
     assert e.player_count == 1
     cal = Calibration.from_height(1.9)
     sel = AnomalySelector(5.0)
     worker.step(
         TickInput(
             [
-                EngineOp("calibration", "a", calibration=cal),
-                EngineOp("selector", "a", selector=sel),
+                EngineOp(EngineOpKind.CALIBRATION, "a", calibration=cal),
+                EngineOp(EngineOpKind.SELECTOR, "a", selector=sel),
             ],
             {},
         ),
@@ -71,7 +84,7 @@ def test_ops_apply_in_order_and_tolerate_races(worker: EngineWorker) -> None:
 
 
 def test_poses_wait_for_the_first_frame(worker: EngineWorker) -> None:
-    worker.step(TickInput([EngineOp("add", "a")], {}), 0.0)
+    worker.step(TickInput([EngineOp(EngineOpKind.ADD, "a")], {}), 0.0)
     for _ in range(5):
         out = worker.step(TickInput([], {}), 0.0)
     assert out.poses == []  # held rest poses of a player who never sent are not shown
@@ -89,7 +102,7 @@ def test_tick_loop_runs_engine_work_in_one_dedicated_thread(worker: EngineWorker
 
     worker.step = spy  # type: ignore[method-assign]
 
-    inputs = iter([TickInput([EngineOp("add", "a")], {})] + [TickInput([], {})] * 1000)
+    inputs = iter([TickInput([EngineOp(EngineOpKind.ADD, "a")], {})] + [TickInput([], {})] * 1000)
 
     async def quarter_second(task: asyncio.Task[None]) -> None:
         await asyncio.sleep(0.25)
@@ -116,7 +129,7 @@ def test_poses_whose_trackers_are_out_of_reach_are_counted(worker: EngineWorker)
 
     counts = []
     for seq in range(5):
-        ops = [EngineOp("add", "a"), EngineOp("add", "b")] if seq == 0 else []
+        ops = [EngineOp(EngineOpKind.ADD, "a"), EngineOp(EngineOpKind.ADD, "b")] if seq == 0 else []
         out = worker.step(TickInput(ops, {"a": thrown(seq), "b": _frame(seq)}), 0.0)
         counts.append((len(out.poses), out.reach_limited))
     assert counts[2:] == [(2, 1)] * 3  # tau = 2; only player a
@@ -126,13 +139,18 @@ def test_a_failing_op_does_not_drop_the_others_of_its_tick(
     worker: EngineWorker, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:
     e = worker.engine
-    worker.step(TickInput([EngineOp("add", "a"), EngineOp("add", "b")], {}), 0.0)
+    worker.step(
+        TickInput([EngineOp(EngineOpKind.ADD, "a"), EngineOp(EngineOpKind.ADD, "b")], {}), 0.0
+    )
 
     def broken(player: str, selector: object) -> None:
         raise RuntimeError("a bug")
 
     monkeypatch.setattr(e, "set_selector", broken)
-    ops = [EngineOp("selector", "a", selector=AnomalySelector(5.0)), EngineOp("remove", "b")]
+    ops = [
+        EngineOp(EngineOpKind.SELECTOR, "a", selector=AnomalySelector(5.0)),
+        EngineOp(EngineOpKind.REMOVE, "b"),
+    ]
     worker.step(TickInput(ops, {}), 0.0)
     assert set(e.players) == {"a"}  # b's removal, after the failed op, was applied
     assert "engine op selector for player 'a' failed" in caplog.text
@@ -234,7 +252,7 @@ def test_poses_at_the_edges_of_the_tracking_space_stay_on_the_wire(
                                              (0, 1.6e-3, -1), (1, 1.6e-3, 1))]  # fmt: skip
     players = {f"p{i}-{yaw}": (edge, yaw) for i, edge in enumerate(edges)
                for yaw in (0, 90, 135, 180, 270)}  # fmt: skip
-    ops = [EngineOp("add", p, layout=Layout(layout)) for p in players]
+    ops = [EngineOp(EngineOpKind.ADD, p, layout=Layout(layout)) for p in players]
     shown = 0
     for seq in range(12):
         frames = {p: _at_edge(seq, e, y, layout) for p, (e, y) in players.items()}

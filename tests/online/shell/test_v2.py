@@ -42,7 +42,7 @@ def run(coro: Coroutine[Any, Any, None]) -> None:
 
 
 class Decoded:
-    """What a v2 client holds: handles, skeletons, references, and every pose rebuilt."""
+    """What a v2 client holds: avatar ids, skeletons, references, and every pose rebuilt."""
 
     def __init__(self, welcome: Welcome) -> None:
         self.player_of: dict[int, str] = {}
@@ -51,27 +51,27 @@ class Decoded:
         self.poses: list[tuple[str, records.Record, np.ndarray]] = []
         self.messages = 0
         for m in welcome.members:
-            assert m.handle is not None and m.skeleton is not None
-            self.announce(m.player, m.handle, m.skeleton)
+            assert m.avatar_id is not None and m.skeleton is not None
+            self.announce(m.player, m.avatar_id, m.skeleton)
 
-    def announce(self, player: str, handle: int, skeleton: bytes) -> None:
-        if self.player_of.get(handle) != player:
-            self.refs[handle] = None
-        self.player_of[handle] = player
-        self.bones[handle] = records.bytes2skeleton(skeleton)
+    def announce(self, player: str, avatar_id: int, skeleton: bytes) -> None:
+        if self.player_of.get(avatar_id) != player:
+            self.refs[avatar_id] = None
+        self.player_of[avatar_id] = player
+        self.bones[avatar_id] = records.bytes2skeleton(skeleton)
 
     def feed(self, msgs: list[Any]) -> None:
         for msg in msgs:
             if isinstance(msg, Presence) and msg.event == "join":
-                assert msg.handle is not None and msg.skeleton is not None
-                self.announce(msg.player, msg.handle, msg.skeleton)
+                assert msg.avatar_id is not None and msg.skeleton is not None
+                self.announce(msg.player, msg.avatar_id, msg.skeleton)
             elif isinstance(msg, Skeleton):
-                self.bones[msg.handle] = records.bytes2skeleton(msg.skeleton)
+                self.bones[msg.avatar_id] = records.bytes2skeleton(msg.skeleton)
             elif isinstance(msg, Poses):
                 self.messages += 1
                 for rec in records.decode_records(msg.data, self.refs):
-                    pos = rec.recon.positions(self.bones[rec.handle])
-                    self.poses.append((self.player_of[rec.handle], rec, pos))
+                    pos = rec.recon.positions(self.bones[rec.avatar_id])
+                    self.poses.append((self.player_of[rec.avatar_id], rec, pos))
 
 
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -1,6 +1,6 @@
 // Engine conventions: a posecast pose in Unity's, Unreal's and three.js's frames, and
 // posecast's 19 joints by their Unity (HumanBodyBones), VRM and Unreal bone names
-// (docs/engines.md; checked on proto/vectors/sdk/conventions.json).
+// (docs/game-engines.md; checked on proto/vectors/sdk/conventions.json).
 //
 // posecast's world is right-handed, +Y up, metres; a character faces +Z, its left is
 // +X. Each engine's frame is a change of basis p_engine = scale * BASIS p_posecast:

@@ -1,6 +1,6 @@
 // Interpolation: a jitter buffer per player, sampled at any display rate. Pure: the
 // caller passes every time. The same rules as the Python and TypeScript SDKs
-// (docs/engines.md, "Interpolation"), checked on proto/vectors/sdk/interp.json.
+// (docs/game-engines.md, "Interpolation"), checked on proto/vectors/sdk/interp.json.
 //
 // At query time `time` a buffer shows tau = time - DelayS on the server's timeline.
 // With a the newest pose at or before tau and b the one after it:

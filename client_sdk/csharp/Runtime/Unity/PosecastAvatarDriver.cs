@@ -4,7 +4,7 @@
 // root * ToUnity(q_j) * rest_j and the hips root.TransformPoint(ToUnity(p_pelvis)), its
 // height times the avatar's hips height over the player's rest pelvis height
 // (FitToAvatar), with root the Animator's transform and rest_j the bone's rotation relative to it in
-// a T-pose facing its root's +Z (docs/engines.md): the pose plays in the avatar root's
+// a T-pose facing its root's +Z (docs/game-engines.md): the pose plays in the avatar root's
 // frame, wherever the avatar is placed. The T-pose is the one the avatar's Humanoid
 // definition holds (Avatar.humanDescription.skeleton, which Unity's avatar setup puts
 // in a T-pose), taken at Awake and put back, so a rig that stands in an A-pose or

@@ -15,7 +15,8 @@ spec's order: size (TOO_LARGE), one msgpack value within the structural bounds
 
 ``version`` is the connection's protocol (the subprotocol the server selected): v2
 knows ``poses``, ``skeleton``, ``pose_rate`` and ``resync`` but no ``pose``, wants
-``version`` 2 in ``hello``, a ``handle`` and ``skeleton`` for every ``welcome``
+``version`` 2 in ``hello``, a ``handle`` (the avatar id, ``avatar_id`` in the message
+classes) and ``skeleton`` for every ``welcome``
 member and ``presence`` join, and lets a server message and its bins reach 16384
 bytes. ``poses.data`` is opaque here: :mod:`posecast_client.records` reads it.
 """
@@ -648,7 +649,7 @@ _ENCODERS: dict[str, Callable[[Any], Map]] = {
     },
     "pose": _enc_pose,
     "presence": lambda p: {"event": p.event, "room": p.room, "player": p.player, "name": p.name,
-                           "handle": p.handle, "skeleton": p.skeleton},
+                           "handle": p.avatar_id, "skeleton": p.skeleton},
     "selector": lambda s: {
         "player": s.player, "kind": s.kind, "joint": s.joint,
         "point": None if s.point is None else [float(c) for c in s.point],
@@ -661,7 +662,7 @@ _ENCODERS: dict[str, Callable[[Any], Map]] = {
                         "field": e.field, "ref_seq": e.ref_seq},
     "bye": lambda b: {"reason": b.reason},
     "poses": lambda p: {"t": float(p.t), "data": bytes(p.data)},
-    "skeleton": lambda k: {"player": k.player, "handle": k.handle, "skeleton": k.skeleton},
+    "skeleton": lambda k: {"player": k.player, "handle": k.avatar_id, "skeleton": k.skeleton},
     "pose_rate": lambda p: {"rate_hz": float(p.rate_hz)},
     "resync": lambda r: {},
 }  # fmt: skip
@@ -669,8 +670,8 @@ _ENCODERS: dict[str, Callable[[Any], Map]] = {
 
 def _member(m: Member) -> Map:
     out: Map = {"player": m.player, "name": m.name}
-    if m.handle is not None:
-        out["handle"] = m.handle
+    if m.avatar_id is not None:
+        out["handle"] = m.avatar_id
     if m.skeleton is not None:
         out["skeleton"] = m.skeleton
     return out

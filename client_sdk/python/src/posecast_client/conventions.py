@@ -4,7 +4,7 @@ posecast's 19 joints by their Unity, VRM and Unreal mannequin bone names.
 posecast's world (``proto/README.md``, Conventions) is right-handed, +Y up, metres;
 a character faces +Z and its left is +X; quaternions are xyzw. Each engine's frame is
 a change of basis ``p_engine = scale * BASIS @ p_posecast`` that keeps up, forward and
-the character's right where the engine expects them (``docs/engines.md``):
+the character's right where the engine expects them (``docs/game-engines.md``):
 
 =======  =============  ==============  ==================  ======================
 engine   handedness     up, forward     position            quaternion xyzw

@@ -139,12 +139,13 @@ class Hello:
 
 @dataclass(frozen=True, slots=True)
 class Member:
-    """A player in the room; v2 adds its ``handle`` (how pose records name it) and its
+    """A player in the room; v2 adds its ``avatar_id`` (``handle`` on the wire: how pose
+    records name it) and its
     ``skeleton`` (108 bytes: 18 x 3 int16 LE bone offsets in 0.1 mm)."""
 
     player: str
     name: str
-    handle: int | None = None
+    avatar_id: int | None = None
     skeleton: bytes | None = None
 
 
@@ -214,14 +215,14 @@ class Pose:
 @dataclass(frozen=True, slots=True)
 class Presence:
     """Server -> client: ``join``, ``leave``, ``stale`` or ``active``; a v2 ``join``
-    carries the player's ``handle`` and ``skeleton``."""
+    carries the player's ``avatar_id`` and ``skeleton``."""
 
     TYPE: ClassVar[str] = "presence"
     event: str
     room: str
     player: str
     name: str
-    handle: int | None = None
+    avatar_id: int | None = None
     skeleton: bytes | None = None
 
 
@@ -240,7 +241,7 @@ class Skeleton:
 
     TYPE: ClassVar[str] = "skeleton"
     player: str
-    handle: int
+    avatar_id: int
     skeleton: bytes
 
 

@@ -3,7 +3,7 @@
 Written from ``proto/README.md`` ("Pose records") apart from the server's encoder; the
 stream vectors in ``proto/vectors/poses.json`` keep the two in step. A record is::
 
-    handle (unsigned LEB128) | flags (u8: bit 0 keyframe, bit 1 reach_limited)
+    avatar id (unsigned LEB128) | flags (u8: bit 0 keyframe, bit 1 reach_limited)
     keyframe: seq u32 LE | root 3 x i32 LE (0.1 mm) | 19 x 48-bit smallest-three
     delta:    seq step u8 (1..255) | bitstream (LSB first) of 20 items, root then the
               19 rotations: a 2-bit class, then 3 signed components of its width
@@ -162,7 +162,7 @@ class AvatarState:
 
 @dataclass(frozen=True)
 class DecodedRecord:
-    handle: int
+    avatar_id: int
     keyframe: bool
     reach_limited: bool
     state: AvatarState
@@ -175,16 +175,16 @@ def _leb128(data: bytes, pos: int) -> tuple[int, int]:
     value = 0
     for k in range(5):
         if pos + k >= len(data):
-            raise BadFieldError("a record is cut short in its handle", field="data")
+            raise BadFieldError("a record is cut short in its avatar id", field="data")
         b = data[pos + k]
         value |= (b & 0x7F) << (7 * k)
         if not b & 0x80:
             if k and b == 0:
-                raise BadFieldError("a handle that is not minimal LEB128", field="data")
+                raise BadFieldError("an avatar id that is not minimal LEB128", field="data")
             if value > 0xFFFFFFFF:
-                raise BadFieldError("a handle over 2**32 - 1", field="data")
+                raise BadFieldError("an avatar id over 2**32 - 1", field="data")
             return value, pos + k + 1
-    raise BadFieldError("a handle of more than 5 bytes", field="data")
+    raise BadFieldError("an avatar id of more than 5 bytes", field="data")
 
 
 def _smallest3(word: int) -> list[float]:
@@ -200,12 +200,12 @@ def _smallest3(word: int) -> list[float]:
 
 
 def decode_records(data: bytes, avatars: dict[int, AvatarState | None]) -> list[DecodedRecord]:
-    """Every record of ``data``, each applied to ``avatars`` (handle -> state, ``None``
+    """Every record of ``data``, each applied to ``avatars`` (avatar id -> state, ``None``
     for an announced avatar without a keyframe yet), which it updates.
 
     Raises:
         BadFieldError: (field ``data``) a record is cut short, has reserved bits set,
-            names a handle not in ``avatars``, or is a delta with nothing to apply to.
+            names an avatar id not in ``avatars``, or is a delta with nothing to apply to.
     """
     out: list[DecodedRecord] = []
     pending: list[tuple[int, int, AvatarState, NDArray[np.int64], list[list[int]], int]] = []
@@ -219,21 +219,21 @@ def decode_records(data: bytes, avatars: dict[int, AvatarState | None]) -> list[
         r = np.array([p[4][1:] for p in pending], dtype=np.float64) * ROT_STEP_RAD
         q = _mul(_mul(prev, _exp(v)), _exp(r))
         q /= np.sqrt((q * q).sum(axis=-1))[..., None]
-        for k, (i, handle, last, steps, _, seq) in enumerate(pending):
+        for k, (i, avatar_id, last, steps, _, seq) in enumerate(pending):
             root = [last.root[c] + int(steps[0, c]) for c in range(3)]
             state = AvatarState(seq, root, q[k], steps)
-            avatars[handle] = state
+            avatars[avatar_id] = state
             rec = out[i]
-            out[i] = DecodedRecord(rec.handle, rec.keyframe, rec.reach_limited, state)
+            out[i] = DecodedRecord(rec.avatar_id, rec.keyframe, rec.reach_limited, state)
         pending.clear()
 
     pos = 0
     while pos < len(data):
-        handle, pos = _leb128(data, pos)
-        if handle not in avatars:
-            raise BadFieldError(f"handle {handle} was never announced", field="data")
+        avatar_id, pos = _leb128(data, pos)
+        if avatar_id not in avatars:
+            raise BadFieldError(f"avatar id {avatar_id} was never announced", field="data")
         if pos >= len(data):
-            raise BadFieldError("a record ends after its handle", field="data")
+            raise BadFieldError("a record ends after its avatar id", field="data")
         flags = data[pos]
         pos += 1
         if flags & ~(KEYFRAME | REACH_LIMITED):
@@ -251,18 +251,18 @@ def decode_records(data: bytes, avatars: dict[int, AvatarState | None]) -> list[
             state = AvatarState(seq, root, np.array(rot))
             pos += 130
         else:
-            if any(p[1] == handle for p in pending):
+            if any(p[1] == avatar_id for p in pending):
                 flush()  # the same avatar twice in one message: apply the first one first
-            prev = avatars[handle]
+            prev = avatars[avatar_id]
             if prev is None:
-                raise BadFieldError(f"a delta for handle {handle} before its keyframe",
+                raise BadFieldError(f"a delta for avatar id {avatar_id} before its keyframe",
                                     field="data")  # fmt: skip
             seq, steps, residuals, pos = _delta(data, pos, prev)
-            pending.append((len(out), handle, prev, steps, residuals, seq))
-            out.append(DecodedRecord(handle, False, bool(flags & REACH_LIMITED), prev))
+            pending.append((len(out), avatar_id, prev, steps, residuals, seq))
+            out.append(DecodedRecord(avatar_id, False, bool(flags & REACH_LIMITED), prev))
             continue
-        avatars[handle] = state
-        out.append(DecodedRecord(handle, bool(flags & KEYFRAME), bool(flags & REACH_LIMITED),
+        avatars[avatar_id] = state
+        out.append(DecodedRecord(avatar_id, bool(flags & KEYFRAME), bool(flags & REACH_LIMITED),
                                  state))  # fmt: skip
     flush()
     return out

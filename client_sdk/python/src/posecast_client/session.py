@@ -113,7 +113,7 @@ def is_retryable(cause: BaseException) -> bool:
 
 @dataclass
 class AvatarTable:
-    """v2: who each handle is, its bone offsets ``(19, 3)``, and the state records apply to."""
+    """v2: who each avatar id is, its bone offsets ``(19, 3)``, and the state records apply to."""
 
     players: dict[int, str] = field(default_factory=dict)
     offsets: dict[int, np.ndarray] = field(default_factory=dict)
@@ -124,24 +124,24 @@ class AvatarTable:
         self.offsets.clear()
         self.states.clear()
 
-    def announce(self, player: str, handle: int, skeleton: bytes) -> None:
+    def announce(self, player: str, avatar_id: int, skeleton: bytes) -> None:
         for h, p in list(self.players.items()):
-            if p == player and h != handle:  # the player moved to another handle
+            if p == player and h != avatar_id:  # the player moved to another avatar id
                 self.forget(h)
-        if self.players.get(handle) != player:
-            self.states[handle] = None  # a new avatar on this handle: wait for a keyframe
-        self.players[handle] = player
-        self.offsets[handle] = skeleton2offsets(skeleton)
+        if self.players.get(avatar_id) != player:
+            self.states[avatar_id] = None  # a new avatar on this id: wait for a keyframe
+        self.players[avatar_id] = player
+        self.offsets[avatar_id] = skeleton2offsets(skeleton)
 
     def drop_states(self) -> None:
         """Drop every reference: each avatar's next record must be a keyframe."""
-        for handle in self.states:
-            self.states[handle] = None
+        for avatar_id in self.states:
+            self.states[avatar_id] = None
 
-    def forget(self, handle: int) -> None:
-        self.players.pop(handle, None)
-        self.offsets.pop(handle, None)
-        self.states.pop(handle, None)
+    def forget(self, avatar_id: int) -> None:
+        self.players.pop(avatar_id, None)
+        self.offsets.pop(avatar_id, None)
+        self.states.pop(avatar_id, None)
 
     def forget_player(self, player: str) -> None:
         for h, p in list(self.players.items()):
@@ -158,10 +158,10 @@ class AvatarTable:
         items = np.stack([r.state.items for r in recs])  # (R, 19, 4)
         world = items2world(items)
         roots = np.array([r.state.root for r in recs], dtype=np.float64) * ROOT_UNIT_M
-        positions = fk(world, roots, np.stack([self.offsets[r.handle] for r in recs]))
+        positions = fk(world, roots, np.stack([self.offsets[r.avatar_id] for r in recs]))
         return [
             Pose(
-                player=self.players[rec.handle],
+                player=self.players[rec.avatar_id],
                 seq=rec.state.seq,
                 t=msg.t,
                 positions=positions[i],
@@ -300,7 +300,7 @@ class ClientSession:
 
     def connected(self, version: int = PROTOCOL_VERSION) -> None:
         """A new connection (of protocol ``version``): its server may be another
-        process, with another clock and other handles."""
+        process, with another clock and other avatar ids."""
         self.clock.reset()
         self.version = version
         self.avatars.clear()
@@ -344,24 +344,24 @@ class ClientSession:
             self.stats.poses += 1
             return msg, None
         if isinstance(msg, Skeleton):
-            # A handle not known yet (or now another player's) is announced by it, as
+            # An avatar id not known yet (or now another player's) is announced by it, as
             # the TypeScript and C# SDKs do; the same player keeps its reference.
-            self.avatars.announce(msg.player, msg.handle, msg.skeleton)
+            self.avatars.announce(msg.player, msg.avatar_id, msg.skeleton)
             return None, None
         if isinstance(msg, Pong):
             self.clock.add(msg.t0, msg.t1, msg.t2, now)
             return None, None
         if isinstance(msg, Presence):
-            if msg.event == "join" and msg.handle is not None and msg.skeleton is not None:
-                self.avatars.announce(msg.player, msg.handle, msg.skeleton)
+            if msg.event == "join" and msg.avatar_id is not None and msg.skeleton is not None:
+                self.avatars.announce(msg.player, msg.avatar_id, msg.skeleton)
             elif msg.event == "leave":
                 self.avatars.forget_player(msg.player)
             return msg, None
         if isinstance(msg, Welcome):
             self.welcome = msg
             for m in msg.members:
-                if m.handle is not None and m.skeleton is not None:
-                    self.avatars.announce(m.player, m.handle, m.skeleton)
+                if m.avatar_id is not None and m.skeleton is not None:
+                    self.avatars.announce(m.player, m.avatar_id, m.skeleton)
             return msg, None
         if isinstance(msg, Error):
             if msg.fatal:

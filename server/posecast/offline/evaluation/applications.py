@@ -25,10 +25,10 @@ import numpy as np
 
 from posecast.offline.dataset.frames import Frames
 from posecast.online.engine.config import EngineConfig
-from posecast.online.engine.selectors import ObstacleSelector, Selector, TargetSelector
+from posecast.online.engine.selectors import ObstacleSelector, SampleSelector, TargetSelector
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
-from posecast.online.inference.backends import Backend
+from posecast.online.inference.auto import Backend
 from posecast.skeleton import Joint
 from posecast.tracking.features import TrackerSlot, from_character_frame, to_character_frame
 
@@ -36,14 +36,14 @@ from posecast.tracking.features import TrackerSlot, from_character_frame, to_cha
 @dataclass(frozen=True)
 class Setting:
     name: str
-    selector: Selector
+    selector: SampleSelector
     joint: Joint
 
 
 def _run(
     backend: Backend,
     fr: Frames,
-    selector_at: Callable[[int], Selector],
+    selector_at: Callable[[int], SampleSelector],
     samples: int,
     runs: int,
     seed0: int,
@@ -89,8 +89,8 @@ def kick_targets(fr: Frames, foot: Joint) -> tuple[int, dict[str, tuple[float, f
     return apex, targets
 
 
-def _constant(selector: Selector) -> Callable[[int], Selector]:
-    def at(_t: int) -> Selector:
+def _constant(selector: SampleSelector) -> Callable[[int], SampleSelector]:
+    def at(_t: int) -> SampleSelector:
         return selector
 
     return at
@@ -137,7 +137,7 @@ def table3(
             err = np.linalg.norm(out[:, apex, foot] - np.asarray(target), axis=-1)
             row[f"{label}_kick_m"] = {"mean": float(err.mean()), "std": float(err.std())}
 
-        def obstacle_at(t: int) -> Selector:
+        def obstacle_at(t: int) -> SampleSelector:
             o = obstacles[min(t, len(obstacles) - 1)]
             return ObstacleSelector(knee, (float(o[0]), float(o[1]), float(o[2])), radius)
 

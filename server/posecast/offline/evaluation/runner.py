@@ -39,7 +39,7 @@ from posecast.online.engine.upper_ik import (
     turn_pelvis,
 )
 from posecast.online.inference.artifact import load_artifact
-from posecast.online.inference.backends import Backend, load_backend
+from posecast.online.inference.auto import Backend, load_backend
 from posecast.skeleton import LOWER_BODY, NUM_ROTATIONS, Joint
 from posecast.tracking.features import TrackerSlot
 from posecast.tracking.layouts import Layout, PlayerLayout, model_layout, pelvis_from_head, spec

@@ -1,6 +1,6 @@
 """Conditional VAE with GRUs (paper Sec. 3.1 and 4.2), plus its deterministic AE ablation.
 
-Decoder, per frame ``t`` (what serving runs, with ``z = eps``)::
+The decoder (:class:`CVAEDecoder`), per frame ``t`` (what serving runs, with ``z = eps``)::
 
     f_t  = relu(W_in [x_t, z_t] + b)          # (B, 54) -> (B, 128)
     h_t  = GRU(f_t, h_{t-1})                  # (B, 128)
@@ -79,7 +79,7 @@ class Encoder(nn.Module):
         return self.mu(h), self.logvar(h), hT
 
 
-class Decoder(nn.Module):
+class CVAEDecoder(nn.Module):
     def __init__(self, cfg: CVAEConfig) -> None:
         super().__init__()
         self.fc = nn.Linear(cfg.n_features + cfg.latent, cfg.hidden)
@@ -132,7 +132,7 @@ class CVAE(nn.Module):
         super().__init__()
         self.cfg = cfg
         self.encoder = Encoder(cfg)
-        self.decoder = Decoder(cfg)
+        self.decoder = CVAEDecoder(cfg)
 
     def forward(
         self, x: torch.Tensor, pose: torch.Tensor | None = None, sample: bool = True

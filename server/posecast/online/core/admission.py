@@ -62,7 +62,7 @@ from posecast.online.core.session import (
     SelectorIn,
     Session,
 )
-from posecast.online.core.tick import EngineInbox, EngineOp
+from posecast.online.core.tick import EngineInbox, EngineOp, EngineOpKind
 from posecast.online.protocol.codec import decode, encode
 from posecast.online.protocol.messages import (
     PROTOCOL_V2,
@@ -238,11 +238,13 @@ class Admission:
         elif isinstance(action, Leave):
             self.end(c, now, final=Bye(reason="bye"), burn=True)
         elif isinstance(action, CalibrateIn):
-            op = EngineOp("calibration", s.player, calibration=action.calibration)
+            op = EngineOp(EngineOpKind.CALIBRATION, s.player, calibration=action.calibration)
             self.inbox.setting(op)
         elif isinstance(action, SelectorIn):
             self._watched_player(s, action.player)
-            self.inbox.setting(EngineOp("selector", action.player, selector=action.selector))
+            self.inbox.setting(
+                EngineOp(EngineOpKind.SELECTOR, action.player, selector=action.selector)
+            )
         elif isinstance(action, PoseRateIn | ResyncIn):
             stream = c.outbox.stream
             assert stream is not None  # only v2 sessions decode these

@@ -1,20 +1,20 @@
-"""Protocol v2 pose streams (pure): handles, skeletons, and each client's references.
+"""Protocol v2 pose streams (pure): avatar ids, skeletons, and each client's references.
 
 A v2 client gets one ``poses`` message per tick (more only where the records would
 pass 16384 bytes) holding a record per avatar, each a
 keyframe or a delta against the last record of that avatar **this client was sent**
 (``docs/broadcast.md``, "v2: deltas under latest-wins"). Two objects keep that true:
 
-* :class:`Avatars`, one per node: each player's small integer ``handle`` (the
+* :class:`Avatars`, one per node: each player's small integer avatar id (the
   smallest free one, so records name avatars in one LEB128 byte) and its skeleton
   (the bone offsets at the scale the engine last used for it);
 * :class:`PoseStream`, one per v2 connection: which avatars this client has been
-  told about (a handle is announced by ``welcome``, ``presence`` join or
+  told about (an avatar id is announced by ``welcome``, ``presence`` join or
   ``skeleton``, all reliable and sent before any pose in the same batch), its pose
   rate, and per avatar the :class:`~posecast.online.protocol.records.Recon` it holds.
 
 Keyframes come on a schedule shared by every client: each avatar has its keyframe
-tick once every 60 ticks (staggered over the avatars by handle, on ticks that every
+tick once every 60 ticks (staggered over the avatars by avatar id, on ticks that every
 pose rate takes), so clients that joined at different times fall back into step at
 the next one and share encodings again; a client's own keyframes (its first, a
 ``resync``, a delta that does not fit) come on top, and one that missed the shared
@@ -61,9 +61,9 @@ _TICK_HZ = 60.0
 
 @dataclass
 class Avatars:
-    """Node-wide: every known player's handle and skeleton (local and remote ones)."""
+    """Node-wide: every known player's avatar id and skeleton (local and remote ones)."""
 
-    _handles: dict[str, int] = field(default_factory=dict)
+    _avatar_ids: dict[str, int] = field(default_factory=dict)
     _free: list[int] = field(default_factory=list)
     _next: int = 0
     _scale: dict[str, float] = field(default_factory=dict)
@@ -71,24 +71,24 @@ class Avatars:
     _default: bytes = field(default_factory=lambda: skeleton2bytes(skeleton_offsets(1.0)))
 
     def __len__(self) -> int:
-        """How many players hold a handle now."""
-        return len(self._handles)
+        """How many players hold an avatar id now."""
+        return len(self._avatar_ids)
 
-    def handle(self, player: str) -> int:
-        """``player``'s handle, assigned on first use (the smallest free one)."""
-        h = self._handles.get(player)
+    def avatar_id(self, player: str) -> int:
+        """``player``'s avatar id, assigned on first use (the smallest free one)."""
+        h = self._avatar_ids.get(player)
         if h is None:
             if self._free:
                 self._free.sort()
                 h = self._free.pop(0)
             else:
                 h, self._next = self._next, self._next + 1
-            self._handles[player] = h
+            self._avatar_ids[player] = h
         return h
 
     def release(self, player: str) -> None:
-        """``player`` is gone from this node: its handle may be given to another."""
-        h = self._handles.pop(player, None)
+        """``player`` is gone from this node: its avatar id may be given to another."""
+        h = self._avatar_ids.pop(player, None)
         if h is not None:
             self._free.append(h)
         self._scale.pop(player, None)
@@ -110,23 +110,23 @@ class Avatars:
 
     def member(self, m: Member) -> Member:
         """``m`` with its v2 fields."""
-        return Member(m.player, m.name, self.handle(m.player), self.skeleton(m.player))
+        return Member(m.player, m.name, self.avatar_id(m.player), self.skeleton(m.player))
 
     def presence(self, p: Presence) -> Presence:
-        """A v2 presence: a join carries the handle and the skeleton."""
+        """A v2 presence: a join carries the avatar id and the skeleton."""
         if p.event != "join":
             return p
-        return Presence(p.event, p.room, p.player, p.name, self.handle(p.player),
+        return Presence(p.event, p.room, p.player, p.name, self.avatar_id(p.player),
                         self.skeleton(p.player))  # fmt: skip
 
     def skeleton_message(self, player: str) -> Skeleton:
-        return Skeleton(player, self.handle(player), self.skeleton(player))
+        return Skeleton(player, self.avatar_id(player), self.skeleton(player))
 
     def keyframe_tick(self, player: str, tick: int) -> bool:
         """Whether ``tick`` is ``player``'s shared keyframe tick: once every 60 ticks,
         at a phase that is a multiple of 12, so every pose rate (each k-th tick, k =
         1, 2, 3, 4) takes it."""
-        return tick % KEYFRAME_EVERY_TICKS == (12 * self.handle(player)) % KEYFRAME_EVERY_TICKS
+        return tick % KEYFRAME_EVERY_TICKS == (12 * self.avatar_id(player)) % KEYFRAME_EVERY_TICKS
 
 
 @dataclass
@@ -134,7 +134,7 @@ class Slot:
     """What waits in a v2 client's latest-wins slot: the pose and its prepared record."""
 
     state: PoseState
-    body: bytes  # the record after its handle
+    body: bytes  # the record after its avatar id
     recon: Recon  # what the client holds once it got the record
     keyframe: bool
 
@@ -145,7 +145,7 @@ class PoseStream:
 
     pose_rate_hz: float = 60.0
     resync: bool = False  # the next poses: keyframes, also of deltas already prepared
-    known: dict[str, int] = field(default_factory=dict)  # player -> handle announced
+    known: dict[str, int] = field(default_factory=dict)  # player -> avatar id announced
     refs: dict[str, Recon] = field(default_factory=dict)  # what the client holds
     last_key: dict[str, float] = field(default_factory=dict)  # when each keyframe went
     records: int = 0
@@ -167,10 +167,10 @@ class PoseStream:
         """Whether tick number ``tick`` is one of this client's (every k-th tick)."""
         return tick % self.every == 0
 
-    def announce(self, player: str, handle: int) -> None:
-        if self.known.get(player) != handle:
-            self.refs.pop(player, None)  # a new avatar on this handle: keyframe first
-        self.known[player] = handle
+    def announce(self, player: str, avatar_id: int) -> None:
+        if self.known.get(player) != avatar_id:
+            self.refs.pop(player, None)  # a new avatar on this avatar id: keyframe first
+        self.known[player] = avatar_id
 
     def forget(self, player: str) -> None:
         self.known.pop(player, None)
@@ -191,13 +191,13 @@ class PoseStream:
         with their tick's time); the references move on."""
         parts: list[tuple[float, bytes]] = []
         for player, slot in slots:
-            handle = self.known.get(player)
-            if handle is None:
-                continue  # left (or its handle moved) since the pose was queued
+            avatar_id = self.known.get(player)
+            if avatar_id is None:
+                continue  # left (or its avatar id moved) since the pose was queued
             body, recon, key = slot.body, slot.recon, slot.keyframe
             if self.resync and not key:
                 (body, recon), key = slot.state.keyframe(), True
-            parts.append((slot.state.t, write_leb128(handle) + body))
+            parts.append((slot.state.t, write_leb128(avatar_id) + body))
             self.refs[player] = recon
             if key:
                 self.last_key[player] = now

@@ -9,7 +9,7 @@ The audience may mix protocol versions. A v1 client's slot gets the pose message
 engine thread encoded once; a v2 client's gets a record prepared against its own
 reference (:mod:`posecast.online.core.posestream`), on the ticks its pose rate
 takes, all the tick's records in one batched encoding. ``welcome`` and ``presence``
-are specialised per client: v2 ones carry each avatar's handle and skeleton, and a
+are specialised per client: v2 ones carry each avatar's id and skeleton, and a
 ``skeleton`` message follows a player's calibration to its room's v2 clients.
 """
 
@@ -63,16 +63,16 @@ class Router:
         if isinstance(msg, Welcome):
             members = tuple(self.avatars.member(m) for m in msg.members)
             for m in members:
-                assert m.handle is not None
-                stream.announce(m.player, m.handle)
+                assert m.avatar_id is not None
+                stream.announce(m.player, m.avatar_id)
             return Welcome(msg.version, msg.player, msg.session, msg.role, msg.room, msg.t,
                            msg.rate_hz, msg.lookahead_frames, members, msg.limits,
                            stream.pose_rate_hz)  # fmt: skip
         if isinstance(msg, Presence):
             if msg.event == "join":
                 msg = self.avatars.presence(msg)
-                assert msg.handle is not None
-                stream.announce(msg.player, msg.handle)
+                assert msg.avatar_id is not None
+                stream.announce(msg.player, msg.avatar_id)
             elif msg.event == "leave":
                 stream.forget(msg.player)
         return msg
@@ -105,7 +105,7 @@ class Router:
             self.release_if_gone(p.player)
 
     def release_if_gone(self, player: str) -> None:
-        """``player``'s avatar (handle, skeleton) goes, unless it is still seen here: a
+        """``player``'s avatar (id, skeleton) goes, unless it is still seen here: a
         local player, or another node's in any room (one that moved between rooms may
         be announced in its new room before it leaves the old one)."""
         if self.rooms.room_of(player) is None and not self.remote.holds(player):
@@ -215,7 +215,7 @@ class Router:
             room = self.rooms.room_of(ev.player)
             if room is not None:
                 name = self.rooms.name_of(ev.player)
-                data = encode(Presence(ev.kind, room, ev.player, name))
+                data = encode(Presence(ev.kind.value, room, ev.player, name))
                 batches.setdefault(room, ([], []))[1].append(data)
                 self.bytes_to_room(room, data, now)
         for room, (poses, events) in batches.items():

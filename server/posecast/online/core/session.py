@@ -39,8 +39,12 @@ from posecast.online.config import ServerConfig
 from posecast.online.core.clock import ClockEstimator, FrameTimes
 from posecast.online.core.ratelimit import TokenBucket
 from posecast.online.engine.calibration import Calibration
-from posecast.online.engine.selectors import DefaultSelector, ObstacleSelector, TargetSelector
-from posecast.online.engine.selectors import Selector as EngineSelector
+from posecast.online.engine.selectors import (
+    DefaultSelector,
+    ObstacleSelector,
+    SampleSelector,
+    TargetSelector,
+)
 from posecast.online.engine.types import TrackerFrame
 from posecast.online.protocol.messages import (
     PROTOCOL_V2,
@@ -101,7 +105,7 @@ class CalibrateIn:
 @dataclass(frozen=True)
 class SelectorIn:
     player: str
-    selector: EngineSelector
+    selector: SampleSelector
 
 
 @dataclass(frozen=True)
@@ -345,7 +349,7 @@ def _calibration(msg: Calibrate, layout: PlayerLayout) -> Calibration:
         raise CalibrationFailedError(exc.message, field=where) from None
 
 
-def _selector(msg: Selector) -> EngineSelector:
+def _selector(msg: Selector) -> SampleSelector:
     if msg.kind == "anomaly":  # the engine's own, as configured (factor: the message's)
         return DefaultSelector(msg.factor)
     assert msg.joint is not None and msg.point is not None

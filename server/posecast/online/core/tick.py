@@ -33,9 +33,10 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass, field
+from enum import StrEnum
 
 from posecast.online.engine.calibration import Calibration
-from posecast.online.engine.selectors import Selector
+from posecast.online.engine.selectors import SampleSelector
 from posecast.online.engine.types import EngineEvent, TrackerFrame
 from posecast.online.protocol.records import PoseState
 from posecast.tracking.layouts import Layout, PlayerLayout
@@ -44,15 +45,24 @@ RATE_WINDOW_TICKS = 60  # the window the arrival rate of unannounced fast client
 FAST_FRAMES_PER_TICK = 1.1  # 66 Hz at a 60 Hz tick: above any 60 Hz client's jitter or drift
 
 
+class EngineOpKind(StrEnum):
+    """What an :class:`EngineOp` does (the value is what logs show)."""
+
+    ADD = "add"  # the player enters the engine (``seed``, ``layout``)
+    REMOVE = "remove"  # the player leaves it
+    SELECTOR = "selector"  # a new sample selector (``selector``)
+    CALIBRATION = "calibration"  # a new calibration (``calibration``)
+
+
 @dataclass(frozen=True)
 class EngineOp:
     """A membership or setting change, applied in the engine thread before a step."""
 
-    kind: str  # add | remove | selector | calibration
+    kind: EngineOpKind
     player: str
     seed: int = 0
     layout: PlayerLayout = Layout.HMD3_WAIST  # add: the player's layout (picks the batch)
-    selector: Selector | None = None
+    selector: SampleSelector | None = None
     calibration: Calibration | None = None
 
 
@@ -123,7 +133,7 @@ class EngineInbox:
         self._over.discard(player)
         if player in self._in_engine:
             self._in_engine.discard(player)
-            self._ops.append(EngineOp("remove", player))
+            self._ops.append(EngineOp(EngineOpKind.REMOVE, player))
 
     def take(self) -> TickInput:
         self._window += 1
@@ -146,4 +156,4 @@ class EngineInbox:
         if waiting is not None:
             seed, layout = waiting
             self._in_engine.add(player)
-            self._ops.append(EngineOp("add", player, seed=seed, layout=layout))
+            self._ops.append(EngineOp(EngineOpKind.ADD, player, seed=seed, layout=layout))

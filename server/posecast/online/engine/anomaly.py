@@ -56,7 +56,7 @@ class AnomalyScorer:
             origin, angle = np.repeat(origin, repeat, 0), np.repeat(angle, repeat, 0)
             root = np.repeat(root, repeat, 0)
         rel = world_pos - origin[:, None, :]
-        local = _rotate_y(rel, angle)  # (B, 19, 3)
+        local = rotate_y(rel, angle)  # (B, 19, 3)
         local = np.ascontiguousarray(local, dtype=np.float32)
         (rot,) = self.artifact.run(local_positions=local.reshape(len(local), 57))
         _, rec = fk32(rot, root, local[:, Joint.PELVIS], want_mats=False, joints=_LOWER_T)
@@ -64,7 +64,7 @@ class AnomalyScorer:
         return err
 
 
-def _rotate_y(v: F64, angle: F64) -> F64:
+def rotate_y(v: F64, angle: F64) -> F64:
     """Rotate ``v (B, K, 3)`` about +Y by ``angle (B,)`` radians."""
     c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
     x, z = v[..., 0], v[..., 2]

@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from posecast.online.engine.calibration import Calibration
-from posecast.online.engine.selectors import Selector
+from posecast.online.engine.selectors import SampleSelector
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TickResult, TrackerFrame
 from posecast.tracking.layouts import Layout, PlayerLayout, model_layout
@@ -71,7 +71,7 @@ class MultiEngine:
         self._engine(player).remove_player(player)
         del self.players[player]
 
-    def set_selector(self, player: str, selector: Selector) -> None:
+    def set_selector(self, player: str, selector: SampleSelector) -> None:
         self._engine(player).set_selector(player, selector)
 
     def set_calibration(self, player: str, calibration: Calibration) -> None:

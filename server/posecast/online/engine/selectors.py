@@ -39,7 +39,10 @@ from posecast.skeleton import Joint
 F64 = NDArray[np.floating]
 
 
-class Selector(Protocol):
+class SampleSelector(Protocol):
+    """A player's sample-selection policy (not the wire ``selector`` message, which
+    :mod:`posecast.online.core.session` turns into one of these)."""
+
     def choose(self, current: int, scores: F64, positions: F64) -> int | None:
         """Return the sample to move to, or ``None`` to stay.
 
@@ -77,7 +80,7 @@ class AnomalySelector:
             raise ValueError("home must be within [0, factor]")
 
     def choose(self, current: int, scores: F64, positions: F64) -> int | None:
-        pool = scores[scores != np.inf]  # +inf: out of the pool (Selector.choose)
+        pool = scores[scores != np.inf]  # +inf: out of the pool (SampleSelector.choose)
         if not len(pool):
             return None
         low = float(np.min(pool))
@@ -150,7 +153,7 @@ def choose_anomaly_rows(
 
 
 def off_the_floor(scores: F64, positions: F64) -> F64:
-    """``scores (P, N)`` with ``+inf`` (out of the pool, :meth:`Selector.choose`) for
+    """``scores (P, N)`` with ``+inf`` (out of the pool, :meth:`SampleSelector.choose`) for
     each sample whose post-IK pose ``positions (P, N, 19, 3)`` has a foot deeper below
     the floor than the floor pass lifts (:func:`~posecast.online.engine.ik.sunk`). A
     player whose every sample is that deep (a tracking space whose origin is not on the

@@ -25,8 +25,8 @@ Per tick, for all ``P`` players x ``N`` samples at once:
 
 The engine is pure: frames go in with :meth:`Engine.push`, :meth:`Engine.tick`
 returns poses and events (:mod:`posecast.online.engine.types`). No sockets, no
-clocks, no threads; steps 2 and 3 are a backend's :class:`~posecast.online.engine.backend.Decoder`
-and :class:`~posecast.online.engine.backend.Pool`, which arrive built
+clocks, no threads; steps 2 and 3 are a backend's :class:`~posecast.online.engine.ports.StepDecoder`
+and :class:`~posecast.online.engine.ports.Pool`, which arrive built
 (:func:`posecast.online.inference.loader.load_engine` loads the shipped models on the backend
 named). One engine serves one model (one layout);
 :class:`posecast.online.engine.multi.MultiEngine` batches each model's players together
@@ -53,7 +53,6 @@ from numpy.typing import NDArray
 from posecast.geometry.fk import fk_positions
 from posecast.geometry.rotations import mat2quat, quat2mat
 from posecast.online.engine.apart import MAX_OVERLAP_M, keep_apart, overlap
-from posecast.online.engine.backend import Decoder, Pool, PoolIK
 from posecast.online.engine.batch_fk import fk32, pelvis_from_head32
 from posecast.online.engine.calibration import (
     Calibration,
@@ -68,15 +67,22 @@ from posecast.online.engine.hinge import ELBOW_LIMBS, KNEE_LIMBS
 from posecast.online.engine.ik import LEGS, floor_ik, floor_lift
 from posecast.online.engine.leg_ik import senses_legs, solve_legs, tracks_legs
 from posecast.online.engine.pelvis import smooth_pelvis
+from posecast.online.engine.ports import Pool, PoolIK, StepDecoder
 from posecast.online.engine.selectors import (
     AnomalySelector,
     DefaultSelector,
-    Selector,
+    SampleSelector,
     choose_anomaly_rows,
     off_the_floor,
 )
 from posecast.online.engine.slots import SlotArrays
-from posecast.online.engine.types import EngineEvent, PoseOut, TickResult, TrackerFrame
+from posecast.online.engine.types import (
+    EngineEvent,
+    EngineEventKind,
+    PoseOut,
+    TickResult,
+    TrackerFrame,
+)
 from posecast.online.engine.upper_ik import (
     LEAN_JOINTS,
     SPAN_SHARE,
@@ -105,7 +111,7 @@ class _Transition:
 class _Player:
     id: str
     slot: int
-    selector: Selector
+    selector: SampleSelector
     calibration: Calibration
     waist_filter: WaistFilter | None
     frames: int = 0  # frames stepped so far
@@ -130,7 +136,7 @@ class Engine:
 
     Args:
         decoder, pool: a backend's two halves (``load_backend`` in
-            :mod:`posecast.online.inference.backends`); the pool's contact-IK settings
+            :mod:`posecast.online.inference.auto`); the pool's contact-IK settings
             should be this ``cfg``'s.
         cfg: sample selection and interpolation settings (defaults: :class:`EngineConfig`).
         capacity: player slots preallocated (doubles when full).
@@ -139,7 +145,7 @@ class Engine:
 
     def __init__(
         self,
-        decoder: Decoder,
+        decoder: StepDecoder,
         pool: Pool,
         cfg: EngineConfig | None = None,
         capacity: int = 8,
@@ -190,7 +196,7 @@ class Engine:
         self.players: dict[str, _Player] = {}
         self._order: list[str] = []  # player id per slot
         self._world = np.empty((0, NUM_JOINTS, 3), np.float32)  # the pool's output, grown
-        self._rest = _rest_frame(rows)
+        self._rest = rest_frame(rows)
 
     # --- membership -----------------------------------------------------------------
 
@@ -198,7 +204,7 @@ class Engine:
         self,
         player: str,
         seed: int,
-        selector: Selector | None = None,
+        selector: SampleSelector | None = None,
         calibration: Calibration | None = None,
         tracker_set: TrackerSet | None = None,
     ) -> None:
@@ -253,12 +259,12 @@ class Engine:
         shape = self.slots["zc"][slot, samples].shape
         self.slots["zc"][slot, samples] = self.decoder.cache_latents(rows).reshape(shape)
 
-    def set_selector(self, player: str, selector: Selector) -> None:
+    def set_selector(self, player: str, selector: SampleSelector) -> None:
         """``player`` selects with ``selector`` from the next tick (a
         :class:`~.selectors.DefaultSelector`: the engine's configured anomaly selector)."""
         self.players[player].selector = self._resolve(selector)
 
-    def _resolve(self, selector: Selector) -> Selector:
+    def _resolve(self, selector: SampleSelector) -> SampleSelector:
         if not isinstance(selector, DefaultSelector):
             return selector
         factor = self.cfg.outlier_factor if selector.factor is None else selector.factor
@@ -438,7 +444,7 @@ class Engine:
                 p.missing += 1
                 if p.missing >= self.cfg.stale_after_frames and not p.stale:
                     p.stale = True
-                    events.append(EngineEvent("stale", pid))
+                    events.append(EngineEvent(EngineEventKind.STALE, pid))
                 if p.last is None:
                     # Nothing ever arrived: stand still at the origin in the rest pose.
                     fresh.append((p, self._rest))
@@ -450,7 +456,7 @@ class Engine:
             p.missing = 0
             if p.stale:
                 p.stale = False
-                events.append(EngineEvent("active", pid))
+                events.append(EngineEvent(EngineEventKind.ACTIVE, pid))
             fresh.append((p, frame))
         s["ring_held"][k, : s.count] = False
         s["ring_held"][k, held] = True
@@ -831,7 +837,7 @@ _IK_SHAPES: dict[str, tuple[int, ...]] = {
 }
 
 
-def _rest_frame(rows: int) -> TrackerFrame:
+def rest_frame(rows: int) -> TrackerFrame:
     """What a player that never sent a frame stands on (seq -1: never kept as its
     last): the reference body in its rest pose at the origin, tracked on ``rows`` rows
     (4 tracker slots, or every site; ``_gather_inputs`` zeroes an inertial site's row,

@@ -9,6 +9,7 @@ inference library.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import StrEnum
 
 import numpy as np
 from numpy.typing import NDArray
@@ -48,9 +49,16 @@ class PoseOut:
     scale: float = 1.0
 
 
+class EngineEventKind(StrEnum):
+    """What happened to a player's input; the value is the ``presence`` event it becomes."""
+
+    STALE = "stale"  # no frame for ``EngineConfig.stale_after_frames`` frames
+    ACTIVE = "active"  # frames again after ``STALE``
+
+
 @dataclass(frozen=True)
 class EngineEvent:
-    kind: str  # "stale" | "active"
+    kind: EngineEventKind
     player: str
 
 

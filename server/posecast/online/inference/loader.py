@@ -3,7 +3,7 @@
 ``load_engine`` builds one :class:`~posecast.online.engine.ssi.Engine` for one tracker
 layout; ``load_multi_engine`` one per layout, each on its own model, as the server
 runs them (:class:`~posecast.online.engine.multi.MultiEngine`). Both run the backend
-named (:mod:`posecast.online.inference.backends`); ``Engine.backend_name`` says which
+named (:mod:`posecast.online.inference.auto`); ``Engine.backend_name`` says which
 one runs, ``onnx`` where ``native`` was asked for and could not load.
 """
 
@@ -14,7 +14,7 @@ from collections.abc import Iterable
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.multi import MultiEngine
 from posecast.online.engine.ssi import Engine
-from posecast.online.inference.backends import load_backend
+from posecast.online.inference.auto import load_backend
 from posecast.tracking.layouts import Layout
 
 

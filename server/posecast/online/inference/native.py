@@ -25,8 +25,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from posecast.errors import ModelError
-from posecast.online.engine.backend import PoolIK
 from posecast.online.engine.hinge import FADES, Limbs, limb_table
+from posecast.online.engine.ports import PoolIK
 from posecast.online.engine.upper_ik import (
     LEAN_SHARE,
     NECK_SHARE,

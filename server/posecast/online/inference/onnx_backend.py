@@ -21,16 +21,16 @@ from numpy.typing import NDArray
 
 from posecast.geometry.rotations import mat2quat
 from posecast.online.engine.anomaly import AnomalyScorer
-from posecast.online.engine.backend import F32, F64, PoolIK
 from posecast.online.engine.batch_fk import fk32
 from posecast.online.engine.hinge import Limbs, hinge_quat
 from posecast.online.engine.ik import MAX_DRIFT_M, RELEASE_FRAMES, ContactIK
+from posecast.online.engine.ports import F32, F64, PoolIK
 from posecast.online.engine.upper_ik import solve_upper_body
 from posecast.online.inference.artifact import Artifact, load_artifact
 
 
 class OnnxDecoder:
-    """A :class:`~posecast.online.engine.backend.Decoder` over an ONNX decoder artifact."""
+    """A :class:`~posecast.online.engine.ports.StepDecoder` over an ONNX decoder artifact."""
 
     def __init__(self, artifact: Artifact) -> None:
         self.artifact = artifact
@@ -50,7 +50,7 @@ class OnnxDecoder:
 
 
 class NumpyPool:
-    """A :class:`~posecast.online.engine.backend.Pool` in numpy (anomaly AE on ONNX Runtime).
+    """A :class:`~posecast.online.engine.ports.Pool` in numpy (anomaly AE on ONNX Runtime).
 
     ``release_frames`` and ``max_drift_m`` are the contact-IK settings
     (``EngineConfig.ik_release_frames``, ``EngineConfig.ik_max_drift_m``).

@@ -1,10 +1,10 @@
-"""The ``torch`` backend: the training code's own ``Decoder.step`` on the exported weights.
+"""The ``torch`` backend: the training code's own ``CVAEDecoder.step`` on the exported weights.
 
 For parity and research, not for speed. The weights come from the same ONNX file the
 ``onnx`` backend runs (the one source of weights, read with the ``onnx`` package), put
-back into :class:`posecast.offline.nets.cvae.Decoder`; the candidate pool is the numpy
+back into :class:`posecast.offline.nets.cvae.CVAEDecoder`; the candidate pool is the numpy
 one. Needs ``posecast[train]`` (torch and onnx);
-:func:`posecast.online.inference.backends.load_backend` says so when they are missing.
+:func:`posecast.online.inference.auto.load_backend` says so when they are missing.
 """
 
 from __future__ import annotations
@@ -19,9 +19,9 @@ import torch
 from onnx import numpy_helper
 
 from posecast.errors import ModelError
-from posecast.offline.nets.cvae import CVAEConfig, Decoder
-from posecast.online.engine.backend import F32
+from posecast.offline.nets.cvae import CVAEConfig, CVAEDecoder
 from posecast.online.engine.ik import MAX_DRIFT_M, RELEASE_FRAMES
+from posecast.online.engine.ports import F32
 from posecast.online.inference.artifact import load_artifact, read_sidecar
 from posecast.online.inference.onnx_backend import NumpyPool
 
@@ -50,7 +50,7 @@ def _pose_head(w: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
 
 
 class TorchDecoder:
-    """A :class:`~posecast.online.engine.backend.Decoder` running ``Decoder.step`` in torch.
+    """A :class:`~posecast.online.engine.ports.StepDecoder` running ``CVAEDecoder.step`` in torch.
 
     The cache is ``eps`` itself. Each step runs under ``torch.no_grad()`` on one
     thread: torch's thread count is process-wide, so it is set for the call and put
@@ -70,7 +70,7 @@ class TorchDecoder:
                 layout=str(meta.get("layout", CVAEConfig.layout)),
                 root_outputs=pose_w.shape[0] - 108,
             )
-            net = Decoder(cfg)
+            net = CVAEDecoder(cfg)
             w = weights
             state = {
                 # (hidden, F + latent): the export split the first layer by input.

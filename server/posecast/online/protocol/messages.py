@@ -152,14 +152,14 @@ class Hello:
 
 @dataclass(frozen=True, slots=True)
 class Member:
-    """A player in a room. v2 adds its ``handle`` (how ``poses`` records name it on
-    this connection) and its ``skeleton``: 108 bytes, the bone offsets ``SPINE`` ..
-    ``RIGHT_TOE`` from their parents at the player's calibrated scale, 18 x 3 int16
-    LE in 0.1 mm (:mod:`posecast.online.protocol.records`)."""
+    """A player in a room. v2 adds its ``avatar_id`` (``handle`` on the wire: how
+    ``poses`` records name it on this connection) and its ``skeleton``: 108 bytes, the
+    bone offsets ``SPINE`` .. ``RIGHT_TOE`` from their parents at the player's calibrated
+    scale, 18 x 3 int16 LE in 0.1 mm (:mod:`posecast.online.protocol.records`)."""
 
     player: str
     name: str
-    handle: int | None = None
+    avatar_id: int | None = None
     skeleton: bytes | None = None
 
 
@@ -228,7 +228,7 @@ class Presence:
     room: str
     player: str
     name: str
-    handle: int | None = None  # v2 join: the new player's handle
+    avatar_id: int | None = None  # v2 join: the new player's avatar id
     skeleton: bytes | None = None  # v2 join: its skeleton (see Member)
 
     def v1(self) -> Presence:
@@ -252,7 +252,7 @@ class Skeleton:
 
     TYPE: ClassVar[str] = "skeleton"
     player: str
-    handle: int
+    avatar_id: int
     skeleton: bytes  # 108 bytes, as Member.skeleton
 
 

@@ -6,7 +6,7 @@ by 19 *items*: the ``PELVIS`` world rotation, then the 18 local joint rotations 
 joint order (joint ``j``'s rotation relative to its parent), plus the ``PELVIS``
 world position (the *root*)::
 
-    record   = handle (LEB128) | flags (u8) | keyframe body | delta body
+    record   = avatar id (LEB128) | flags (u8) | keyframe body | delta body
     keyframe = seq (u32 LE) | root (3 x i32 LE, 0.1 mm) | 19 x smallest-three (48 bits)
     delta    = seq delta (u8, 1..255) | bitstream: root item, then the 19 rotation items,
                each a 2-bit width class and, unless the class is 0, 3 signed components
@@ -61,8 +61,8 @@ ROOT_WIDTHS = (0, 5, 8, 14)  # bits per component of a root residual (0.1 mm), b
 FLAG_KEYFRAME = 0x01
 FLAG_REACH_LIMITED = 0x02
 FLAGS_KNOWN = FLAG_KEYFRAME | FLAG_REACH_LIMITED
-KEYFRAME_BYTES = 1 + 4 + 12 + NUM_ITEMS * 6  # flags .. rotations: 131 (plus the handle)
-MAX_HANDLE = UINT32_MAX
+KEYFRAME_BYTES = 1 + 4 + 12 + NUM_ITEMS * 6  # flags .. rotations: 131 (plus the avatar id)
+MAX_AVATAR_ID = UINT32_MAX
 _MAX_DELTA_BYTES = 2 + (2 + 3 * ROOT_WIDTHS[-1] + NUM_ITEMS * (2 + 3 * ROT_WIDTHS[-1]) + 7) // 8
 _PARENTS = np.array(PARENTS[1:])
 _ROOT_MAX = round(MAX_COORD_M / ROOT_UNIT_M)
@@ -557,9 +557,9 @@ def _encode_deltas_numpy(
 
 @dataclass(frozen=True)
 class Record:
-    """One decoded record: whose (``handle``), which frame, and the new state."""
+    """One decoded record: whose (``avatar_id``), which frame, and the new state."""
 
-    handle: int
+    avatar_id: int
     keyframe: bool
     reach_limited: bool
     recon: Recon
@@ -570,15 +570,15 @@ def read_leb128(data: bytes, pos: int) -> tuple[int, int]:
     value = shift = 0
     for k in range(5):
         if pos + k >= len(data):
-            raise BadFieldError("a record is cut short in its handle", field="data")
+            raise BadFieldError("a record is cut short in its avatar id", field="data")
         b = data[pos + k]
         value |= (b & 0x7F) << shift
         shift += 7
         if not b & 0x80:
-            if value > MAX_HANDLE or (k and b == 0):
-                raise BadFieldError("a handle is too large or not minimal", field="data")
+            if value > MAX_AVATAR_ID or (k and b == 0):
+                raise BadFieldError("an avatar id is too large or not minimal", field="data")
             return value, pos + k + 1
-    raise BadFieldError("a handle is longer than 5 bytes", field="data")
+    raise BadFieldError("an avatar id is longer than 5 bytes", field="data")
 
 
 def write_leb128(value: int) -> bytes:
@@ -592,16 +592,18 @@ def write_leb128(value: int) -> bytes:
 
 
 def decode_records(data: bytes, refs: dict[int, Recon | None]) -> list[Record]:
-    """Every record of a ``poses.data`` blob, against the references ``refs`` (handle ->
+    """Every record of a ``poses.data`` blob, against the references ``refs`` (avatar id ->
     the last state, ``None`` for an announced avatar without one yet). Updates
-    ``refs``. BAD_FIELD (field ``data``) for a malformed record, an unknown handle or a
+    ``refs``. BAD_FIELD (field ``data``) for a malformed record, an unknown avatar id or a
     delta without a reference."""
     out: list[Record] = []
     pos = 0
     while pos < len(data):
-        handle, pos = read_leb128(data, pos)
-        if handle not in refs:
-            raise BadFieldError(f"a record for handle {handle}, never announced", field="data")
+        avatar_id, pos = read_leb128(data, pos)
+        if avatar_id not in refs:
+            raise BadFieldError(
+                f"a record for avatar id {avatar_id}, never announced", field="data"
+            )
         if pos >= len(data):
             raise BadFieldError("a record is cut short", field="data")
         flags = data[pos]
@@ -620,13 +622,15 @@ def decode_records(data: bytes, refs: dict[int, Recon | None]) -> list[Record]:
             recon = Recon(seq, root, smallest3_unpack(body[16:]))  # type: ignore[arg-type]
             pos += KEYFRAME_BYTES
         else:
-            ref = refs[handle]
+            ref = refs[avatar_id]
             if ref is None:
-                raise BadFieldError(f"a delta for handle {handle} without a keyframe", field="data")
+                raise BadFieldError(
+                    f"a delta for avatar id {avatar_id} without a keyframe", field="data"
+                )
             recon, pos = _read_delta(data, pos + 1, ref)
-        refs[handle] = recon
+        refs[avatar_id] = recon
         out.append(
-            Record(handle, bool(flags & FLAG_KEYFRAME), bool(flags & FLAG_REACH_LIMITED), recon)
+            Record(avatar_id, bool(flags & FLAG_KEYFRAME), bool(flags & FLAG_REACH_LIMITED), recon)
         )
     return out
 

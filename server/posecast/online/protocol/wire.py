@@ -4,7 +4,8 @@
 v2 (``posecast.v2``) keeps every v1 type but ``pose``, adds ``poses``, ``skeleton``,
 ``pose_rate`` and ``resync``, and changes ``hello`` (``version`` 2, ``pose_rate_hz``),
 ``welcome`` (members with ``handle`` and ``skeleton``, ``pose_rate_hz``) and
-``presence`` (a ``join`` carries ``handle`` and ``skeleton``). A decoder
+``presence`` (a ``join`` carries ``handle`` and ``skeleton``); the wire's ``handle``
+is the avatar id, ``avatar_id`` in the message classes. A decoder
 sees a map already held to the structural bounds, reads every known field with the
 :mod:`posecast.online.protocol.fields` validators and ignores the rest. An encoder builds
 the map in canonical key order (``type``, then the spec's field order), leaving
@@ -119,8 +120,8 @@ def _pose_rate(m: Map, key: str) -> float:
     return v
 
 
-def _handle(m: Map, key: str, at: str = "") -> int:
-    return as_int(m, key, 0, records.MAX_HANDLE, at=at)
+def _avatar_id(m: Map, key: str, at: str = "") -> int:
+    return as_int(m, key, 0, records.MAX_AVATAR_ID, at=at)
 
 
 def _skeleton(m: Map, key: str, at: str = "") -> bytes:
@@ -170,7 +171,7 @@ def _welcome(m: Map, lim: Limits, v: int = PROTOCOL_VERSION) -> Welcome:
         player = as_id(item, "player", MAX_ID_BYTES, at=at)
         name = as_name(item, "name", lim.max_name_bytes, at=at)
         if v >= PROTOCOL_V2:
-            members.append(Member(player, name, _handle(item, "handle", at),
+            members.append(Member(player, name, _avatar_id(item, "handle", at),
                                   _skeleton(item, "skeleton", at)))  # fmt: skip
         else:
             members.append(Member(player, name))
@@ -252,7 +253,7 @@ def _presence(m: Map, lim: Limits, v: int = PROTOCOL_VERSION) -> Presence:
         room=as_id(m, "room", lim.max_room_bytes),
         player=as_id(m, "player", MAX_ID_BYTES),
         name=as_name(m, "name", lim.max_name_bytes),
-        handle=_handle(m, "handle") if v2_join else None,
+        avatar_id=_avatar_id(m, "handle") if v2_join else None,
         skeleton=_skeleton(m, "skeleton") if v2_join else None,
     )
 
@@ -320,7 +321,7 @@ def _enc_welcome(w: Welcome) -> Map:
 
 
 def _member(p: Member) -> Map:
-    return _opt({"player": p.player, "name": p.name}, handle=p.handle, skeleton=p.skeleton)
+    return _opt({"player": p.player, "name": p.name}, handle=p.avatar_id, skeleton=p.skeleton)
 
 
 def _enc_pose(p: Pose) -> Map:
@@ -370,14 +371,14 @@ _ENC: dict[type[Any], Callable[[Any], Map]] = {
     Pose: _enc_pose,
     Presence: lambda p: _opt(
         {"type": "presence", "event": p.event, "room": p.room, "player": p.player, "name": p.name},
-        handle=p.handle,
+        handle=p.avatar_id,
         skeleton=p.skeleton,
     ),
     Poses: lambda p: {"type": "poses", "t": float(p.t), "data": bytes(p.data)},
     Skeleton: lambda k: {
         "type": "skeleton",
         "player": k.player,
-        "handle": k.handle,
+        "handle": k.avatar_id,
         "skeleton": k.skeleton,
     },
     PoseRate: lambda p: {"type": "pose_rate", "rate_hz": float(p.rate_hz)},
@@ -452,7 +453,7 @@ _DEC: dict[type[Message], tuple[tuple[str, ...], _Dec]] = {
     Skeleton: (
         ("player", "handle", "skeleton"),
         lambda m, lim, v: Skeleton(
-            as_id(m, "player", MAX_ID_BYTES), _handle(m, "handle"), _skeleton(m, "skeleton")
+            as_id(m, "player", MAX_ID_BYTES), _avatar_id(m, "handle"), _skeleton(m, "skeleton")
         ),
     ),
     PoseRate: (("rate_hz",), lambda m, lim, v: PoseRate(_pose_rate(m, "rate_hz"))),

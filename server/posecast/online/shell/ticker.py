@@ -24,7 +24,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from posecast.online.core.tick import EngineOp, TickInput, TickOutput
+from posecast.online.core.tick import EngineOp, EngineOpKind, TickInput, TickOutput
 from posecast.online.engine.multi import MultiEngine
 from posecast.online.protocol.codec import encode_poses
 from posecast.online.protocol.quantize import roots_on_wire
@@ -92,17 +92,17 @@ class EngineWorker:
     def _apply(self, op: EngineOp) -> None:
         e = self.engine
         present = op.player in e.players
-        if op.kind == "add":
+        if op.kind is EngineOpKind.ADD:
             if present:  # rejoined before its removal was applied: start afresh
                 e.remove_player(op.player)
             e.add_player(op.player, op.seed, op.layout)
         elif not present:
             return  # left before this op was applied
-        elif op.kind == "remove":
+        elif op.kind is EngineOpKind.REMOVE:
             e.remove_player(op.player)
-        elif op.kind == "selector" and op.selector is not None:
+        elif op.kind is EngineOpKind.SELECTOR and op.selector is not None:
             e.set_selector(op.player, op.selector)
-        elif op.kind == "calibration" and op.calibration is not None:
+        elif op.kind is EngineOpKind.CALIBRATION and op.calibration is not None:
             e.set_calibration(op.player, op.calibration)
 
 

@@ -1,5 +1,6 @@
-"""Backends by name: the one place that turns ``native``, ``onnx`` or ``torch`` into a
-decoder and a candidate pool (:mod:`posecast.online.engine.backend`).
+"""Choose the inference backend by name (like uvicorn's ``auto``): the one place that
+turns ``native``, ``onnx`` or ``torch`` into a decoder and a candidate pool (the
+protocols of :mod:`posecast.online.engine.ports`).
 
 Each backend lives in its own module and none imports another's runtime: ``torch`` is
 imported only when asked for (a serving install has none), ``native`` only through
@@ -15,8 +16,8 @@ from pathlib import Path
 from typing import NamedTuple
 
 from posecast.errors import ConfigError, ModelError
-from posecast.online.engine.backend import BACKENDS, MAX_THREADS, Decoder, Pool
 from posecast.online.engine.config import EngineConfig
+from posecast.online.engine.ports import BACKENDS, MAX_THREADS, Pool, StepDecoder
 from posecast.tracking.layouts import Layout, spec
 
 log = logging.getLogger("posecast.engine")
@@ -27,7 +28,7 @@ class Backend(NamedTuple):
     ``native`` was asked for and fell back)."""
 
     name: str
-    decoder: Decoder
+    decoder: StepDecoder
     pool: Pool
 
 

@@ -1,4 +1,4 @@
-"""Backends by name (posecast.online.inference.backends): torch against ONNX Runtime on the
+"""Backends by name (posecast.online.inference.auto): torch against ONNX Runtime on the
 shipped decoders and through the whole engine, the native fallback, and bad names."""
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from posecast.offline.motion.synthetic import walk_clip
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import PoseOut, TrackerFrame
-from posecast.online.inference.backends import load_backend
+from posecast.online.inference.auto import load_backend
 from posecast.online.inference.loader import load_engine, load_multi_engine
 from posecast.tracking.layouts import Layout, spec
 

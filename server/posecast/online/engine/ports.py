@@ -1,7 +1,10 @@
-"""What the engine asks of an inference backend (STYLE principle 5: backends by name).
+"""The engine's ports: what it asks of an inference backend (STYLE principle 5).
+
+The protocols here are what a backend implements; :mod:`posecast.online.inference.auto`
+builds one by name.
 
 A tick needs two things done for all ``R = P * N`` candidate rows: the decoder step
-(:class:`Decoder`) and the candidate pool's FK, contact IK and anomaly error
+(:class:`StepDecoder`) and the candidate pool's FK, contact IK and anomaly error
 (:class:`Pool`), and then the shown pose of each player (``Pool.emit``, and the
 upper-body pass and the hinges on it, ``Pool.upper_body`` and ``Pool.hinge``). A backend
 supplies both; the engine calls nothing else. Backends:
@@ -10,7 +13,7 @@ supplies both; the engine calls nothing else. Backends:
   on one thread pool; :mod:`posecast.online.inference.native`), the default where it
   loads;
 * ``onnx``: ONNX Runtime for the networks, numpy for the geometry (the reference);
-* ``torch``: the training code's own ``Decoder.step`` (parity and research).
+* ``torch``: the training code's own ``CVAEDecoder.step`` (parity and research).
 
 All read the same artifacts (ONNX + JSON sidecar): the ONNX file is the one source of
 weights. This module imports no inference library.
@@ -46,7 +49,7 @@ class PoolIK:
     suppressed: NDArray[np.bool_]
 
 
-class Decoder(Protocol):
+class StepDecoder(Protocol):
     """One step of the CVAE decoder for ``R`` rows."""
 
     name: str
