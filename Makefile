@@ -45,8 +45,8 @@ $(NATIVE_STAMP): $(RUN_STAMP) $(NATIVE_SRC)
 venv: $(STAMP) $(NATIVE_STAMP)
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check server tests benchmarks client_sdk/python
-	$(VENV)/bin/ruff format --check server tests benchmarks client_sdk/python
+	$(VENV)/bin/ruff check server tests benchmarks client_sdk/python proto
+	$(VENV)/bin/ruff format --check server tests benchmarks client_sdk/python proto
 
 typecheck: $(STAMP)
 	$(VENV)/bin/mypy

@@ -4,7 +4,9 @@ Conventions (stated once, used everywhere):
 
 * Right-handed world, **+Y up**, metres.
 * The character faces **+Z** in its rest pose; its left side is **+X**.
-* Rest pose (all local rotations identity) is a T-pose: arms along ±X, legs down.
+* Rest pose (all local rotations identity) is a T-pose: arms along ±X, palms down,
+  legs down. So a joint's world rotation maps its own axes onto the world's as the
+  body stands in the rest pose: +X the body's left, +Y up, +Z forward.
 * Quaternions are **xyzw** (scalar last).
 * Joint ``j``'s world position is ``p[parent] + R_world[parent] @ offset[j]``; the
   root (``PELVIS``) takes its world position and rotation from the waist tracker.
@@ -100,6 +102,29 @@ _REFERENCE_OFFSETS_M: dict[Joint, tuple[float, float, float]] = {
     Joint.RIGHT_SHIN: (0.0, -0.43, 0.0),
     Joint.RIGHT_FOOT: (0.0, -0.42, 0.0),
     Joint.RIGHT_TOE: (0.0, -0.06, 0.13),
+}
+
+# Where each joint sits on a body (proto/skeleton.md's tables say it to implementers).
+LANDMARK: dict[Joint, str] = {
+    Joint.PELVIS: "the middle of the pelvis, between the hips (the waist tracker)",
+    Joint.SPINE: "the lower back, 10 cm above the pelvis",
+    Joint.CHEST: "the middle of the chest",
+    Joint.NECK: "the base of the neck",
+    Joint.HEAD: "the headset: the point between the eyes, no eye offset",
+    Joint.LEFT_UPPER_ARM: "the left shoulder",
+    Joint.LEFT_FOREARM: "the left elbow",
+    Joint.LEFT_HAND: "the left wrist (a controller's grip sits a few cm off it)",
+    Joint.RIGHT_UPPER_ARM: "the right shoulder",
+    Joint.RIGHT_FOREARM: "the right elbow",
+    Joint.RIGHT_HAND: "the right wrist (a controller's grip sits a few cm off it)",
+    Joint.LEFT_THIGH: "the left hip",
+    Joint.LEFT_SHIN: "the left knee",
+    Joint.LEFT_FOOT: "the left ankle",
+    Joint.LEFT_TOE: "the ball of the left foot",
+    Joint.RIGHT_THIGH: "the right hip",
+    Joint.RIGHT_SHIN: "the right knee",
+    Joint.RIGHT_FOOT: "the right ankle",
+    Joint.RIGHT_TOE: "the ball of the right foot",
 }
 
 # Height of the pelvis above the floor in the rest pose, and of the toe joint.

@@ -118,9 +118,9 @@ def error_table() -> dict[str, bool]:
 
 
 def schema(version: int = 1) -> dict[str, Any]:
-    """``proto/schema.json`` as protocol ``version`` has it: the other versions'
-    messages and fields left out."""
-    out: dict[str, Any] = json.loads((PROTO / "schema.json").read_text("utf-8"))
+    """``proto/fields.json`` as protocol ``version`` has it: the other versions'
+    messages and fields left out, a per-version ``const`` resolved."""
+    out: dict[str, Any] = json.loads((PROTO / "fields.json").read_text("utf-8"))
     out["messages"] = {
         k: {**m, "fields": [f for f in m["fields"] if version in f.get("versions", [version])]}
         for k, m in out["messages"].items()
@@ -129,6 +129,10 @@ def schema(version: int = 1) -> dict[str, Any]:
     for t in out["types"].values():
         if "fields" in t:
             t["fields"] = [f for f in t["fields"] if version in f.get("versions", [version])]
+    for m in out["messages"].values():
+        for f in m["fields"]:
+            if "const_by_version" in f:  # hello.version: 1 on posecast.v1, 2 on posecast.v2
+                f["const"] = f.pop("const_by_version")[str(version)]
     return out
 
 

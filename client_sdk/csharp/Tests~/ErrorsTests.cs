@@ -1,4 +1,4 @@
-// The error table is proto/errors.json, row for row, and schema.json's constants are
+// The error table is proto/errors.json, row for row, and fields.json's constants are
 // the SDK's.
 
 using System;
@@ -40,9 +40,9 @@ namespace Posecast.Client.Tests
                 T.True(e.Retryable && ClientSession.IsRetryable(e), "TokenProviderException is retryable");
                 T.True(!ClientSession.IsRetryable(new ConfigInvalidException("the TokenProvider returned null", "h")), "ConfigInvalid is not");
             });
-            T.Run("schema: constants, bounds, limits and v2 record constants match proto/schema.json", () =>
+            T.Run("schema: constants, bounds, limits and v2 record constants match proto/fields.json", () =>
             {
-                var s = T.Load("proto", "schema.json");
+                var s = T.Load("proto", "fields.json");
                 var c = s["constants"];
                 T.Equal(Protocol.MaxCoordM, c["max_coord_m"].D, "max_coord_m");
                 T.Equal(Protocol.QuatTolerance, c["quat_tolerance"].D, "quat_tolerance");

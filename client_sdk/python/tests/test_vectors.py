@@ -101,8 +101,8 @@ def test_every_message_type_has_vectors() -> None:
 
 
 def test_canonical_order_is_the_schema_order() -> None:
-    """proto/schema.json lists the fields in canonical order; so does FIELDS."""
-    schema = json.loads((PROTO / "schema.json").read_text("utf-8"))
+    """proto/fields.json lists the fields in canonical order; so does FIELDS."""
+    schema = json.loads((PROTO / "fields.json").read_text("utf-8"))
     assert {k: tuple(f["name"] for f in v["fields"]) for k, v in schema["messages"].items()} == (
         FIELDS
     )

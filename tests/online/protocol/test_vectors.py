@@ -5,7 +5,7 @@ re-encode to themselves and match the case's ``message``; every ``also_accept_he
 decodes to the same message. Every invalid case fails with exactly its code (and
 field). Every stream case decodes message by message with the reference record
 decoder to its ``expect``. The files must be what ``proto/vectors/generate.py``
-writes, and ``proto/schema.json`` must describe the same messages as the codec.
+writes, and ``proto/fields.json`` must describe the same messages as the codec.
 """
 
 from __future__ import annotations
@@ -171,10 +171,10 @@ def test_files_are_what_the_generator_writes() -> None:
     assert (PROTO / "errors.json").read_text() == gen.error_table(files)
 
 
-# --- schema.json --------------------------------------------------------------------
+# --- fields.json --------------------------------------------------------------------
 
 
-SCHEMA = json.loads((PROTO / "schema.json").read_text())
+SCHEMA = json.loads((PROTO / "fields.json").read_text())
 
 
 def test_schema_lists_the_codec_messages_in_canonical_order() -> None:

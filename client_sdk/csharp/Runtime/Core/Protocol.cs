@@ -1,5 +1,5 @@
 // The wire's constants, limits, joints and tracker slots (proto/README.md and
-// proto/schema.json are the spec; a test compares these with schema.json).
+// proto/fields.json are the spec; a test compares these with fields.json).
 //
 // Units everywhere: metres, seconds, hertz; a right-handed world with +Y up where a
 // character faces +Z and its left is +X; quaternions xyzw.

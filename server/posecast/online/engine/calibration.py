@@ -38,6 +38,8 @@ REFERENCE_HEAD_HEIGHT_M = REST_PELVIS_HEIGHT_M + float(
 # The head joint sits this far below the top of the head on the reference body.
 HEAD_TOP_ABOVE_JOINT_M = 0.15
 MIN_HEIGHT_M, MAX_HEIGHT_M = 0.9, 2.5
+# A T-pose's hands at least this far apart horizontally: the heading is square to them.
+MIN_TPOSE_HAND_SPAN_M = 0.5
 
 
 @dataclass(frozen=True)
@@ -116,7 +118,7 @@ def _tpose_heading(pos: F64) -> F64:
     right hand to the left."""
     across = pos[TrackerSlot.LEFT_HAND] - pos[TrackerSlot.RIGHT_HAND]
     forward = np.cross(across, [0.0, 1.0, 0.0])  # left x up = forward (+Z)
-    if np.hypot(forward[0], forward[2]) < 0.5:
+    if np.hypot(forward[0], forward[2]) < MIN_TPOSE_HAND_SPAN_M:
         raise ConfigError("T-pose hands are not spread apart level with the body")
     return yaw2quat(np.arctan2(forward[0], forward[2]))
 
