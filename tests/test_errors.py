@@ -11,7 +11,7 @@ import pytest
 from posecast.errors import PosecastError, ProtocolError
 from posecast.online.protocol import Error
 
-PROTO = Path(__file__).resolve().parents[3] / "proto"
+PROTO = Path(__file__).resolve().parents[1] / "proto"
 CLASSES = ProtocolError.__subclasses__()
 
 

@@ -1,3 +1,6 @@
+"""``offline/train/cvae_trainer.py``: the learning-rate schedule and the steps a wall-time
+budget plans (that each network's loss goes down is ``test_training.py``'s)."""
+
 from __future__ import annotations
 
 import dataclasses
