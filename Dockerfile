@@ -4,7 +4,7 @@
 # Configuration is by environment only (POSECAST_*, docs/server.md), e.g.
 #   docker build -t posecast .
 #   docker run -e POSECAST_TOKEN_SECRET="$(openssl rand -base64 32)" -p 8765:8765 posecast
-# tests/deploy checks this file (hadolint, structure) and runs its ENTRYPOINT with the
+# tests/system/deploy checks this file (hadolint, structure) and runs its ENTRYPOINT with the
 # compose environment outside Docker.
 
 ARG PYTHON_IMAGE=python:3.11-slim-bookworm

@@ -66,6 +66,15 @@ $(TS_DIR)/node_modules/.installed: $(TS_DIR)/package-lock.json
 ts-test: $(STAMP) $(NATIVE_STAMP) $(TS_DIR)/node_modules/.installed
 	cd $(TS_DIR) && npm run --silent typecheck && npm test --silent
 
+# The live viewer's one-file bundle, server/posecast/online/shell/static/viewer.js, from
+# client_sdk/typescript/viewer/ and src/ (three.js included). It is generated and committed
+# (.gitattributes marks it): rebuild it in the commit of any change that reaches it;
+# tests/online/shell/test_http.py fails while it is stale.
+.PHONY: viewer
+
+viewer: $(TS_DIR)/node_modules/.installed
+	cd $(TS_DIR) && npm run --silent build:viewer
+
 # The C# SDK for Unity (client_sdk/csharp): Mono's mcs builds the library and its test
 # runner (C# 7.x, which Unity compiles too), then the proto vectors, unit, end-to-end
 # (a real .venv posecast) and README tests run; the last line reads "N passed, N failed".

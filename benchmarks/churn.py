@@ -1,9 +1,9 @@
 """Connection churn against a real server: what the fatal-error budget buys.
 
-Three processes, as in ``tests/reliability/test_hostile_churn.py``: ``posecast serve``
+Three processes, as in ``tests/system/reliability/test_hostile_churn.py``: ``posecast serve``
 (:class:`posecast.testing.serve.ServeProcess`), the healthy players
-(``tests/reliability/healthy_players.py``: two rooms of two, 60 Hz) and the churner
-(``tests/reliability/hostile_helpers.py --kind churn``: join, garbage, cut off,
+(``tests/system/reliability/healthy_players.py``: two rooms of two, 60 Hz) and the churner
+(``tests/system/reliability/hostile_helpers.py --kind churn``: join, garbage, cut off,
 reconnect at once, from ``--ips`` loopback addresses, at niceness 10). For each
 configuration, in one run, side by side: a baseline window, then a window under
 churn; it prints the healthy players' pose rates (their own process), the server's
@@ -34,7 +34,7 @@ SECRET = "test-secret-" + "x" * 20  # the healthy players' tokens: tests/online/
 
 def _players(port: int) -> subprocess.Popen[str]:
     proc = subprocess.Popen(
-        [sys.executable, "-m", "tests.reliability.healthy_players", str(port)],
+        [sys.executable, "-m", "tests.system.reliability.healthy_players", str(port)],
         cwd=REPO, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
     )  # fmt: skip
     assert proc.stdout is not None
@@ -89,7 +89,7 @@ def run(fatal_per_min: int, seconds: float, ips: int, attempts: int) -> dict[str
             tok = mint(SECRET.encode(), room="r1", player="churn", role="player", ttl_s=600,
                        now=time.time())  # fmt: skip
             churner = subprocess.Popen(
-                [sys.executable, "-m", "tests.reliability.hostile_helpers",
+                [sys.executable, "-m", "tests.system.reliability.hostile_helpers",
                  "--port", str(server.port), "--token", tok, "--kind", "churn",
                  "--seconds", str(seconds), "--ips", str(ips), "--attempts", str(attempts)],
                 cwd=REPO, stdout=subprocess.PIPE, text=True,

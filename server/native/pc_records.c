@@ -2,11 +2,12 @@
  *
  * A line-for-line port of posecast.online.protocol.records.encode_deltas (the
  * reference, numpy), one pose at a time in double precision, the same operations in
- * the same order; tests/native parity-test it against that function. The numpy
- * version costs about 2 ms for a tick of 48 players (call overhead of a few hundred
- * small array operations, on the event loop's thread); this one a few microseconds a
- * pose. Plain C, no SIMD and no fused multiply-adds: it runs on every machine the
- * module builds on, so it needs no instruction-set dispatch.
+ * the same order; tests/online/protocol/test_records.py parity-tests it against that
+ * function. The numpy version costs about 2 ms for a tick of 48 players (call
+ * overhead of a few hundred small array operations, on the event loop's thread);
+ * this one a few microseconds a pose. Plain C, no SIMD and no fused multiply-adds:
+ * it runs on every machine the module builds on, so it needs no instruction-set
+ * dispatch.
  *
  * Quaternions are xyzw, Hamilton product (posecast.geometry.rotations). */
 #pragma GCC optimize("fp-contract=off")

@@ -1,11 +1,12 @@
 /* The upper-body pass in C: head on the headset, hands on the controllers.
  *
  * A line-for-line port of posecast.online.engine.upper_ik.solve_upper_body (the
- * reference, numpy), one pose at a time in double precision; tests/native parity-test
- * it against that function. The numpy version costs about 2.5 ms a tick whatever the
- * number of players (call overhead of a few hundred small array operations); this one
- * a few microseconds a pose. Plain C, no SIMD: it runs on every machine the module
- * builds on, so it needs no instruction-set dispatch.
+ * reference, numpy), one pose at a time in double precision;
+ * tests/online/inference/test_native.py parity-tests it against that function. The
+ * numpy version costs about 2.5 ms a tick whatever the number of players (call
+ * overhead of a few hundred small array operations); this one a few microseconds a
+ * pose. Plain C, no SIMD: it runs on every machine the module builds on, so it needs
+ * no instruction-set dispatch.
  *
  * Matrices are row-major 3x3 (m[3 * r + c]) acting on column vectors; quaternions are
  * xyzw. Joint numbers and parents are posecast.skeleton's (checked at import by

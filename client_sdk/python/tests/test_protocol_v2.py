@@ -105,7 +105,7 @@ def test_sim_reports_bytes_per_pose(
     assert v2["protocol"] == [2] and v1["protocol"] == [1]
     # 3 players a room: a v2 message per tick holds up to 3 poses (fewer on a machine
     # too busy for the sim to keep up, whose superseded poses also make longer deltas;
-    # the 64-byte bound of an 8-player room is tests/online/shell/test_v2.py's, in
+    # the 64-byte bound of an 8-player room is tests/system/test_protocol_v2.py's, in
     # simulated time); v1 sends 347-byte poses
     assert 330 < v1["bytes_per_pose"] < 360, v1
     assert 30 < v2["bytes_per_pose"] < 0.4 * v1["bytes_per_pose"], (v2, v1)

@@ -1,5 +1,5 @@
 // Drive the live viewer in headless Chromium (playwright-core, the system's chromium)
-// and measure what it draws. Prints one JSON line; tests/online/shell/test_viewer.py asserts.
+// and measure what it draws. Prints one JSON line; tests/system/test_viewer.py asserts.
 //
 //   node scripts/viewer-check.mjs URL OUT_DIR [GAP_MS] [TRIES]
 //

@@ -19,7 +19,7 @@ type Vec3 = readonly [number, number, number];
 /**
  * Rest offsets of the reference body (head joint 1.60 m up, about 1.75 m tall) from each
  * joint's parent, metres, joint order: a copy of `_REFERENCE_OFFSETS_M` in
- * `server/posecast/skeleton.py` (tests/online/shell/test_viewer.py compares the two).
+ * `server/posecast/skeleton.py` (tests/system/test_viewer.py compares the two).
  */
 export const REFERENCE_OFFSETS_M: readonly Vec3[] = [
   [0.0, 0.0, 0.0], // PELVIS

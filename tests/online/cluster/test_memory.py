@@ -1,7 +1,7 @@
 """Several hubs on one in-memory broker (posecast.online.cluster.memory), without
 sockets: rooms across nodes, one batch per room per tick, takeovers, capacity, burned
 tokens. The Redis backend runs the same hub code against a real ``redis-server`` in
-``tests/scaleout/``."""
+``tests/system/scaleout/``."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """The Redis bus (posecast.online.cluster.redis_bus) in process, against a real
-``redis-server`` (the fixture of ``tests/scaleout/conftest.py``), with a recording
+``redis-server`` (the fixture of ``tests/system/scaleout/conftest.py``), with a recording
 sink in place of the hub: the ordering of its writes and reads, exactly.
 
 A node ends a local player's session when a read lists the player on another live
@@ -24,7 +24,7 @@ from posecast.online.cluster.redis_bus import RedisBus
 from posecast.online.cluster.redis_store import RedisStore
 from posecast.online.metrics import Metrics
 from tests.online.conftest import make_cfg
-from tests.scaleout.conftest import (  # noqa: F401 - fixtures used by name
+from tests.system.scaleout.conftest import (  # noqa: F401 - fixtures used by name
     RedisServer,
     redis_server,
     redis_server_bin,

@@ -1,5 +1,6 @@
 """Read budgets (posecast.online.shell.paced): the frame-header scanner and the budgets,
-pure; the connection that uses them is tested on a real server in test_transport_edge."""
+pure; the connection that uses them is tested on a real server in
+tests/system/test_transport_edge.py."""
 
 from __future__ import annotations
 
