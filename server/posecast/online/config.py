@@ -19,11 +19,11 @@ from dataclasses import InitVar, dataclass, field, fields
 from typing import Any
 from urllib.parse import urlsplit
 
+from posecast.body.upper_ik import WRIST_ELBOW_SHARE
 from posecast.errors import ConfigError
 from posecast.online.auth.tokens import new_secret
 from posecast.online.engine.backend import BACKENDS, MAX_THREADS
 from posecast.online.engine.config import MAX_SAMPLES
-from posecast.online.engine.upper_ik import WRIST_ELBOW_SHARE
 from posecast.online.protocol.messages import LIMIT_RANGES, MAX_LOOKAHEAD_FRAMES, Limits
 from posecast.tracking.layouts import Layout
 

@@ -8,7 +8,7 @@ import pytest
 from posecast.offline.train.masks import TABLE_SETS
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.multi import MultiEngine
-from posecast.online.engine.ssi import _rest_frame
+from posecast.online.engine.ring import rest_frame
 from posecast.online.engine.types import TrackerFrame
 from posecast.online.inference.loader import load_engine
 from posecast.tracking.sites import SITE_JOINT_INDEX, Site, TrackerSet
@@ -16,7 +16,7 @@ from posecast.tracking.sites import SITE_JOINT_INDEX, Site, TrackerSet
 
 def _walk(t: int, dx: float) -> TrackerFrame:
     """The rest frame of every site walking forward along +Z."""
-    rest = _rest_frame(10)
+    rest = rest_frame(10)
     pos = rest.pos.copy()
     pos[:, 0] += dx
     pos[:, 2] += 0.01 * t

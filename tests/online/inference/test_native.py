@@ -18,15 +18,15 @@ from typing import Any
 import numpy as np
 import pytest
 
+from posecast.body.batch_fk import fk32
+from posecast.body.hinge import ELBOW_LIMBS, FADES, KNEE_LIMBS, hinge_quat, limb_table
+from posecast.body.ik import ContactIK
 from posecast.geometry.fk import fk_mat
 from posecast.geometry.rotations import aa2mat, mat2quat
 from posecast.offline.train.masks import TABLE_SETS
 from posecast.online.engine.backend import PoolIK
-from posecast.online.engine.batch_fk import fk32
 from posecast.online.engine.config import EngineConfig
-from posecast.online.engine.hinge import ELBOW_LIMBS, FADES, KNEE_LIMBS, hinge_quat, limb_table
-from posecast.online.engine.ik import ContactIK
-from posecast.online.engine.ssi import _rest_frame
+from posecast.online.engine.ring import rest_frame
 from posecast.online.engine.types import TrackerFrame
 from posecast.online.inference.loader import load_engine
 from posecast.online.inference.onnx_backend import NumpyPool
@@ -490,7 +490,7 @@ def test_the_engine_streams_the_same_poses_with_the_passes_in_c_or_numpy(layout:
         out = []
         for t in range(40):
             for i, n in enumerate(names):
-                rest = _rest_frame(rows)
+                rest = rest_frame(rows)
                 pos = rest.pos.copy()
                 pos[:, 0] += 2.0 * i + 0.05 * np.sin(0.3 * t + i)
                 pos[:, 2] += 0.01 * t

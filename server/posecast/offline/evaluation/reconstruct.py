@@ -10,10 +10,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from posecast.body.ik import MAX_DRIFT_M, RELEASE_FRAMES, ContactIK
 from posecast.geometry.fk import fk_mat
 from posecast.geometry.rotations import quat2mat, r6d2mat
 from posecast.offline.dataset.frames import Frames
-from posecast.online.engine.ik import MAX_DRIFT_M, RELEASE_FRAMES, ContactIK
 from posecast.online.inference.artifact import Artifact
 from posecast.skeleton import NUM_ROTATIONS, reference_offsets
 

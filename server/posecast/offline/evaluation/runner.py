@@ -10,6 +10,19 @@ from typing import Any
 
 import numpy as np
 
+from posecast.body.apart import keep_apart
+from posecast.body.clearance import clearance_lift, clip_toe_speed
+from posecast.body.hinge import hinge_elbows, hinge_knees
+from posecast.body.ik import floor_ik, floor_lift
+from posecast.body.leg_ik import senses_legs, solve_legs, tracks_legs
+from posecast.body.pelvis import smooth_pelvis_clip
+from posecast.body.upper_ik import (
+    ease_reach_clip,
+    lean_root,
+    reach_root,
+    solve_upper_body,
+    turn_pelvis,
+)
 from posecast.geometry.rotations import mat2quat, quat2mat
 from posecast.offline.dataset.frames import Frames
 from posecast.offline.evaluation import metrics as m
@@ -22,22 +35,9 @@ from posecast.offline.evaluation.reconstruct import (
     pose_from_rotations,
 )
 from posecast.online.engine.anomaly import AnomalyScorer
-from posecast.online.engine.apart import keep_apart
-from posecast.online.engine.clearance import clearance_lift, clip_toe_speed
 from posecast.online.engine.config import EngineConfig
-from posecast.online.engine.hinge import hinge_elbows, hinge_knees
-from posecast.online.engine.ik import floor_ik, floor_lift
-from posecast.online.engine.leg_ik import senses_legs, solve_legs, tracks_legs
-from posecast.online.engine.pelvis import smooth_pelvis_clip
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
-from posecast.online.engine.upper_ik import (
-    ease_reach_clip,
-    lean_root,
-    reach_root,
-    solve_upper_body,
-    turn_pelvis,
-)
 from posecast.online.inference.artifact import load_artifact
 from posecast.online.inference.backends import Backend, load_backend
 from posecast.skeleton import LOWER_BODY, NUM_ROTATIONS, Joint

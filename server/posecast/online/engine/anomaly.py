@@ -12,8 +12,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from posecast.body.batch_fk import fk32
 from posecast.geometry.rotations import quat2mat
-from posecast.online.engine.batch_fk import fk32
 from posecast.skeleton import LOWER_BODY, Joint
 
 if TYPE_CHECKING:  # the artifact arrives built: importing this module loads no runtime
