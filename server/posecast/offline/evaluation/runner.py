@@ -34,10 +34,10 @@ from posecast.offline.evaluation.reconstruct import (
     decode_cvae,
     pose_from_rotations,
 )
-from posecast.online.engine.anomaly import AnomalyScorer
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
+from posecast.online.inference.anomaly import AnomalyScorer
 from posecast.online.inference.artifact import load_artifact
 from posecast.online.inference.backends import Backend, load_backend
 from posecast.skeleton import LOWER_BODY, NUM_ROTATIONS, Joint

@@ -5,7 +5,7 @@ into the engine's ring rows; its latent cache is ``eps`` itself. :class:`NumpyPo
 the candidate pool of every backend that has no pool of its own (``torch`` too): the
 float32 FK of :mod:`posecast.body.batch_fk`, the contact IK of
 :mod:`posecast.body.ik` and the anomaly error of
-:class:`posecast.online.engine.anomaly.AnomalyScorer` (whose network ONNX Runtime
+:class:`posecast.online.inference.anomaly.AnomalyScorer` (whose network ONNX Runtime
 runs); the shown poses' passes are the numpy references,
 :class:`posecast.body.passes.NumpyPasses`.
 """
@@ -21,8 +21,8 @@ import numpy as np
 from posecast.body.batch_fk import fk32
 from posecast.body.ik import MAX_DRIFT_M, RELEASE_FRAMES, ContactIK
 from posecast.body.passes import NumpyPasses
-from posecast.online.engine.anomaly import AnomalyScorer
 from posecast.online.engine.backend import F32, F64, PoolIK
+from posecast.online.inference.anomaly import AnomalyScorer
 from posecast.online.inference.artifact import Artifact, load_artifact
 
 
