@@ -160,10 +160,12 @@ def test_inertial_sites_read_accelerations_with_seeded_noise() -> None:
 
 @pytest.mark.parametrize("layout", ["hmd3+waist", "hmd3", TABLE_SETS["3p"], TABLE_SETS["6p"]])
 def test_cvae_ik_is_the_engine_with_one_sample(layout: str) -> None:
-    """``cvae_ik`` (the clip pipeline: pelvis smoothing, lean, reach, contact IK, legs
-    apart, floor pass, leg pass, hinges, upper-body pass) is what the engine streams
-    with its one sample, the prior's mean: so ``cvae_ik_ssi`` against ``cvae_ik``
-    measures SSI alone. The two differ only by the engine's float32 arithmetic."""
+    """``cvae_ik`` (the engine's own shown-pose pipeline, ``body.pipeline.show``, run
+    frame by frame over the clips) is what the engine streams with its one sample, the
+    prior's mean: so ``cvae_ik_ssi`` against ``cvae_ik`` measures SSI alone. The two
+    differ only where the decoders do (ONNX Runtime one row at a time against the
+    backend's batch) and at a clip's last frame (the engine's next pelvis there is the
+    decoder's on the held frame)."""
     clips = [derive_frames(walk_clip(3.0, 60.0, seed=s)) for s in (0, 1)]
     lay = layout if "," not in layout else TrackerSet.parse(layout)
     clip = evaluate(clips, 60.0, ["cvae_ik"], layout=lay)["variants"]["cvae_ik"]
