@@ -20,7 +20,7 @@ import numpy as np
 
 from posecast.body.hinge import ELBOW_LIMBS, KNEE_LIMBS, Limbs
 from posecast.body.passes import NumpyPasses
-from posecast.offline.evaluation.engine_speed import _frames
+from posecast.offline.evaluation.engine_speed import bench_frames
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.types import TrackerFrame
 from posecast.online.inference.loader import load_engine
@@ -50,7 +50,7 @@ class NumpyShownPool:
 def _passes_alone(pool: Any, E: int, repeats: int = 200) -> tuple[float, float]:
     """Milliseconds per call of the three passes on ``E`` poses: C, numpy."""
     eng = load_engine(EngineConfig(samples=1), None, 1, Layout.HMD3_WAIST, "native")
-    pos, quat = _frames()
+    pos, quat = bench_frames()
     rng = np.random.default_rng(0)
     for p in range(E):
         eng.add_player(f"p{p}", seed=p)
@@ -89,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     counts = [int(x) for x in args.players.split(",")]
     cfg = EngineConfig(samples=args.samples)
-    pos, quat = _frames()
+    pos, quat = bench_frames()
     print(f"N = {args.samples}, {args.threads} threads, 4-point players, the generated walk")
     print(f"{'players':>7s} {'C p50':>8s} {'C p90':>8s} {'numpy p50':>10s} {'numpy p90':>10s}"
           f" {'numpy / C (p50)':>16s}")  # fmt: skip
