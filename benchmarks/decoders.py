@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from posecast.offline.evaluation.engine_speed import _frames
+from posecast.offline.evaluation.engine_speed import bench_frames
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.types import TrackerFrame
 from posecast.online.inference.loader import load_engine
@@ -56,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
         for p in range(args.players):
             engine.add_player(f"p{p}", seed=p)
         engines.append(engine)
-    pos, quat = _frames()
+    pos, quat = bench_frames()
     times: list[list[float]] = [[] for _ in engines]
     for t in range(args.warmup + args.ticks):
         for (_, level), engine, kept in zip(specs, engines, times, strict=True):

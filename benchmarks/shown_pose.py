@@ -4,7 +4,7 @@
 Two engines on the ``native`` backend, identical but for where the upper-body pass and
 the hinges (knees, elbows) of the shown poses run: in C (``NativePool.upper_body`` and
 ``hinge``, ``pc_upper.c``, what the backend serves) or in numpy (the references,
-``upper_ik.solve_upper_body`` and ``hinge.hinge_quat``). Both tick in turn, tick by tick,
+``posecast.body.passes.NumpyPasses``). Both tick in turn, tick by tick,
 in one process on the generated walk, so machine load hits both alike; prints the
 whole tick's p50 and p90 for each and their ratio, and the passes alone on ``E`` shown
 poses. It also checks that the two engines stream the same poses.
@@ -18,20 +18,21 @@ from typing import Any
 
 import numpy as np
 
-from posecast.offline.evaluation.engine_speed import _frames
+from posecast.body.hinge import ELBOW_LIMBS, KNEE_LIMBS, Limbs
+from posecast.body.passes import NumpyPasses
+from posecast.offline.evaluation.engine_speed import bench_frames
 from posecast.online.engine.config import EngineConfig
-from posecast.online.engine.hinge import ELBOW_LIMBS, KNEE_LIMBS, Limbs, hinge_quat
 from posecast.online.engine.types import TrackerFrame
-from posecast.online.engine.upper_ik import solve_upper_body
 from posecast.online.inference.loader import load_engine
 from posecast.tracking.layouts import Layout
 
 
-class NumpyPasses:
-    """A pool that runs the shown pose's passes as the numpy references."""
+class NumpyShownPool:
+    """A native pool whose shown pose's upper-body pass and hinges are the numpy
+    references (:class:`posecast.body.passes.NumpyPasses`)."""
 
     def __init__(self, pool: Any) -> None:
-        self.pool, self.threshold_m = pool, pool.threshold_m
+        self.pool, self.threshold_m, self.numpy = pool, pool.threshold_m, NumpyPasses()
 
     def step(self, *args: Any) -> Any:
         return self.pool.step(*args)
@@ -40,16 +41,16 @@ class NumpyPasses:
         return self.pool.emit(*args)
 
     def upper_body(self, *args: Any) -> Any:
-        return solve_upper_body(*args)
+        return self.numpy.upper_body(*args)
 
     def hinge(self, positions: Any, rotations: Any, limbs: Limbs) -> None:
-        hinge_quat(positions, rotations, limbs)
+        self.numpy.hinge(positions, rotations, limbs)
 
 
 def _passes_alone(pool: Any, E: int, repeats: int = 200) -> tuple[float, float]:
     """Milliseconds per call of the three passes on ``E`` poses: C, numpy."""
     eng = load_engine(EngineConfig(samples=1), None, 1, Layout.HMD3_WAIST, "native")
-    pos, quat = _frames()
+    pos, quat = bench_frames()
     rng = np.random.default_rng(0)
     for p in range(E):
         eng.add_player(f"p{p}", seed=p)
@@ -63,7 +64,7 @@ def _passes_alone(pool: Any, E: int, repeats: int = 200) -> tuple[float, float]:
     picks = rng.integers(len(pos), size=len(wp))
     tp, tq = pos[picks].astype(np.float64), quat[picks].astype(np.float64)
     out = []
-    for passes in (pool, NumpyPasses(pool)):
+    for passes in (pool, NumpyShownPool(pool)):
 
         def run(passes: Any = passes) -> None:
             p, r, _ = passes.upper_body(wp, rot, tp, tq, None, 0.75)
@@ -88,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     counts = [int(x) for x in args.players.split(",")]
     cfg = EngineConfig(samples=args.samples)
-    pos, quat = _frames()
+    pos, quat = bench_frames()
     print(f"N = {args.samples}, {args.threads} threads, 4-point players, the generated walk")
     print(f"{'players':>7s} {'C p50':>8s} {'C p90':>8s} {'numpy p50':>10s} {'numpy p90':>10s}"
           f" {'numpy / C (p50)':>16s}")  # fmt: skip
@@ -99,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
             for p in range(P):
                 engine.add_player(f"p{p}", seed=p)
             engines.append(engine)
-        engines[1].pool = NumpyPasses(engines[1].pool)
+        engines[1].pool = NumpyShownPool(engines[1].pool)
         times: list[list[float]] = [[], []]
         worst = 0.0
         for t in range(args.warmup + args.ticks):

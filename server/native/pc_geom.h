@@ -33,9 +33,9 @@ static inline void pc_mat2quat(const double *R, double *q) {
     for (int i = 0; i < 4; i++) q[i] = s * (c[k][i] / d);
 }
 
-/* ik.swing_mat: the smallest rotation taking direction a onto b (Rodrigues' formula,
+/* geom.swing_mat: the smallest rotation taking direction a onto b (Rodrigues' formula,
  * R = c I + [v]x + v v^T / (1 + c) with v = a x b, c = a . b, on the directions
- * v / max(|v|, 1e-9), ik.unit3); opposite directions turn half a turn about a
+ * v / max(|v|, 1e-9), geom.unit3); opposite directions turn half a turn about a
  * perpendicular (a x x, or a x y where a is near x). */
 static inline void pc_swing(const double *a, const double *b, double *R) {
     double na = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);

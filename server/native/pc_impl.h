@@ -10,9 +10,10 @@
  * and then includes this file. Vectors are GCC vector extensions, so one source
  * serves every width; the compiler emits the level's instructions for them.
  *
- * Numerics follow the numpy reference (batch_fk.py, ik.py, anomaly.py and the ONNX
- * decoder graph) operation by operation; tests/online/inference/test_native.py
- * checks every level this CPU runs against a float64 reference.
+ * Numerics follow the numpy reference (body/batch_fk.py, body/ik.py,
+ * online/inference/anomaly.py and the ONNX decoder graph) operation by operation;
+ * tests/online/inference/test_native.py checks every level this CPU runs against a
+ * float64 reference.
  */
 #include <math.h>
 #include <stdint.h>

@@ -1,12 +1,11 @@
 /* The upper-body pass in C: head on the headset, hands on the controllers.
  *
- * A line-for-line port of posecast.online.engine.upper_ik.solve_upper_body (the
- * reference, numpy), one pose at a time in double precision;
- * tests/online/inference/test_native.py parity-tests it against that function. The
- * numpy version costs about 2.5 ms a tick whatever the number of players (call
- * overhead of a few hundred small array operations); this one a few microseconds a
- * pose. Plain C, no SIMD: it runs on every machine the module builds on, so it needs
- * no instruction-set dispatch.
+ * A line-for-line port of posecast.body.upper_ik.solve_upper_body (the
+ * reference, numpy), one pose at a time in double precision; tests/online/inference/test_native.py parity-tests
+ * it against that function. The numpy version costs about 2.5 ms a tick whatever the
+ * number of players (call overhead of a few hundred small array operations); this one
+ * a few microseconds a pose. Plain C, no SIMD: it runs on every machine the module
+ * builds on, so it needs no instruction-set dispatch.
  *
  * Matrices are row-major 3x3 (m[3 * r + c]) acting on column vectors; quaternions are
  * xyzw. Joint numbers and parents are posecast.skeleton's (checked at import by
@@ -21,7 +20,7 @@
 enum { PELVIS, SPINE, CHEST, NECK, HEAD, L_UPPER, L_FORE, L_HAND, R_UPPER, R_FORE, R_HAND, NJ = 19 };
 enum { S_HEAD, S_LHAND, S_RHAND };
 
-#define EPS 1e-9       /* posecast.online.engine.ik.EPS */
+#define EPS 1e-9       /* posecast.body.geom.EPS */
 #define QEPS 1e-12     /* posecast.geometry.rotations._EPS (normalize) */
 
 typedef double V3[3];
@@ -48,7 +47,7 @@ static void cross3(const double *a, const double *b, double *o) {
     o[1] = y;
     o[2] = z;
 }
-/* v / max(|v|, EPS); returns |v| (ik.unit3). */
+/* v / max(|v|, EPS); returns |v| (geom.unit3). */
 static double unit3(const double *v, double *o) {
     double n = norm3(v), d = n > EPS ? n : EPS;
     o[0] = v[0] / d;
@@ -364,7 +363,7 @@ void pc_upper_rows(const PcUpperArgs *a, int64_t r0, int64_t r1) {
     for (int64_t e = r0; e < r1; e++) solve_one(a, bone, e);
 }
 
-/* --- the hinges (posecast.online.engine.hinge._hinge on quaternions) ------------------ */
+/* --- the hinges (posecast.body.hinge._hinge on quaternions) ------------------ */
 
 /* upper_ik._wrap: into [-pi, pi), as Python's float modulo. */
 static double wrap_angle(double x) {

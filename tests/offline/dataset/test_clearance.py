@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from posecast.body.clearance import SPEEDS_M_S, TOES
 from posecast.offline.dataset.clearance import EDGES_M_S, clearance_table, toe_speed_height
-from posecast.online.engine.clearance import SPEEDS_M_S, TOES
 
 
 def _clip(speed_m_s: float, heights: np.ndarray, fps: float = 60.0) -> np.ndarray:

@@ -160,10 +160,14 @@ def test_inertial_sites_read_accelerations_with_seeded_noise() -> None:
 
 @pytest.mark.parametrize("layout", ["hmd3+waist", "hmd3", TABLE_SETS["3p"], TABLE_SETS["6p"]])
 def test_cvae_ik_is_the_engine_with_one_sample(layout: str) -> None:
-    """``cvae_ik`` (the clip pipeline: pelvis smoothing, lean, reach, contact IK, legs
-    apart, floor pass, leg pass, hinges, upper-body pass) is what the engine streams
-    with its one sample, the prior's mean: so ``cvae_ik_ssi`` against ``cvae_ik``
-    measures SSI alone. The two differ only by the engine's float32 arithmetic."""
+    """``cvae_ik`` (the engine's own shown-pose pipeline, ``body.pipeline.show``, run
+    frame by frame over the clips) is what the engine streams with its one sample, the
+    prior's mean: so ``cvae_ik_ssi`` against ``cvae_ik`` measures SSI alone. The two
+    differ only where the decoders do (ONNX Runtime one row at a time against the
+    backend's batch) and at a clip's last frame (the engine's next pelvis there is the
+    decoder's on the held frame): measured within 1.2e-4 of each other (relative;
+    the 6-point set 3e-6), where ``cvae_ik``'s own float64 copy of the passes was
+    8.5e-4 off (the 6-point set's lower body)."""
     clips = [derive_frames(walk_clip(3.0, 60.0, seed=s)) for s in (0, 1)]
     lay = layout if "," not in layout else TrackerSet.parse(layout)
     clip = evaluate(clips, 60.0, ["cvae_ik"], layout=lay)["variants"]["cvae_ik"]
@@ -175,7 +179,7 @@ def test_cvae_ik_is_the_engine_with_one_sample(layout: str) -> None:
     np.testing.assert_allclose(
         [streamed[k] for k in keys],
         [clip[k] for k in keys],
-        rtol=1e-3,
+        rtol=5e-4,
         atol=1e-3,
         err_msg=str(keys),
     )

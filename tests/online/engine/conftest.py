@@ -22,11 +22,11 @@ import pytest
 
 from posecast.offline.dataset.frames import derive_frames
 from posecast.offline.motion.synthetic import walk_clip
-from posecast.online.engine.anomaly import AnomalyScorer
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.ports import Pool, StepDecoder
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import PoseOut, TrackerFrame
+from posecast.online.inference.anomaly import AnomalyScorer
 from posecast.online.inference.artifact import Artifact, load_artifact
 from posecast.online.inference.auto import Backend, load_backend
 from posecast.tracking.layouts import Layout

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 import torch
 
+from posecast.body.upper_ik import ease_reach_clip, lean_root, reach_root
 from posecast.geometry.rotations import quat2mat
 from posecast.offline.evaluation.reconstruct import decode_cvae, pose_from_rotations
 from posecast.offline.nets.cvae import CVAE, CVAEConfig
@@ -25,7 +26,6 @@ from posecast.offline.train.export import build_decoder, sidecar
 from posecast.online.engine.multi import MultiEngine
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
-from posecast.online.engine.upper_ik import ease_reach_clip, lean_root, reach_root
 from posecast.online.inference.artifact import Artifact, default_models_dir, load_artifact
 from posecast.skeleton import Joint
 from posecast.tracking.features import TrackerSlot

@@ -8,7 +8,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from posecast.online.engine.ik import FLOOR_MAX_LIFT_M
+from posecast.body.ik import FLOOR_MAX_LIFT_M
 from posecast.online.engine.selectors import (
     AnomalySelector,
     ObstacleSelector,

@@ -8,7 +8,7 @@ import pytest
 from posecast.offline.train.masks import TABLE_SETS
 from posecast.online.engine.config import EngineConfig
 from posecast.online.engine.multi import MultiEngine
-from posecast.online.engine.ssi import rest_frame
+from posecast.online.engine.ring import rest_frame
 from posecast.online.engine.types import TrackerFrame
 from posecast.online.inference.loader import load_engine
 from posecast.tracking.sites import SITE_JOINT_INDEX, Site, TrackerSet

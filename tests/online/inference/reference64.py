@@ -1,8 +1,8 @@
 """A float64 reference of one SSI tick's math, from the shipped ONNX weights.
 
 Written out from the decoder graph (posecast/offline/nets/cvae.py ``CVAEDecoder.step``),
-the float64 FK of :mod:`posecast.geometry.fk`, :class:`posecast.online.engine.ik.ContactIK`
-on float64 arrays and the anomaly score of :mod:`posecast.online.engine.anomaly`, so
+the float64 FK of :mod:`posecast.geometry.fk`, :class:`posecast.body.ik.ContactIK`
+on float64 arrays and the anomaly score of :mod:`posecast.online.inference.anomaly`, so
 the native kernels are checked against something that shares none of their code.
 """
 
@@ -17,9 +17,9 @@ import onnx
 from numpy.typing import NDArray
 from onnx import numpy_helper
 
+from posecast.body.ik import ContactIK
 from posecast.geometry.fk import fk_mat
 from posecast.geometry.rotations import quat2mat, r6d2mat
-from posecast.online.engine.ik import ContactIK
 from posecast.online.inference.artifact import default_models_dir
 from posecast.skeleton import LOWER_BODY, reference_offsets
 

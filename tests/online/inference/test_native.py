@@ -18,15 +18,15 @@ from typing import Any
 import numpy as np
 import pytest
 
+from posecast.body.batch_fk import fk32
+from posecast.body.hinge import ELBOW_LIMBS, FADES, KNEE_LIMBS, hinge_quat, limb_table
+from posecast.body.ik import ContactIK
 from posecast.geometry.fk import fk_mat
 from posecast.geometry.rotations import aa2mat, mat2quat
 from posecast.offline.train.masks import TABLE_SETS
-from posecast.online.engine.batch_fk import fk32
 from posecast.online.engine.config import EngineConfig
-from posecast.online.engine.hinge import ELBOW_LIMBS, FADES, KNEE_LIMBS, hinge_quat, limb_table
-from posecast.online.engine.ik import ContactIK
 from posecast.online.engine.ports import PoolIK
-from posecast.online.engine.ssi import rest_frame
+from posecast.online.engine.ring import rest_frame
 from posecast.online.engine.types import TrackerFrame
 from posecast.online.inference.loader import load_engine
 from posecast.online.inference.onnx_backend import NumpyPool

@@ -1,5 +1,5 @@
 """How high real toes keep off the floor at each horizontal speed: the table behind the
-engine's swing clearance (:mod:`posecast.online.engine.clearance`).
+engine's swing clearance (:mod:`posecast.body.clearance`).
 
 For every frame of every clip, the toe's horizontal speed from the frame before and its
 height now; per speed bin, a low percentile of the height. ``posecast data clearance
@@ -14,7 +14,7 @@ from collections.abc import Iterable
 import numpy as np
 from numpy.typing import NDArray
 
-from posecast.online.engine.clearance import TOES, toe_steps
+from posecast.body.clearance import TOES, toe_steps
 
 F64 = NDArray[np.floating]
 

@@ -1,5 +1,5 @@
 """How far real wrists bend: the statistic behind the engine's elbow hint
-(:data:`posecast.online.engine.upper_ik.WRIST_ELBOW_SHARE`).
+(:data:`posecast.body.upper_ik.WRIST_ELBOW_SHARE`).
 
 The upper-body pass places an elbow partly where a straight wrist puts it behind the
 controller: the forearm along the hand's rest direction turned by the hand's world
@@ -15,7 +15,7 @@ from collections.abc import Iterable
 import numpy as np
 from numpy.typing import NDArray
 
-from posecast.online.engine.upper_ik import straight_forearms
+from posecast.body.upper_ik import straight_forearms
 from posecast.skeleton import Joint
 
 F64 = NDArray[np.floating]

@@ -114,7 +114,10 @@ def _rss_mb() -> float:
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def _frames(seconds: float = 8.0) -> tuple[np.ndarray, np.ndarray]:
+def bench_frames(seconds: float = 8.0) -> tuple[np.ndarray, np.ndarray]:
+    """The benchmarks' trackers: a generated walk's positions ``(T, 4, 3)`` and
+    orientations ``(T, 4, 4)``, float64 (also ``benchmarks/shown_pose.py`` and
+    ``decoders.py``)."""
     fr = derive_frames(walk_clip(seconds, 60.0, seed=3))
     return fr["tracker_pos"].astype(np.float64), fr["tracker_quat"].astype(np.float64)
 
@@ -147,7 +150,7 @@ def bench(
             engine.add_player(f"p{p}", p, Layout.HMD3 if p < n3 else Layout.HMD3_WAIST)
         else:
             engine.add_player(f"p{p}", seed=p)
-    pos, quat = _frames()
+    pos, quat = bench_frames()
     ms = _timed_ticks(
         engine,
         players,
@@ -254,7 +257,7 @@ def naive_loop(
         e = Engine(one.decoder, one.pool, cfg, 1, backend_name=one.backend_name)
         e.add_player("p", seed=p)
         engines.append(e)
-    pos, quat = _frames()
+    pos, quat = bench_frames()
     times = []
     for t in range(10 + ticks):
         t0 = time.perf_counter()

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from posecast.online.engine.clearance import toe_steps
+from posecast.body.clearance import toe_steps
 from posecast.skeleton import FEET, LOWER_BODY, PARENTS, TOES, Joint
 
 F64 = NDArray[np.floating]

@@ -29,8 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from posecast.body.clearance import toe_steps
 from posecast.offline.evaluation.metrics import local_rotations
-from posecast.online.engine.clearance import toe_steps
 from posecast.skeleton import Joint
 
 F64 = NDArray[np.float64]

@@ -2,7 +2,8 @@
 
 Frames go through the decoder one step at a time exactly as the server steps them,
 then FK with the root from the waist tracker (or, for the headset-only model, from
-its own pelvis outputs), then optional contact IK.
+its own pelvis outputs); the shown pose's passes are the engine's own
+(:func:`posecast.body.pipeline.show`, run by :func:`~posecast.offline.evaluation.runner.run_shown`).
 """
 
 from __future__ import annotations
@@ -13,7 +14,6 @@ from numpy.typing import NDArray
 from posecast.geometry.fk import fk_mat
 from posecast.geometry.rotations import quat2mat, r6d2mat
 from posecast.offline.dataset.frames import Frames
-from posecast.online.engine.ik import MAX_DRIFT_M, RELEASE_FRAMES, ContactIK
 from posecast.online.inference.artifact import Artifact
 from posecast.skeleton import NUM_ROTATIONS, reference_offsets
 
@@ -67,17 +67,3 @@ def clip_truth(fr: Frames) -> tuple[F64, F64]:
     return pose_from_rotations(
         fr["rot6d"].astype(np.float64), root, fr["root_pos"].astype(np.float64)
     )
-
-
-def contact_ik(
-    world_mat: F64,
-    world_pos: F64,
-    contacts: F64,
-    release_frames: int = RELEASE_FRAMES,
-    max_drift_m: float | None = MAX_DRIFT_M,
-) -> None:
-    """Run the contact IK over a clip in place (one sample, frame by frame), with the
-    engine's release and drift settings (``EngineConfig.ik_*``)."""
-    ik = ContactIK.zeros(1, release_frames, max_drift_m)
-    for t in range(len(world_pos)):
-        ik.step(world_mat[t : t + 1], world_pos[t : t + 1], contacts[t : t + 1])

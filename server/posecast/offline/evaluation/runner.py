@@ -10,37 +10,26 @@ from typing import Any
 
 import numpy as np
 
-from posecast.geometry.rotations import mat2quat, quat2mat
+from posecast.body.passes import Passes
+from posecast.body.pelvis import pelvis_poses
+from posecast.body.pipeline import Decoded, ShownState, show
+from posecast.geometry.rotations import quat2mat
 from posecast.offline.dataset.frames import Frames
 from posecast.offline.evaluation import metrics as m
 from posecast.offline.evaluation import plausibility as pl
 from posecast.offline.evaluation.reconstruct import (
     clip_truth,
-    contact_ik,
     decode_ae,
     decode_cvae,
     pose_from_rotations,
 )
-from posecast.online.engine.anomaly import AnomalyScorer
-from posecast.online.engine.apart import keep_apart
-from posecast.online.engine.clearance import clearance_lift, clip_toe_speed
 from posecast.online.engine.config import EngineConfig
-from posecast.online.engine.hinge import hinge_elbows, hinge_knees
-from posecast.online.engine.ik import floor_ik, floor_lift
-from posecast.online.engine.leg_ik import senses_legs, solve_legs, tracks_legs
-from posecast.online.engine.pelvis import smooth_pelvis_clip
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import TrackerFrame
-from posecast.online.engine.upper_ik import (
-    ease_reach_clip,
-    lean_root,
-    reach_root,
-    solve_upper_body,
-    turn_pelvis,
-)
-from posecast.online.inference.artifact import load_artifact
+from posecast.online.inference.anomaly import AnomalyScorer
+from posecast.online.inference.artifact import Artifact, load_artifact
 from posecast.online.inference.auto import Backend, load_backend
-from posecast.skeleton import LOWER_BODY, NUM_ROTATIONS, Joint
+from posecast.skeleton import LOWER_BODY, NUM_ROTATIONS
 from posecast.tracking.features import TrackerSlot
 from posecast.tracking.layouts import Layout, PlayerLayout, model_layout, pelvis_from_head, spec
 from posecast.tracking.sites import (
@@ -140,20 +129,18 @@ def evaluate(
     for the model of tracker ``layout`` (a named layout, or a
     :class:`~posecast.tracking.sites.TrackerSet` for the one model of every set). The
     full method (``cvae_ik_ssi``) runs the SSI engine on ``backend`` (the report's
-    ``backend`` names the one that ran); the other variants and the scores behind
-    ``implausible_rate`` run the ONNX models.
+    ``backend`` names the one that ran), and the ``_ik`` variants that backend's shown
+    pose passes; the networks of the other variants and the scores behind
+    ``implausible_rate`` run on ONNX Runtime.
 
     ``baseline_mean_lower_body`` takes the true upper body and pelvis whatever the
     layout, so only its lower-body numbers are a floor to beat.
 
     ``cvae_ik`` and ``ae_ik`` are what the server would stream without SSI: the
-    pelvis smoothing (``engine_cfg.pelvis_smoothing``), contact IK, the floor pass
-    (``engine_cfg.floor_ik``; with it the swing clearance, ``swing_clearance``), the
-    knee hinge (``knee_hinge``) and (when ``engine_cfg.upper_body_ik``, the default)
-    the engine's upper-body pass (its elbow hint at ``wrist_elbow``; a guessed pelvis
-    first moved toward out-of-reach trackers, ``hand_reach``, before the contact IK as
-    the engine does), then the elbow hinge (``elbow_hinge``), so that ``cvae_ik_ssi``
-    against ``cvae_ik`` measures SSI alone.
+    network's one sample (the prior's mean; the AE's pose) through the engine's own
+    shown-pose passes, :func:`posecast.body.pipeline.show` with ``engine_cfg``'s
+    switches, frame by frame (:func:`run_shown`), so that ``cvae_ik_ssi`` against
+    ``cvae_ik`` measures SSI alone.
     ``cvae_1sample`` is the network's raw pose.
     """
     player_layout = layout if isinstance(layout, TrackerSet) else Layout(layout)
@@ -176,81 +163,45 @@ def evaluate(
     # The pelvis of a single-sample variant: the waist tracker's, or the decoder's own.
     root_from_waist = tracker_set.tracks_waist if tracker_set is not None else not ls.predicts_root
     engine_cfg = engine_cfg or EngineConfig()
-    # A guessed pelvis leans toward the headset, as the engine's does; not that of a set
-    # that senses its legs, which keeps its hips as they are.
-    legs_sensed = tracker_set is not None and bool(senses_legs(tracker_set.kinds()[None])[0])
-    lean = not root_from_waist and not legs_sensed and engine_cfg.leans
-    ssi_backend = (
+    kinds = tracker_set.kinds() if tracker_set is not None else None
+    shown_by = (
         load_backend(backend, ls.layout, models_dir, cfg=engine_cfg)
-        if "cvae_ik_ssi" in variants
+        if any(v == "cvae_ik_ssi" or v.endswith("_ik") for v in variants)
         else None
     )
     for name in variants:
         acc, t0 = m.Accumulator(), time.perf_counter()
-        ssi: list[tuple[np.ndarray, np.ndarray, int]] = []
+        poses: list[tuple[np.ndarray, np.ndarray]] = []
         transitions = 0
         if name == "cvae_ik_ssi":
-            assert ssi_backend is not None
-            ssi = run_ssi(ssi_backend, tracks, engine_cfg, tracker_set)
-        for ci, fr in enumerate(clips):
-            tr = tracks[ci]
-            feats = tr.features
-            # The true pelvis (baseline_mean_lower_body), or the waist tracker's.
-            root_mat = quat2mat(fr["tracker_quat"][:, TrackerSlot.WAIST].astype(np.float64))
-            root_pos = fr["tracker_pos"][:, TrackerSlot.WAIST].astype(np.float64)
-            if name == "cvae_ik_ssi":
-                wm, wp, n_trans = ssi[ci]
-                transitions += n_trans
-            elif name.startswith("cvae"):
-                rot, con, root = decode_cvae(dec, feats, np.zeros(latent, np.float32))
+            assert shown_by is not None
+            ssi = run_ssi(shown_by, tracks, engine_cfg, tracker_set)
+            poses = [(wm, wp) for wm, wp, _ in ssi]
+            transitions = sum(n for _, _, n in ssi)
+        elif name.endswith("_ik"):
+            assert shown_by is not None
+            one = [_decode(name, dec, ae, tr, root_from_waist, latent) for tr in tracks]
+            poses = run_shown(shown_by.pool, one, tracks, engine_cfg, root_from_waist, kinds)
+        elif name == "cvae_1sample":
+            for fr, tr in zip(clips, tracks, strict=True):
+                rot, _, root = decode_cvae(dec, tr.features, np.zeros(latent, np.float32))
+                root_mat, root_pos = _true_waist(fr)
                 if root is not None and not root_from_waist:
                     head_pos = tr.values[:, TrackerSlot.HEAD]
                     head_quat = tr.quat[:, TrackerSlot.HEAD]
                     root_mat, root_pos = pelvis_from_head(root, head_pos, head_quat)
-            elif name == "ae_ik":
-                assert ae is not None
-                rot, con = decode_ae(ae, feats)
-            elif name == "baseline_mean_lower_body":
-                if mean_pose is None:
-                    raise ValueError("the decoder sidecar has no mean_pose_rot6d")
+                poses.append(pose_from_rotations(rot, root_mat, root_pos))
+        elif name == "baseline_mean_lower_body":
+            if mean_pose is None:
+                raise ValueError("the decoder sidecar has no mean_pose_rot6d")
+            for fr in clips:
                 rot = fr["rot6d"].astype(np.float64).copy()  # upper body: ground truth
                 rot[:, leg_rot] = mean_pose[leg_rot]
-                con = np.zeros((len(feats), 2))
-            else:
-                raise ValueError(f"unknown variant {name!r}")
-            if name != "cvae_ik_ssi":
-                if name.endswith("_ik") and engine_cfg.pelvis_smoothing and engine_cfg.lookahead:
-                    root_mat, root_pos = smooth_pelvis_clip(root_mat, root_pos)
-                if name.endswith("_ik") and lean:
-                    _, near = pose_from_rotations(rot, root_mat, root_pos)
-                    turn = lean_root(root_pos, near[:, Joint.HEAD], tr.values[:, TrackerSlot.HEAD])
-                    leant, turned = turn_pelvis(rot, root_mat, turn)
-                    rot, root_mat = np.asarray(leant), np.asarray(turned, np.float64)
-                wm, wp = pose_from_rotations(rot, root_mat, root_pos)
-                if name.endswith("_ik") and not root_from_waist and engine_cfg.reaches:
-                    span = None if engine_cfg.torso_span and not legs_sensed else 0.0
-                    wp = wp + ease_reach_clip(reach_root(wp, tr.values, span))[:, None]
-                if name.endswith("_ik"):
-                    net_mat, net_pos = wm.copy(), wp.copy()
-                    contact_ik(wm, wp, con, engine_cfg.ik_release_frames, engine_cfg.ik_max_drift_m)
-                    if engine_cfg.legs_apart:
-                        keep_apart(wm, wp, net_mat, net_pos)
-                    if engine_cfg.floor_ik:
-                        lift = floor_lift(wp)
-                        if engine_cfg.swing_clearance:
-                            speed = clip_toe_speed(wp, fps)
-                            lift = np.maximum(lift, clearance_lift(wp, speed))
-                        floor_ik(wm, wp, lift=lift)
-                    if engine_cfg.upper_body_ik and tracker_set is not None:
-                        wm, wp = _legs(wm, wp, tr, tracker_set)
-                    if engine_cfg.knee_hinge:
-                        hinge_knees(wm, wp)
-                    if engine_cfg.upper_body_ik:
-                        wm, wp = _upper_body(
-                            wm, wp, tr, not root_from_waist, engine_cfg.wrist_elbow
-                        )
-                    if engine_cfg.elbow_hinge:
-                        hinge_elbows(wm, wp)
+                poses.append(pose_from_rotations(rot, *_true_waist(fr)))
+        else:
+            raise ValueError(f"unknown variant {name!r}")
+        for ci, fr in enumerate(clips):
+            wm, wp = poses[ci]
             gt_mat, gt = truth[ci]
             acc.add("mpjpe_cm", m.mpjpe(wp, gt))
             acc.add("lower_mpjpe_cm", m.lower_mpjpe(wp, gt))
@@ -286,7 +237,7 @@ def evaluate(
     ground_truth = {k: round(v, 4) for k, v in gt_acc.means().items()}
     return {
         "layout": str(player_layout),
-        "backend": ssi_backend.name if ssi_backend is not None else None,
+        "backend": shown_by.name if shown_by is not None else None,
         "variants": results,
         "clips": len(clips),
         "frames": int(sum(len(c["features"]) for c in clips)),
@@ -296,31 +247,101 @@ def evaluate(
     }
 
 
-def _upper_body(
-    wm: np.ndarray, wp: np.ndarray, tr: Tracks, free_root: bool, wrist_share: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """The engine's upper-body pass over a clip: head and hands onto the clip's trackers
-    (``free_root``: the pelvis is the decoder's, which may follow the headset;
-    ``wrist_share``: of the elbows' hints, the controllers' share)."""
-    slots = len(TrackerSlot)
-    free = np.full(len(wp), free_root)
-    pos, quat, _ = solve_upper_body(
-        wp, mat2quat(wm), tr.values[:, :slots], tr.quat[:, :slots], free, wrist_share
-    )
-    return quat2mat(quat.astype(np.float64)), pos.astype(np.float64)
+def _true_waist(fr: Frames) -> tuple[np.ndarray, np.ndarray]:
+    """A clip's waist tracker on the true pelvis, ``(T, 3, 3)`` and ``(T, 3)`` float64."""
+    root_mat = quat2mat(fr["tracker_quat"][:, TrackerSlot.WAIST].astype(np.float64))
+    return root_mat, fr["tracker_pos"][:, TrackerSlot.WAIST].astype(np.float64)
 
 
-def _legs(
-    wm: np.ndarray, wp: np.ndarray, tr: Tracks, tracker_set: TrackerSet
-) -> tuple[np.ndarray, np.ndarray]:
-    """The engine's lower-body pass over a clip: feet and knees onto a tracker set's
-    positional trackers (a no-op for a set without them)."""
-    per_site = tracker_set.kinds()
-    if not tracks_legs(per_site[None]).any():
-        return wm, wp
-    kinds = np.broadcast_to(per_site, (len(wp), *per_site.shape))
-    pos, quat, _ = solve_legs(wp, mat2quat(wm), tr.values, tr.quat, kinds)
-    return quat2mat(quat.astype(np.float64)), pos.astype(np.float64)
+def _decode(
+    name: str,
+    dec: Artifact,
+    ae: Artifact | None,
+    tr: Tracks,
+    root_from_waist: bool,
+    latent: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A single-sample variant's network over a clip, as the engine holds a decoded
+    sample: rotations ``(T, 108)`` and contacts ``(T, 2)`` float32, and the pelvis
+    ``(T, 3, 3)`` / ``(T, 3)`` float32 (:func:`~posecast.body.pelvis.pelvis_poses`)."""
+    if name == "ae_ik":
+        assert ae is not None
+        rot, con = decode_ae(ae, tr.features)
+        root = None
+    else:
+        rot, con, root = decode_cvae(dec, tr.features, np.zeros(latent, np.float32))
+    root_out = None if root_from_waist or root is None else root.astype(np.float32)
+    rootm = quat2mat(tr.quat[:, TrackerSlot.WAIST]).astype(np.float32)
+    root_mat, root_pos, _ = pelvis_poses(tr.values, tr.quat, rootm, root_out, 1)
+    rot32 = rot.reshape(len(rot), -1).astype(np.float32)
+    return rot32, np.asarray(con, np.float32), root_mat, root_pos
+
+
+def run_shown(
+    passes: Passes,
+    decoded: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+    clips: Sequence[Tracks],
+    cfg: EngineConfig,
+    root_from_waist: bool,
+    kinds: np.ndarray | None = None,
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """What the engine streams of one decoded sample per clip (:func:`_decode`'s
+    rotations, contacts and pelvis): :func:`~posecast.body.pipeline.show` frame by
+    frame, every clip a row of one batch as the engine's players are, each carrying
+    its own state from frame to frame, on ``passes`` (a backend's pool). The pelvis is
+    smoothed with its neighbours' (a clip's first and last frames stand in for the
+    missing one, as the engine's first frame does), and it is the decoder's guess
+    unless ``root_from_waist``; ``kinds``: a tracker set's sites.
+
+    Returns per clip world rotations ``(T, 19, 3, 3)`` and positions ``(T, 19, 3)``.
+    """
+    C = len(decoded)
+    lengths = np.array([len(d[0]) for d in decoded])
+    last = lengths - 1
+    # Every clip's arrays padded to the longest with its last frame: (C, T, ...)
+    T = int(lengths.max())
+
+    def padded(arrays: list[np.ndarray]) -> np.ndarray:
+        return np.stack([np.concatenate([a, a[-1:].repeat(T - len(a), 0)]) for a in arrays])
+
+    rot, con, root_mat, root_pos = (padded([d[k] for d in decoded]) for k in range(4))
+    tp, tq = padded([tr.values for tr in clips]), padded([tr.quat for tr in clips])
+    smooth = cfg.pelvis_smoothing and cfg.lookahead >= 1
+    state = ShownState.zeros(C)
+    out_pos = np.zeros((C, T, 19, 3), np.float32)
+    out_rot = np.zeros((C, T, 19, 4), np.float32)
+    for t in range(T):
+        rows = np.flatnonzero(lengths > t)
+        neighbours = None
+        if smooth:
+            at = np.concatenate([np.full(len(rows), max(t - 1, 0)), np.minimum(t + 1, last[rows])])
+            both = np.concatenate([rows, rows])
+            E = len(rows)
+            neighbours = (
+                root_mat[both, at].reshape(2, E, 3, 3),
+                root_pos[both, at].reshape(2, E, 3),
+            )
+        batch = Decoded(
+            rot[rows, t],
+            con[rows, t],
+            root_mat[rows, t],
+            root_pos[rows, t],
+            tp[rows, t],
+            tq[rows, t],
+            first=np.full(len(rows), t == 0),
+            neighbours=neighbours,
+            free=None if root_from_waist else np.ones(len(rows), np.bool_),
+            kinds=None if kinds is None else np.broadcast_to(kinds, (len(rows), len(kinds))),
+        )
+        sub = ShownState.of([a[rows] for a in state.arrays()])
+        shown = show(batch, sub, cfg, passes)
+        for whole, part in zip(state.arrays(), sub.arrays(), strict=True):
+            whole[rows] = part
+        out_pos[rows, t], out_rot[rows, t] = shown.positions, shown.rotations
+    return [
+        (quat2mat(out_rot[c, :n].astype(np.float64)), out_pos[c, :n].astype(np.float64))
+        for c, n in enumerate(lengths.tolist())
+    ]
 
 
 def run_ssi(

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from posecast.body.ik import MAX_DRIFT_M, RELEASE_FRAMES
+from posecast.body.upper_ik import WRIST_ELBOW_SHARE
 from posecast.errors import ConfigError
-from posecast.online.engine.ik import MAX_DRIFT_M, RELEASE_FRAMES
-from posecast.online.engine.upper_ik import WRIST_ELBOW_SHARE
 
 # The most latent samples per player, N. The engine's buffers hold (lookahead + 2) x
 # players x N GRU states of 128 floats; past a few thousand one player costs gigabytes
@@ -36,51 +36,51 @@ class EngineConfig:
         waist_filter_hz: cutoff of the waist-orientation low-pass, ``None`` for off.
         fps: tick rate the model was trained at (60).
         upper_body_ik: put the shown pose's head on the headset and hands on the
-            controllers (:mod:`posecast.online.engine.upper_ik`; default on, off for
+            controllers (:mod:`posecast.body.upper_ik`; default on, off for
             research evaluation of the network's own upper body).
         floor_ik: lift a shown foot that is below the floor (``y = 0``) onto it
-            (:func:`posecast.online.engine.ik.floor_ik`; default on, off for research
+            (:func:`posecast.body.ik.floor_ik`; default on, off for research
             evaluation of the network's own legs). With it, the swing clearance:
         swing_clearance: lift a shown toe to the height real toes keep at its
-            horizontal speed (:mod:`posecast.online.engine.clearance`; default on,
+            horizontal speed (:mod:`posecast.body.clearance`; default on,
             chosen on the validation split, docs/evaluation.md, "Feet"; only with
             ``floor_ik``).
         wrist_elbow: the share of each shown elbow's placement that comes from its
             controller's rotation (a straight wrist), the rest from the network's
             elbow (0.75, chosen on the validation split; 0 for the network's alone;
-            :func:`posecast.online.engine.upper_ik.solve_upper_body`).
+            :func:`posecast.body.upper_ik.solve_upper_body`).
         hand_reach: move a pelvis that is the decoder's guess (no waist tracker)
             toward a controller beyond the arm's reach, horizontally, before the feet
-            are planted (:func:`posecast.online.engine.upper_ik.reach_root`; default
+            are planted (:func:`posecast.body.upper_ik.reach_root`; default
             on, with ``upper_body_ik``).
         torso_span: move a body whose pelvis is the decoder's guess along the line
             from its spine to the headset until the spine is as far from the headset
             as the network's own head is from it (:data:`~posecast.online.engine.
             upper_ik.SPAN_SHARE` of that gap), so that the spine chain reaches the
             headset with the network's torso instead of folding it, as part of the
-            hand reach's move (:func:`posecast.online.engine.upper_ik.reach_root`;
+            hand reach's move (:func:`posecast.body.upper_ik.reach_root`;
             default on, with ``hand_reach``; chosen on the validation split).
         legs_apart: where the display contact IK draws one leg into the other (a
             held foot the other leg swings past), the held foot gives way toward the
             network's own ankle just as far as keeps the legs apart
-            (:mod:`posecast.online.engine.apart`; default on, off for research
+            (:mod:`posecast.body.apart`; default on, off for research
             evaluation; chosen on the validation split, docs/evaluation.md, "Legs
             apart").
         pelvis_lean: turn a pelvis that is the decoder's guess (no waist tracker)
             about itself so that the line from it to the network's head points at the
             headset, the upper body with it and the legs following the hips, before
-            the hand reach and the feet (:func:`posecast.online.engine.upper_ik.lean_root`;
+            the hand reach and the feet (:func:`posecast.body.upper_ik.lean_root`;
             default on, with ``upper_body_ik``; chosen on the validation split).
         elbow_hinge: turn the shown upper arms and forearms so each elbow bends as
             a hinge about a fixed axis in its upper arm's frame, no joint moving
-            (after the upper-body pass; :func:`posecast.online.engine.hinge.hinge_elbows`;
+            (after the upper-body pass; :func:`posecast.body.hinge.hinge_elbows`;
             default on, off for research evaluation).
         knee_hinge: turn the shown thighs and shins so each knee bends as a hinge
-            about its thigh's axis, no joint moving (:mod:`posecast.online.engine.hinge`;
+            about its thigh's axis, no joint moving (:mod:`posecast.body.hinge`;
             default on, off for research evaluation).
         pelvis_smoothing: build the shown pose on the pelvis averaged over frames
             ``e - 1, e, e + 1`` (weights 1, 2, 1; needs ``lookahead >= 1``, adds no lag;
-            :mod:`posecast.online.engine.pelvis`): default on, chosen on the validation
+            :mod:`posecast.body.pelvis`): default on, chosen on the validation
             split (docs/evaluation.md, "Jitter"); off for research evaluation.
         floor_select: SSI leaves out of the pool, frame by frame, every sample with a
             foot deeper below the floor than the floor pass lifts (it is never chosen,

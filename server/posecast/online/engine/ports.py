@@ -5,9 +5,10 @@ builds one by name.
 
 A tick needs two things done for all ``R = P * N`` candidate rows: the decoder step
 (:class:`StepDecoder`) and the candidate pool's FK, contact IK and anomaly error
-(:class:`Pool`), and then the shown pose of each player (``Pool.emit``, and the
-upper-body pass and the hinges on it, ``Pool.upper_body`` and ``Pool.hinge``). A backend
-supplies both; the engine calls nothing else. Backends:
+(:class:`Pool`), and then the heaviest passes of each player's shown pose (``Pool.emit``,
+``Pool.upper_body``, ``Pool.hinge``: a pool is a :class:`posecast.body.passes.Passes`,
+which :func:`posecast.body.pipeline.show` runs them in). A backend supplies both; the
+engine calls nothing else. Backends:
 
 * ``native``: the C extension ``posecast._native`` (fused GRU step, FK, IK and scoring
   on one thread pool; :mod:`posecast.online.inference.native`), the default where it
@@ -22,31 +23,19 @@ weights. This module imports no inference library.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
-from posecast.online.engine.hinge import Limbs
+from posecast.body.passes import Passes
+from posecast.body.passes import PoolIK as PoolIK  # the pool's contact-IK state, re-exported
 
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
 
 BACKENDS = ("native", "onnx", "torch")
 MAX_THREADS = 64  # a backend's pool at most: the native kernels' (server/native/pc_module.c)
-
-
-@dataclass
-class PoolIK:
-    """Contact-IK state of ``R`` candidate rows (views into the engine's slot arrays,
-    updated in place): ``locked (R, 2) bool``, ``lock_pos (R, 2, 3) float64``,
-    ``release (R, 2) int64``, ``suppressed (R, 2) bool``."""
-
-    locked: NDArray[np.bool_]
-    lock_pos: F64
-    release: NDArray[np.int64]
-    suppressed: NDArray[np.bool_]
 
 
 class StepDecoder(Protocol):
@@ -77,8 +66,10 @@ class StepDecoder(Protocol):
         ...
 
 
-class Pool(Protocol):
-    """FK, contact IK and anomaly error of every candidate row."""
+class Pool(Passes, Protocol):
+    """FK, contact IK and anomaly error of every candidate row; and, a
+    :class:`~posecast.body.passes.Passes`, the shown poses' FK and display IK, upper-body
+    pass and hinges."""
 
     threshold_m: float  # the anomaly error above which a pose counts as implausible
 
@@ -99,37 +90,4 @@ class Pool(Protocol):
         = N`` with a waist tracker, ``1`` when every sample has its own pelvis). The
         post-IK world positions go into ``world_out (R, 19, 3)``; ``ik`` steps in place.
         """
-        ...
-
-    def emit(
-        self, rotations: F32, contacts: F32, root_mat: F32, root_pos: F32, ik: PoolIK
-    ) -> tuple[F32, F32]:
-        """The shown poses of ``E`` rows (one per emitting player): FK with world
-        rotations from ``rotations (E, 108)`` and the pelvis ``root_mat (E, 3, 3)`` /
-        ``root_pos (E, 3)``, then the players' own display IK (``ik``, stepped in
-        place; the thighs and shins swing with the feet). Returns world positions
-        ``(E, 19, 3)`` and world rotations ``(E, 19, 4)`` xyzw, float32."""
-        ...
-
-    def upper_body(
-        self,
-        positions: F32,
-        rotations: F32,
-        tracker_pos: F64,
-        tracker_quat: F64,
-        free_root: NDArray[np.bool_] | None,
-        wrist_share: float,
-    ) -> tuple[F32, F32, NDArray[np.bool_]]:
-        """Head and hands of the ``E`` shown poses onto their trackers: exactly
-        :func:`posecast.online.engine.upper_ik.solve_upper_body` (the reference, which
-        documents the arguments), in whatever this backend runs it in."""
-        ...
-
-    def hinge(self, positions: F32, rotations: F32, limbs: Limbs) -> None:
-        """The limbs ``limbs`` of the ``E`` shown poses onto their hinges, rotations
-        changed in place: exactly :func:`posecast.online.engine.hinge.hinge_quat`.
-        ``rotations`` must be a writable C-contiguous float32 array (the engine's, as
-        ``emit`` and ``upper_body`` return them; ``native`` raises ``ValueError`` on
-        any other rather than write into a copy), ``positions`` float32, and no joint
-        may belong to two limbs."""
         ...

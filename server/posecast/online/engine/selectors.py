@@ -33,7 +33,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from posecast.online.engine.ik import sunk
+from posecast.body.ik import sunk
 from posecast.skeleton import Joint
 
 F64 = NDArray[np.floating]
@@ -155,7 +155,7 @@ def choose_anomaly_rows(
 def off_the_floor(scores: F64, positions: F64) -> F64:
     """``scores (P, N)`` with ``+inf`` (out of the pool, :meth:`SampleSelector.choose`) for
     each sample whose post-IK pose ``positions (P, N, 19, 3)`` has a foot deeper below
-    the floor than the floor pass lifts (:func:`~posecast.online.engine.ik.sunk`). A
+    the floor than the floor pass lifts (:func:`~posecast.body.ik.sunk`). A
     player whose every sample is that deep (a tracking space whose origin is not on the
     floor) keeps its scores: the floor says nothing about which of them is better."""
     deep = sunk(positions)  # (P, N)

@@ -13,15 +13,13 @@ Per tick, for all ``P`` players x ``N`` samples at once:
    at frame ``n``, the newest)
 5. emit frame ``n - tau`` per player: the current sample's pose, or during a
    transition the decoder re-run on the interpolated latent and hidden state
-   (one more batched call), on the pelvis averaged with frames ``n - tau - 1`` and
-   ``n - tau + 1`` (:mod:`posecast.online.engine.pelvis`; a guessed pelvis then
-   moved toward trackers beyond reach, ``upper_ik.reach_root``), then that player's own
-   display IK, the floor pass (with the swing clearance,
-   :mod:`posecast.online.engine.clearance`), a tracker set's leg pass, the knees
-   onto their hinges (:mod:`posecast.online.engine.hinge`), then the upper-body pass
-   (:mod:`posecast.online.engine.upper_ik`, run by the backend, ``Pool.upper_body``:
-   head and hands on their trackers) and the
-   elbows onto their hinges
+   (one more batched call), on its pelvis, through the shown pose's passes
+   (:func:`posecast.body.pipeline.show`: the pelvis averaged with frames
+   ``n - tau -+ 1`` read from the ring, a guessed pelvis's lean and reach, the
+   player's own display IK, legs apart, the floor pass and swing clearance, a tracker
+   set's legs, the knees onto their hinges, head and hands on their trackers, the
+   elbows onto their hinges; FK with the display IK, the upper-body pass and the
+   hinges run in the backend's pool, ``Pool.emit``, ``Pool.upper_body``, ``Pool.hinge``)
 
 The engine is pure: frames go in with :meth:`Engine.push`, :meth:`Engine.tick`
 returns poses and events (:mod:`posecast.online.engine.types`). No sockets, no
@@ -44,30 +42,19 @@ new sample is fully in place exactly at the frame where the outlier would have s
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from posecast.geometry.fk import fk_positions
-from posecast.geometry.rotations import mat2quat, quat2mat
-from posecast.online.engine.apart import MAX_OVERLAP_M, keep_apart, overlap
-from posecast.online.engine.batch_fk import fk32, pelvis_from_head32
-from posecast.online.engine.calibration import (
-    Calibration,
-    WaistFilter,
-    apply_all,
-    orient_all,
-    recalibrate,
-)
-from posecast.online.engine.clearance import TOES, clearance_lift, toe_speed
+from posecast.body.pelvis import pelvis_poses
+from posecast.body.pipeline import Decoded, ShownState, show
+from posecast.geometry.rotations import quat2mat
+from posecast.online.engine.calibration import Calibration, WaistFilter, recalibrate
 from posecast.online.engine.config import EngineConfig
-from posecast.online.engine.hinge import ELBOW_LIMBS, KNEE_LIMBS
-from posecast.online.engine.ik import LEGS, floor_ik, floor_lift
-from posecast.online.engine.leg_ik import senses_legs, solve_legs, tracks_legs
-from posecast.online.engine.pelvis import smooth_pelvis
 from posecast.online.engine.ports import Pool, PoolIK, StepDecoder
+from posecast.online.engine.ring import Fed, pelvis_neighbours, rest_frame, write_inputs
 from posecast.online.engine.selectors import (
     AnomalySelector,
     DefaultSelector,
@@ -83,18 +70,10 @@ from posecast.online.engine.types import (
     TickResult,
     TrackerFrame,
 )
-from posecast.online.engine.upper_ik import (
-    LEAN_JOINTS,
-    SPAN_SHARE,
-    ease_reach,
-    lean_root,
-    reach_root,
-    turn_pelvis,
-)
-from posecast.skeleton import NUM_JOINTS, REST_PELVIS_HEIGHT_M, Joint, reference_offsets
-from posecast.tracking.features import TRACKER_JOINT_INDEX, TrackerSlot
+from posecast.skeleton import NUM_JOINTS
+from posecast.tracking.features import TrackerSlot
 from posecast.tracking.layouts import Layout, spec
-from posecast.tracking.sites import SITE_JOINT_INDEX, Kind, TrackerSet
+from posecast.tracking.sites import Kind, TrackerSet
 
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
@@ -122,13 +101,6 @@ class _Player:
     missing: int = 0
     stale: bool = False
     transitions: int = 0
-    # The swing clearance's state: the shown toes' horizontal positions at the last
-    # emitted frame (None before the first) and their averaged speed.
-    toe_xz: F64 | None = None
-    toe_speed: NDArray[np.floating] = field(default_factory=lambda: np.zeros(2))
-    # The shown move of a guessed pelvis toward out-of-reach trackers at the last
-    # emitted frame (upper_ik.ease_reach; None before the first).
-    reach: F64 | None = None
 
 
 class Engine:
@@ -179,6 +151,11 @@ class Engine:
                 "disp_lock_pos": ((2, 3), np.float64),
                 "disp_release": ((2,), np.int64),
                 "disp_suppressed": ((2,), np.bool_),
+                # The rest of the shown pose's state (body.pipeline.ShownState): the
+                # toes' horizontal positions and averaged speeds, the reach's move.
+                "disp_toe_xz": ((2, 2), np.float64),
+                "disp_toe_speed": ((2,), np.float64),
+                "disp_reach": ((3,), np.float64),
                 "ring_h": ((N, self.hidden), np.float32, L),  # hidden state before the frame
                 "ring_rot": ((N, 108), np.float32, L),
                 "ring_con": ((N, 2), np.float32, L),
@@ -289,12 +266,8 @@ class Engine:
         if not self.layout.predicts_root:  # the pelvis is the waist tracker's
             s["ring_rootm"][:, k] = quat2mat(q[:, TrackerSlot.WAIST])
         s["ring_pos"][:, k], s["ring_quat"][:, k] = pos, q
-        for name in ("ik_lock_pos", "disp_lock_pos"):
+        for name in ("ik_lock_pos", "disp_lock_pos", "disp_toe_xz", "disp_reach"):
             s[name][k] *= ratio
-        if p.toe_xz is not None:
-            p.toe_xz = p.toe_xz * ratio
-        if p.reach is not None:
-            p.reach = p.reach * ratio
 
     def push(self, player: str, frame: TrackerFrame) -> None:
         """Offer the newest frame; a newer push before the tick replaces it."""
@@ -339,7 +312,7 @@ class Engine:
             outputs,
         )
         # One pool step: FK, contact IK and anomaly error of every sample.
-        root_mat, root_pos, group = self._roots(
+        root_mat, root_pos, group = pelvis_poses(
             pos, quat, s.row("ring_rootm", k), outputs.get("root"), N, self._waist_rows()
         )
         if len(self._world) < R:
@@ -366,40 +339,6 @@ class Engine:
         kinds = self.slots.view("kinds")[:, TrackerSlot.WAIST]
         tracked: NDArray[np.bool_] = kinds == Kind.POSITIONAL
         return tracked if slots is None else tracked[slots]
-
-    def _roots(
-        self,
-        pos: F64,
-        quat: F64,
-        rootm: F32,
-        root_out: F32 | None,
-        repeat: int,
-        waist: NDArray[np.bool_] | None = None,
-    ) -> tuple[F32, F32, int]:
-        """World pelvis rotations ``(G, 3, 3)`` and positions ``(G, 3)`` (float32) for
-        ``R = len(pos) * repeat`` decoded rows, and how many rows share each: ``R / G``.
-
-        ``hmd3+waist``: the waist tracker's (``rootm``, its rotation as the ring keeps
-        it), one per player (``G = len(pos)``), shared by its ``repeat`` rows.
-        ``hmd3``: each row's own pelvis output (6D rotation, position), moved out of
-        the player's head frame into the world (``G = R``).
-        ``sites``: as ``hmd3``, except that the rows of a player whose set tracks the
-        waist's position (``waist``, per player) take the waist tracker's pose.
-        """
-        if root_out is None:
-            return rootm, pos[:, TrackerSlot.WAIST].astype(np.float32), repeat
-        mats, places = pelvis_from_head32(
-            root_out, pos[:, TrackerSlot.HEAD], quat[:, TrackerSlot.HEAD]
-        )
-        if waist is not None and waist.any():
-            rows = np.repeat(waist, repeat)
-            players = np.flatnonzero(waist)
-            wm = quat2mat(quat[players, TrackerSlot.WAIST]).astype(np.float32)
-            mats[rows] = np.repeat(wm, repeat, axis=0)
-            places[rows] = np.repeat(
-                pos[players, TrackerSlot.WAIST].astype(np.float32), repeat, axis=0
-            )
-        return mats, places, 1
 
     def newest_inputs(
         self, player: str
@@ -431,7 +370,7 @@ class Engine:
         kp = (k - 1) % self._ring
         events: list[EngineEvent] = []
         s = self.slots
-        fresh: list[tuple[_Player, TrackerFrame]] = []
+        fresh: list[tuple[Fed, TrackerFrame]] = []
         held: list[int] = []  # slots without a new frame (a rest frame stands in too)
         kept: list[int] = []  # slots whose inputs stay those of the frame before
         gaps: dict[int, int] = {}  # per fresh row: the frames held since its last one
@@ -458,48 +397,7 @@ class Engine:
                 p.stale = False
                 events.append(EngineEvent(EngineEventKind.ACTIVE, pid))
             fresh.append((p, frame))
-        s["ring_held"][k, : s.count] = False
-        s["ring_held"][k, held] = True
-        if kept:
-            for name in ("ring_x", "ring_pos", "ring_quat", "ring_rootm", "ring_seq"):
-                s[name][k, kept] = s[name][kp, kept]
-        if not fresh:
-            return events
-        players = [p for p, _ in fresh]
-        idx = [p.slot for p in players]
-        q = np.array([f.quat for _, f in fresh], dtype=np.float64)  # (M, rows, 4)
-        for i, (p, f) in enumerate(fresh):
-            if p.waist_filter is not None and f is not self._rest:  # not the stand-in
-                q[i, TrackerSlot.WAIST] = p.waist_filter(q[i, TrackerSlot.WAIST])
-        calibrations = [p.calibration for p in players]
-        q = orient_all(calibrations, q)
-        raw = np.array([f.pos for _, f in fresh], dtype=np.float64)  # (M, rows, 3)
-        if self._sites:  # the rest frame's inertial rows read no acceleration
-            rest = [i for i, (_, f) in enumerate(fresh) if f is self._rest]
-            if rest:
-                still = s["kinds"][[players[i].slot for i in rest]] == Kind.INERTIAL
-                raw[rest] = np.where(still[..., None], 0.0, raw[rest])
-        if self.layout.layout is Layout.HMD3:
-            # No waist: keep the unused slot finite whatever the client sent.
-            raw[:, TrackerSlot.WAIST], q[:, TrackerSlot.WAIST] = raw[:, TrackerSlot.HEAD], _IDENT
-        cal = apply_all(calibrations, raw, q)
-        # Velocities from the frame before; a player's first frame has none, and one
-        # after missing frames moved over all of them (the ring held the last one).
-        first = [i for i, p in enumerate(players) if p.last is None]
-        prev = s["ring_pos"][kp, idx]
-        prev[first] = cal[first]
-        for i, gap in gaps.items():
-            prev[i] = cal[i] - (cal[i] - prev[i]) / (gap + 1)
-        s["ring_pos"][k, idx] = cal
-        s["ring_quat"][k, idx] = q
-        if not self.layout.predicts_root:  # the pelvis is the waist tracker's, per frame
-            s["ring_rootm"][k, idx] = quat2mat(q[:, TrackerSlot.WAIST])
-        s["ring_seq"][k, idx] = [f.seq for _, f in fresh]
-        kinds = s["kinds"][idx] if self._sites else None
-        s["ring_x"][k, idx] = self.layout.features(cal, prev, q, self.cfg.fps, kinds)
-        for p, f in fresh:
-            if f.seq >= 0:
-                p.last = f
+        write_inputs(s, k, kp, fresh, kept, held, gaps, self.layout, self.cfg.fps, self._rest)
         return events
 
     def _floor_check(self, scores: F64, positions: F32) -> F64:
@@ -613,87 +511,37 @@ class Engine:
                 p.plan = None
         pos, quat = s["ring_pos"][k, slots], s["ring_quat"][k, slots]
         waist = self._waist_rows(slots)
-        root_mat, root_pos, _ = self._roots(pos, quat, s["ring_rootm"][k, slots], root, 1, waist)
+        root_mat, root_pos, _ = pelvis_poses(pos, quat, s["ring_rootm"][k, slots], root, 1, waist)
+        neighbours = None
         if self.cfg.pelvis_smoothing and tau >= 1:
-            root_mat, root_pos = self._smooth_roots(
-                k, slots, samples, np.array(firsts), root_own, root_mat, root_pos, waist
-            )
+            own = None  # the emitted samples' own pelvises, where a blend replaced them
+            if root_own is not None:
+                own = pelvis_poses(pos, quat, s["ring_rootm"][k, slots], root_own, 1, waist)[:2]
+            neighbours = pelvis_neighbours(
+                s, k, self._ring, self.layout, slots, samples, np.array(firsts), own,
+                (root_mat, root_pos), waist,
+            )  # fmt: skip
         free = None  # per emitted pose, whether its pelvis is the decoder's guess
         if self.layout.predicts_root:
             free = np.ones(len(emit), np.bool_) if waist is None else ~waist
-        if (self.cfg.reaches or self.cfg.leans) and free is not None and free.any():
-            # A guessed pelvis leans so that the line to the head meets the headset
-            # (upper_ik.lean_root), then moves toward the trackers it cannot reach
-            # (upper_ik.reach_root), before the display IK plants the feet.
-            rows = np.flatnonzero(free)
-            _, near32 = fk32(rot[rows], root_mat[rows], root_pos[rows], False, LEAN_JOINTS)
-            near: NDArray[np.floating] = near32
-            # A set that senses its legs keeps its hips as they are and its height.
-            sensed = senses_legs(s["kinds"][slots[rows]]) if self._sites else None
-            if self.cfg.leans:
-                head = near[:, Joint.HEAD]
-                turn = lean_root(root_pos[rows], head, pos[rows, TrackerSlot.HEAD])
-                if sensed is not None:
-                    turn[sensed] = np.eye(3)
-                root_mat = root_mat.copy()
-                rot[rows], root_mat[rows] = turn_pelvis(rot[rows], root_mat[rows], turn)
-                pivot = root_pos[rows, None].astype(np.float64)
-                lean = list(LEAN_JOINTS)
-                # Only LEAN_JOINTS' rows of fk32's output are defined: the others are
-                # whatever the buffer held, which a cast to float64 may trip on
-                # (a signalling NaN raises "invalid value"), so they are not cast.
-                leant = np.zeros(near.shape, np.float64)
-                leant[:, lean] = pivot + np.einsum("eab,ekb->eka", turn, near[:, lean] - pivot)
-                near = leant
-            if self.cfg.reaches:
-                span = None if sensed is None else np.where(sensed, 0.0, SPAN_SHARE)
-                target = reach_root(near, pos[rows], span if self.cfg.torso_span else 0.0)
-                root_pos = root_pos.copy()
-                for r, i in enumerate(rows.tolist()):
-                    p = emit[i][0]
-                    p.reach = ease_reach(None if firsts[i] else p.reach, target[r])
-                    root_pos[i] += p.reach.astype(np.float32)
-        # FK and the players' own display IK, batched: gather their states, step,
-        # scatter back.
-        E = len(emit)
-        state = {n: s[n][slots] for n in _DISPLAY_IK}
-        ik = PoolIK(
-            *(
-                state[n].reshape(E, *shape)
-                for n, shape in zip(_DISPLAY_IK, _IK_SHAPES.values(), strict=True)
-            )
+        batch = Decoded(
+            rot,
+            con,
+            root_mat,
+            root_pos,
+            pos,
+            quat,
+            first=np.array(firsts),
+            neighbours=neighbours,
+            free=free,
+            kinds=s["kinds"][slots] if self._sites else None,
         )
-        wp, rotations = self.pool.emit(rot, con, root_mat, root_pos, ik)
-        for n in _DISPLAY_IK:
-            s[n][slots] = state[n]
-        if self.cfg.legs_apart:
-            _apart(wp, rotations, rot, root_mat, root_pos)
-        if self.cfg.floor_ik:
-            lift = floor_lift(wp)
-            if self.cfg.swing_clearance:
-                speed = self._toe_speeds(emit, wp, firsts)
-                lift = np.maximum(lift, clearance_lift(wp, speed))
-            _floor(wp, rotations, lift)
-        reach_limited = np.zeros(E, np.bool_)
-        if self.cfg.upper_body_ik and self._sites:
-            # A tracker set's positional feet and knees: the legs onto their trackers.
-            kinds = s["kinds"][slots]
-            legs = np.flatnonzero(tracks_legs(kinds))
-            if len(legs):
-                wp[legs], rotations[legs], reach_limited[legs] = solve_legs(
-                    wp[legs], rotations[legs], pos[legs], quat[legs], kinds[legs]
-                )
-        if self.cfg.knee_hinge:
-            self.pool.hinge(wp, rotations, KNEE_LIMBS)
-        if self.cfg.upper_body_ik:
-            # Head and hands onto their (calibrated) trackers, before the user's scale
-            # (a pelvis from the decoder may follow the head).
-            wp, rotations, upper_limited = self.pool.upper_body(
-                wp, rotations, pos, quat, free, self.cfg.wrist_elbow
-            )
-            reach_limited |= upper_limited
-        if self.cfg.elbow_hinge:
-            self.pool.hinge(wp, rotations, ELBOW_LIMBS)
+        # The shown pose's passes, on the players' own state: gathered, stepped, put back.
+        state = ShownState.of([s[n][slots] for n in _SHOWN])
+        shown = show(batch, state, self.cfg, self.pool)
+        for n, a in zip(_SHOWN, state.arrays(), strict=True):
+            s[n][slots] = a
+        wp, rotations, reach_limited = shown.positions, shown.rotations, shown.reach_limited
         limited = reach_limited.tolist()
         scale = np.array([p.calibration.scale for p, _, _ in emit], np.float32)
         positions = wp / scale[:, None, None]
@@ -715,119 +563,17 @@ class Engine:
             for i, (p, sample, w) in enumerate(emit)
         ]
 
-    def _toe_speeds(
-        self, emit: list[tuple[_Player, int, float]], wp: F32, firsts: list[bool]
-    ) -> NDArray[np.floating]:
-        """The emitted players' averaged toe speeds ``(E, 2)``
-        (:func:`~posecast.online.engine.clearance.toe_speed`) from their shown poses
-        ``wp`` before any lift; each player's state moves on to this frame. A player's
-        first (real) frame starts at rest."""
-        xz = wp[:, TOES][:, :, [0, 2]].astype(np.float64)
-        prev, was = xz.copy(), np.zeros((len(emit), 2))  # at rest, where a player starts
-        for i, ((p, _, _), first) in enumerate(zip(emit, firsts, strict=True)):
-            if p.toe_xz is not None and not first:
-                prev[i], was[i] = p.toe_xz, p.toe_speed
-        speed = toe_speed(prev, xz, was, self.cfg.fps)
-        for i, (p, _, _) in enumerate(emit):
-            p.toe_xz, p.toe_speed = xz[i], speed[i]
-        return speed
 
-    def _smooth_roots(
-        self,
-        k: int,
-        slots: NDArray[np.intp],
-        samples: NDArray[np.intp],
-        first: NDArray[np.bool_],
-        root_own: F32 | None,
-        root_mat: F32,
-        root_pos: F32,
-        waist: NDArray[np.bool_] | None,
-    ) -> tuple[F32, F32]:
-        """The shown pelvis at ring row ``k`` (frame ``e``) averaged with frames ``e - 1``
-        and ``e + 1`` (:func:`~posecast.online.engine.pelvis.smooth_pelvis`; the look-ahead
-        holds ``e + 1``, the ring still holds ``e - 1``). A neighbour is the emitted
-        sample's own pelvis there, moved by the difference between the shown pelvis and
-        that sample's at ``e`` (they differ during a transition's blend); a player's first
-        frame stands in for its missing ``e - 1``."""
-        s, L = self.slots, self._ring
-        own = (root_mat, root_pos)
-        if root_own is not None:
-            m, p, _ = self._roots(
-                s["ring_pos"][k, slots],
-                s["ring_quat"][k, slots],
-                s["ring_rootm"][k, slots],
-                root_own,
-                1,
-                waist,
-            )
-            own = (m, p)
-        # Both neighbours in one call: frame e - 1 (or e, on a first frame), then e + 1
-        # (or e, on the last rest frame before a player's first real one).
-        E = len(slots)
-        nxt = (k + 1) % L
-        last_rest = (s["ring_seq"][k, slots] < 0) & (s["ring_seq"][nxt, slots] >= 0)
-        rows = np.concatenate([np.where(first, k, (k - 1) % L), np.where(last_rest, k, nxt)])
-        at = np.concatenate([slots, slots])
-        m, p, _ = self._roots(
-            s["ring_pos"][rows, at],
-            s["ring_quat"][rows, at],
-            s["ring_rootm"][rows, at],
-            s["ring_root"][rows, at, np.concatenate([samples, samples])]
-            if self.layout.predicts_root
-            else None,
-            1,
-            None if waist is None else np.concatenate([waist, waist]),
-        )
-        mats: NDArray[np.floating] = m.reshape(2, E, 3, 3)
-        places: NDArray[np.floating] = p.reshape(2, E, 3)
-        if root_own is not None:  # a blend: move the sample's own motion onto it
-            mats = (mats @ np.swapaxes(own[0], -1, -2)) @ root_mat
-            places = root_pos + (places - own[1])
-        mat, pos = smooth_pelvis((mats[0], root_mat, mats[1]), (places[0], root_pos, places[1]))
-        return mat.astype(np.float32), pos.astype(np.float32)
-
-
-def _floor(wp: F32, rotations: F32, lift: NDArray[np.floating]) -> None:
-    """:func:`~posecast.online.engine.ik.floor_ik` on shown poses, in place: positions
-    ``(E, 19, 3)`` and world rotations ``(E, 19, 4)`` (the thighs' and shins' change),
-    each foot lifted by ``lift (E, 2)``."""
-    rows = np.flatnonzero(lift.any(axis=1))
-    if not len(rows):
-        return
-    pos = wp[rows].astype(np.float64)
-    mat = quat2mat(rotations[rows].astype(np.float64))
-    floor_ik(mat, pos, lift=lift[rows])
-    wp[rows] = pos
-    rotations[np.ix_(rows, _THIGHS_SHINS)] = mat2quat(mat[:, _THIGHS_SHINS])
-
-
-def _apart(wp: F32, rotations: F32, rot: F32, root_mat: F32, root_pos: F32) -> None:
-    """:func:`~posecast.online.engine.apart.keep_apart` on shown poses after the display
-    contact IK, in place: positions ``(E, 19, 3)`` and world rotations ``(E, 19, 4)``
-    (the thighs' and shins' change); the network's own legs come from the decoder's
-    ``rot`` on the same pelvis, for the poses whose legs meet."""
-    deep = overlap(wp)
-    rows = np.flatnonzero(deep > MAX_OVERLAP_M)
-    if not len(rows):
-        return
-    mat32, pos32 = fk32(rot[rows], root_mat[rows], root_pos[rows], True, _LEG_JOINTS)
-    assert mat32 is not None
-    # Only the legs' rows of fk32's output are defined (and all keep_apart reads).
-    legs = list(_LEG_JOINTS)
-    net_mat, net_pos = np.zeros((len(rows), NUM_JOINTS, 3, 3)), np.zeros((len(rows), NUM_JOINTS, 3))
-    net_mat[:, legs], net_pos[:, legs] = mat32[:, legs], pos32[:, legs]
-    pos = wp[rows].astype(np.float64)
-    mat = quat2mat(rotations[rows].astype(np.float64))
-    keep_apart(mat, pos, net_mat, net_pos, deep=deep[rows])
-    wp[rows] = pos
-    rotations[np.ix_(rows, _THIGHS_SHINS)] = mat2quat(mat[:, _THIGHS_SHINS])
-
-
-_LEG_JOINTS = tuple(int(j) for leg in LEGS for j in leg)
-_THIGHS_SHINS = np.array([int(j) for leg in LEGS for j in leg[:2]])  # what floor_ik turns
-
-
-_DISPLAY_IK = ("disp_locked", "disp_lock_pos", "disp_release", "disp_suppressed")
+# The shown pose's state per player, in body.pipeline.ShownState.arrays()'s order.
+_SHOWN = (
+    "disp_locked",
+    "disp_lock_pos",
+    "disp_release",
+    "disp_suppressed",
+    "disp_toe_xz",
+    "disp_toe_speed",
+    "disp_reach",
+)
 # Per-sample shapes of the candidate pool's contact-IK state, in PoolIK's field order.
 _IK_SHAPES: dict[str, tuple[int, ...]] = {
     "locked": (2,),
@@ -835,19 +581,3 @@ _IK_SHAPES: dict[str, tuple[int, ...]] = {
     "release": (2,),
     "suppressed": (2,),
 }
-
-
-def rest_frame(rows: int) -> TrackerFrame:
-    """What a player that never sent a frame stands on (seq -1: never kept as its
-    last): the reference body in its rest pose at the origin, tracked on ``rows`` rows
-    (4 tracker slots, or every site; ``_gather_inputs`` zeroes an inertial site's row,
-    so it reads no acceleration)."""
-    eye = np.broadcast_to(np.eye(3), (NUM_JOINTS, 3, 3))
-    pos = fk_positions(eye, np.array([0.0, REST_PELVIS_HEIGHT_M, 0.0]), reference_offsets())
-    joints = TRACKER_JOINT_INDEX if rows == len(TRACKER_JOINT_INDEX) else SITE_JOINT_INDEX
-    q = np.zeros((rows, 4))
-    q[:, 3] = 1.0
-    return TrackerFrame(-1, pos[list(joints)], q)
-
-
-_IDENT = np.array([0.0, 0.0, 0.0, 1.0])

@@ -24,15 +24,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from posecast.errors import ModelError
-from posecast.online.engine.hinge import FADES, Limbs, limb_table
-from posecast.online.engine.ports import PoolIK
-from posecast.online.engine.upper_ik import (
+from posecast.body.hinge import FADES, Limbs, limb_table
+from posecast.body.upper_ik import (
     LEAN_SHARE,
     NECK_SHARE,
     REACH_TOLERANCE_M,
     SPINE_REACH_M,
 )
+from posecast.errors import ModelError
+from posecast.online.engine.ports import PoolIK
 from posecast.online.inference.artifact import read_sidecar
 from posecast.skeleton import PARENTS, reference_offsets
 
@@ -273,7 +273,7 @@ class NativePool:
         free_root: NDArray[np.bool_] | None,
         wrist_share: float,
     ) -> tuple[F32, F32, NDArray[np.bool_]]:
-        """:func:`~posecast.online.engine.upper_ik.solve_upper_body` in C (``pc_upper.c``,
+        """:func:`~posecast.body.upper_ik.solve_upper_body` in C (``pc_upper.c``,
         one pose at a time in double precision; the same figures to float32's last bit
         on the parity tests, at a few microseconds a pose against the reference's
         2-3 ms of numpy call overhead a tick)."""
@@ -300,7 +300,7 @@ class NativePool:
         return pos_out, quat_out, limited
 
     def hinge(self, positions: F32, rotations: F32, limbs: Limbs) -> None:
-        """:func:`~posecast.online.engine.hinge.hinge_quat` in C (``pc_upper.c``), in place."""
+        """:func:`~posecast.body.hinge.hinge_quat` in C (``pc_upper.c``), in place."""
         pos = np.ascontiguousarray(positions, dtype=np.float32)
         _native.hinge(pos, rotations, limb_table(limbs), *FADES)
 

@@ -3,11 +3,11 @@
 :class:`OnnxDecoder` runs the exported decoder step (``cvae_decoder*.onnx``) straight
 into the engine's ring rows; its latent cache is ``eps`` itself. :class:`NumpyPool` is
 the candidate pool of every backend that has no pool of its own (``torch`` too): the
-float32 FK of :mod:`posecast.online.engine.batch_fk`, the contact IK of
-:mod:`posecast.online.engine.ik` and the anomaly error of
-:class:`posecast.online.engine.anomaly.AnomalyScorer` (whose network ONNX Runtime
-runs), the upper-body pass of :mod:`posecast.online.engine.upper_ik` and the hinges of
-:mod:`posecast.online.engine.hinge`.
+float32 FK of :mod:`posecast.body.batch_fk`, the contact IK of
+:mod:`posecast.body.ik` and the anomaly error of
+:class:`posecast.online.inference.anomaly.AnomalyScorer` (whose network ONNX Runtime
+runs); the shown poses' passes are the numpy references,
+:class:`posecast.body.passes.NumpyPasses`.
 """
 
 from __future__ import annotations
@@ -17,15 +17,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
-from posecast.geometry.rotations import mat2quat
-from posecast.online.engine.anomaly import AnomalyScorer
-from posecast.online.engine.batch_fk import fk32
-from posecast.online.engine.hinge import Limbs, hinge_quat
-from posecast.online.engine.ik import MAX_DRIFT_M, RELEASE_FRAMES, ContactIK
+from posecast.body.batch_fk import fk32
+from posecast.body.ik import MAX_DRIFT_M, RELEASE_FRAMES, ContactIK
+from posecast.body.passes import NumpyPasses
 from posecast.online.engine.ports import F32, F64, PoolIK
-from posecast.online.engine.upper_ik import solve_upper_body
+from posecast.online.inference.anomaly import AnomalyScorer
 from posecast.online.inference.artifact import Artifact, load_artifact
 
 
@@ -49,7 +46,7 @@ class OnnxDecoder:
         self.artifact.run_into({"features": x, "z": cache, "h": h}, dict(out))
 
 
-class NumpyPool:
+class NumpyPool(NumpyPasses):
     """A :class:`~posecast.online.engine.ports.Pool` in numpy (anomaly AE on ONNX Runtime).
 
     ``release_frames`` and ``max_drift_m`` are the contact-IK settings
@@ -62,10 +59,9 @@ class NumpyPool:
         release_frames: int = RELEASE_FRAMES,
         max_drift_m: float | None = MAX_DRIFT_M,
     ) -> None:
+        super().__init__(release_frames, max_drift_m)
         self.scorer = AnomalyScorer(anomaly)
         self.threshold_m = self.scorer.threshold_m
-        self.release_frames = release_frames
-        self.max_drift_m = max_drift_m
 
     def step(
         self,
@@ -89,33 +85,6 @@ class NumpyPool:
         # The scorer's frame math runs once per pelvis, on the unrepeated (G, ...) rows.
         scores = self.scorer.score_mats(wp, root_pos, root_mat, repeat=group)
         return np.asarray(scores, dtype=np.float64)
-
-    def emit(
-        self, rotations: F32, contacts: F32, root_mat: F32, root_pos: F32, ik: PoolIK
-    ) -> tuple[F32, F32]:
-        wm, wp = fk32(rotations, root_mat, root_pos)
-        assert wm is not None
-        ContactIK(
-            ik.locked, ik.lock_pos, ik.release, self.release_frames, ik.suppressed, self.max_drift_m
-        ).step(wm, wp, contacts)
-        quats: F32 = mat2quat(wm).astype(np.float32)
-        return wp, quats
-
-    def upper_body(
-        self,
-        positions: F32,
-        rotations: F32,
-        tracker_pos: F64,
-        tracker_quat: F64,
-        free_root: NDArray[np.bool_] | None,
-        wrist_share: float,
-    ) -> tuple[F32, F32, NDArray[np.bool_]]:
-        return solve_upper_body(
-            positions, rotations, tracker_pos, tracker_quat, free_root, wrist_share
-        )
-
-    def hinge(self, positions: F32, rotations: F32, limbs: Limbs) -> None:
-        hinge_quat(positions, rotations, limbs)
 
 
 def load_onnx(

@@ -18,9 +18,9 @@ import onnx
 import torch
 from onnx import numpy_helper
 
+from posecast.body.ik import MAX_DRIFT_M, RELEASE_FRAMES
 from posecast.errors import ModelError
 from posecast.offline.nets.cvae import CVAEConfig, CVAEDecoder
-from posecast.online.engine.ik import MAX_DRIFT_M, RELEASE_FRAMES
 from posecast.online.engine.ports import F32
 from posecast.online.inference.artifact import load_artifact, read_sidecar
 from posecast.online.inference.onnx_backend import NumpyPool

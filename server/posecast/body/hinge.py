@@ -24,9 +24,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from posecast.body.geom import cross3, unit3, wrap_angle
 from posecast.geometry.rotations import axis_angle_mat, mat2quat, quat2mat
-from posecast.online.engine.ik import cross3, unit3
-from posecast.online.engine.upper_ik import _wrap
 from posecast.skeleton import NUM_JOINTS, Joint
 
 F64 = NDArray[np.float64]
@@ -78,7 +77,7 @@ def _twist_angle(rot: F64, axis: F64) -> F64:
         axis=-1,
     )
     w = 1.0 + rot[:, 0, 0] + rot[:, 1, 1] + rot[:, 2, 2]
-    return _wrap(2.0 * np.arctan2(np.einsum("bi,bi->b", v, axis), w))
+    return wrap_angle(2.0 * np.arctan2(np.einsum("bi,bi->b", v, axis), w))
 
 
 def hinge_knees(mat: F64, pos: F64) -> None:

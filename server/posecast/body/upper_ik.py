@@ -45,6 +45,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
+from posecast.body.geom import BONE_M, EPS, cross3, norm3, swing_mat, turn_joint, unit3
 from posecast.geometry.rotations import (
     axis_angle_mat,
     mat2quat,
@@ -52,11 +53,7 @@ from posecast.geometry.rotations import (
     quat2mat,
     r6d2mat,
 )
-from posecast.online.engine.ik import EPS as _EPS
-from posecast.online.engine.ik import cross3, swing_mat
-from posecast.online.engine.ik import norm3 as _norm
-from posecast.online.engine.ik import unit3 as _unit
-from posecast.skeleton import NUM_JOINTS, PARENTS, Joint, reference_offsets
+from posecast.skeleton import Joint, reference_offsets
 from posecast.tracking.features import TRACKER_JOINT_INDEX, TrackerSlot
 
 F32 = NDArray[np.float32]
@@ -73,36 +70,12 @@ _ARM_HAND = [int(Joint.LEFT_HAND), int(Joint.RIGHT_HAND)]
 _HAND_SLOTS = [int(TrackerSlot.LEFT_HAND), int(TrackerSlot.RIGHT_HAND)]
 # Joints whose rotation the pass may change (the rest are copied through untouched).
 _UPPER = list(range(Joint.SPINE, Joint.LEFT_THIGH))  # spine, neck, head and the arms
-_BONE_M = np.linalg.norm(reference_offsets(), axis=-1)  # (19,) length of each joint's bone
-
-
-def _descendants() -> dict[int, list[int]]:
-    out: dict[int, list[int]] = {j: [] for j in range(NUM_JOINTS)}
-    for j in range(NUM_JOINTS):
-        p = PARENTS[j]
-        while p >= 0:
-            out[p].append(j)
-            p = PARENTS[p]
-    return out
-
-
-_DESCENDANTS = _descendants()
-
-
-def _turn(pos: F64, mat: F64, joint: int, R: F64) -> None:
-    """Turn ``joint``'s world rotation by ``R (E, 3, 3)`` (on the left) about its own
-    position, with its whole subtree, in place: what FK gives after that change."""
-    sub = _DESCENDANTS[joint]
-    pivot = pos[:, joint, None]  # (E, 1, 3)
-    pos[:, sub] = pivot + np.einsum("eab,ekb->eka", R, pos[:, sub] - pivot)
-    rows = [joint, *sub]
-    mat[:, rows] = R[:, None] @ mat[:, rows]
 
 
 def _point_bone(pos: F64, mat: F64, joint: int, child: int, new_child: F64) -> None:
     """Swing ``joint`` so that its bone to ``child`` points at ``new_child (E, 3)``."""
     R = swing_mat(pos[:, child] - pos[:, joint], new_child - pos[:, joint])
-    _turn(pos, mat, joint, R)
+    turn_joint(pos, mat, joint, R)
 
 
 def fabrik(chain: F64, lengths: F64, target: F64, iterations: int = 1) -> F64:
@@ -115,11 +88,11 @@ def fabrik(chain: F64, lengths: F64, target: F64, iterations: int = 1) -> F64:
     for _ in range(iterations):
         p[:, -1] = target
         for i in range(n - 2, -1, -1):  # backward: from the target to the root
-            u, _ = _unit(p[:, i] - p[:, i + 1])
+            u, _ = unit3(p[:, i] - p[:, i + 1])
             p[:, i] = p[:, i + 1] + lengths[i] * u
         p[:, 0] = root
         for i in range(n - 1):  # forward: from the root to the end
-            u, _ = _unit(p[:, i + 1] - p[:, i])
+            u, _ = unit3(p[:, i + 1] - p[:, i])
             p[:, i + 1] = p[:, i] + lengths[i] * u
     return p
 
@@ -132,16 +105,16 @@ def two_bone(
     in the plane of shoulder, target and the current ``elbow``, on its side of the
     shoulder-target line; a straight limb gives no plane and bends toward ``bend (E, 3)``.
     Out of reach: straight at the target."""
-    u, d = _unit(target - shoulder)
-    w, wn = _unit(_across(elbow - shoulder, u))
+    u, d = unit3(target - shoulder)
+    w, wn = unit3(_across(elbow - shoulder, u))
     for fallback in (bend, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]]):
         bad = wn < 1e-6
         if not bad.any():
             break
-        alt, altn = _unit(_across(np.broadcast_to(np.asarray(fallback, np.float64), u.shape), u))
+        alt, altn = unit3(_across(np.broadcast_to(np.asarray(fallback, np.float64), u.shape), u))
         w, wn = np.where(bad[:, None], alt, w), np.where(bad, altn, wn)
     l2 = np.asarray(l2, np.float64)
-    dc = np.clip(d, np.abs(l1 - l2) + _EPS, l1 + l2)
+    dc = np.clip(d, np.abs(l1 - l2) + EPS, l1 + l2)
     cos_a = np.clip((l1 * l1 + dc * dc - l2 * l2) / (2.0 * l1 * dc), -1.0, 1.0)
     sin_a = np.sqrt(1.0 - cos_a * cos_a)
     new_elbow = shoulder + l1 * (cos_a[:, None] * u + sin_a[:, None] * w)
@@ -168,21 +141,21 @@ def _along(origin: F64, target: F64, gap: Callable[[F64], F64]) -> F64:
     """The move ``(E, 3)`` of ``origin`` along the line to ``target`` (both ``(E, 3)``)
     by ``gap(d)`` metres, ``d (E,)`` their distance (a negative gap: away)."""
     v = target - origin
-    d = _norm(v)
-    out: F64 = v * (gap(d) / np.maximum(d, _EPS))[:, None]
+    d = norm3(v)
+    out: F64 = v * (gap(d) / np.maximum(d, EPS))[:, None]
     return out
 
 
 # How far the spine chain (spine -> chest -> neck -> head, 0.52 m) may reach before a
 # pose whose pelvis is a guess (no waist tracker) is moved instead: nearly straight.
-SPINE_REACH_M = float(_BONE_M[[Joint.CHEST, Joint.NECK, Joint.HEAD]].sum()) - 0.01
+SPINE_REACH_M = float(BONE_M[[Joint.CHEST, Joint.NECK, Joint.HEAD]].sum()) - 0.01
 
 # How far an arm (shoulder -> elbow -> hand) reaches, nearly straight, and how softly a
 # guessed pelvis starts to follow a controller beyond it: the move is the softplus of
 # the overreach at this width (metres), so it sets in smoothly instead of with a kink
 # the jitter shows. Chosen on the validation split (docs/evaluation.md, "Hands out of
 # reach: a guessed pelvis follows the controllers").
-ARM_REACH_M = float(_BONE_M[_ARM_FORE[0]] + _BONE_M[_ARM_HAND[0]]) - 0.01
+ARM_REACH_M = float(BONE_M[_ARM_FORE[0]] + BONE_M[_ARM_HAND[0]]) - 0.01
 HAND_REACH_SOFTNESS_M = 0.05
 _REACH_ROUNDS = 2  # the move toward the controllers, again from where the first put it
 
@@ -235,14 +208,14 @@ def reach_root(
     w = HAND_REACH_SOFTNESS_M
     for _ in range(_REACH_ROUNDS):
         v = tp[:, _HAND_SLOTS] - (shoulders + shift[:, None])  # (E, 2, 3)
-        d = _norm(v)
+        d = norm3(v)
         over = w * np.logaddexp(0.0, (d - ARM_REACH_M) / w)  # softplus of the overreach
-        step = (v * (over / np.maximum(d, _EPS))[..., None]).sum(axis=1)
+        step = (v * (over / np.maximum(d, EPS))[..., None]).sum(axis=1)
         step[:, 1] = 0.0  # its horizontal part
         shift = shift + _within(head - (spine + shift), step, SPINE_REACH_M)[:, None] * step
     share = np.asarray(SPAN_SHARE if span is None else span, np.float64)
     if np.any(share > 0.0):
-        torso = _norm(np.asarray(positions[:, Joint.HEAD], np.float64) - spine)
+        torso = norm3(np.asarray(positions[:, Joint.HEAD], np.float64) - spine)
         shift = shift + _along(spine + shift, head, lambda d: share * (d - torso))
     return shift
 
@@ -253,7 +226,7 @@ def _within(c: F64, step: F64, radius: float) -> F64:
     a = np.einsum("ei,ei->e", step, step)
     b = np.einsum("ei,ei->e", c, step)
     slack = np.maximum(radius * radius - np.einsum("ei,ei->e", c, c), 0.0)
-    t = (b + np.sqrt(b * b + a * slack)) / np.maximum(a, _EPS * _EPS)
+    t = (b + np.sqrt(b * b + a * slack)) / np.maximum(a, EPS * EPS)
     out: F64 = np.clip(t, 0.0, 1.0)
     return out
 
@@ -326,11 +299,6 @@ def ease_reach_clip(targets: F64) -> F64:
     return out
 
 
-def _wrap(angle: F64) -> F64:
-    out: F64 = (angle + np.pi) % (2.0 * np.pi) - np.pi
-    return out
-
-
 def _neck(chest_mat: F64, neck_local: F64, head_local: F64, head_mat: F64) -> F64:
     """The neck's world rotations ``(E, 3, 3)`` under a chest ``chest_mat``: the
     network's (``neck_local``, relative to the chest) turned by :data:`NECK_SHARE` of
@@ -346,13 +314,13 @@ def _part_of_swing(a: F64, b: F64, share: float, most_rad: float = np.pi) -> F64
     """``share`` of the smallest rotation ``(E, 3, 3)`` taking direction ``a (E, 3)``
     onto ``b``: about the same axis, by that share of the angle, at most ``most_rad``
     (none for directions exactly opposite, which have no smallest rotation)."""
-    ua, _ = _unit(a)
-    ub, _ = _unit(b)
+    ua, _ = unit3(a)
+    ub, _ = unit3(b)
     v = cross3(ua, ub)
-    s = _norm(v)
+    s = norm3(v)
     c = np.einsum("ei,ei->e", ua, ub)
-    angle = np.where(s > _EPS, share * np.arctan2(s, c), 0.0)  # opposite: no turn
-    return axis_angle_mat(v / np.maximum(s, _EPS)[:, None], np.minimum(angle, most_rad))
+    angle = np.where(s > EPS, share * np.arctan2(s, c), 0.0)  # opposite: no turn
+    return axis_angle_mat(v / np.maximum(s, EPS)[:, None], np.minimum(angle, most_rad))
 
 
 def _part_of_turn(R: F64, share: float) -> F64:
@@ -360,9 +328,9 @@ def _part_of_turn(R: F64, share: float) -> F64:
     angle (at most half a turn)."""
     q = mat2quat(R)
     q = np.where(q[:, 3:] < 0.0, -q, q)
-    s = _norm(q[:, :3])
+    s = norm3(q[:, :3])
     return axis_angle_mat(
-        q[:, :3] / np.maximum(s, _EPS)[:, None], share * 2.0 * np.arctan2(s, q[:, 3])
+        q[:, :3] / np.maximum(s, EPS)[:, None], share * 2.0 * np.arctan2(s, q[:, 3])
     )
 
 
@@ -390,7 +358,7 @@ _HEAD_OFFSET = reference_offsets()[Joint.HEAD]  # (3,) the head from the neck, n
 # median, 14 at the 90th percentile: `posecast data wrists`), a player's do, so the
 # network keeps a quarter.
 WRIST_ELBOW_SHARE = 0.75
-_HAND_DIR = reference_offsets()[_ARM_HAND] / _BONE_M[_ARM_HAND][:, None]  # (2, 3) at rest
+_HAND_DIR = reference_offsets()[_ARM_HAND] / BONE_M[_ARM_HAND][:, None]  # (2, 3) at rest
 
 
 def straight_forearms(hand_mat: NDArray[np.floating]) -> F64:
@@ -455,8 +423,8 @@ def solve_upper_body(
     head_local = np.swapaxes(mat[:, neck_j], -1, -2) @ mat[:, head_j]
     for joint in (spine, chest_j):
         aim = pos[:, head_j] - pos[:, joint], head_target - pos[:, joint]
-        _turn(pos, mat, joint, _part_of_swing(*aim, LEAN_SHARE))
-    lengths = _BONE_M[chain[1:]]  # spine-chest, chest-neck, neck-head
+        turn_joint(pos, mat, joint, _part_of_swing(*aim, LEAN_SHARE))
+    lengths = BONE_M[chain[1:]]  # spine-chest, chest-neck, neck-head
     forward = mat[:, Joint.CHEST, :, 2]  # the chest's +Z: where a straight spine bends
     for _ in range(_NECK_ROUNDS):
         neck_mat = _neck(mat[:, chest_j], neck_local, head_local, head_mat)
@@ -467,10 +435,10 @@ def solve_upper_body(
         _point_bone(pos, mat, spine, chest_j, chest)
         _point_bone(pos, mat, chest_j, neck_j, neck_at)
         neck_mat = _neck(mat[:, chest_j], neck_local, head_local, head_mat)
-        _turn(pos, mat, neck_j, neck_mat @ np.swapaxes(mat[:, neck_j], -1, -2))
+        turn_joint(pos, mat, neck_j, neck_mat @ np.swapaxes(mat[:, neck_j], -1, -2))
     shaped = fabrik(pos[:, chain], lengths, head_target, FABRIK_SWEEPS)  # (E, 4, 3)
     span = np.clip(
-        _norm(head_target - shaped[:, 1]),
+        norm3(head_target - shaped[:, 1]),
         abs(lengths[1] - lengths[2]),
         lengths[1] + lengths[2],
     )
@@ -487,7 +455,7 @@ def solve_upper_body(
     hint = pos[:, fore]
     if wrist_share > 0.0:
         # A straight wrist: the forearm points where the controller's rest direction does.
-        behind = hand_target - float(_BONE_M[hand[0]]) * straight_forearms(
+        behind = hand_target - float(BONE_M[hand[0]]) * straight_forearms(
             tracker_mat[:, _HAND_SLOTS]
         )
         hint = (1.0 - wrist_share) * hint + wrist_share * behind
@@ -495,8 +463,8 @@ def solve_upper_body(
         shoulder.reshape(-1, 3),
         hint.reshape(-1, 3),
         hand_target.reshape(-1, 3),
-        float(_BONE_M[fore[0]]),
-        float(_BONE_M[hand[0]]),
+        float(BONE_M[fore[0]]),
+        float(BONE_M[hand[0]]),
         np.array([[0.0, -1.0, 0.0]]),  # where a straight network arm bends its elbow
     )
     elbow, wrist = elbow.reshape(-1, 2, 3), wrist.reshape(-1, 2, 3)
@@ -514,7 +482,7 @@ def solve_upper_body(
     # 3. What was not reached.
     slots = [int(TrackerSlot.HEAD), *_HAND_SLOTS]
     effectors = [TRACKER_JOINT_INDEX[slot] for slot in slots]
-    miss = _norm(pos[:, effectors] - tp[:, slots])  # (E, 3)
+    miss = norm3(pos[:, effectors] - tp[:, slots])  # (E, 3)
     reach_limited = np.any(miss > REACH_TOLERANCE_M, axis=-1)
 
     quats = np.array(quat_in, np.float32, copy=True)

@@ -2,7 +2,7 @@
 positional knee trackers (numpy, batched).
 
 A tracker set's foot tracker reports where the ankle is; the network only conditions on
-it. This pass, the legs' counterpart of :mod:`posecast.online.engine.upper_ik`, runs on
+it. This pass, the legs' counterpart of :mod:`posecast.body.upper_ik`, runs on
 the shown poses after the contact IK and the floor pass (a tracked foot is where its
 tracker says, floor or not) and changes rotations only, keeping every bone's length
 and FK consistency:
@@ -25,10 +25,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from posecast.body.geom import BONE_M, norm3, swing_mat, turn_joint
+from posecast.body.upper_ik import REACH_TOLERANCE_M, two_bone
 from posecast.geometry.rotations import mat2quat, quat2mat
-from posecast.online.engine.ik import norm3 as _norm
-from posecast.online.engine.ik import swing_mat
-from posecast.online.engine.upper_ik import _BONE_M, REACH_TOLERANCE_M, _turn, two_bone
 from posecast.skeleton import Joint
 from posecast.tracking.sites import SITE_ROW, Kind, Site
 
@@ -122,23 +121,23 @@ def solve_legs(
                 p[:, thigh],
                 pole,
                 target,
-                float(_BONE_M[shin]),
-                float(_BONE_M[foot]),
+                float(BONE_M[shin]),
+                float(BONE_M[foot]),
                 np.broadcast_to(m[:, thigh, :, 2], (len(rows), 3)),  # a straight leg bends forward
             )
-            _turn(p, m, int(thigh), swing_mat(p[:, shin] - p[:, thigh], knee - p[:, thigh]))
-            _turn(p, m, int(shin), swing_mat(p[:, foot] - p[:, shin], ankle - p[:, shin]))
+            turn_joint(p, m, int(thigh), swing_mat(p[:, shin] - p[:, thigh], knee - p[:, thigh]))
+            turn_joint(p, m, int(shin), swing_mat(p[:, foot] - p[:, shin], ankle - p[:, shin]))
             R = smat[rows, fr] @ np.swapaxes(m[:, foot], -1, -2)  # foot onto the tracker's
-            _turn(p, m, int(foot), R)
+            turn_joint(p, m, int(foot), R)
             m[:, thigh] = _hinge_twist(m[:, thigh], p[:, foot] - p[:, shin])
-            limited[rows] |= _norm(p[:, foot] - target) > REACH_TOLERANCE_M
+            limited[rows] |= norm3(p[:, foot] - target) > REACH_TOLERANCE_M
             pos[rows], mat[rows] = p, m
         rows = np.flatnonzero(has_knee & ~has_foot)
         if len(rows):
             p, m = pos[rows], mat[rows]
             target = sp[rows, kr]
-            _turn(p, m, int(thigh), swing_mat(p[:, shin] - p[:, thigh], target - p[:, thigh]))
-            limited[rows] |= _norm(p[:, shin] - target) > REACH_TOLERANCE_M
+            turn_joint(p, m, int(thigh), swing_mat(p[:, shin] - p[:, thigh], target - p[:, thigh]))
+            limited[rows] |= norm3(p[:, shin] - target) > REACH_TOLERANCE_M
             pos[rows], mat[rows] = p, m
     quats = np.array(quat_in, np.float32, copy=True)
     quats[:, LEG_JOINTS] = mat2quat(mat[:, LEG_JOINTS])

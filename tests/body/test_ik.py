@@ -5,9 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from posecast.geometry.fk import fk_mat
-from posecast.geometry.rotations import axis_mat, normalize
-from posecast.online.engine.ik import (
+from posecast.body.ik import (
     FLOOR_MAX_LIFT_M,
     ContactIK,
     apply_leg_ik,
@@ -16,6 +14,8 @@ from posecast.online.engine.ik import (
     sunk,
     two_bone_ik,
 )
+from posecast.geometry.fk import fk_mat
+from posecast.geometry.rotations import axis_mat, normalize
 from posecast.skeleton import NUM_JOINTS, Joint, reference_offsets
 
 L_THIGH, L_SHIN, L_FOOT, L_TOE = Joint.LEFT_THIGH, Joint.LEFT_SHIN, Joint.LEFT_FOOT, Joint.LEFT_TOE

@@ -1,4 +1,4 @@
-"""The lower-body pass of tracker sets (:mod:`posecast.online.engine.leg_ik`): ankles on
+"""The lower-body pass of tracker sets (:mod:`posecast.body.leg_ik`): ankles on
 positional foot trackers, feet turned to them, knees on the side of the pole, bones
 unchanged, rotations FK-consistent, only the tracked legs moved, out-of-reach feet
 reached for and flagged."""
@@ -8,9 +8,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from posecast.body.leg_ik import LEG_JOINTS, senses_legs, solve_legs, tracks_legs
 from posecast.geometry.fk import fk_mat, world2local_mat
 from posecast.geometry.rotations import aa2mat, mat2quat, quat2mat
-from posecast.online.engine.leg_ik import LEG_JOINTS, senses_legs, solve_legs, tracks_legs
 from posecast.skeleton import PARENTS, Joint, reference_offsets
 from posecast.tracking.sites import SITE_JOINT_INDEX, TrackerSet
 

@@ -3,21 +3,23 @@
 ``R`` of a pose is the mean distance, over the 8 lower-body joints, between the pose
 and its reconstruction: positions go into the character frame, through the AE, and
 back through FK with the waist's own (heading-free) rotation.
+
+The scorer runs the AE's artifact (:mod:`posecast.online.inference.artifact`, ONNX
+Runtime), so it lives beside it: the ``onnx`` and ``torch`` backends' candidate pool
+scores with it, and so does the evaluation's ``implausible_rate``; the engine itself
+only reads the scores a backend's pool returns (the ``native`` pool runs the same AE
+in C).
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 from numpy.typing import NDArray
 
+from posecast.body.batch_fk import fk32
 from posecast.geometry.rotations import quat2mat
-from posecast.online.engine.batch_fk import fk32
+from posecast.online.inference.artifact import Artifact
 from posecast.skeleton import LOWER_BODY, Joint
-
-if TYPE_CHECKING:  # the artifact arrives built: importing this module loads no runtime
-    from posecast.online.inference.artifact import Artifact
 
 F64 = NDArray[np.floating]
 _LOWER = [int(j) for j in LOWER_BODY]

@@ -22,7 +22,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from posecast.online.engine.ik import LEGS, apply_leg_ik, two_bone_ik
+from posecast.body.batch_fk import fk32
+from posecast.body.ik import LEGS, THIGHS_SHINS, apply_leg_ik, two_bone_ik
+from posecast.geometry.rotations import mat2quat, quat2mat
+from posecast.skeleton import NUM_JOINTS
 
 F64 = NDArray[np.float64]
 
@@ -43,6 +46,7 @@ _PAIRS_I = np.repeat(np.arange(3), 3)
 _PAIRS_K = np.tile(np.arange(3), 3)
 _RSUM = np.asarray(RADII_M)[_PAIRS_I] + np.asarray(RADII_M)[_PAIRS_K]
 _ANKLES = [int(leg[2]) for leg in LEGS]
+_LEG_JOINTS = tuple(int(j) for leg in LEGS for j in leg)
 
 
 def overlap(pos: NDArray[np.floating]) -> F64:
@@ -92,7 +96,7 @@ def keep_apart(
     the pose before the contact IK, whose hips are the same) toward ankle targets moved
     from the contact IK's back toward the network's ankles by the least share that
     keeps them apart, in place. The same solve as the contact IK's
-    (:func:`~posecast.online.engine.ik.apply_leg_ik`, knees bent toward the network's
+    (:func:`~posecast.body.ik.apply_leg_ik`, knees bent toward the network's
     thighs' forward axes), so a share of 0 is the contact IK's pose and 1 the
     network's legs (knees forward). The share: the first of :data:`SHARES` evenly
     spaced ones that keeps the legs apart (all tried in one batch), refined linearly
@@ -185,3 +189,31 @@ def _legs_at(
         legs[:, :, side, 2] = np.where(on, a2, legs[:, :, side, 2])
         legs[:, :, side, 3] = np.where(on, a2 + (toe - ankle), legs[:, :, side, 3])
     return legs
+
+
+def keep_apart_quat(
+    positions: NDArray[np.float32],
+    rotations: NDArray[np.float32],
+    rot6d: NDArray[np.float32],
+    root_mat: NDArray[np.float32],
+    root_pos: NDArray[np.float32],
+) -> None:
+    """:func:`keep_apart` on the shown poses after the display contact IK, in place:
+    positions ``(E, 19, 3)`` and world rotations ``(E, 19, 4)`` xyzw float32 (the
+    thighs' and shins' change); the network's own legs come from its rotations
+    ``rot6d (E, 108)`` on the same pelvis (float32 FK), for the poses whose legs meet."""
+    deep = overlap(positions)
+    rows = np.flatnonzero(deep > MAX_OVERLAP_M)
+    if not len(rows):
+        return
+    mat32, pos32 = fk32(rot6d[rows], root_mat[rows], root_pos[rows], True, _LEG_JOINTS)
+    assert mat32 is not None
+    # Only the legs' rows of fk32's output are defined (and all keep_apart reads).
+    legs = list(_LEG_JOINTS)
+    net_mat, net_pos = np.zeros((len(rows), NUM_JOINTS, 3, 3)), np.zeros((len(rows), NUM_JOINTS, 3))
+    net_mat[:, legs], net_pos[:, legs] = mat32[:, legs], pos32[:, legs]
+    pos = positions[rows].astype(np.float64)
+    mat = quat2mat(rotations[rows].astype(np.float64))
+    keep_apart(mat, pos, net_mat, net_pos, deep=deep[rows])
+    positions[rows] = pos
+    rotations[np.ix_(rows, THIGHS_SHINS)] = mat2quat(mat[:, THIGHS_SHINS])

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from posecast.body.geom import swing_mat
+from posecast.geometry.rotations import mat2quat, quat2mat
 from posecast.skeleton import Joint
 
 F64 = NDArray[np.floating]
@@ -35,7 +37,6 @@ CONTACT_THRESHOLD = 0.5
 # the foot locks again: it steps). Chosen on the validation split (docs/evaluation.md).
 RELEASE_FRAMES = 20
 MAX_DRIFT_M = 0.05
-EPS = 1e-9  # below this a length counts as zero
 FLOOR_Y = 0.0  # the world floor (proto/README.md, "Conventions")
 # A foot further below the floor than this is not lifted: the client's tracking space
 # is not floor-level (an eye-level origin puts the feet 1.5 m down), or the body is
@@ -116,54 +117,6 @@ def two_bone_ik(
     new_knee = hip + l1 * (cos_a * u + sin_a * v)
     new_ankle = hip + u * d_c
     return new_knee, new_ankle
-
-
-# Small-array helpers written out by component: numpy's ``cross`` and ``linalg.norm``
-# cost more in call overhead than in arithmetic at a tick's few rows.
-def norm3(v: D64) -> D64:
-    """Lengths ``(...,)`` of vectors ``(..., 3)``."""
-    out: D64 = np.sqrt(np.einsum("...i,...i->...", v, v))
-    return out
-
-
-def cross3(a: D64, b: D64) -> D64:
-    """Cross products of ``(..., 3)`` vectors."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
-
-
-def unit3(v: D64) -> tuple[D64, D64]:
-    """``v (..., 3)`` -> (direction, length ``(...,)``); a zero vector keeps direction 0."""
-    n = norm3(v)
-    return v / np.maximum(n, EPS)[..., None], n
-
-
-def swing_mat(a: D64, b: D64) -> D64:
-    """The smallest rotation ``(..., 3, 3)`` taking direction ``a (..., 3)`` onto ``b``
-    (Rodrigues' formula, ``R = c I + [v]x + v v^T / (1 + c)`` with ``v = a x b``,
-    ``c = a . b``; opposite directions turn half a turn about a perpendicular)."""
-    ua, _ = unit3(a)
-    ub, _ = unit3(b)
-    x, y, z = np.moveaxis(cross3(ua, ub), -1, 0)  # the axis times sin
-    c = np.einsum("...i,...i->...", ua, ub)  # cos
-    opposite = c < -1.0 + 1e-9
-    h = 1.0 / np.where(opposite, 1.0, 1.0 + c)
-    xh, yh, zh = x * h, y * h, z * h
-    R = np.stack(
-        [
-            c + x * xh, y * xh - z, z * xh + y,
-            y * xh + z, c + y * yh, z * yh - x,
-            z * xh - y, z * yh + x, c + z * zh,
-        ],
-        axis=-1,
-    ).reshape(*c.shape, 3, 3)  # fmt: skip
-    if opposite.any():
-        helper = np.where(np.abs(ua[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-        p, _ = unit3(cross3(ua, helper))
-        half = 2.0 * p[..., :, None] * p[..., None, :] - np.eye(3)
-        R = np.where(opposite[..., None, None], half, R)
-    return R
 
 
 def apply_leg_ik(
@@ -333,3 +286,22 @@ def floor_ik(
         targets[..., 1] += lift
         apply_leg_ik(world_mat, world_pos, targets, active, FLOOR_BEND_HINT_M)
     return active
+
+
+THIGHS_SHINS = np.array([int(j) for leg in LEGS for j in leg[:2]])  # what the leg solves turn
+
+
+def floor_ik_quat(
+    positions: NDArray[np.float32], rotations: NDArray[np.float32], lift: F64
+) -> None:
+    """:func:`floor_ik` on the shown poses, in place: positions ``(E, 19, 3)`` and world
+    rotations ``(E, 19, 4)`` xyzw float32 (the thighs' and shins' change), each foot
+    lifted by ``lift (E, 2)`` (:func:`floor_lift`, with the swing clearance's)."""
+    rows = np.flatnonzero(lift.any(axis=1))
+    if not len(rows):
+        return
+    pos = positions[rows].astype(np.float64)
+    mat = quat2mat(rotations[rows].astype(np.float64))
+    floor_ik(mat, pos, lift=lift[rows])
+    positions[rows] = pos
+    rotations[np.ix_(rows, THIGHS_SHINS)] = mat2quat(mat[:, THIGHS_SHINS])

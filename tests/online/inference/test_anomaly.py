@@ -8,10 +8,10 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
+from posecast.body.batch_fk import fk32
 from posecast.geometry.rotations import normalize, quat2mat, quat_apply, quat_mul, yaw2quat
-from posecast.online.engine.anomaly import AnomalyScorer, rotate_y
-from posecast.online.engine.batch_fk import fk32
 from posecast.online.engine.ports import PoolIK
+from posecast.online.inference.anomaly import AnomalyScorer, rotate_y
 from posecast.skeleton import NUM_JOINTS, Joint
 from posecast.tracking.features import TrackerSlot, character_frame, to_character_frame
 from tests.online.engine.conftest import BackendLoader

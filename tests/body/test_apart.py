@@ -5,11 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from posecast.body.apart import MAX_OVERLAP_M, RADII_M, keep_apart, keep_apart_quat, overlap
+from posecast.body.ik import apply_leg_ik
 from posecast.geometry.fk import fk_mat
 from posecast.geometry.rotations import axis_mat, mat2quat, mat2r6d, quat2mat
-from posecast.online.engine import ssi
-from posecast.online.engine.apart import MAX_OVERLAP_M, RADII_M, keep_apart, overlap
-from posecast.online.engine.ik import apply_leg_ik
 from posecast.skeleton import NUM_JOINTS, Joint, reference_offsets
 
 LEFT = (Joint.LEFT_THIGH, Joint.LEFT_SHIN, Joint.LEFT_FOOT, Joint.LEFT_TOE)
@@ -200,8 +199,9 @@ def test_giving_way_is_continuous_as_the_foot_is_drawn_in() -> None:
 
 
 def test_the_engine_step_reads_the_network_legs_from_the_decoder_output() -> None:
-    """``ssi._apart`` rebuilds the network's legs from the decoder's rotations and the
-    pelvis (float32, as the engine holds them) and moves the shown poses like
+    """``keep_apart_quat`` (the pipeline's step) rebuilds the network's legs from the
+    decoder's rotations and the pelvis (float32, as the engine holds them) and moves the
+    shown poses like
     ``keep_apart`` on float64 arrays: a batch of three, the middle one crossing, the
     others untouched."""
     rows = [held_into_other_leg(t) for t in (0.1, 0.8, 0.2)]
@@ -216,7 +216,7 @@ def test_the_engine_step_reads_the_network_legs_from_the_decoder_output() -> Non
     wp, quats = pos.astype(np.float32), mat2quat(mat).astype(np.float32)
     before_wp, before_q = wp.copy(), quats.copy()
     root_mat, root_pos = net_mat[:, 0].astype(np.float32), net_pos[:, 0].astype(np.float32)
-    ssi._apart(wp, quats, rot6d, root_mat, root_pos)
+    keep_apart_quat(wp, quats, rot6d, root_mat, root_pos)
     assert keep_apart(mat, pos, net_mat, net_pos).tolist() == [False, True, False]
     assert np.allclose(wp, pos, atol=1e-4)
     assert np.allclose(quat2mat(quats.astype(np.float64)), mat, atol=1e-4)

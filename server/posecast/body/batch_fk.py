@@ -4,7 +4,7 @@ Same math as :mod:`posecast.geometry.fk`, specialised: float32 throughout,
 the reference offsets fixed, and the arrays laid out component-major (``(3, 3, B)``
 per joint). numpy multiplies a batch of 3x3 matrices about 5x faster as nine
 contiguous vector operations than through ``matmul`` on ``(B, 3, 3)`` stacks.
-``tests/online/engine/test_batch_fk.py`` checks it against the float64 reference.
+``tests/body/test_batch_fk.py`` checks it against the float64 reference.
 """
 
 from __future__ import annotations
@@ -119,7 +119,7 @@ def pelvis_from_head32(
     ``n`` (a player's samples): the head's heading is taken once per head, and its
     rotation about +Y is applied to the rows' 6D pelvis and position component-wise in
     float32 (within 1e-5 of the float64 reference,
-    ``tests/online/engine/test_batch_fk.py``)."""
+    ``tests/body/test_batch_fk.py``)."""
     G = len(head_pos)
     n = len(root_out) // max(G, 1)
     h = quat2yaw(head_quat)  # heading of each head: the frame is a turn about +Y by it

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from posecast.body.batch_fk import fk32, pelvis_from_head32, r6d2mat32
 from posecast.geometry.fk import fk_mat
 from posecast.geometry.rotations import normalize, quat2mat, r6d2mat
-from posecast.online.engine.batch_fk import fk32, pelvis_from_head32, r6d2mat32
 from posecast.skeleton import NUM_JOINTS, NUM_ROTATIONS, reference_offsets
 from posecast.tracking.layouts import pelvis_from_head
 

@@ -1,6 +1,7 @@
-"""The upper-body pass (:mod:`posecast.online.engine.upper_ik`): head and hands on their
+"""The upper-body pass (:mod:`posecast.body.upper_ik`): head and hands on their
 trackers, bones unchanged, rotations FK-consistent, no elbow flips, out-of-reach
-targets reached for and flagged; and the engine streaming it (or not)."""
+targets reached for and flagged; a guessed pelvis's reach and lean. The engine
+streaming it: ``tests/online/engine/test_shown.py``."""
 
 from __future__ import annotations
 
@@ -9,14 +10,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from posecast.geometry.fk import fk_mat, world2local_mat
-from posecast.geometry.rotations import aa2mat, mat2aa, mat2quat, mat2r6d, quat2mat
-from posecast.offline.evaluation.reconstruct import pose_from_rotations
-from posecast.online.engine.calibration import Calibration
-from posecast.online.engine.hinge import hinge_elbows_quat
-from posecast.online.engine.ssi import Engine
-from posecast.online.engine.types import PoseOut, TrackerFrame
-from posecast.online.engine.upper_ik import (
+from posecast.body.upper_ik import (
     ARM_REACH_M,
     HAND_REACH_SOFTNESS_M,
     LEAN_MOST_RAD,
@@ -34,9 +28,12 @@ from posecast.online.engine.upper_ik import (
     solve_upper_body,
     turn_pelvis,
 )
+from posecast.geometry.fk import fk_mat, world2local_mat
+from posecast.geometry.rotations import aa2mat, mat2aa, mat2quat, mat2r6d, quat2mat
+from posecast.offline.evaluation.reconstruct import pose_from_rotations
+from posecast.online.engine.types import TrackerFrame
 from posecast.skeleton import LOWER_BODY, PARENTS, Joint, reference_offsets
 from posecast.tracking.features import TrackerSlot
-from tests.online.engine.conftest import BackendLoader
 
 WalkFrames = Callable[..., list[TrackerFrame]]
 HANDS = ((Joint.LEFT_HAND, TrackerSlot.LEFT_HAND), (Joint.RIGHT_HAND, TrackerSlot.RIGHT_HAND))
@@ -441,73 +438,6 @@ def test_a_guessed_body_keeps_the_networks_torso_span_to_the_headset() -> None:
         cos = (np.trace(np.swapaxes(chest, -1, -2) @ net, axis1=-2, axis2=-1) - 1.0) / 2.0
         turned.append(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
     assert turned[1][0] < turned[0][0] - 1.0 and turned[1][2] < turned[0][2] - 1.0
-
-
-# --- the engine -----------------------------------------------------------------------
-
-
-def run(
-    engine: Engine, frames: list[TrackerFrame], calibration: Calibration | None = None
-) -> list[PoseOut]:
-    engine.add_player("p", seed=0, calibration=calibration)
-    poses = []
-    for f in frames:
-        engine.push("p", f)
-        poses += engine.tick().poses
-    return poses
-
-
-def test_the_engine_streams_head_and_hands_on_the_trackers(
-    backend: BackendLoader, walk_frames: WalkFrames
-) -> None:
-    """On a synthetic walk (trackers on the reference body's joints, so the walk's own
-    head and hands are within reach) every streamed pose has its head and hands within
-    1 cm of the trackers (measured: within 1 mm) and FK-consistent rotations; with
-    ``upper_body_ik=False`` (and no elbow hinge) the pose is the one before the pass:
-    the pass and then the elbow hinge applied to it give the streamed pose, and the
-    pelvis and legs are the same either way."""
-    frames = walk_frames(0)
-    by_seq = {f.seq: f for f in frames}
-    on = run(backend.engine(samples=10, lookahead=2), frames)
-    off = run(
-        backend.engine(samples=10, lookahead=2, upper_body_ik=False, elbow_hinge=False), frames
-    )
-    assert len(on) == len(off) == len(frames) - 2
-    for pose in on:
-        f = by_seq[pose.seq]
-        for joint, slot in ((Joint.HEAD, TrackerSlot.HEAD), *HANDS):
-            assert np.linalg.norm(pose.positions[joint] - f.pos[slot]) < 0.01, (pose.seq, joint)
-    assert not any(p.reach_limited for p in on)
-    assert not any(p.reach_limited for p in off)
-    pos_on = np.stack([p.positions for p in on])
-    quat_on = np.stack([p.rotations for p in on])
-    pos_off = np.stack([p.positions for p in off])
-    quat_off = np.stack([p.rotations for p in off])
-    assert_fk_consistent(pos_on, quat_on, atol=1e-4)
-    legs = [int(Joint.PELVIS), *(int(j) for j in LOWER_BODY)]
-    np.testing.assert_array_equal(pos_on[:, legs], pos_off[:, legs])
-    assert np.abs(pos_on - pos_off).max() > 1e-3  # the pass did something
-    tp = np.stack([by_seq[p.seq].pos for p in off])
-    tq = np.stack([by_seq[p.seq].quat for p in off])
-    again, again_q, _ = solve_upper_body(pos_off, quat_off, tp, tq)
-    hinge_elbows_quat(again, again_q)  # then the elbows onto their hinges
-    np.testing.assert_allclose(again, pos_on, atol=1e-5)
-    np.testing.assert_allclose(quat2mat(again_q), quat2mat(quat_on), atol=1e-5)
-
-
-def test_the_engine_reaches_calibrated_trackers_at_the_users_scale(
-    backend: BackendLoader, walk_frames: WalkFrames
-) -> None:
-    """A half-size user (``scale = 2``): the pass works on the calibrated trackers, and the
-    streamed head and hands land on the user's own trackers at the user's size."""
-    frames = [TrackerFrame(f.seq, f.pos / 2.0, f.quat) for f in walk_frames(0)[:30]]
-    by_seq = {f.seq: f for f in frames}
-    poses = run(backend.engine(samples=10, lookahead=2), frames, Calibration(scale=2.0))
-    assert poses
-    for pose in poses:
-        f = by_seq[pose.seq]
-        for joint, slot in ((Joint.HEAD, TrackerSlot.HEAD), *HANDS):
-            assert np.linalg.norm(pose.positions[joint] - f.pos[slot]) < 0.005
 
 
 def test_the_shown_move_eases_toward_reach_roots() -> None:

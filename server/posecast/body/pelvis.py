@@ -1,4 +1,8 @@
-"""Smoothing the shown pelvis over the look-ahead: frames ``e - 1, e, e + 1``, weights 1, 2, 1.
+"""The shown pelvis: where each decoded row's pelvis stands, and its smoothing over the look-ahead.
+
+:func:`pelvis_poses` places the pelvis of decoded rows: the waist tracker's, or (a model
+without one) the decoder's own guess, moved out of the head's frame. The engine places
+its candidate pool's and its shown rows' with it, and the evaluation its clips'.
 
 Every joint of the shown body hangs off the pelvis, so the pelvis's own frame-to-frame
 noise (a waist tracker's, or the 3-point model's pelvis outputs) is carried out to the
@@ -9,11 +13,11 @@ the waist orientation for the same reason (Sec. 4.4); with the engine's look-ahe
 (``tau`` frames; one is enough) the filter can be centred, so it adds no lag: the pose
 shown for frame ``e`` is built on the pelvis averaged over frames ``e - 1``, ``e`` and
 ``e + 1`` with weights 1, 2, 1 (positions, and rotations as sign-aligned quaternions,
-renormalised). The head and hands are then put on their trackers as before.
+renormalised: :func:`smooth_pelvis`, the first pass of
+:func:`posecast.body.pipeline.show`). The head and hands are then put on their
+trackers as before.
 
-Pure numpy; the engine (:mod:`posecast.online.engine.ssi`) and the evaluation's
-single-sample variants (:mod:`posecast.offline.evaluation.runner`) call the same
-:func:`smooth_pelvis`.
+Pure numpy.
 """
 
 from __future__ import annotations
@@ -21,8 +25,11 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from posecast.body.batch_fk import pelvis_from_head32
 from posecast.geometry.rotations import mat2quat, quat2mat
+from posecast.tracking.features import TrackerSlot
 
+F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
 WEIGHTS = (0.25, 0.5, 0.25)  # frames e - 1, e, e + 1
 
@@ -54,3 +61,34 @@ def smooth_pelvis_clip(mats: NDArray[np.floating], places: NDArray[np.floating])
     prev_m, next_m = np.concatenate([m[:1], m[:-1]]), np.concatenate([m[1:], m[-1:]])
     prev_p, next_p = np.concatenate([p[:1], p[:-1]]), np.concatenate([p[1:], p[-1:]])
     return smooth_pelvis((prev_m, m, next_m), (prev_p, p, next_p))
+
+
+def pelvis_poses(
+    pos: F64,
+    quat: F64,
+    rootm: F32,
+    root_out: F32 | None,
+    repeat: int,
+    waist: NDArray[np.bool_] | None = None,
+) -> tuple[F32, F32, int]:
+    """World pelvis rotations ``(G, 3, 3)`` and positions ``(G, 3)`` (float32) for
+    ``R = len(pos) * repeat`` decoded rows, and how many rows share each: ``R / G``.
+
+    ``pos (P, rows, 3)``, ``quat (P, rows, 4)``: the calibrated trackers of ``P``
+    players. ``hmd3+waist``: the waist tracker's (``rootm``, its rotation ``(P, 3, 3)``
+    float32), one per player (``G = P``), shared by its ``repeat`` rows. ``hmd3``: each
+    row's own pelvis output ``root_out (R, 9)`` (6D rotation, position), moved out of
+    the player's head frame into the world (``G = R``). ``sites``: as ``hmd3``, except
+    that the rows of a player whose set tracks the waist's position (``waist``, per
+    player) take the waist tracker's pose.
+    """
+    if root_out is None:
+        return rootm, pos[:, TrackerSlot.WAIST].astype(np.float32), repeat
+    mats, places = pelvis_from_head32(root_out, pos[:, TrackerSlot.HEAD], quat[:, TrackerSlot.HEAD])
+    if waist is not None and waist.any():
+        rows = np.repeat(waist, repeat)
+        players = np.flatnonzero(waist)
+        wm = quat2mat(quat[players, TrackerSlot.WAIST]).astype(np.float32)
+        mats[rows] = np.repeat(wm, repeat, axis=0)
+        places[rows] = np.repeat(pos[players, TrackerSlot.WAIST].astype(np.float32), repeat, axis=0)
+    return mats, places, 1

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from posecast.online.engine.ik import FLOOR_MAX_LIFT_M, FLOOR_TOLERANCE_M, FLOOR_Y, LEGS
+from posecast.body.ik import FLOOR_MAX_LIFT_M, FLOOR_TOLERANCE_M, FLOOR_Y, LEGS
 from posecast.skeleton import TOES as TOE_JOINTS
 
 F64 = NDArray[np.floating]
@@ -76,8 +76,8 @@ def clip_toe_speed(world_pos: F64, fps: float) -> F64:
 def clearance_lift(world_pos: F64, speed: F64, floor_y: float = FLOOR_Y) -> F64:
     """How far each foot ``(B, 2)`` must rise for its toe to clear the floor by the
     height real toes keep at ``speed (B, 2)``; 0 for a toe that does (within
-    :data:`~posecast.online.engine.ik.FLOOR_TOLERANCE_M`), and for a foot whose ankle
-    or toe is more than :data:`~posecast.online.engine.ik.FLOOR_MAX_LIFT_M` below the
+    :data:`~posecast.body.ik.FLOOR_TOLERANCE_M`), and for a foot whose ankle
+    or toe is more than :data:`~posecast.body.ik.FLOOR_MAX_LIFT_M` below the
     floor (a tracking space whose origin is not on the floor: the floor pass leaves
     those alone too)."""
     p = np.asarray(world_pos, np.float64)

@@ -1,15 +1,15 @@
-"""The swing clearance (:mod:`posecast.online.engine.clearance`): a toe moving over the
-floor is lifted to the height real toes keep at its speed, straight up, on every
-backend; the evaluation's clip-wise speed is the engine's frame-by-frame one."""
+"""The swing clearance (:mod:`posecast.body.clearance`): a toe moving over the
+floor is lifted to the height real toes keep at its speed, straight up; the speed
+is an average of the horizontal steps. The engine streaming it:
+``tests/online/engine/test_shown.py``."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 
 import numpy as np
-import pytest
 
-from posecast.online.engine.clearance import (
+from posecast.body.clearance import (
     CLEARANCE_M,
     MAX_STEP_M_S,
     SPEED_SMOOTHING,
@@ -19,11 +19,9 @@ from posecast.online.engine.clearance import (
     clip_toe_speed,
     toe_speed,
 )
-from posecast.online.engine.ik import FLOOR_MAX_LIFT_M
-from posecast.online.engine.ssi import Engine
+from posecast.body.ik import FLOOR_MAX_LIFT_M
 from posecast.online.engine.types import TrackerFrame
 from posecast.skeleton import Joint
-from tests.online.engine.conftest import BackendLoader, run_player
 
 WalkFrames = Callable[..., list[TrackerFrame]]
 
@@ -83,35 +81,3 @@ def test_a_toe_is_lifted_to_its_speeds_clearance_and_no_further() -> None:
     np.testing.assert_allclose(
         clearance_lift(ankle_deep, np.zeros((1, 2))), [[0.0, CLEARANCE_M[0]]]
     )
-
-
-def _run(engine: Engine, frames: list[TrackerFrame]) -> np.ndarray:
-    return np.stack([p.positions for p in run_player(engine, frames)]).astype(np.float64)
-
-
-@pytest.mark.parametrize("layout", ["hmd3+waist", "hmd3"])
-def test_the_engine_lifts_sliding_toes_straight_up(
-    backend: BackendLoader, walk_frames: WalkFrames, layout: str
-) -> None:
-    """A walk, 8 cm lower (the synthetic walker's 4-point toes swing well clear of the
-    floor; lowered, they scrape it): with the clearance (the default) every shown toe is
-    at least at the clearance of its averaged speed, recomputed from the shown poses
-    (which shows the engine's speed is the evaluation's); without it some toes are
-    lower; the toes' horizontal tracks are the same either way (a lift is straight up)."""
-    frames = [TrackerFrame(f.seq, f.pos - [0.0, 0.08, 0.0], f.quat) for f in walk_frames(0)]
-    cfg = {"samples": 10, "lookahead": 2, "upper_body_ik": False}
-    on = _run(backend.engine(layout, **cfg), frames)
-    off = _run(backend.engine(layout, **cfg, swing_clearance=False), frames)
-    speed = clip_toe_speed(on, 60.0)
-    need = np.interp(speed, SPEEDS_M_S, CLEARANCE_M)
-    toe_on, toe_off = on[:, TOES], off[:, TOES]
-    assert np.all(toe_on[..., 1] >= need - 1.001e-3)
-    # A toe the clearance lifted, where the floor pass alone lifted nothing, sits at the
-    # clearance of the speed recomputed here: the engine's speed is this one, not more.
-    feet = off[:, [int(f) for f in (Joint.LEFT_FOOT, Joint.RIGHT_FOOT)], 1]
-    lifted = (toe_on[..., 1] > toe_off[..., 1] + 1e-3) & (np.minimum(feet, toe_off[..., 1]) > 0)
-    assert lifted.sum() > 20
-    np.testing.assert_allclose(toe_on[..., 1][lifted], need[lifted], atol=1.5e-3)
-    assert np.mean(toe_off[..., 1] < need - 5e-3) > 0.05  # the walk's toes do go low
-    np.testing.assert_allclose(toe_on[..., [0, 2]], toe_off[..., [0, 2]], atol=2e-3)
-    np.testing.assert_allclose(clip_toe_speed(off, 60.0), speed, atol=0.05)
