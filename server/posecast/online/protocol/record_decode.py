@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from posecast.errors import BadFieldError
+from posecast.geometry.rotations import quat_mul
 from posecast.online.protocol.messages import UINT32_MAX
 from posecast.online.protocol.record_state import (
     FLAG_KEYFRAME,
@@ -26,7 +27,6 @@ from posecast.online.protocol.record_state import (
     ROT_WIDTHS,
     Recon,
     normalise,
-    qmul,
     rotvec2quat,
     smallest3_unpack,
 )
@@ -141,6 +141,6 @@ def _read_delta(data: bytes, pos: int, ref: Recon) -> tuple[Recon, int]:
     root = (ref.root[0] + d_root[0], ref.root[1] + d_root[1], ref.root[2] + d_root[2])
     if max(map(abs, root)) > ROOT_MAX:
         raise BadFieldError("a delta takes the root beyond +-1000 m", field="data")
-    pred = qmul(ref.items, rotvec2quat(ref.step_rot.astype(np.float64) * ROT_STEP_RAD))
-    items = normalise(qmul(pred, rotvec2quat(r_rot.astype(np.float64) * ROT_STEP_RAD)))
+    pred = quat_mul(ref.items, rotvec2quat(ref.step_rot.astype(np.float64) * ROT_STEP_RAD))
+    items = normalise(quat_mul(pred, rotvec2quat(r_rot.astype(np.float64) * ROT_STEP_RAD)))
     return Recon(seq, root, items, (d_root[0], d_root[1], d_root[2]), d_rot), pos

@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from posecast.errors import BadFieldError, OutOfRangeError
+from posecast.geometry.rotations import quat_conj, quat_mul
 from posecast.online.protocol.messages import MAX_COORD_M, UINT32_MAX
 from posecast.skeleton import NUM_JOINTS, PARENTS, reference_offsets
 
@@ -41,29 +42,8 @@ _PARENTS = np.array(PARENTS[1:])
 ROOT_MAX = round(MAX_COORD_M / ROOT_UNIT_M)
 
 
-# --- quaternion helpers (float64, the exact operations the spec names) -------------------
-
-
-def qmul(a: F64, b: F64) -> F64:
-    """Hamilton product of xyzw quaternions, ``(..., 4)``."""
-    ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
-    bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
-    return np.stack(
-        [
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-            aw * bw - ax * bx - ay * by - az * bz,
-        ],
-        axis=-1,
-    )
-
-
-def conj(q: F64) -> F64:
-    """The conjugate (the inverse of a unit quaternion), ``(..., 4)``."""
-    out = q.copy()
-    out[..., :3] *= -1.0
-    return out
+# --- quaternion helpers (float64, the exact operations the spec names; the product and the
+# conjugate are posecast.geometry.rotations') ----------------------------------------------
 
 
 def quat2rotvec(q: F64) -> F64:
@@ -94,7 +74,7 @@ def normalise(q: F64) -> F64:
 def world2items(world: F64) -> F64:
     """World rotations ``(19, 4)`` -> items: PELVIS world, then each joint's local rotation."""
     items = world.copy()
-    items[1:] = qmul(conj(world[_PARENTS]), world[1:])
+    items[1:] = quat_mul(quat_conj(world[_PARENTS]), world[1:])
     return items
 
 
@@ -102,7 +82,7 @@ def items2world(items: F64) -> F64:
     """Items ``(19, 4)`` -> world rotations, parents before children."""
     world = items.copy()
     for j in range(1, NUM_JOINTS):
-        world[j] = qmul(world[PARENTS[j]], items[j])
+        world[j] = quat_mul(world[PARENTS[j]], items[j])
     return world
 
 

@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from posecast.errors import OutOfRangeError
+from posecast.geometry.rotations import quat_conj, quat_mul
 from posecast.online.protocol.messages import UINT32_MAX
 from posecast.online.protocol.record_decode import (
     Record,
@@ -68,10 +69,8 @@ from posecast.online.protocol.record_state import (
     SMALLEST3_SCALE,
     Recon,
     bytes2skeleton,
-    conj,
     items2world,
     normalise,
-    qmul,
     quat2rotvec,
     rotvec2quat,
     skeleton2bytes,
@@ -109,13 +108,11 @@ __all__ = [  # the encoder's own names, and the record names kept importable fro
     "Recon",
     "Record",
     "bytes2skeleton",
-    "conj",
     "decode_records",
     "encode_delta",
     "encode_deltas",
     "encode_many",
     "items2world",
-    "qmul",
     "quat2rotvec",
     "read_leb128",
     "rotvec2quat",
@@ -185,7 +182,7 @@ class PoseState:
         ``rotations (E, 19, 4)``); ``None`` for a pose whose pelvis is beyond +-1000 m."""
         q = normalise(np.asarray(rotations, dtype=np.float64))  # (E, 19, 4)
         items = q.copy()
-        items[:, 1:] = qmul(conj(q[:, _PARENTS]), q[:, 1:])
+        items[:, 1:] = quat_mul(quat_conj(q[:, _PARENTS]), q[:, 1:])
         root = np.rint(np.asarray(positions, dtype=np.float64)[:, 0] / ROOT_UNIT_M)  # (E, 3)
         inside: NDArray[np.bool_] = np.all(np.abs(root) <= ROOT_MAX, axis=1)
         ok: list[bool] = inside.tolist()
@@ -381,18 +378,18 @@ def _encode_deltas_numpy(
     new_world = np.empty_like(ref_items)
     r_rot = np.empty_like(step_rot)
     # Every item's prediction at once: it depends on the references alone.
-    pred_all = qmul(ref_items, rotvec2quat(step_rot.astype(np.float64) * ROT_STEP_RAD))
+    pred_all = quat_mul(ref_items, rotvec2quat(step_rot.astype(np.float64) * ROT_STEP_RAD))
     for idx in _LEVELS:
         pred = pred_all[:, idx]
         if idx[0] == 0:
             target = world[:, idx]
         else:
-            target = qmul(conj(new_world[:, _PARENT_OF[idx]]), world[:, idx])
-        u = quat2rotvec(qmul(conj(pred), target))  # (M, n, 3)
+            target = quat_mul(quat_conj(new_world[:, _PARENT_OF[idx]]), world[:, idx])
+        u = quat2rotvec(quat_mul(quat_conj(pred), target))  # (M, n, 3)
         r = np.rint(u / ROT_STEP_RAD).astype(np.int64)
-        q = normalise(qmul(pred, rotvec2quat(r.astype(np.float64) * ROT_STEP_RAD)))
+        q = normalise(quat_mul(pred, rotvec2quat(r.astype(np.float64) * ROT_STEP_RAD)))
         new_items[:, idx], r_rot[:, idx] = q, r
-        new_world[:, idx] = q if idx[0] == 0 else qmul(new_world[:, _PARENT_OF[idx]], q)
+        new_world[:, idx] = q if idx[0] == 0 else quat_mul(new_world[:, _PARENT_OF[idx]], q)
     d_rot = step_rot + r_rot
     ref_root = np.array([r.root for r in refs], np.int64)  # (M, 3)
     d_root = np.array(roots, np.int64) - ref_root
