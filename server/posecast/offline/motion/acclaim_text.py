@@ -6,27 +6,18 @@ the line. Shared by :mod:`~posecast.offline.motion.acclaim_asf` and
 
 from __future__ import annotations
 
-import gzip
 import math
-import zlib
 from collections.abc import Sequence
 from pathlib import Path
 
 from posecast.errors import AcclaimError
+from posecast.offline.motion.gzfile import read_maybe_gzip
 
 
 def read_lines(path: str | Path) -> list[str]:
     """The lines of a text file, plain or gzip, any line ends (AcclaimError if unreadable)."""
     p = Path(path)
-    try:
-        raw = p.read_bytes()
-    except OSError as exc:
-        raise AcclaimError(f"cannot read file: {exc.strerror or exc}", file=p) from exc
-    if raw[:2] == b"\x1f\x8b":
-        try:
-            raw = gzip.decompress(raw)
-        except (OSError, EOFError, zlib.error) as exc:
-            raise AcclaimError(f"corrupt gzip stream: {exc}", file=p) from exc
+    raw = read_maybe_gzip(p, AcclaimError)
     if b"\x00" in raw:
         raise AcclaimError(
             "not a text file", file=p, line=raw[: raw.index(b"\x00")].count(b"\n") + 1
