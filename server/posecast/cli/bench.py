@@ -74,11 +74,24 @@ def _print_ratios(reports: list[dict[str, Any]]) -> None:
         print(f"{p:8d}{cells} {ratio:8.2f}x")
 
 
-def _table(players: list[int], columns: list[tuple[str, str, list[Any]]]) -> None:
-    """One table of ``posecast bench engine``: a row per player count, then each column
-    given as (heading, format spec, a value per count), the heading right-aligned to
-    the spec's width."""
-    cols: list[tuple[str, str, list[Any]]] = [("players", "8d", players), *columns]
+def _table(
+    players: list[int],
+    src: dict[str, Any],
+    before: tuple[tuple[str, str, str], ...] = (),
+    after: tuple[tuple[str, str, str], ...] = (),
+) -> None:
+    """One table of ``posecast bench engine``: a row per player count with the p50 and
+    p99 tick and the memory per player from ``src``, and the columns ``before`` and
+    ``after`` them, each a (heading, format spec, key of ``src``): the heading is
+    right-aligned to the spec's width."""
+    cols = [
+        ("players", "8d", players),
+        *((head, spec, src[key]) for head, spec, key in before),
+        ("p50 ms", "8.2f", src["tick_p50_ms"]),
+        ("p99 ms", "8.2f", src["tick_p99_ms"]),
+        *((head, spec, src[key]) for head, spec, key in after),
+        ("MB/player", "10.2f", src["rss_mb_per_player"]),
+    ]
     print(" ".join(f"{head:>{spec.split('.')[0].rstrip('d')}s}" for head, spec, _ in cols))
     for i in range(len(players)):
         print(" ".join(f"{values[i]:{spec}}" for _, spec, values in cols))
@@ -90,15 +103,7 @@ def _print_bench(report: dict[str, Any], samples: int) -> None:
 
     used, asked = report["backend"], report["backend_asked"]
     print(f"backend {used}" + (f" ({asked} asked for; unavailable)" if used != asked else ""))
-    _table(
-        report["players"],
-        [
-            ("p50 ms", "8.2f", report["tick_p50_ms"]),
-            ("p99 ms", "8.2f", report["tick_p99_ms"]),
-            ("GFLOP/s", "8.1f", report["gflops"]),
-            ("MB/player", "10.2f", report["rss_mb_per_player"]),
-        ],
-    )
+    _table(report["players"], report, after=(("GFLOP/s", "8.1f", "gflops"),))
     fit = realtime_summary(report["players"], report["tick_p99_ms"])
     print(f"max players at 60 Hz (p99 < 16.7 ms), N={samples}: {fit}")
     if report["native_isa"]:
@@ -110,15 +115,7 @@ def _print_bench(report: dict[str, Any], samples: int) -> None:
             f"both models loaded (backend {both['backend']}), {both['hmd3_share']:.0%} of the "
             "players headset-only:"
         )
-        _table(
-            report["players"],
-            [
-                ("hmd3", "5d", both["hmd3_players"]),
-                ("p50 ms", "8.2f", both["tick_p50_ms"]),
-                ("p99 ms", "8.2f", both["tick_p99_ms"]),
-                ("MB/player", "10.2f", both["rss_mb_per_player"]),
-            ],
-        )
+        _table(report["players"], both, before=(("hmd3", "5d", "hmd3_players"),))
         fit = realtime_summary(report["players"], both["tick_p99_ms"])
         print(f"max players at 60 Hz, both models: {fit}")
     sets = report.get("mixed_sets")
@@ -127,15 +124,7 @@ def _print_bench(report: dict[str, Any], samples: int) -> None:
             f"mixed tracker sets on the sites model (backend {sets['backend']}), players on "
             f"{', '.join(sets['sets'])} in turn, beside hmd3+waist (p50 ratio):"
         )
-        _table(
-            report["players"],
-            [
-                ("p50 ms", "8.2f", sets["tick_p50_ms"]),
-                ("p99 ms", "8.2f", sets["tick_p99_ms"]),
-                ("ratio", "6.2f", sets["p50_ratio"]),
-                ("MB/player", "10.2f", sets["rss_mb_per_player"]),
-            ],
-        )
+        _table(report["players"], sets, after=(("ratio", "6.2f", "p50_ratio"),))
         fit = realtime_summary(report["players"], sets["tick_p99_ms"])
         print(f"max players at 60 Hz, mixed sets: {fit}")
 
