@@ -18,7 +18,7 @@ import torch
 
 from posecast.offline.dataset.augment import Augmentation
 from posecast.offline.nets.anomaly import AnomalyAE, AnomalyConfig
-from posecast.offline.train.checkpoint import load_checkpoint, save_checkpoint
+from posecast.offline.train.checkpoint import resume_into, save_checkpoint
 from posecast.offline.train.data import Normalisation, TrainArrays, load_train_val
 from posecast.offline.train.losses import PoseFK, position_mse_cm2
 from posecast.skeleton import LOWER_BODY
@@ -82,13 +82,11 @@ def train_anomaly(
     model, fk = AnomalyAE(model_cfg), PoseFK()
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr, betas=(cfg.beta1, 0.999))
     norm = Normalisation.fit(train)
-    step, elapsed, history = 0, 0.0, []
+    step, elapsed = 0, 0.0
+    history: list[dict[str, float]] = []
     if resume and ckpt_path.exists():
-        state = load_checkpoint(ckpt_path)
-        model.load_state_dict(state["model"])
-        opt.load_state_dict(state["optim"])
+        state, step, history, elapsed = resume_into(ckpt_path, model, opt)
         norm = Normalisation.from_dict(state["norm"])
-        step, history, elapsed = state["step"], state["history"], state["train_seconds"]
         log(f"resumed from {ckpt_path} at step {step}")
     rng = np.random.default_rng(cfg.seed + step)
 

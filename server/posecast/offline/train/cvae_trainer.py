@@ -21,7 +21,7 @@ import torch
 from posecast.geometry.torch_ops import r6d2mat
 from posecast.offline.dataset.augment import Augmentation
 from posecast.offline.nets.cvae import CVAE, CVAEConfig
-from posecast.offline.train.checkpoint import load_checkpoint, save_checkpoint
+from posecast.offline.train.checkpoint import resume_into, save_checkpoint
 from posecast.offline.train.data import Normalisation, TrainArrays, compose_sites, load_train_val
 from posecast.offline.train.losses import PoseFK, position_mse_cm2, split_root, velocity_mse_cm2
 from posecast.offline.train.masks import add_inertial_noise, cycle_table_kinds, sample_kinds
@@ -209,11 +209,8 @@ def train_cvae(
     history: list[dict[str, float]] = []
     elapsed = 0.0
     if resume and ckpt_path.exists():
-        state = load_checkpoint(ckpt_path)
-        model.load_state_dict(state["model"])
-        opt.load_state_dict(state["optim"])  # moves the moments to the parameters' device
+        state, step, history, elapsed = resume_into(ckpt_path, model, opt)
         norm = Normalisation.from_dict(state["norm"])
-        step, history, elapsed = state["step"], state["history"], state["train_seconds"]
         torch.set_rng_state(state["torch_rng"])
         log(f"resumed from {ckpt_path} at step {step}")
     rng = np.random.default_rng(cfg.seed + step)
