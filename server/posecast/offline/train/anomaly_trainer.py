@@ -18,7 +18,7 @@ import torch
 
 from posecast.offline.dataset.augment import Augmentation
 from posecast.offline.nets.anomaly import AnomalyAE, AnomalyConfig
-from posecast.offline.train.checkpoint import resume_into, save_checkpoint
+from posecast.offline.train.checkpoint import resume_into, save_training, start_run
 from posecast.offline.train.data import Normalisation, TrainArrays, load_train_val
 from posecast.offline.train.losses import PoseFK, position_mse_cm2
 from posecast.skeleton import LOWER_BODY
@@ -70,10 +70,7 @@ def train_anomaly(
     resume: bool = False,
     log: Any = print,
 ) -> Path:
-    torch.set_num_threads(cfg.threads)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    ckpt_path = out / "checkpoint.pt"
+    ckpt_path = start_run(out_dir, cfg.threads)
     aug = Augmentation(mirror=cfg.mirror, speeds=cfg.speeds)
     manifest, train, val = load_train_val(data_dir, aug, cfg.seed)
     log(f"data: {train.n_frames} train frames, {val.n_frames} val frames")
@@ -91,22 +88,16 @@ def train_anomaly(
     rng = np.random.default_rng(cfg.seed + step)
 
     def save(extra: dict[str, object] | None = None) -> None:
-        save_checkpoint(
+        save_training(
             ckpt_path,
-            {
-                "kind": "anomaly",
-                "model": model.state_dict(),
-                "optim": opt.state_dict(),
-                "config": model_cfg.to_dict(),
-                "train_config": asdict(cfg),
-                "norm": norm.to_dict(),
-                "step": step,
-                "history": history,
-                "train_seconds": elapsed,
-                "data": {"root": str(data_dir), "splits": manifest["splits"]},
-                "train_frames": train.n_frames,
-            }
-            | (extra or {}),
+            "anomaly",
+            model,
+            opt,
+            (model_cfg.to_dict(), asdict(cfg)),
+            norm.to_dict(),
+            (step, history, elapsed),
+            (data_dir, manifest, train.n_frames),
+            extra,
         )
 
     t_log = time.perf_counter()
