@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from posecast.geometry.rotations import quat_conj, quat_mul
 from posecast.online.protocol import records
 from posecast.online.protocol.messages import (
     Calibrate,
@@ -79,7 +80,7 @@ def _angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     3e-5 off unit length, which arccos of their dot product would read as 0.9 deg)."""
     a = a / np.linalg.norm(a, axis=-1, keepdims=True)
     b = b / np.linalg.norm(b, axis=-1, keepdims=True)
-    rel = records._qmul(records._conj(a), b)
+    rel = quat_mul(quat_conj(a), b)
     out: np.ndarray = np.degrees(np.linalg.norm(records.quat2rotvec(rel), axis=-1))
     return out
 

@@ -74,18 +74,36 @@ def _print_ratios(reports: list[dict[str, Any]]) -> None:
         print(f"{p:8d}{cells} {ratio:8.2f}x")
 
 
+def _table(
+    players: list[int],
+    src: dict[str, Any],
+    before: tuple[tuple[str, str, str], ...] = (),
+    after: tuple[tuple[str, str, str], ...] = (),
+) -> None:
+    """One table of ``posecast bench engine``: a row per player count with the p50 and
+    p99 tick and the memory per player from ``src``, and the columns ``before`` and
+    ``after`` them, each a (heading, format spec, key of ``src``): the heading is
+    right-aligned to the spec's width."""
+    cols = [
+        ("players", "8d", players),
+        *((head, spec, src[key]) for head, spec, key in before),
+        ("p50 ms", "8.2f", src["tick_p50_ms"]),
+        ("p99 ms", "8.2f", src["tick_p99_ms"]),
+        *((head, spec, src[key]) for head, spec, key in after),
+        ("MB/player", "10.2f", src["rss_mb_per_player"]),
+    ]
+    print(" ".join(f"{head:>{spec.split('.')[0].rstrip('d')}s}" for head, spec, _ in cols))
+    for i in range(len(players)):
+        print(" ".join(f"{values[i]:{spec}}" for _, spec, values in cols))
+
+
 def _print_bench(report: dict[str, Any], samples: int) -> None:
     """One backend's tables of ``posecast bench engine``."""
     from posecast.offline.evaluation.engine_speed import realtime_summary
 
     used, asked = report["backend"], report["backend_asked"]
     print(f"backend {used}" + (f" ({asked} asked for; unavailable)" if used != asked else ""))
-    print(f"{'players':>8s} {'p50 ms':>8s} {'p99 ms':>8s} {'GFLOP/s':>8s} {'MB/player':>10s}")
-    for i, p in enumerate(report["players"]):
-        print(
-            f"{p:8d} {report['tick_p50_ms'][i]:8.2f} {report['tick_p99_ms'][i]:8.2f} "
-            f"{report['gflops'][i]:8.1f} {report['rss_mb_per_player'][i]:10.2f}"
-        )
+    _table(report["players"], report, after=(("GFLOP/s", "8.1f", "gflops"),))
     fit = realtime_summary(report["players"], report["tick_p99_ms"])
     print(f"max players at 60 Hz (p99 < 16.7 ms), N={samples}: {fit}")
     if report["native_isa"]:
@@ -97,12 +115,7 @@ def _print_bench(report: dict[str, Any], samples: int) -> None:
             f"both models loaded (backend {both['backend']}), {both['hmd3_share']:.0%} of the "
             "players headset-only:"
         )
-        print(f"{'players':>8s} {'hmd3':>5s} {'p50 ms':>8s} {'p99 ms':>8s} {'MB/player':>10s}")
-        for i, p in enumerate(report["players"]):
-            print(
-                f"{p:8d} {both['hmd3_players'][i]:5d} {both['tick_p50_ms'][i]:8.2f} "
-                f"{both['tick_p99_ms'][i]:8.2f} {both['rss_mb_per_player'][i]:10.2f}"
-            )
+        _table(report["players"], both, before=(("hmd3", "5d", "hmd3_players"),))
         fit = realtime_summary(report["players"], both["tick_p99_ms"])
         print(f"max players at 60 Hz, both models: {fit}")
     sets = report.get("mixed_sets")
@@ -111,12 +124,7 @@ def _print_bench(report: dict[str, Any], samples: int) -> None:
             f"mixed tracker sets on the sites model (backend {sets['backend']}), players on "
             f"{', '.join(sets['sets'])} in turn, beside hmd3+waist (p50 ratio):"
         )
-        print(f"{'players':>8s} {'p50 ms':>8s} {'p99 ms':>8s} {'ratio':>6s} {'MB/player':>10s}")
-        for i, p in enumerate(report["players"]):
-            print(
-                f"{p:8d} {sets['tick_p50_ms'][i]:8.2f} {sets['tick_p99_ms'][i]:8.2f} "
-                f"{sets['p50_ratio'][i]:6.2f} {sets['rss_mb_per_player'][i]:10.2f}"
-            )
+        _table(report["players"], sets, after=(("ratio", "6.2f", "p50_ratio"),))
         fit = realtime_summary(report["players"], sets["tick_p99_ms"])
         print(f"max players at 60 Hz, mixed sets: {fit}")
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from posecast.geometry.rotations import quat_conj, quat_mul
 from posecast.online.core.outbox import Outbox
 from posecast.online.core.posestream import KEYFRAME_EVERY_S, Avatars, PoseStream, prepare
 from posecast.online.protocol import decode, records
@@ -66,7 +67,7 @@ def test_superseded_records_stay_decodable_and_close() -> None:
         for rec in client.got:
             truth = poses[rec.recon.seq]
             world = records.items2world(rec.recon.items)
-            err = records.quat2rotvec(records._qmul(records._conj(world), truth.world))
+            err = records.quat2rotvec(quat_mul(quat_conj(world), truth.world))
             assert np.degrees(np.linalg.norm(err, axis=-1)).max() < 0.11
             assert rec.recon.root == truth.root
     keys = [r.recon.seq for r in cf.got if r.keyframe]

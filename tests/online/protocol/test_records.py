@@ -122,7 +122,7 @@ def test_native_encoder_refuses_arrays_of_the_wrong_shape() -> None:
         np.zeros((m, 3), np.int64),
         np.empty((m, 19, 4)),
         np.empty((m, 19, 3), np.int64),
-        np.empty((m, records._MAX_DELTA_BYTES), np.uint8),
+        np.empty((m, records.MAX_DELTA_BYTES), np.uint8),
         np.empty(m, np.int64),
     ]
     _native.encode_deltas(*args)  # the right shapes are taken

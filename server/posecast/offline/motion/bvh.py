@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import gzip
 import io
-import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,6 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from posecast.errors import BvhError
 from posecast.geometry.rotations import euler2mat, mat2euler, quat2mat
+from posecast.offline.motion.gzfile import read_maybe_gzip
 
 _VALID_CHANNELS = {f"{axis}{kind}" for axis in "XYZ" for kind in ("position", "rotation")}
 
@@ -100,15 +100,7 @@ class Bvh:
 def read_bvh(path: str | Path) -> Bvh:
     """Read a BVH file, plain or gzip-compressed."""
     p = Path(path)
-    try:
-        raw = p.read_bytes()
-    except OSError as exc:
-        raise BvhError(f"cannot read file: {exc.strerror or exc}", file=p) from exc
-    if raw[:2] == b"\x1f\x8b":
-        try:
-            raw = gzip.decompress(raw)
-        except (OSError, EOFError, zlib.error) as exc:  # BadGzipFile is an OSError
-            raise BvhError(f"corrupt gzip stream: {exc}", file=p) from exc
+    raw = read_maybe_gzip(p, BvhError)
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError:

@@ -18,7 +18,7 @@ import torch
 
 from posecast.offline.dataset.augment import Augmentation
 from posecast.offline.nets.anomaly import AnomalyAE, AnomalyConfig
-from posecast.offline.train.checkpoint import load_checkpoint, save_checkpoint
+from posecast.offline.train.checkpoint import resume_into, save_training, start_run
 from posecast.offline.train.data import Normalisation, TrainArrays, load_train_val
 from posecast.offline.train.losses import PoseFK, position_mse_cm2
 from posecast.skeleton import LOWER_BODY
@@ -70,10 +70,7 @@ def train_anomaly(
     resume: bool = False,
     log: Any = print,
 ) -> Path:
-    torch.set_num_threads(cfg.threads)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    ckpt_path = out / "checkpoint.pt"
+    ckpt_path = start_run(out_dir, cfg.threads)
     aug = Augmentation(mirror=cfg.mirror, speeds=cfg.speeds)
     manifest, train, val = load_train_val(data_dir, aug, cfg.seed)
     log(f"data: {train.n_frames} train frames, {val.n_frames} val frames")
@@ -82,33 +79,25 @@ def train_anomaly(
     model, fk = AnomalyAE(model_cfg), PoseFK()
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr, betas=(cfg.beta1, 0.999))
     norm = Normalisation.fit(train)
-    step, elapsed, history = 0, 0.0, []
+    step, elapsed = 0, 0.0
+    history: list[dict[str, float]] = []
     if resume and ckpt_path.exists():
-        state = load_checkpoint(ckpt_path)
-        model.load_state_dict(state["model"])
-        opt.load_state_dict(state["optim"])
+        state, step, history, elapsed = resume_into(ckpt_path, model, opt)
         norm = Normalisation.from_dict(state["norm"])
-        step, history, elapsed = state["step"], state["history"], state["train_seconds"]
         log(f"resumed from {ckpt_path} at step {step}")
     rng = np.random.default_rng(cfg.seed + step)
 
     def save(extra: dict[str, object] | None = None) -> None:
-        save_checkpoint(
+        save_training(
             ckpt_path,
-            {
-                "kind": "anomaly",
-                "model": model.state_dict(),
-                "optim": opt.state_dict(),
-                "config": model_cfg.to_dict(),
-                "train_config": asdict(cfg),
-                "norm": norm.to_dict(),
-                "step": step,
-                "history": history,
-                "train_seconds": elapsed,
-                "data": {"root": str(data_dir), "splits": manifest["splits"]},
-                "train_frames": train.n_frames,
-            }
-            | (extra or {}),
+            "anomaly",
+            model,
+            opt,
+            (model_cfg.to_dict(), asdict(cfg)),
+            norm.to_dict(),
+            (step, history, elapsed),
+            (data_dir, manifest, train.n_frames),
+            extra,
         )
 
     t_log = time.perf_counter()

@@ -21,7 +21,7 @@ import torch
 from posecast.geometry.torch_ops import r6d2mat
 from posecast.offline.dataset.augment import Augmentation
 from posecast.offline.nets.cvae import CVAE, CVAEConfig
-from posecast.offline.train.checkpoint import load_checkpoint, save_checkpoint
+from posecast.offline.train.checkpoint import resume_into, save_training, start_run
 from posecast.offline.train.data import Normalisation, TrainArrays, compose_sites, load_train_val
 from posecast.offline.train.losses import PoseFK, position_mse_cm2, split_root, velocity_mse_cm2
 from posecast.offline.train.masks import add_inertial_noise, cycle_table_kinds, sample_kinds
@@ -183,10 +183,7 @@ def train_cvae(
     log: Any = print,
 ) -> Path:
     """Train, checkpointing to ``out_dir/checkpoint.pt``; returns the checkpoint path."""
-    torch.set_num_threads(cfg.threads)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    ckpt_path = out / "checkpoint.pt"
+    ckpt_path = start_run(out_dir, cfg.threads)
     t0 = time.perf_counter()
     manifest, train, val = load_train_val(data_dir, cfg.augmentation(), cfg.seed, model_cfg.layout)
     if cfg.no_orientation:
@@ -209,11 +206,8 @@ def train_cvae(
     history: list[dict[str, float]] = []
     elapsed = 0.0
     if resume and ckpt_path.exists():
-        state = load_checkpoint(ckpt_path)
-        model.load_state_dict(state["model"])
-        opt.load_state_dict(state["optim"])  # moves the moments to the parameters' device
+        state, step, history, elapsed = resume_into(ckpt_path, model, opt)
         norm = Normalisation.from_dict(state["norm"])
-        step, history, elapsed = state["step"], state["history"], state["train_seconds"]
         torch.set_rng_state(state["torch_rng"])
         log(f"resumed from {ckpt_path} at step {step}")
     rng = np.random.default_rng(cfg.seed + step)
@@ -222,22 +216,16 @@ def train_cvae(
     sites = train.features_imu is not None
 
     def save() -> None:
-        save_checkpoint(
+        save_training(
             ckpt_path,
-            {
-                "kind": "ae" if model_cfg.deterministic else "cvae",
-                "model": {k: v.cpu() for k, v in model.state_dict().items()},
-                "optim": opt.state_dict(),
-                "config": model_cfg.to_dict(),
-                "train_config": asdict(cfg),
-                "norm": norm.to_dict(),
-                "step": step,
-                "history": history,
-                "train_seconds": elapsed,
-                "torch_rng": torch.get_rng_state(),
-                "data": {"root": str(data_dir), "splits": manifest["splits"]},
-                "train_frames": train.n_frames,
-            },
+            "ae" if model_cfg.deterministic else "cvae",
+            model,
+            opt,
+            (model_cfg.to_dict(), asdict(cfg)),
+            norm.to_dict(),
+            (step, history, elapsed),
+            (data_dir, manifest, train.n_frames),
+            {"torch_rng": torch.get_rng_state()},
         )
 
     t_log = time.perf_counter()

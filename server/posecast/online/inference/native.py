@@ -210,6 +210,18 @@ class NativePool:
         self.release_frames = int(release_frames)
         self.max_drift = -1.0 if max_drift_m is None else float(max_drift_m)
 
+    def _ik(self, ik: PoolIK) -> tuple[Any, Any, Any, Any, int, float]:
+        """The display IK's state (the kernels step it in place) and this pool's settings
+        for it, in the order ``pool`` and ``emit`` take them."""
+        return (
+            ik.locked,
+            ik.lock_pos,
+            ik.release,
+            ik.suppressed,
+            self.release_frames,
+            self.max_drift,
+        )
+
     def step(
         self,
         rotations: F32,
@@ -225,15 +237,9 @@ class NativePool:
             self._packed,
             rotations,
             contacts,
-            np.ascontiguousarray(root_mat, dtype=np.float32),
-            np.ascontiguousarray(root_pos, dtype=np.float32),
+            *_f32(root_mat, root_pos),
             group,
-            ik.locked,
-            ik.lock_pos,
-            ik.release,
-            ik.suppressed,
-            self.release_frames,
-            self.max_drift,
+            *self._ik(ik),
             world_out,
             scores,
         )
@@ -249,16 +255,9 @@ class NativePool:
         quats = np.empty((E, 19, 4), np.float32)
         _native.emit(
             self._packed,
-            np.ascontiguousarray(rotations, dtype=np.float32),
-            np.ascontiguousarray(contacts, dtype=np.float32),
-            np.ascontiguousarray(root_mat, dtype=np.float32),
-            np.ascontiguousarray(root_pos, dtype=np.float32),
-            ik.locked,
-            ik.lock_pos,
-            ik.release,
-            ik.suppressed,
-            self.release_frames,
-            self.max_drift,
+            *_f32(rotations, contacts),
+            *_f32(root_mat, root_pos),
+            *self._ik(ik),
             positions,
             quats,
         )
@@ -306,6 +305,11 @@ class NativePool:
 
 
 _checked: set[str] = set()
+
+
+def _f32(a: F32, b: F32) -> tuple[F32, F32]:
+    """Two arrays as the kernels take them: C-contiguous float32 (no copy where one is)."""
+    return np.ascontiguousarray(a, dtype=np.float32), np.ascontiguousarray(b, dtype=np.float32)
 
 
 def _self_check(dec: NativeDecoder, pool: NativePool) -> None:
