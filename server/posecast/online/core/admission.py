@@ -194,9 +194,8 @@ class Admission:
 
     def flooded(self, conn: int, now: float) -> None:
         """The shell held ``conn``'s reads back past its read budget for seconds on end
-        (``shell/paced.py``): it is cut off with ``RATE_LIMITED`` (fatal; no frame of
-        it is counted dropped), charged to its address, and its socket dropped once
-        the error is out."""
+        (``shell/paced.py``): it is cut off with ``RATE_LIMITED`` (fatal), charged to
+        its address, and its socket dropped once the error is out."""
         c = self.conns.get(conn)
         self.metrics.floods_cut_off.inc()
         if c is None or c.session.phase is Phase.CLOSED:
@@ -205,10 +204,7 @@ class Admission:
             "sent past the read budget (twice the protocol's limits) for seconds on end: cut off",
             fatal=True,
         )
-        self.metrics.errors.labels(exc.code).inc()
-        log.info("refused", extra={"code": exc.code, "ip": c.session.ip, "detail": exc.message})
-        self._charge(c, exc, now)
-        self.end(c, now, final=Error.from_exception(exc))
+        self.refuse(c, exc, now)
         self.conns.abort(conn)
 
     def disconnect(self, conn: int, now: float) -> None:
@@ -348,7 +344,8 @@ class Admission:
 
     def refuse(self, c: Conn, exc: ProtocolError, now: float) -> None:
         self.metrics.errors.labels(exc.code).inc()
-        if exc.code in _DROP_REASON:
+        if exc.code in _DROP_REASON and not exc.fatal:  # a fatal one drops no frame:
+            # the connection ends (RATE_LIMITED for a flood, ``flooded``)
             self.metrics.frames_dropped.labels(_DROP_REASON[exc.code]).inc()
         err = Error.from_exception(exc)
         if len(err.message.encode()) > self.limits.max_text_bytes:
