@@ -48,9 +48,17 @@ for i in range(P):
 rng = np.random.default_rng(0)
 q = rng.normal(size=(19, 4))
 q /= np.linalg.norm(q, axis=1, keepdims=True)
-poses = [
-    (f"p{i}", encode(Pose(f"p{i}", 1, now, rng.normal(size=(19, 3)) * 0.3, q))) for i in range(P)
-]
+try:  # a tree whose ticks carry PoseOut (one per pose, every protocol's encoder)
+    from posecast.testing.poses import pose_out
+
+    poses: list[object] = [
+        pose_out(f"p{i}", 1, now, rng.normal(size=(19, 3)) * 0.3, q) for i in range(P)
+    ]
+except ImportError:  # older trees: (player, v1 bytes)
+    poses = [
+        (f"p{i}", encode(Pose(f"p{i}", 1, now, rng.normal(size=(19, 3)) * 0.3, q)))
+        for i in range(P)
+    ]
 try:  # a tree with protocol v2: take() wants the time
     from posecast.online.protocol import records
 
@@ -62,7 +70,7 @@ for _ in range(5):
     t0 = time.process_time()
     for _tick in range(300):
         now += 1 / 60
-        hub.deliver(TickOutput(poses), now)
+        hub.deliver(TickOutput(poses), now)  # type: ignore[arg-type]
         for c in conns:
             box = hub.outbox(c)
             assert box is not None

@@ -44,7 +44,6 @@ def train_device(name: str) -> str:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    import dataclasses
 
     cmd = "train"
     if args.steps is not None:
@@ -116,20 +115,10 @@ def cmd_train(args: argparse.Namespace) -> int:
             root_outputs=ls.root_outputs,
         )
         cfg = CVAETrainConfig(
-            threads=args.threads,
-            seed=args.seed,
-            rot_weight=args.rot_weight,
-            vel_weight=args.vel_weight,
-            lower_weight=args.lower_weight,
-            kl_weight=args.kl_weight,
-            window=args.window,
-            batch=args.batch,
+            **_given(args, _CVAE_FLAGS),
             budget_s=args.budget_min * 60.0,
             device=train_device(args.device),
-            no_orientation=args.no_orientation,
         )
-        if args.steps is not None:
-            cfg = dataclasses.replace(cfg, steps=args.steps)
         need_clips(manifest, args.data, ("train", "val"), cfg.window)
         if args.resume and ckpt.exists():
             check_checkpoint("--resume", ckpt, args.network, str(ls.layout), _RESUME_HINT)
@@ -137,15 +126,24 @@ def cmd_train(args: argparse.Namespace) -> int:
     else:
         from posecast.offline.train.anomaly_trainer import AnomalyTrainConfig, train_anomaly
 
-        acfg = AnomalyTrainConfig(threads=args.threads, seed=args.seed)
-        if args.steps is not None:
-            acfg = dataclasses.replace(acfg, steps=args.steps)
+        acfg = AnomalyTrainConfig(**_given(args, ("threads", "seed", "steps")))
         need_clips(manifest, args.data, ("train", "val"), 1)
         if args.resume and ckpt.exists():
             check_checkpoint("--resume", ckpt, "anomaly", hint=_RESUME_HINT)
         path = train_anomaly(args.data, args.out, acfg, resume=args.resume)
     print(f"checkpoint: {path}")
     return 0
+
+
+# The training settings that `posecast train` passes on under their own names.
+_CVAE_FLAGS = ("threads", "seed", "steps", "rot_weight", "vel_weight", "lower_weight",
+               "kl_weight", "window", "batch", "no_orientation")  # fmt: skip
+
+
+def _given(args: argparse.Namespace, names: tuple[str, ...]) -> dict[str, Any]:
+    """``names`` as ``args`` holds them, leaving out those not given (``None``: the
+    training config's default stands)."""
+    return {n: getattr(args, n) for n in names if getattr(args, n) is not None}
 
 
 def cmd_export(args: argparse.Namespace) -> int:

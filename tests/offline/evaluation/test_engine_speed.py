@@ -6,6 +6,7 @@ checks that a tiny run measures what it says it does."""
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import pytest
 
@@ -17,8 +18,13 @@ from posecast.offline.evaluation.engine_speed import (
     fits_frame,
     max_realtime_players,
     realtime_summary,
-    run,
+    run_side_by_side,
 )
+
+
+def run(player_counts: list[int], backend: str = "native", **kw: Any) -> dict[str, Any]:
+    """One backend's report."""
+    return run_side_by_side([backend], player_counts, **kw)[0]
 
 
 def test_a_mixed_run_splits_players_between_the_models() -> None:

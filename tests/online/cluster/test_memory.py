@@ -24,6 +24,7 @@ from posecast.online.protocol.messages import (
     Welcome,
 )
 from posecast.online.shell.ticker import TickOutput
+from posecast.testing.poses import of_message
 from tests.online.conftest import make_cfg, token, walk_frame
 
 
@@ -49,8 +50,7 @@ class Node:
         return out
 
     def tick(self, *players: str, seq: int = 0) -> None:
-        poses = [(p, encode(_pose(p, seq))) for p in players]
-        self.hub.deliver(TickOutput(poses), self.now)
+        self.hub.deliver(TickOutput([of_message(_pose(p, seq)) for p in players]), self.now)
 
 
 def _pose(player: str, seq: int) -> Pose:
@@ -178,8 +178,8 @@ def test_a_v2_client_gets_a_remote_players_poses_as_records() -> None:
 
 
 def test_a_remote_players_calibration_reaches_v2_clients_as_its_skeleton() -> None:
-    """The v1 bus pose carries no scale: B reads it off the bone lengths and sends its
-    v2 client the skeleton before the records, so FK gives the remote positions."""
+    """The bus carries each pose's calibration scale: B sends its v2 client the
+    skeleton before the records, so FK gives the remote positions."""
     from posecast.online.protocol import records
     from posecast.online.protocol.messages import Poses, Skeleton
 
@@ -201,9 +201,7 @@ def test_a_remote_players_calibration_reaches_v2_clients_as_its_skeleton() -> No
     pos[0] = (1.0, 0.8, 2.0)
     for j in range(1, 19):
         pos[j] = pos[records.PARENTS[j]] + short[j - 1]
-    pose = Pose("pa", 5, 1.0, pos, q)
-    broker_bytes = encode(pose)
-    a.hub.deliver(TickOutput([("pa", broker_bytes)]), a.now)
+    a.hub.deliver(TickOutput([of_message(Pose("pa", 5, 1.0, pos, q), scale=1.25)]), a.now)
     msgs = [decode(d, version=2) for d in box.take(b.now)]
     kinds = [m.TYPE for m in msgs]
     assert kinds == ["skeleton", "poses"], kinds  # the skeleton first

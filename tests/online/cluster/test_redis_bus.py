@@ -23,6 +23,7 @@ from redis.asyncio import Redis
 from posecast.online.cluster.redis_bus import RedisBus
 from posecast.online.cluster.redis_store import RedisStore
 from posecast.online.metrics import Metrics
+from posecast.online.protocol.pose_out import PoseOut
 from tests.online.conftest import make_cfg
 from tests.system.scaleout.conftest import (  # noqa: F401 - fixtures used by name
     RedisServer,
@@ -53,7 +54,7 @@ class Sink:
         self,
         room: str,
         node: str,
-        poses: Sequence[tuple[str, bytes]],
+        poses: Sequence[PoseOut],
         events: Sequence[bytes],
         now: float,
     ) -> None:

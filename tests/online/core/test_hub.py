@@ -59,8 +59,8 @@ def test_no_pose_of_a_player_goes_out_after_its_leave() -> None:
     import numpy as np
 
     from posecast.online.core.tick import TickOutput
-    from posecast.online.protocol import encode
-    from posecast.online.protocol.messages import Pose, Presence
+    from posecast.online.protocol.messages import Presence
+    from posecast.testing.poses import pose_out
 
     h = Harness()
     spectator = h.join("s", role="spectator")
@@ -69,7 +69,7 @@ def test_no_pose_of_a_player_goes_out_after_its_leave() -> None:
     pos = np.zeros((19, 3))
     pos[:, 1] = np.linspace(0.1, 1.7, 19)
     rot = np.tile([0.0, 0.0, 0.0, 1.0], (19, 1))
-    h.hub.deliver(TickOutput(poses=[("a", encode(Pose("a", 7, h.now, pos, rot)))]), h.now)
+    h.hub.deliver(TickOutput(poses=[pose_out("a", 7, h.now, pos, rot)]), h.now)
     h.hub.disconnect(a, h.now)
     got = h.inbox(spectator)
     assert [(type(m).__name__, getattr(m, "event", None)) for m in got] == [("Presence", "leave")]

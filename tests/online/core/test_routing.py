@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from posecast.online.core.tick import TickOutput
+from posecast.testing.poses import pose_out
 from tests.online.core.harness import Harness
 
 
@@ -12,16 +13,17 @@ def test_poses_reach_the_room_audience_only() -> None:
     spec = h.join("s", role="spectator")
     for conn in (a, b, c, spec):
         h.inbox(conn)
-    h.hub.deliver(TickOutput([("a", b"pose-a"), ("c", b"pose-c")]), h.now)
-    h.hub.deliver(TickOutput([("a", b"pose-a2"), ("c", b"pose-c2")]), h.now)  # nobody read
+    h.hub.deliver(TickOutput([pose_out("a", 1), pose_out("c", 1)]), h.now)
+    a2, c2 = pose_out("a", 2), pose_out("c", 2)
+    h.hub.deliver(TickOutput([a2, c2]), h.now)  # nobody read
     raw = {conn: h.hub.outbox(conn).take() for conn in (a, b, c, spec)}  # type: ignore[union-attr]
-    assert raw == {a: [b"pose-a2"], b: [b"pose-a2"], c: [b"pose-c2"], spec: [b"pose-a2"]}
+    assert raw == {a: [a2.v1()], b: [a2.v1()], c: [c2.v1()], spec: [a2.v1()]}
     assert h.hub.metrics.value("posecast_poses_superseded_total") == 4
 
 
 def test_reach_limited_poses_are_counted() -> None:
     h = Harness()
     h.inbox(h.join("a"))
-    h.hub.deliver(TickOutput([("a", b"pose-a")], reach_limited=1), h.now)
-    h.hub.deliver(TickOutput([("a", b"pose-a2")]), h.now)
+    h.hub.deliver(TickOutput([pose_out("a", 1, reach_limited=True)], reach_limited=1), h.now)
+    h.hub.deliver(TickOutput([pose_out("a", 2)]), h.now)
     assert h.hub.metrics.value("posecast_reach_limited_total") == 1

@@ -25,7 +25,7 @@ from posecast.geometry.fk import fk_mat
 from posecast.geometry.rotations import aa2mat, mat2quat
 from posecast.offline.train.masks import TABLE_SETS
 from posecast.online.engine.config import EngineConfig
-from posecast.online.engine.ports import PoolIK
+from posecast.online.engine.ports import Models, PoolIK
 from posecast.online.engine.ring import rest_frame
 from posecast.online.engine.types import TrackerFrame
 from posecast.online.inference.loader import load_engine
@@ -57,7 +57,7 @@ def test_the_extension_is_built_where_a_compiler_is() -> None:
 
 
 def _decoder(name: str) -> tuple[object, ref.Decoder64]:
-    dec, _ = native.load_native(name, "anomaly", None, 2, 10, 0.2)
+    dec, _ = native.load_native(Models(name, "anomaly", None, 2, 10, 0.2))
     return dec, ref.Decoder64.load(name)
 
 
@@ -136,7 +136,7 @@ def _pool_inputs(rng: np.random.Generator, G: int, N: int) -> dict[str, np.ndarr
 
 @pytest.mark.parametrize("group", [1, 25])
 def test_pool_matches_float64_fk_ik_and_scores(level: str, group: int) -> None:
-    _, pool = native.load_native("cvae_decoder", "anomaly", None, 2, 10, 0.2)
+    _, pool = native.load_native(Models("cvae_decoder", "anomaly", None, 2, 10, 0.2))
     rng = np.random.default_rng(2)
     inp = _pool_inputs(rng, 200 // group, group)
     R = len(inp["rot"])
@@ -165,7 +165,7 @@ def test_pool_matches_float64_fk_ik_and_scores(level: str, group: int) -> None:
 def test_emit_matches_the_numpy_display_path(level: str) -> None:
     """The shown pose: FK with rotations, the display IK (thigh and shin swing) and
     quaternions, against batch_fk.fk32 + ContactIK.step(world_mat) + mat2quat."""
-    _, pool = native.load_native("cvae_decoder", "anomaly", None, 2, 10, 0.2)
+    _, pool = native.load_native(Models("cvae_decoder", "anomaly", None, 2, 10, 0.2))
     rng = np.random.default_rng(4)
     inp = _pool_inputs(rng, 300, 1)
     ik = PoolIK(*(inp[k].copy() for k in ("locked", "lock_pos", "release", "suppressed")))
@@ -201,7 +201,7 @@ def test_emit_matches_the_numpy_display_path(level: str) -> None:
 
 
 def test_threads_do_not_change_results(level: str) -> None:
-    dec, _ = native.load_native("cvae_decoder", "anomaly", None, 1, 10, 0.2)
+    dec, _ = native.load_native(Models("cvae_decoder", "anomaly", None, 1, 10, 0.2))
     rng = np.random.default_rng(3)
     R = 1000
     x = rng.standard_normal((10, 24)).astype(np.float32)
@@ -209,7 +209,7 @@ def test_threads_do_not_change_results(level: str) -> None:
     h = (0.5 * rng.standard_normal((R, 128))).astype(np.float32)
     outs = []
     for threads in (1, 2):
-        native.load_native("cvae_decoder", "anomaly", None, threads, 10, 0.2)
+        native.load_native(Models("cvae_decoder", "anomaly", None, threads, 10, 0.2))
         o = {k: np.zeros((R, n), np.float32) for k, n in (("rotations", 108), ("contacts", 2))}
         o["h_out"] = np.zeros((R, 128), np.float32)
         dec.step(x, 100, cache, h, o)
@@ -219,7 +219,7 @@ def test_threads_do_not_change_results(level: str) -> None:
 
 
 def test_bad_buffers_raise_value_errors_not_crashes() -> None:
-    dec, pool = native.load_native("cvae_decoder", "anomaly", None, 1, 10, 0.2)
+    dec, pool = native.load_native(Models("cvae_decoder", "anomaly", None, 1, 10, 0.2))
     R = 10
     good = {
         "rotations": np.zeros((R, 108), np.float32),
@@ -291,7 +291,7 @@ def test_a_level_that_disagrees_with_generic_is_dropped(
     native.set_native_isa(LEVELS[0])
     try:
         with caplog.at_level("WARNING", logger="posecast.engine"):
-            native.load_native("cvae_decoder", "anomaly", None, 1, 10, 0.2)
+            native.load_native(Models("cvae_decoder", "anomaly", None, 1, 10, 0.2))
         assert native.native_isa() == LEVELS[1]
         assert f"level {LEVELS[0]} disagrees with generic" in caplog.text
     finally:
@@ -301,7 +301,7 @@ def test_a_level_that_disagrees_with_generic_is_dropped(
 def test_a_forked_child_runs_the_kernels_on_new_workers() -> None:
     """After fork the child has only the forking thread: the pool must start workers
     again instead of waiting for the parent's (which would hang the child)."""
-    dec, _ = native.load_native("cvae_decoder", "anomaly", None, 2, 10, 0.2)
+    dec, _ = native.load_native(Models("cvae_decoder", "anomaly", None, 2, 10, 0.2))
     R = 500
     rng = np.random.default_rng(6)
     x = rng.standard_normal((5, 24)).astype(np.float32)
@@ -361,7 +361,7 @@ def test_upper_body_matches_the_numpy_reference(wrist_share: float, free: bool, 
     """The C port of the upper-body pass (pc_upper.c) against upper_ik.solve_upper_body,
     the numpy reference, on 1,000 poses: every position, rotation and reach flag, with
     the tracker rows of ``hmd3`` (3), the waist layout (4) and a tracker set (10)."""
-    _, pool = native.load_native("cvae_decoder", "anomaly", None, 1, 10, 0.2)
+    _, pool = native.load_native(Models("cvae_decoder", "anomaly", None, 1, 10, 0.2))
     ref_pool = NumpyPool.__new__(NumpyPool)  # its upper_body needs no scorer
     inp = _upper_inputs(1000, seed=11)
     roots = inp["free"] if free else None
@@ -386,7 +386,7 @@ def _tracker_rows(a: np.ndarray, rows: int) -> np.ndarray:
 
 
 def test_the_passes_in_c_take_no_poses_and_in_place_outputs() -> None:
-    _, pool = native.load_native("cvae_decoder", "anomaly", None, 1, 10, 0.2)
+    _, pool = native.load_native(Models("cvae_decoder", "anomaly", None, 1, 10, 0.2))
     inp = _upper_inputs(0, seed=2)
     pos, quat, limited = pool.upper_body(inp["pos"], inp["quat"], inp["tp"], inp["tq"], None, 0.5)
     assert pos.shape == (0, 19, 3) and quat.shape == (0, 19, 4) and limited.shape == (0,)
@@ -424,7 +424,7 @@ def test_hinge_bad_buffers_and_limbs_raise_value_errors() -> None:
 
 
 def test_upper_body_bad_buffers_raise_value_errors() -> None:
-    _, pool = native.load_native("cvae_decoder", "anomaly", None, 1, 10, 0.2)
+    _, pool = native.load_native(Models("cvae_decoder", "anomaly", None, 1, 10, 0.2))
     inp = _upper_inputs(4, seed=1)
     with pytest.raises(ValueError, match="tracker_pos"):
         pool.upper_body(inp["pos"], inp["quat"], inp["tp"][:, :2], inp["tq"], None, 0.5)
@@ -438,7 +438,7 @@ def test_upper_body_bad_buffers_raise_value_errors() -> None:
 def test_hinge_matches_the_numpy_reference(limbs: str) -> None:
     """The C port of the hinges against hinge.hinge_quat on 2,000 random poses: limbs
     bent every way (forward, backward past the fade, nearly straight)."""
-    _, pool = native.load_native("cvae_decoder", "anomaly", None, 1, 10, 0.2)
+    _, pool = native.load_native(Models("cvae_decoder", "anomaly", None, 1, 10, 0.2))
     table = KNEE_LIMBS if limbs == "knees" else ELBOW_LIMBS
     rng = np.random.default_rng(5)
     local = aa2mat(rng.normal(0.0, 0.8, (2000, 19, 3)))

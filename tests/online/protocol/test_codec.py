@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import msgpack
 import numpy as np
 import pytest
@@ -35,7 +33,6 @@ from posecast.online.protocol import (
     Selector,
     Skeleton,
     Welcome,
-    codec,
     decode,
     encode,
     from_wire,
@@ -226,30 +223,6 @@ def test_pose_encoder_refuses_what_int16_cannot_hold() -> None:
     assert info.value.code == "NOT_NORMALISED"
 
 
-def test_a_ticks_poses_encode_in_one_pass_as_one_at_a_time(rng: np.random.Generator) -> None:
-    """codec.encode_poses (the engine thread's) writes the bytes encode(Pose) writes,
-    float32 engine output included, and refuses what encode refuses, pose by pose."""
-    e = 9
-    pos = (rng.normal(size=(e, 19, 3)) * 0.5 + [0, 1, 0]).astype(np.float32)
-    pos += rng.uniform(-900, 900, size=(e, 1, 3)).astype(np.float32)  # anywhere in the world
-    q = rng.normal(size=(e, 19, 4))
-    rot = (q / np.linalg.norm(q, axis=-1, keepdims=True)).astype(np.float32)
-    pos[2, 7, 0] = pos[2, 0, 0] + 32.768  # a joint beyond int16 millimetres
-    pos[4, 3, 1] = np.nan
-    rot[6, 5] = 2.0  # far from unit length
-    players, seqs = [f"p-{i}" for i in range(e)], [2**32 - 1 - i for i in range(e)]
-    got = codec.encode_poses(players, seqs, 12.25, pos, rot)
-    refused = 0
-    for i in range(e):
-        one = Pose(players[i], seqs[i], 12.25, pos[i].astype(np.float64), rot[i].astype(np.float64))
-        try:
-            want: bytes | None = encode(one)
-        except ProtocolError:
-            want, refused = None, refused + 1
-        assert got[i] == want, i
-    assert refused == 3 and [i for i, b in enumerate(got) if b is None] == [2, 4, 6]
-
-
 def test_frame_errors_carry_the_seq() -> None:
     wire = to_wire(Frame(77, 1.0, np.zeros((4, 3)), np.tile([0, 0, 0, 1.0], (4, 1))))
     wire["trackers"][0][0] = float("inf")
@@ -392,32 +365,3 @@ def test_bad_sites_frames(frame: dict[str, object], code: str, field: str) -> No
     with pytest.raises(ProtocolError) as err:
         decode(msgpack.packb({"type": "frame", "seq": 1, "t": 0.5, **frame}))
     assert err.value.code == code and err.value.field == field
-
-
-def test_pose_time_reads_and_with_time_rewrites_only_t(rng: np.random.Generator) -> None:
-    from posecast.errors import MalformedError
-    from posecast.online.protocol.codec import pose_time, with_time
-
-    poses = [s for s in _samples(rng) if isinstance(s, Pose)]
-    assert poses
-    for msg in poses:
-        data = encode(msg)
-        t, at = pose_time(data)
-        assert t == msg.t
-        moved = with_time(data, at, 1234.5)
-        back = decode(moved)
-        assert isinstance(back, Pose) and back.t == 1234.5
-        assert encode(replace(decode(data), t=1234.5)) == moved  # type: ignore[type-var]
-    good = encode(poses[0])
-    not_poses = [
-        encode(Ping(1.0)),
-        b"",
-        b"\xc1",
-        good[: pose_time(good)[1] + 4],  # cut inside t
-        msgpack.packb({"type": "pose", "player": "p", "t": 3}),  # t not a float64
-        msgpack.packb({"type": "pose", "player": "p"}),
-        msgpack.packb([1, 2]),
-    ]
-    for data in not_poses:
-        with pytest.raises(MalformedError):
-            pose_time(data)

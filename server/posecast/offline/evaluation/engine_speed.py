@@ -270,22 +270,6 @@ def naive_loop(
     return round(float(np.percentile(np.array(times) * 1000.0, 50)), 3)
 
 
-def run(
-    player_counts: list[int],
-    samples: int,
-    threads: int,
-    ticks: int,
-    naive_players: int,
-    hmd3_share: float = 0.0,
-    backend: str = "native",
-    sets: bool = False,
-) -> dict[str, Any]:
-    """The whole report for ``backend`` (``backend`` in it: the one that ran)."""
-    return run_side_by_side(
-        [backend], player_counts, samples, threads, ticks, naive_players, hmd3_share, sets
-    )[0]
-
-
 def run_side_by_side(
     backends: list[str],
     player_counts: list[int],

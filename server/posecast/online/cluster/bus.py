@@ -26,11 +26,14 @@ import secrets
 import socket
 from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, Protocol, cast
 
 import msgpack
 
-BUS_VERSION = 1
+from posecast.online.protocol.pose_out import PoseOut
+
+# 2: a tick's poses are PoseOut rows (quantised, with their scale), not v1 messages.
+BUS_VERSION = 2
 
 
 class BusSink(Protocol):
@@ -44,7 +47,7 @@ class BusSink(Protocol):
         self,
         room: str,
         node: str,
-        poses: Sequence[tuple[str, bytes]],
+        poses: Sequence[PoseOut],
         events: Sequence[bytes],
         now: float,
     ) -> None: ...
@@ -84,7 +87,7 @@ class BusMessage:
     node: str
     player: str = ""
     name: str = ""
-    poses: tuple[tuple[str, bytes], ...] = ()  # (player, encoded pose message)
+    poses: tuple[PoseOut, ...] = ()  # each stamped with the sending node's clock
     events: tuple[bytes, ...] = ()  # encoded presence messages
     exp: int = 0  # burn: Unix time the token expires
 
@@ -92,7 +95,7 @@ class BusMessage:
 def encode_message(m: BusMessage) -> bytes:
     body: dict[str, Any] = {"v": BUS_VERSION, "k": m.kind, "n": m.node}
     if m.kind == "tick":
-        body["p"] = [list(p) for p in m.poses]
+        body["p"] = [p.bus_row() for p in m.poses]
         if m.events:
             body["e"] = list(m.events)
     else:
@@ -114,17 +117,19 @@ def decode_message(data: bytes) -> BusMessage | None:
             return None
         kind, node = str(body["k"]), str(body["n"])
         if kind == "tick":
-            # Poses and events are encoded wire messages: bytes, nothing else (an int
-            # here once made bytes(d) allocate d zero bytes).
-            pairs, events = body["p"], body.get("e", [])
-            if not isinstance(pairs, list) or not isinstance(events, list):
+            # Poses are PoseOut rows, checked field by field; events are encoded wire
+            # messages: bytes, nothing else (an int here once made bytes(d) allocate d
+            # zero bytes).
+            rows, events = body["p"], body.get("e", [])
+            if not isinstance(rows, list) or not isinstance(events, list):
                 return None
-            poses = tuple((str(p), d) for p, d in pairs)
-            if not all(isinstance(d, bytes) for _, d in poses):
-                return None
+            poses = tuple(PoseOut.from_bus_row(r) for r in rows)
             if not all(isinstance(e, bytes) for e in events):
                 return None
-            return BusMessage(kind, node, poses=poses, events=tuple(events))
+            if any(p is None for p in poses):
+                return None
+            checked = cast(tuple[PoseOut, ...], poses)
+            return BusMessage(kind, node, poses=checked, events=tuple(events))
         if kind in ("join", "leave"):
             return BusMessage(kind, node, str(body["p"]), str(body.get("m", "")))
         if kind == "burn":
@@ -192,7 +197,7 @@ class Bus:
     def left(self, room: str, player: str) -> None:
         """A local player left ``room``."""
 
-    def publish(self, room: str, poses: list[tuple[str, bytes]], events: list[bytes]) -> None:
+    def publish(self, room: str, poses: list[PoseOut], events: list[bytes]) -> None:
         """This tick's poses (and stale/active presence) of ``room``'s local players."""
 
     def burned(self, jti: str, exp: int) -> None:

@@ -10,6 +10,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from posecast.online.cluster.bus import Bus, BusMessage, decode_message, deliver, encode_message
+from posecast.online.protocol.pose_out import PoseOut
 
 
 @dataclass
@@ -56,7 +57,7 @@ class MemoryBus(Bus):
             del members[player]
         self._send(room, BusMessage("leave", self.node, player))
 
-    def publish(self, room: str, poses: list[tuple[str, bytes]], events: list[bytes]) -> None:
+    def publish(self, room: str, poses: list[PoseOut], events: list[bytes]) -> None:
         if len(self.broker.subscribers.get(room, ())) > 1:  # someone besides this node
             self._send(
                 room, BusMessage("tick", self.node, poses=tuple(poses), events=tuple(events))

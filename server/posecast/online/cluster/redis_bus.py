@@ -48,6 +48,7 @@ from posecast.online.cluster.bus import Bus, BusMessage, decode_message, deliver
 from posecast.online.cluster.redis_store import RedisStore
 from posecast.online.config import ServerConfig
 from posecast.online.metrics import Metrics
+from posecast.online.protocol.pose_out import PoseOut
 
 log = logging.getLogger("posecast.bus")
 _POLL_S = 0.05  # longest wait before a (un)subscription is sent; messages never wait
@@ -56,7 +57,7 @@ _MAX_EVENTS = 64  # stale/active presence kept per room while a round trip is in
 
 @dataclass
 class _Batch:
-    poses: dict[str, bytes] = field(default_factory=dict)
+    poses: dict[str, PoseOut] = field(default_factory=dict)  # player -> newest pose
     events: list[bytes] = field(default_factory=list)
 
 
@@ -169,7 +170,7 @@ class RedisBus(Bus):
         self._own.add(jti, exp, wall)
         self._queue(("burn", jti, exp))  # while disconnected: re-sent after the reconnect
 
-    def publish(self, room: str, poses: list[tuple[str, bytes]], events: list[bytes]) -> None:
+    def publish(self, room: str, poses: list[PoseOut], events: list[bytes]) -> None:
         if not self._connected:
             self.metrics.bus_dropped.labels("disconnected").inc()
             return
@@ -178,7 +179,7 @@ class RedisBus(Bus):
             self._ticks[room] = batch = _Batch()
         elif batch.poses:
             self.metrics.bus_dropped.labels("superseded").inc()
-        batch.poses.update(poses)
+        batch.poses.update((p.player, p) for p in poses)
         batch.events = (batch.events + events)[-_MAX_EVENTS:]
         self._wake.set()
 
@@ -333,7 +334,7 @@ class RedisBus(Bus):
     def _add_ticks(self, pipe: Any) -> None:
         ticks, self._ticks = self._ticks, {}
         for room, b in ticks.items():
-            poses, events = tuple(b.poses.items()), tuple(b.events)
+            poses, events = tuple(b.poses.values()), tuple(b.events)
             self.store.publish(
                 pipe, room, BusMessage("tick", self.node, poses=poses, events=events)
             )

@@ -13,6 +13,7 @@ bus watching exactly the rooms this node has an audience in
 from __future__ import annotations
 
 from collections.abc import Callable, Collection, Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from posecast.errors import ProtocolError, ReplacedError
@@ -24,39 +25,27 @@ from posecast.online.core.remote import RemoteRooms
 from posecast.online.core.rooms import Rooms
 from posecast.online.core.routing import Router
 from posecast.online.protocol import decode
-from posecast.online.protocol.codec import pose_time, with_time
 from posecast.online.protocol.messages import Error, Presence
+from posecast.online.protocol.pose_out import PoseOut
 
 if TYPE_CHECKING:
     from posecast.online.metrics import Metrics
 
 
+@dataclass(eq=False)
 class ClusterSink:
-    def __init__(
-        self,
-        conns: Connections,
-        rooms: Rooms,
-        remote: RemoteRooms,
-        router: Router,
-        replay: ReplayGuard,
-        bus: Bus,
-        metrics: Metrics,
-        *,
-        wall_offset_s: float,
-        end: Callable[[Conn, float, Error], None],
-    ) -> None:
-        """``end(conn, now, final)`` ends a local connection (admission's ending)."""
-        self.conns = conns
-        self.rooms = rooms
-        self.remote = remote
-        self.router = router
-        self.replay = replay
-        self.bus = bus
-        self.metrics = metrics
-        self.wall_offset_s = wall_offset_s
-        self._end = end
-        self._watched: set[str] = set()  # rooms the bus delivers to this node
-        self.clocks = NodeClocks()  # other nodes' clocks onto this one's
+    conns: Connections
+    rooms: Rooms
+    remote: RemoteRooms
+    router: Router
+    replay: ReplayGuard
+    bus: Bus
+    metrics: Metrics
+    wall_offset_s: float = field(kw_only=True)
+    # end(conn, now, final) ends a local connection (admission's ending)
+    end: Callable[[Conn, float, Error], None] = field(kw_only=True)
+    _watched: set[str] = field(default_factory=set)  # rooms the bus delivers to this node
+    clocks: NodeClocks = field(default_factory=NodeClocks)  # other nodes' clocks onto ours
 
     def remote_join(self, room: str, player: str, name: str, node: str, now: float) -> None:
         local = self.conns.of_player(player)
@@ -64,7 +53,7 @@ class ClusterSink:
             # The same player joined on another node (a reconnect through the balancer
             # landed elsewhere): that one wins, as a takeover does on one node.
             replaced = ReplacedError("the same player joined on another node")
-            self._end(local, now, Error.from_exception(replaced))
+            self.end(local, now, Error.from_exception(replaced))
         if room not in self._watched:
             return
         is_new = self.remote.join(room, player, node, name, now)
@@ -91,23 +80,18 @@ class ClusterSink:
         self,
         room: str,
         node: str,
-        poses: Sequence[tuple[str, bytes]],
+        poses: Sequence[PoseOut],
         events: Sequence[bytes],
         now: float,
     ) -> None:
-        unknown = undecodable = superseded = 0
-        for player, data in poses:
-            m = self.remote.get(room, player)
+        unknown = superseded = 0
+        for pose in poses:
+            m = self.remote.get(room, pose.player)
             if m is None or m.node != node:
                 unknown += 1  # not (yet) a member here: its join or the snapshot comes first
                 continue
-            try:
-                t, at = pose_time(data)
-            except ProtocolError:
-                undecodable += 1
-                continue
-            data = with_time(data, at, self.clocks.local(node, t, now, player))
-            superseded += self.router.pose_to_room(room, player, data, now)
+            local = pose.at(self.clocks.local(node, pose.t, now, pose.player))
+            superseded += self.router.pose_to_room(room, local, now)
         for data in events:
             if self._member_event(room, node, data):
                 self.router.bytes_to_room(room, data, now)
@@ -115,8 +99,6 @@ class ClusterSink:
                 unknown += 1
         if unknown:
             self.metrics.bus_dropped.labels("unknown_player").inc(unknown)
-        if undecodable:
-            self.metrics.bus_dropped.labels("undecodable").inc(undecodable)
         if superseded:
             self.metrics.poses_superseded.inc(superseded)
 
@@ -162,7 +144,7 @@ class ClusterSink:
                 # The join there could not reach this node (a Redis outage): it wins,
                 # as the join would have made it.
                 gone = ReplacedError("the same player joined on another node")
-                self._end(c, now, Error.from_exception(gone))
+                self.end(c, now, Error.from_exception(gone))
         if room not in self._watched:
             return  # that was the room's last local audience
         r = self.rooms.rooms.get(room)

@@ -5,8 +5,10 @@ Poses go into each listener's latest-wins slot (:mod:`posecast.online.core.outbo
 audience is its local players and watchers; players on other nodes are members of
 the room but reached through the bus, one message per room per tick.
 
-The audience may mix protocol versions. A v1 client's slot gets the pose message the
-engine thread encoded once; a v2 client's gets a record prepared against its own
+The audience may mix protocol versions. Each pose is a
+:class:`~posecast.online.protocol.pose_out.PoseOut`, this node's or another's (the bus
+carries it quantised, with its calibration scale): a v1 client's slot gets its pose
+message, encoded once for all of them; a v2 client's gets a record prepared against its own
 reference (:mod:`posecast.online.core.posestream`), on the ticks its pose rate
 takes, all the tick's records in one batched encoding. ``welcome`` and ``presence``
 are specialised per client: v2 ones carry each avatar's id and skeleton, and a
@@ -15,42 +17,33 @@ are specialised per client: v2 ones carry each avatar's id and skeleton, and a
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-import numpy as np
-
-from posecast.errors import ProtocolError
 from posecast.online.cluster.bus import Bus
 from posecast.online.core.connections import Conn, Connections
 from posecast.online.core.posestream import Avatars, PoseStream, prepare
 from posecast.online.core.remote import RemoteRooms
 from posecast.online.core.rooms import Rooms
 from posecast.online.core.tick import TickOutput
-from posecast.online.protocol.codec import decode, encode
-from posecast.online.protocol.messages import Member, Message, Pose, Presence, Welcome
+from posecast.online.protocol.codec import encode
+from posecast.online.protocol.messages import Member, Message, Presence, Welcome
+from posecast.online.protocol.pose_out import PoseOut
 from posecast.online.protocol.records import PoseState
-from posecast.skeleton import PARENTS, reference_offsets
 
 if TYPE_CHECKING:
     from posecast.online.metrics import Metrics
 
 
+@dataclass(eq=False)
 class Router:
-    def __init__(
-        self,
-        conns: Connections,
-        rooms: Rooms,
-        remote: RemoteRooms,
-        bus: Bus,
-        metrics: Metrics,
-    ) -> None:
-        self.conns = conns
-        self.rooms = rooms
-        self.remote = remote
-        self.bus = bus
-        self.metrics = metrics
-        self.avatars = Avatars()
-        self.tick = 0  # ticks delivered: a v2 client at 60/k Hz takes every k-th
+    conns: Connections
+    rooms: Rooms
+    remote: RemoteRooms
+    bus: Bus
+    metrics: Metrics
+    avatars: Avatars = field(default_factory=Avatars)
+    tick: int = 0  # ticks delivered: a v2 client at 60/k Hz takes every k-th
 
     def send(self, c: Conn, msg: Message, now: float) -> None:
         stream = c.outbox.stream
@@ -116,15 +109,11 @@ class Router:
             if member != skip:
                 self.conns.send_to_player(member, data, now)
 
-    def pose_to_room(
-        self, room: str, player: str, data: bytes, now: float, state: PoseState | None = None
-    ) -> int:
-        """``player``'s pose to ``room``'s audience; how many older ones it superseded."""
-        return self.poses_to_room(room, [(player, data, state)], now)
+    def pose_to_room(self, room: str, pose: PoseOut, now: float) -> int:
+        """One pose to ``room``'s audience; how many older ones it superseded."""
+        return self.poses_to_room(room, [pose], now)
 
-    def poses_to_room(
-        self, room: str, poses: list[tuple[str, bytes, PoseState | None]], now: float
-    ) -> int:
+    def poses_to_room(self, room: str, poses: list[PoseOut], now: float) -> int:
         """Poses of ``room`` to its audience (v2 records prepared in one batch)."""
         requests: list[tuple[Conn, PoseStream, PoseState]] = []
         superseded = self._route(room, poses, now, requests)
@@ -133,7 +122,7 @@ class Router:
     def _route(
         self,
         room: str,
-        poses: list[tuple[str, bytes, PoseState | None]],
+        poses: list[PoseOut],
         now: float,
         requests: list[tuple[Conn, PoseStream, PoseState]],
     ) -> int:
@@ -149,15 +138,13 @@ class Router:
                 v1.append(c)
             elif stream.accepts(self.tick):
                 v2.append((c, stream))
-        for player, data, state in poses:
-            for c in v1:
-                superseded += self.conns.pose_to_conn(c, player, data, now)
-            if v2 and state is None:  # a pose from another node: decode it once
-                state = _state_from_v1(data)
-                if state is not None:
-                    self._remote_scale(room, state, now)
-            if state is not None:
-                requests.extend((c, s, state) for c, s in v2 if player in s.known)
+        for pose in poses:
+            self._rescaled(room, pose.state, now)
+            if v1:
+                data = pose.v1()
+                for c in v1:
+                    superseded += self.conns.pose_to_conn(c, pose.player, data, now)
+            requests.extend((c, s, pose.state) for c, s in v2 if pose.player in s.known)
         return superseded
 
     def _put_v2(self, requests: list[tuple[Conn, PoseStream, PoseState]], now: float) -> int:
@@ -172,13 +159,10 @@ class Router:
                 superseded += self.conns.pose_to_conn(c, st.player, slot, now)
         return superseded
 
-    def _remote_scale(self, room: str, state: PoseState, now: float) -> None:
-        """A remote player's scale, read off its v1 pose's bone lengths: when it moved
-        by more than 0.2 % (2 mm on a metre of bones), its new skeleton goes to the
-        room's v2 clients before the pose."""
-        current = self.avatars.scale_of(state.player)
-        if abs(state.scale / current - 1.0) > 0.002:
-            self.avatars.rescale(state.player, round(state.scale, 4))
+    def _rescaled(self, room: str, state: PoseState, now: float) -> None:
+        """A new calibration (this node's player or another node's, whose scale the bus
+        carries): its skeleton reaches the room's v2 clients before the pose."""
+        if self.avatars.rescale(state.player, state.scale) is not None:
             self.bytes_to_room_v2(room, encode(self.avatars.skeleton_message(state.player)), now)
 
     def bytes_to_room_v2(self, room: str, data: bytes, now: float) -> None:
@@ -195,20 +179,14 @@ class Router:
         """Route one tick's poses to their rooms' audiences, and stale/active presence."""
         superseded = 0
         self.tick += 1
-        batches: dict[str, tuple[list[tuple[str, bytes]], list[bytes]]] = {}
+        batches: dict[str, tuple[list[PoseOut], list[bytes]]] = {}
         requests: list[tuple[Conn, PoseStream, PoseState]] = []
-        by_room: dict[str, list[tuple[str, bytes, PoseState | None]]] = {}
-        for player, data in out.poses:
-            room = self.rooms.room_of(player)
+        for pose in out.poses:
+            room = self.rooms.room_of(pose.player)
             if room is None:
                 continue  # left while the tick ran
-            batches.setdefault(room, ([], []))[0].append((player, data))
-            state = out.states.get(player)
-            if state is not None and self.avatars.rescale(player, state.scale) is not None:
-                # A new calibration: its skeleton reaches v2 clients before this pose.
-                self.bytes_to_room_v2(room, encode(self.avatars.skeleton_message(player)), now)
-            by_room.setdefault(room, []).append((player, data, state))
-        for room, room_poses in by_room.items():
+            batches.setdefault(room, ([], []))[0].append(pose)
+        for room, (room_poses, _) in batches.items():
             superseded += self._route(room, room_poses, now, requests)
         superseded += self._put_v2(requests, now)
         for ev in out.events:
@@ -232,24 +210,3 @@ class Router:
             m.transitions.inc(out.transitions)
         if out.reach_limited:
             m.reach_limited.inc(out.reach_limited)
-
-
-_REF_BONES_M = float(np.linalg.norm(reference_offsets()[1:], axis=1).sum())
-
-
-def _state_from_v1(data: bytes) -> PoseState | None:
-    """A v1 pose from another node, for this node's v2 clients. Its rotations are
-    snorm16 (within 1e-4 rad); the calibration scale is not on the v1 wire, so it is
-    read off the pose's bone lengths (its positions are FK of the reference bones
-    divided by the scale; 1 mm rounding leaves about 1e-4 of error)."""
-    try:
-        pose = decode(data)
-    except ProtocolError:
-        return None
-    if not isinstance(pose, Pose) or pose.rotations is None:
-        return None
-    p = pose.positions
-    bones = float(np.linalg.norm(p[1:] - p[list(PARENTS[1:])], axis=1).sum())
-    scale = _REF_BONES_M / bones if bones > 0.2 * _REF_BONES_M else 1.0  # else: no body
-    return PoseState.batch([pose.player], [pose.seq], pose.t, p[None], pose.rotations[None],
-                           [scale], [False])[0]  # fmt: skip

@@ -38,7 +38,7 @@ from enum import StrEnum
 from posecast.online.engine.calibration import Calibration
 from posecast.online.engine.selectors import SampleSelector
 from posecast.online.engine.types import EngineEvent, TrackerFrame
-from posecast.online.protocol.records import PoseState
+from posecast.online.protocol.pose_out import PoseOut
 from posecast.tracking.layouts import Layout, PlayerLayout
 
 RATE_WINDOW_TICKS = 60  # the window the arrival rate of unannounced fast clients is read over
@@ -74,9 +74,8 @@ class TickInput:
 
 @dataclass
 class TickOutput:
-    poses: list[tuple[str, bytes]]  # (player, encoded v1 pose message)
+    poses: list[PoseOut]  # the tick's shown poses, quantised once for every way out
     events: list[EngineEvent] = field(default_factory=list)
-    states: dict[str, PoseState] = field(default_factory=dict)  # the same poses, for v2
     transitions: int = 0
     batch: int = 0  # players in the step
     seconds: float = 0.0  # wall time of the step in the engine thread

@@ -23,11 +23,14 @@ weights. This module imports no inference library.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
+from posecast.body.ik import MAX_DRIFT_M, RELEASE_FRAMES
 from posecast.body.passes import Passes
 from posecast.body.passes import PoolIK as PoolIK  # the pool's contact-IK state, re-exported
 
@@ -91,3 +94,17 @@ class Pool(Passes, Protocol):
         post-IK world positions go into ``world_out (R, 19, 3)``; ``ik`` steps in place.
         """
         ...
+
+
+@dataclass(frozen=True)
+class Models:
+    """What every backend's loader takes: the artifacts of one layout (names, and the
+    folder, ``None`` for the shipped models), its thread count, and the pool's
+    contact-IK settings (``EngineConfig.ik_release_frames``, ``ik_max_drift_m``)."""
+
+    decoder: str
+    anomaly: str
+    models_dir: str | Path | None = None
+    threads: int = 1
+    release_frames: int = RELEASE_FRAMES
+    max_drift_m: float | None = MAX_DRIFT_M

@@ -17,7 +17,7 @@ from typing import NamedTuple
 
 from posecast.errors import ConfigError, ModelError
 from posecast.online.engine.config import EngineConfig
-from posecast.online.engine.ports import BACKENDS, MAX_THREADS, Pool, StepDecoder
+from posecast.online.engine.ports import BACKENDS, MAX_THREADS, Models, Pool, StepDecoder
 from posecast.tracking.layouts import Layout, spec
 
 log = logging.getLogger("posecast.engine")
@@ -62,14 +62,13 @@ def load_backend(
         raise exc
     ls = spec(layout)
     cfg = cfg or EngineConfig()
-    ik = (cfg.ik_release_frames, cfg.ik_max_drift_m)
+    models = Models(ls.decoder, ls.anomaly, models_dir, threads, cfg.ik_release_frames,
+                    cfg.ik_max_drift_m)  # fmt: skip
     if name == "native":
         try:
             from posecast.online.inference.native import load_native
 
-            folder = str(models_dir) if models_dir is not None else None
-            dec, pool = load_native(ls.decoder, ls.anomaly, folder, threads, *ik)
-            return Backend("native", dec, pool)
+            return Backend("native", *load_native(models))
         except (ImportError, ModelError) as exc:
             log.warning(
                 "native backend unavailable (%s: %s); using onnx",
@@ -87,7 +86,7 @@ def load_backend(
             raise missing from None
         from posecast.online.inference.torch_backend import load_torch
 
-        return Backend("torch", *load_torch(ls.decoder, ls.anomaly, models_dir, threads, *ik))
+        return Backend("torch", *load_torch(models))
     from posecast.online.inference.onnx_backend import load_onnx
 
-    return Backend("onnx", *load_onnx(ls.decoder, ls.anomaly, models_dir, threads, *ik))
+    return Backend("onnx", *load_onnx(models))

@@ -32,7 +32,7 @@ from posecast.body.upper_ik import (
     SPINE_REACH_M,
 )
 from posecast.errors import ModelError
-from posecast.online.engine.ports import PoolIK
+from posecast.online.engine.ports import Models, PoolIK
 from posecast.online.inference.artifact import read_sidecar
 from posecast.skeleton import PARENTS, reference_offsets
 
@@ -369,19 +369,13 @@ def _probe(dec: NativeDecoder, pool: NativePool, level: str) -> list[F32 | F64]:
     return [*out.values(), world, scores]
 
 
-def load_native(
-    decoder_name: str,
-    anomaly_name: str,
-    models_dir: str | None,
-    threads: int,
-    release_frames: int,
-    max_drift_m: float | None,
-) -> tuple[NativeDecoder, NativePool]:
-    """The native decoder and pool on the artifacts ``decoder_name`` / ``anomaly_name``."""
-    _native.set_threads(max(1, int(threads)))
-    meta, path = read_sidecar(decoder_name, models_dir)
-    ae_meta, ae_path = read_sidecar(anomaly_name, models_dir)
-    dec = NativeDecoder(decoder_name, meta, path)
-    pool = NativePool(ae_meta, ae_path, release_frames, max_drift_m)
+def load_native(m: Models) -> tuple[NativeDecoder, NativePool]:
+    """The native decoder and pool on the artifacts ``m`` names."""
+    _native.set_threads(max(1, int(m.threads)))
+    folder = None if m.models_dir is None else str(m.models_dir)
+    meta, path = read_sidecar(m.decoder, folder)
+    ae_meta, ae_path = read_sidecar(m.anomaly, folder)
+    dec = NativeDecoder(m.decoder, meta, path)
+    pool = NativePool(ae_meta, ae_path, m.release_frames, m.max_drift_m)
     _self_check(dec, pool)
     return dec, pool

@@ -13,7 +13,6 @@ runs); the shown poses' passes are the numpy references,
 from __future__ import annotations
 
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -21,7 +20,7 @@ import numpy as np
 from posecast.body.batch_fk import fk32
 from posecast.body.ik import MAX_DRIFT_M, RELEASE_FRAMES, ContactIK
 from posecast.body.passes import NumpyPasses
-from posecast.online.engine.ports import F32, F64, PoolIK
+from posecast.online.engine.ports import F32, F64, Models, PoolIK
 from posecast.online.inference.anomaly import AnomalyScorer
 from posecast.online.inference.artifact import Artifact, load_artifact
 
@@ -87,15 +86,8 @@ class NumpyPool(NumpyPasses):
         return np.asarray(scores, dtype=np.float64)
 
 
-def load_onnx(
-    decoder: str,
-    anomaly: str,
-    models_dir: str | Path | None = None,
-    threads: int = 1,
-    release_frames: int = RELEASE_FRAMES,
-    max_drift_m: float | None = MAX_DRIFT_M,
-) -> tuple[OnnxDecoder, NumpyPool]:
-    """The ``onnx`` backend on the artifacts ``decoder`` and ``anomaly``."""
-    dec = OnnxDecoder(load_artifact(decoder, models_dir, threads=threads))
-    scorer = load_artifact(anomaly, models_dir, threads=threads)
-    return dec, NumpyPool(scorer, release_frames, max_drift_m)
+def load_onnx(m: Models) -> tuple[OnnxDecoder, NumpyPool]:
+    """The ``onnx`` backend on the artifacts ``m`` names."""
+    dec = OnnxDecoder(load_artifact(m.decoder, m.models_dir, threads=m.threads))
+    scorer = load_artifact(m.anomaly, m.models_dir, threads=m.threads)
+    return dec, NumpyPool(scorer, m.release_frames, m.max_drift_m)

@@ -18,10 +18,9 @@ import onnx
 import torch
 from onnx import numpy_helper
 
-from posecast.body.ik import MAX_DRIFT_M, RELEASE_FRAMES
 from posecast.errors import ModelError
 from posecast.offline.nets.cvae import CVAEConfig, CVAEDecoder
-from posecast.online.engine.ports import F32
+from posecast.online.engine.ports import F32, Models
 from posecast.online.inference.artifact import load_artifact, read_sidecar
 from posecast.online.inference.onnx_backend import NumpyPool
 
@@ -124,17 +123,10 @@ def _tensor(a: np.ndarray) -> torch.Tensor:
     return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))
 
 
-def load_torch(
-    decoder: str,
-    anomaly: str,
-    models_dir: str | Path | None = None,
-    threads: int = 1,
-    release_frames: int = RELEASE_FRAMES,
-    max_drift_m: float | None = MAX_DRIFT_M,
-) -> tuple[TorchDecoder, NumpyPool]:
-    """The ``torch`` backend on the artifacts ``decoder`` and ``anomaly`` (``threads``: of
-    the anomaly network's ONNX Runtime session; the decoder runs on one)."""
-    meta, onnx_path = read_sidecar(decoder, models_dir)
-    dec = TorchDecoder(decoder, meta, _initializers(onnx_path))
-    scorer = load_artifact(anomaly, models_dir, threads=threads)
-    return dec, NumpyPool(scorer, release_frames, max_drift_m)
+def load_torch(m: Models) -> tuple[TorchDecoder, NumpyPool]:
+    """The ``torch`` backend on the artifacts ``m`` names (``m.threads``: of the anomaly
+    network's ONNX Runtime session; the decoder runs on one)."""
+    meta, onnx_path = read_sidecar(m.decoder, m.models_dir)
+    dec = TorchDecoder(m.decoder, meta, _initializers(onnx_path))
+    scorer = load_artifact(m.anomaly, m.models_dir, threads=m.threads)
+    return dec, NumpyPool(scorer, m.release_frames, m.max_drift_m)

@@ -18,12 +18,9 @@ message a client sends stays within ``max_message_bytes``).
 
 from __future__ import annotations
 
-import struct
 from typing import Any, NoReturn
 
 import msgpack
-import numpy as np
-from numpy.typing import NDArray
 
 from posecast.errors import (
     BadFieldError,
@@ -32,7 +29,6 @@ from posecast.errors import (
     TooLargeError,
     UnknownTypeError,
 )
-from posecast.online.protocol import quantize
 from posecast.online.protocol.messages import (
     DEFAULT_LIMITS,
     MAX_ARRAY_LEN,
@@ -47,7 +43,7 @@ from posecast.online.protocol.messages import (
     Limits,
     Message,
 )
-from posecast.online.protocol.wire import DECODERS, ENCODERS, pose_map
+from posecast.online.protocol.wire import DECODERS, ENCODERS
 
 Map = dict[str, Any]
 
@@ -60,26 +56,6 @@ def encode(msg: Message) -> bytes:
     pelvis, or a rotation far from unit length, raises :class:`ProtocolError`.
     """
     out: bytes = msgpack.packb(to_wire(msg), use_bin_type=True)
-    return out
-
-
-def encode_poses(
-    players: list[str], seqs: list[int], t: float, positions: NDArray[Any], rotations: NDArray[Any]
-) -> list[bytes | None]:
-    """:func:`encode` of one tick's ``pose`` messages, the same bytes as one
-    :class:`~posecast.online.protocol.messages.Pose` at a time, quantised in one numpy
-    pass (``positions (E, 19, 3)``, ``rotations (E, 19, 4)``); ``None`` for a pose that
-    quantising refuses (where :func:`encode` raises)."""
-    pos = np.asarray(positions, dtype=np.float64)
-    roots, offsets = quantize.pos2mm_many(pos)
-    rots = quantize.quat2snorm_many(np.asarray(rotations, dtype=np.float64))
-    tf = float(t)
-    out: list[bytes | None] = []
-    for player, seq, root, pos_mm, rot in zip(players, seqs, roots, offsets, rots, strict=True):
-        if pos_mm is None or rot is None:
-            out.append(None)
-            continue
-        out.append(msgpack.packb(pose_map(player, seq, tf, root, pos_mm, rot), use_bin_type=True))
     return out
 
 
@@ -173,41 +149,6 @@ def from_wire(
         # walk the whole map now (only on this error path) so the code matches.
         _check_structure(obj, 1)
         raise
-
-
-_FLOAT64 = 0xCB
-
-
-def pose_time(data: bytes) -> tuple[float, int]:
-    """A pose's ``t``, and where its float64 starts in ``data``, reading only the keys
-    before it (a tenth of :func:`decode`'s time). The rest is not checked: a caller
-    that passes the bytes on has them from a trusted source (another node).
-
-    Raises:
-        MalformedError: not a msgpack map of ``type`` pose with a float64 ``t``.
-    """
-    u = msgpack.Unpacker(raw=False, strict_map_key=True, max_buffer_size=len(data) or 1)
-    u.feed(data)
-    try:
-        n = u.read_map_header()
-        if n < 1 or u.unpack() != "type" or u.unpack() != "pose":
-            raise MalformedError("not a pose")
-        for _ in range(n - 1):
-            if u.unpack() == "t":
-                at = u.tell() + 1
-                if data[at - 1] != _FLOAT64 or len(data) < at + 8:
-                    break
-                t: float = struct.unpack_from(">d", data, at)[0]
-                return t, at
-            u.skip()
-    except (ValueError, msgpack.OutOfData, TypeError):
-        pass
-    raise MalformedError("not a pose with a float64 t")
-
-
-def with_time(data: bytes, at: int, t: float) -> bytes:
-    """``data`` with the float64 at ``at`` (from :func:`pose_time`) set to ``t``."""
-    return data[:at] + struct.pack(">d", t) + data[at + 8 :]
 
 
 def _check_structure(value: object, depth: int) -> None:

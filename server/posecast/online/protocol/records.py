@@ -168,6 +168,27 @@ class PoseState:
         return cls(player, seq, t, (r[0], r[1], r[2]), world2items(w), w, scale, reach_limited)
 
     @classmethod
+    def from_world(
+        cls,
+        player: str,
+        seq: int,
+        t: float,
+        root: tuple[int, int, int],
+        world: F64,
+        scale: float = 1.0,
+        reach_limited: bool = False,
+    ) -> PoseState:
+        """From the pelvis in 0.1 mm steps and world ``rotations (19, 4)`` (a pose another
+        node made); ``ValueError`` when the root is beyond +-1000 m or a rotation is not
+        a unit quaternion's."""
+        if not all(abs(c) <= ROOT_MAX for c in root):
+            raise ValueError("the pelvis is beyond +-1000 m")
+        w = normalise(np.asarray(world, dtype=np.float64))
+        if not np.isfinite(w).all():
+            raise ValueError("a rotation is not finite")
+        return cls(player, seq, t, root, world2items(w), w, scale, reach_limited)
+
+    @classmethod
     def batch(
         cls,
         players: list[str],

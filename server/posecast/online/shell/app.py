@@ -23,6 +23,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import errno
+import gc
 import logging
 import signal
 import socket
@@ -135,6 +136,12 @@ class PosecastServer:
             )
         )
         await self.bus.start()
+        # What start-up made (the models, numpy, onnxruntime's bindings: most of the
+        # heap) lives as long as the node: frozen, a full collection no longer walks it.
+        # A full collection during a join wave took 40-73 ms before and 7-22 ms after
+        # (the tiny-frames test, joined; docs/reliability.md "Collector pauses").
+        gc.collect()
+        gc.freeze()
         self.ready = True
         log.info(
             "listening", extra={"host": self.cfg.host, "port": self.port, "node": self.bus.node}

@@ -1,5 +1,6 @@
 """The fixed-rate tick: take every player's waiting frame (the core's EngineInbox),
-one batched engine step, encode the poses, hand them back for broadcast.
+one batched engine step, the poses quantised once for every way out
+(:class:`~posecast.online.protocol.pose_out.PoseOut`), handed back for broadcast.
 
 All engine work, membership changes included, runs in ONE dedicated worker thread
 (``ThreadPoolExecutor(max_workers=1)``), at tick boundaries, so socket I/O goes on
@@ -26,7 +27,7 @@ import numpy as np
 
 from posecast.online.core.tick import EngineOp, EngineOpKind, TickInput, TickOutput
 from posecast.online.engine.multi import MultiEngine
-from posecast.online.protocol.codec import encode_poses
+from posecast.online.protocol.pose_out import PoseOut
 from posecast.online.protocol.quantize import roots_on_wire
 from posecast.online.protocol.records import PoseState
 
@@ -53,36 +54,29 @@ class EngineWorker:
             if player in e.players:
                 e.push(player, frame)
         result = e.tick()
-        poses = []
-        limited = 0
-        shown = [p for p in result.poses if not p.held and p.seq >= 0]
+        poses: list[PoseOut] = []
         # one pose per source frame: nothing new over a gap or when stale
-        states: dict[str, PoseState] = {}
+        shown = [p for p in result.poses if not p.held and p.seq >= 0]
         if shown:
-            players, seqs = [p.player for p in shown], [p.seq for p in shown]
             positions = roots_on_wire(np.stack([p.positions for p in shown]))
             rotations = np.stack([p.rotations for p in shown])
-            batch = PoseState.batch(
-                players,
-                seqs,
+            states = PoseState.batch(
+                [p.player for p in shown],
+                [p.seq for p in shown],
                 server_t,
                 positions,
                 rotations,
                 [p.scale for p in shown],
                 [p.reach_limited for p in shown],
             )
-            states = {st.player: st for st in batch if st is not None}
-            encoded = encode_poses(players, seqs, server_t, positions, rotations)
-            for p, data in zip(shown, encoded, strict=True):
-                limited += p.reach_limited
-                if data is None:  # quantising refused it (a joint 32 m from the pelvis)
-                    self.unencodable += 1
-                else:
-                    poses.append((p.player, data))
+            poses, refused = PoseOut.batch(states, positions, rotations)
+            self.unencodable += refused  # a joint 32 m from the pelvis
+            for p in poses:
+                p.v1()  # the v1 bytes too, here in the engine thread, once
+        limited = sum(p.state.reach_limited for p in poses)
         return TickOutput(
             poses,
             result.events,
-            states,
             result.transitions,
             e.player_count,
             time.perf_counter() - t0,
