@@ -53,6 +53,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 
 class PosecastError(Exception):
@@ -241,17 +242,28 @@ class RateLimitedError(ProtocolError):
 
 class UnauthenticatedError(ProtocolError):
     """The ``hello`` token is missing, malformed or its signature does not verify, or a
-    session with it ended with ``bye`` or a kick (refused until the token expires)."""
+    session with it ended with ``bye`` or a kick (refused until the token expires).
+    ``reason`` is a stable slug of why (``posecast.online.auth.tokens.REASONS``), the
+    label the refusal is counted under in ``posecast_token_refusals_total``."""
 
     code = "UNAUTHENTICATED"
     fatal = True
 
+    def __init__(self, message: str, *, reason: str = "invalid", **kw: Any) -> None:
+        super().__init__(message, **kw)
+        self.reason = reason
+
 
 class TokenExpiredError(ProtocolError):
-    """The token verified but has expired (or is not valid yet)."""
+    """The token verified but has expired (or is not valid yet); ``reason`` as for
+    :class:`UnauthenticatedError` (``expired``, ``not_yet_valid``)."""
 
     code = "TOKEN_EXPIRED"
     fatal = True
+
+    def __init__(self, message: str, *, reason: str = "expired", **kw: Any) -> None:
+        super().__init__(message, **kw)
+        self.reason = reason
 
 
 class ForbiddenError(ProtocolError):
