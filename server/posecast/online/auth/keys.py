@@ -94,12 +94,12 @@ class KeySet:
         return cls.of([secret_key(secret, kid)])
 
 
-def secret_key(secret: str | bytes, kid: str = SECRET_KID) -> Key:
+def secret_key(secret: str | bytes, kid: str = SECRET_KID, where: str = "") -> Key:
     raw = secret.encode("utf-8") if isinstance(secret, str) else secret
     if len(raw) < MIN_SECRET_BYTES:
         raise ConfigError(
-            f"HS256 key {kid!r} has {len(raw)} bytes: a token secret must be at least"
-            f" {MIN_SECRET_BYTES} (RFC 7518 3.2)"
+            f"{where or f'HS256 key {kid!r}'} has {len(raw)} bytes: a token secret must be"
+            f" at least {MIN_SECRET_BYTES} (RFC 7518 3.2)"
         )
     return Key(kid, "HS256", raw)
 
@@ -114,7 +114,11 @@ def parse_key_set(text: str, source: str) -> KeySet:
         raise ConfigError(f'{source} is not JSON: a key set is {{"keys": [JWK, ...]}}') from None
     if not isinstance(doc, dict) or not isinstance(doc.get("keys"), list) or not doc["keys"]:
         raise ConfigError(f'{source} is not a key set: {{"keys": [JWK, ...]}}, at least one key')
-    return KeySet.of(parse_jwk(jwk, f"{source} key {i}") for i, jwk in enumerate(doc["keys"]))
+    keys = [parse_jwk(jwk, f"{source} key {i}") for i, jwk in enumerate(doc["keys"])]
+    try:
+        return KeySet.of(keys)
+    except ConfigError as exc:
+        raise ConfigError(f"{source}: {exc.message}") from None
 
 
 def parse_jwk(jwk: object, where: str) -> Key:
@@ -136,7 +140,7 @@ def parse_jwk(jwk: object, where: str) -> Key:
     except jwt.PyJWTError:  # its message may quote the key: not shown
         raise ConfigError(f"{where} is not a valid {alg} key") from None
     if alg == "HS256":
-        return secret_key(material, kid)
+        return secret_key(material, kid, where)
     return Key(kid, alg, material)
 
 
