@@ -298,8 +298,12 @@ def add_parsers(sub: argparse._SubParsersAction[Any]) -> None:
     gen = sub.add_parser(
         "keygen", help="a new token key: private JWK to --out, public key set to stdout"
     )
-    gen.add_argument("--alg", default="ES256", choices=("ES256", "EdDSA", "HS256"),
-                     help="ES256 (default) or EdDSA: servers hold only the public key")
+    gen.add_argument(
+        "--alg",
+        default="ES256",
+        choices=("ES256", "EdDSA", "HS256"),
+        help="ES256 (default) or EdDSA: servers hold only the public key",
+    )
     gen.add_argument("--kid", required=True, help="the key's id, e.g. 2026-12")
     gen.add_argument("--out", required=True, help="new file for the private key (mode 0600)")
     gen.set_defaults(func=cmd_keygen)  # fmt: skip

@@ -81,7 +81,7 @@ def test_the_config_joins_secret_keys_and_file(tmp_path: Path) -> None:
 def test_a_config_with_no_key_or_a_bad_file_is_refused(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="no token secret or key set"):
         ServerConfig()
-    with pytest.raises(ConfigError, match="token key file .*missing.json"):
+    with pytest.raises(ConfigError, match=r"token key file .*missing\.json"):
         ServerConfig(token_keys_file=str(tmp_path / "missing.json"))
     ServerConfig(token_keys=_set(generate("EdDSA", "ed")[1]))  # a key set alone will do
     dev = ServerConfig.from_sources({"POSECAST_TOKEN_KEYS": _set(generate("EdDSA", "e")[1])},

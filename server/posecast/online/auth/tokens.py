@@ -29,7 +29,10 @@ with ``old_format``, naming the change (docs/operations.md, "Upgrading").
 
 from __future__ import annotations
 
+import base64
+import binascii
 import heapq
+import json
 import secrets
 from dataclasses import dataclass, field
 from typing import Any
@@ -146,6 +149,20 @@ def _shown(value: object) -> str:
     return "(not shown: not a short id)"
 
 
+def _header(token: str) -> dict[str, Any]:
+    """The JOSE header, read only to pick the key: PyJWT then reads the whole token
+    again, strictly, and verifies it (this saves its strict read of the header twice,
+    a third of a check's cost)."""
+    part = token.split(".", 1)[0]
+    try:
+        header = json.loads(base64.urlsafe_b64decode(part + "=" * (-len(part) % 4)))
+    except (ValueError, binascii.Error, RecursionError):
+        raise _refused("malformed", "token header is not base64url JSON") from None
+    if not isinstance(header, dict):
+        raise _refused("malformed", "token header is not a JSON object")
+    return header
+
+
 def _pick_key(keys: KeySet, token: str) -> Key:
     """The key that must verify ``token``, from its header, before any signature
     check: refused here are a non-JWT, an alg off the list, an unknown kid, and an
@@ -163,10 +180,7 @@ def _pick_key(keys: KeySet, token: str) -> Key:
         )
     if token.count(".") != 2:
         raise _refused("malformed", "token is not a JWT (header.claims.signature)")
-    try:
-        header = jwt.get_unverified_header(token)
-    except jwt.PyJWTError:
-        raise _refused("malformed", "token header is not base64url JSON") from None
+    header = _header(token)
     alg = header.get("alg")
     if alg not in ALGORITHMS:
         raise _refused(
@@ -177,11 +191,11 @@ def _pick_key(keys: KeySet, token: str) -> Key:
     if "crit" in unknown or "b64" in unknown:
         raise _refused("malformed", "token header asks for JWS extensions (crit, b64)")
     kid = header.get("kid")
+    if kid is not None and not isinstance(kid, str):
+        raise _refused("malformed", "token kid is not a string")
     if kid is None:
         if len(keys) != 1:
-            raise _refused(
-                "unknown_kid", f"token has no kid and the server holds {len(keys)} keys"
-            )
+            raise _refused("unknown_kid", f"token has no kid and the server holds {len(keys)} keys")
         key = next(iter(keys.keys.values()))
     else:
         found = keys.keys.get(kid) if isinstance(kid, str) else None
@@ -196,9 +210,7 @@ def _pick_key(keys: KeySet, token: str) -> Key:
     return key
 
 
-def verify(
-    keys: KeySet | bytes | str, token: str, *, now: float, leeway_s: float = 0.0
-) -> Claims:
+def verify(keys: KeySet | bytes | str, token: str, *, now: float, leeway_s: float = 0.0) -> Claims:
     """The claims of a token whose signature verifies and that is valid at ``now``.
 
     ``keys``: the server's key set, or one HS256 secret (tests, tools).
