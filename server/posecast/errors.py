@@ -242,26 +242,26 @@ class RateLimitedError(ProtocolError):
 
 class UnauthenticatedError(ProtocolError):
     """The ``hello`` token is missing, malformed or its signature does not verify, or a
-    session with it ended with ``bye`` or a kick (refused until the token expires).
-    ``reason`` is a stable slug of why (``posecast.online.auth.tokens.REASONS``), the
-    label the refusal is counted under in ``posecast_token_refusals_total``."""
+    session with it ended with ``bye`` or a kick (refused until the token expires)."""
 
     code = "UNAUTHENTICATED"
     fatal = True
 
     def __init__(self, message: str, *, reason: str = "invalid", **kw: Any) -> None:
+        """``reason``: a stable slug of why (``posecast.online.auth.tokens.REASONS``),
+        the label the refusal is counted under in ``posecast_token_refusals_total``."""
         super().__init__(message, **kw)
         self.reason = reason
 
 
 class TokenExpiredError(ProtocolError):
-    """The token verified but has expired (or is not valid yet); ``reason`` as for
-    :class:`UnauthenticatedError` (``expired``, ``not_yet_valid``)."""
+    """The token verified but has expired (or is not valid yet)."""
 
     code = "TOKEN_EXPIRED"
     fatal = True
 
     def __init__(self, message: str, *, reason: str = "expired", **kw: Any) -> None:
+        """``reason``: ``expired`` or ``not_yet_valid`` (as for UnauthenticatedError)."""
         super().__init__(message, **kw)
         self.reason = reason
 
