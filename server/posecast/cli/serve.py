@@ -302,11 +302,11 @@ def add_parsers(sub: argparse._SubParsersAction[Any]) -> None:
         "--alg",
         default="ES256",
         choices=("ES256", "EdDSA", "HS256"),
-        help="ES256 (default) or EdDSA: servers hold only the public key",
+        help="ES256 (default) or EdDSA: servers hold only the public key; HS256: a shared secret",
     )
     gen.add_argument("--kid", required=True, help="the key's id, e.g. 2026-12")
     gen.add_argument("--out", required=True, help="new file for the private key (mode 0600)")
-    gen.set_defaults(func=cmd_keygen)  # fmt: skip
+    gen.set_defaults(func=cmd_keygen)
 
     demo = sub.add_parser("demo", help="server + two simulated headsets + a spectator (make run)")
     demo.add_argument("--port", type=int, default=8765, help="port (0: any free one)")
