@@ -31,11 +31,13 @@ sys.path.insert(0, str(HERE))  # the helper modules beside this script
 from _body import body_json, body_md  # noqa: E402
 from _schema import Builder  # noqa: E402
 
+from posecast.online.auth.keys import KeySet, SigningKey  # noqa: E402
 from posecast.online.auth.tokens import mint, verify  # noqa: E402
 
 TOKEN_BEGIN = "<!-- BEGIN token example: written by proto/generate_spec.py -->"
 TOKEN_END = "<!-- END token example -->"
-EXAMPLE_SECRET = "correct-horse-battery-staple"  # 28 characters: at least 16
+EXAMPLE_SECRET = "correct-horse-battery-staple-2026"  # 33 characters: at least 32
+EXAMPLE_KID = "2026-01"
 EXAMPLE_NOW = 1_767_225_600  # 2026-01-01T00:00:00Z
 EXAMPLE_JTI = "bS3Vx0kq7RZ1Jm9a"  # what a minter's 12 random bytes look like in base64url
 
@@ -63,28 +65,33 @@ def dumps(value: Any, width: int = 100) -> str:
 
 def token_example() -> str:
     """The README's worked token example, minted and checked by the server's own code."""
-    secret = EXAMPLE_SECRET.encode("utf-8")
-    token = mint(secret, room="lobby", player="ada", now=EXAMPLE_NOW, jti=EXAMPLE_JTI)
-    verify(secret, token, now=EXAMPLE_NOW + 1)
-    first, sig = token.split(".")
-    claims = base64.urlsafe_b64decode(first + "=" * (-len(first) % 4)).decode("utf-8")
-    mac = hmac.new(secret, first.encode("ascii"), hashlib.sha256).digest()
+    key = SigningKey.from_secret(EXAMPLE_SECRET, kid=EXAMPLE_KID)
+    token = mint(key, room="lobby", player="ada", now=EXAMPLE_NOW, jti=EXAMPLE_JTI)
+    keys = KeySet.from_secret(EXAMPLE_SECRET, kid=EXAMPLE_KID)
+    verify(keys, token, now=EXAMPLE_NOW + 1)
+    header_part, claims_part, sig = token.split(".")
+
+    def text(part: str) -> str:
+        return base64.urlsafe_b64decode(part + "=" * (-len(part) % 4)).decode("utf-8")
+
+    signing_input = f"{header_part}.{claims_part}".encode("ascii")
+    mac = hmac.new(EXAMPLE_SECRET.encode(), signing_input, hashlib.sha256).digest()
     assert base64.urlsafe_b64encode(mac).rstrip(b"=").decode() == sig
     return "\n".join(
         [
             TOKEN_BEGIN,
             "",
-            f"With the secret `{EXAMPLE_SECRET}`, for player `ada` in room `lobby`, issued",
-            f"at {EXAMPLE_NOW} (2026-01-01 00:00 UTC) for an hour:",
+            f"HS256 with the secret `{EXAMPLE_SECRET}` (kid `{EXAMPLE_KID}`), for player",
+            f"`ada` in room `lobby`, issued at {EXAMPLE_NOW} (2026-01-01 00:00 UTC) for an hour:",
             "",
             "```",
+            "header (UTF-8 JSON):",
+            f"  {text(header_part)}",
             "claims (UTF-8 JSON):",
-            f"  {claims}",
-            "first part = base64url(claims):",
-            f"  {first}",
-            "HMAC-SHA256(key = UTF-8 of the secret, message = ASCII of the first part), hex:",
+            f"  {text(claims_part)}",
+            "HMAC-SHA256(key = UTF-8 of the secret, message = ASCII of header.claims), hex:",
             f"  {mac.hex()}",
-            'token = first part "." base64url(MAC):',
+            'token = base64url(header) "." base64url(claims) "." base64url(MAC):',
             f"  {token}",
             "```",
             "",

@@ -53,6 +53,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 
 class PosecastError(Exception):
@@ -246,12 +247,23 @@ class UnauthenticatedError(ProtocolError):
     code = "UNAUTHENTICATED"
     fatal = True
 
+    def __init__(self, message: str, *, reason: str = "invalid", **kw: Any) -> None:
+        """``reason``: a stable slug of why (``posecast.online.auth.tokens.REASONS``),
+        the label the refusal is counted under in ``posecast_token_refusals_total``."""
+        super().__init__(message, **kw)
+        self.reason = reason
+
 
 class TokenExpiredError(ProtocolError):
     """The token verified but has expired (or is not valid yet)."""
 
     code = "TOKEN_EXPIRED"
     fatal = True
+
+    def __init__(self, message: str, *, reason: str = "expired", **kw: Any) -> None:
+        """``reason``: ``expired`` or ``not_yet_valid`` (as for UnauthenticatedError)."""
+        super().__init__(message, **kw)
+        self.reason = reason
 
 
 class ForbiddenError(ProtocolError):

@@ -18,6 +18,7 @@ import pytest
 
 from posecast.offline.dataset.frames import derive_frames
 from posecast.offline.motion.synthetic import walk_clip
+from posecast.online.auth.keys import SigningKey
 from posecast.online.auth.tokens import mint
 from posecast.online.config import ServerConfig
 from posecast.online.engine.ssi import Engine
@@ -48,7 +49,13 @@ def token(
     room: str = "r1", player: str = "p1", role: str = "player", ttl_s: int = 600, **kw: Any
 ) -> str:
     return mint(
-        SECRET.encode(), room=room, player=player, role=role, ttl_s=ttl_s, now=time.time(), **kw
+        SigningKey.from_secret(SECRET),
+        room=room,
+        player=player,
+        role=role,
+        ttl_s=ttl_s,
+        now=time.time(),
+        **kw,
     )
 
 

@@ -104,11 +104,11 @@ def test_every_option_has_a_flag_except_the_secret() -> None:
     add_arguments(parser)
     args = vars(parser.parse_args(["--max-rate-hz", "30", "--dev", "--redis", "redis://r"]))
     assert args["max_rate_hz"] == 30 and args["dev"] is True and args["port"] is None
-    assert "token_secret" not in args
+    assert "token_secret" not in args and "token_keys" not in args
     # Each flag typed is recorded as typed (an alias too), for the errors.
     given = args.pop(FLAGS_GIVEN)
     assert given == {"max_rate_hz": "--max-rate-hz", "dev": "--dev", "redis_url": "--redis"}
-    assert set(args) == {f.name for f in fields(ServerConfig)} - {"token_secret"}
+    assert set(args) == {f.name for f in fields(ServerConfig)} - {"token_secret", "token_keys"}
     assert FLAGS_GIVEN not in vars(parser.parse_args([]))
 
 
@@ -285,7 +285,7 @@ def test_docs_table_lists_every_option_with_env_and_default() -> None:
     for name, env, default, _ in option_help():
         row = next((ln for ln in text.splitlines() if f"`{env}`" in ln), None)
         assert row is not None, f"docs/server.md lacks {env}"
-        assert f"`--{name.replace('_', '-')}`" in row or name == "token_secret", row
+        assert f"`--{name.replace('_', '-')}`" in row or name in ("token_secret", "token_keys"), row
         if default:
             assert re.search(rf"`{re.escape(default)}`", row), (name, default, row)
         if name in BOUNDS:  # and each number's range, as --help words it

@@ -11,6 +11,7 @@ from collections import Counter
 
 import pytest
 
+from posecast.online.auth.keys import KeySet
 from posecast.online.auth.tokens import verify
 from posecast.skeleton import JOINT_NAMES, PARENTS, reference_offsets
 from posecast.tracking.features import TRACKER_JOINT_INDEX
@@ -52,8 +53,9 @@ def test_the_readme_token_example_verifies() -> None:
     gen = load("generate_spec")
     readme = (PROTO / "README.md").read_text("utf-8")
     block = readme.split(gen.TOKEN_BEGIN)[1].split(gen.TOKEN_END)[0]
-    token = block.split("token = first part")[1].split("\n")[1].strip()
-    claims = verify(gen.EXAMPLE_SECRET.encode(), token, now=gen.EXAMPLE_NOW)
+    token = block.split("token = base64url(header)")[1].split("\n")[1].strip()
+    keys = KeySet.from_secret(gen.EXAMPLE_SECRET, kid=gen.EXAMPLE_KID)
+    claims = verify(keys, token, now=gen.EXAMPLE_NOW)
     assert (claims.room, claims.player, claims.jti) == ("lobby", "ada", gen.EXAMPLE_JTI)
 
 

@@ -19,7 +19,7 @@ namespace Posecast.Client.Tests
 {
     public sealed class Server : IDisposable
     {
-        public readonly string Secret = "cs-sdk-test-secret-" + Guid.NewGuid().ToString("N").Substring(0, 12);
+        public readonly string Secret = "cs-sdk-test-secret-" + Guid.NewGuid().ToString("N").Substring(0, 16);
         public int Port;
         public Process Proc;
         public string Url { get { return "ws://127.0.0.1:" + Port + "/"; } }
@@ -264,6 +264,24 @@ namespace Posecast.Client.Tests
                     T.True(WaitFor(() => c.PosesOf("cs-a").Count > 10, 15), "v1 poses of a: " + c.PosesOf("cs-a").Count);
                     T.True(c.PosesOf("cs-a").All(p => !p.Keyframe && p.Rotations != null), "v1 poses carry rotations");
                     c.Stop().Wait();
+                });
+                T.Run("e2e: DevTokens' JWTs join by kid; an unknown kid and a wrong secret are refused UNAUTHENTICATED", () =>
+                {
+                    var opts = new ClientOptions { Reconnect = false };
+                    var ok = PosecastClient.ConnectAsync(server.Url, DevTokens.Mint(server.Secret, "cs-room", "cs-kid", kid: "secret"), opts).Result;
+                    ok.JoinAsync("cs-room", "kid").GetAwaiter().GetResult();
+                    ok.CloseAsync().Wait();
+                    var refused = new Dictionary<string, string>
+                    {
+                        { DevTokens.Mint(server.Secret, "cs-room", "cs-k2", kid: "retired-2025"), "token kid 'retired-2025' is unknown" },
+                        { DevTokens.Mint(new string('w', 32), "cs-room", "cs-k3"), "signature does not verify" },
+                    };
+                    foreach (var kv in refused)
+                    {
+                        var c = PosecastClient.ConnectAsync(server.Url, kv.Key, opts).Result;
+                        var e = T.Throws<UnauthenticatedException>(() => c.JoinAsync("cs-room", "m").GetAwaiter().GetResult(), kv.Value);
+                        T.True(e.Message.Contains(kv.Value), e.Message);
+                    }
                 });
                 T.Run("e2e: the README example compiles and runs against the server", () =>
                 {

@@ -3,6 +3,7 @@
 using System;
 using System.Collections.Generic;
 using System.Linq;
+using System.Text;
 
 namespace Posecast.Client.Tests
 {
@@ -196,29 +197,29 @@ namespace Posecast.Client.Tests
                 string e = "\u00e9", smile = "\ud83d\ude00";  // 2 UTF-8 bytes; one character of two UTF-16 units
                 var refused = new Dictionary<string, int>
                 {
-                    { "", 0 }, { "dev", 3 }, { new string('s', 15), 15 },
-                    { string.Concat(Enumerable.Repeat(e, 8)), 8 },  // 16 bytes of UTF-8, 8 characters
-                    { smile + new string('s', 14), 15 },  // 16 UTF-16 units, 15 characters
+                    { "", 0 }, { "dev", 3 }, { new string('s', 31), 31 },
+                    { string.Concat(Enumerable.Repeat(e, 16)), 16 },  // 32 bytes of UTF-8, 16 characters
+                    { smile + new string('s', 30), 31 },  // 32 UTF-16 units, 31 characters
                 };
                 foreach (var kv in refused)
                 {
                     var err = T.Throws<ArgumentException>(() => DevTokens.Mint(kv.Key, "r", "p"), "secret of " + kv.Value);
-                    T.True(err.Message.StartsWith("the secret has " + kv.Value + " characters; a server takes none under 16"), err.Message);
+                    T.True(err.Message.StartsWith("the secret has " + kv.Value + " characters; a server takes none under 32"), err.Message);
                 }
                 T.Throws<ArgumentException>(() => DevTokens.Mint(null, "r", "p"), "no secret");
-                foreach (var ok in new[] { new string('s', 16), string.Concat(Enumerable.Repeat(e, 16)), smile + new string('s', 15) })
-                    T.Equal(2, DevTokens.Mint(ok, "r", "p").Split('.').Length, "a token from a secret of 16 characters");
+                foreach (var ok in new[] { new string('s', 32), string.Concat(Enumerable.Repeat(e, 32)), smile + new string('s', 31) })
+                    T.Equal(3, DevTokens.Mint(ok, "r", "p").Split('.').Length, "a token from a secret of 32 characters");
             });
             T.Run("tokens: ttlS and the room and player are checked as mint_token checks them", () =>
             {
-                string secret = new string('s', 16), id64 = new string('a', 64);
+                string secret = new string('s', 32), id64 = new string('a', 64);
                 foreach (int ttl in new[] { 0, -1, DevTokens.MaxTtlS + 1, int.MinValue })
                 {
                     var err = T.Throws<ArgumentException>(() => DevTokens.Mint(secret, "r", "p", ttlS: ttl), "ttlS " + ttl);
                     T.Equal("ttlS must be in (0, 604800], not " + ttl, err.Message, "ttlS " + ttl);
                 }
                 foreach (int ttl in new[] { 1, DevTokens.MaxTtlS })
-                    T.Equal(2, DevTokens.Mint(secret, "r", "p", ttlS: ttl).Split('.').Length, "ttlS " + ttl);
+                    T.Equal(3, DevTokens.Mint(secret, "r", "p", ttlS: ttl).Split('.').Length, "ttlS " + ttl);
                 foreach (var bad in new[] { "", "lob by", "a/b", "caf\u00e9", "\u0661", id64 + "a", "r\n" })
                 {
                     var err = T.Throws<ArgumentException>(() => DevTokens.Mint(secret, bad, "p"), "room " + bad);
@@ -228,7 +229,20 @@ namespace Posecast.Client.Tests
                 }
                 T.Equal("no room (null)", T.Throws<ArgumentException>(() => DevTokens.Mint(secret, null, "p"), "null room").Message, "null room");
                 T.Equal("no player (null)", T.Throws<ArgumentException>(() => DevTokens.Mint(secret, "r", null), "null player").Message, "null player");
-                T.Equal(2, DevTokens.Mint(secret, id64, "Ab_0.9:-z").Split('.').Length, "64 bytes and every id character");
+                T.Equal(3, DevTokens.Mint(secret, id64, "Ab_0.9:-z").Split('.').Length, "64 bytes and every id character");
+            });
+            T.Run("tokens: HS256 JWTs, byte for byte what the Python SDK's mint_token writes", () =>
+            {
+                // client_sdk/python/tests/test_tokens.py's GOLDEN_PLAYER: the same secret and arguments.
+                string golden = "eyJhbGciOiJIUzI1NiIsInR5cCI6IkpXVCJ9.eyJyb29tIjoibG9iYnkiLCJwbGF5ZXIiOiJhZGEiLCJyb2xlIjoicGxh"
+                                + "eWVyIiwiaWF0IjoxNzAwMDAwMDAwLCJleHAiOjE3MDAwMDA2MDAsImp0aSI6ImotMSJ9."
+                                + "TyecKK-bRxsHDcw7o2ZWdiGswDDliclFuP6O43sBC7I";
+                T.Equal(golden, DevTokens.MintAt("dev-secret-0123456789-abcdefghijk", "lobby", "ada", "player", 600, null,
+                                                 1700000000, "j-1"), "golden token");
+                string withKid = DevTokens.MintAt(new string('s', 32), "r", "p", "player", 60, "2026-12", 1700000000, "j");
+                string part = withKid.Split('.')[0].Replace('-', '+').Replace('_', '/');
+                string header = Encoding.UTF8.GetString(Convert.FromBase64String(part + new string('=', (4 - part.Length % 4) % 4)));
+                T.Equal("{\"alg\":\"HS256\",\"kid\":\"2026-12\",\"typ\":\"JWT\"}", header, "header with a kid");
             });
         }
     }

@@ -1,4 +1,5 @@
-"""Minted tokens are byte-for-byte the server's format."""
+"""Minted tokens are JWTs the server verifies: HS256 with a secret, ES256 and EdDSA
+with a private key (the server holding the public one), each with its kid."""
 
 from __future__ import annotations
 
@@ -9,28 +10,26 @@ import pytest
 
 from posecast_client.tokens import MIN_SECRET_CHARS, mint_token
 
-SECRET = "dev-secret-0123456789"
+SECRET = "dev-secret-0123456789-abcdefghijk"
 # Minted by server/posecast/online/auth/tokens.py with the same arguments.
 GOLDEN_PLAYER = (
-    "eyJleHAiOjE3MDAwMDA2MDAsImlhdCI6MTcwMDAwMDAwMCwianRpIjoiai0xIiwicGxheWVyIjoiYWRhIiwicm9sZSI6"
-    "InBsYXllciIsInJvb20iOiJsb2JieSIsInYiOjF9.25UbpyGLcJ3Gx9fQuf04BaNpBL51CSum7sQn_ctNe2c"
-)
-GOLDEN_BACKEND = (
-    "eyJleHAiOjE3MDAwMDA2MDAsImlhdCI6MTcwMDAwMDAwMCwianRpIjoiai0yIiwicGxheWVyIjoib3BzIiwicm9sZSI6"
-    "ImJhY2tlbmQiLCJyb29tIjoibG9iYnkiLCJyb29tcyI6WyJhIiwiYiJdLCJ2IjoxfQ."
-    "GZ4Law7x8KU2cVEaSElKngM_E_qVE6kKLrS9vukKupc"
+    "eyJhbGciOiJIUzI1NiIsInR5cCI6IkpXVCJ9.eyJyb29tIjoibG9iYnkiLCJwbGF5ZXIiOiJhZGEiLCJyb2xlIjoicGxh"
+    "eWVyIiwiaWF0IjoxNzAwMDAwMDAwLCJleHAiOjE3MDAwMDA2MDAsImp0aSI6ImotMSJ9."
+    "TyecKK-bRxsHDcw7o2ZWdiGswDDliclFuP6O43sBC7I"
 )
 
 
-def test_golden_tokens() -> None:
+def _part(token: str, i: int) -> dict[str, object]:
+    part = token.split(".")[i]
+    return json.loads(base64.urlsafe_b64decode(part + "=" * (-len(part) % 4)))  # type: ignore[no-any-return]
+
+
+def test_golden_token() -> None:
     player = mint_token(SECRET, room="lobby", player="ada", ttl_s=600, now=1700000000.5, jti="j-1")
     assert player == GOLDEN_PLAYER
-    backend = mint_token(SECRET.encode(), room="lobby", player="ops", role="backend", ttl_s=600,
-                         now=1700000000, rooms=("a", "b"), jti="j-2")  # fmt: skip
-    assert backend == GOLDEN_BACKEND
-    claims = json.loads(base64.urlsafe_b64decode(player.split(".")[0] + "=="))
-    assert claims == {"v": 1, "room": "lobby", "player": "ada", "role": "player",
-                      "iat": 1700000000, "exp": 1700000600, "jti": "j-1"}  # fmt: skip
+    assert _part(player, 0) == {"alg": "HS256", "typ": "JWT"}
+    assert _part(player, 1) == {"room": "lobby", "player": "ada", "role": "player",
+                                "iat": 1700000000, "exp": 1700000600, "jti": "j-1"}  # fmt: skip
 
 
 def test_the_server_verifies_minted_tokens() -> None:
@@ -40,14 +39,36 @@ def test_the_server_verifies_minted_tokens() -> None:
     assert (claims.room, claims.player, claims.role, claims.exp) == ("r", "p", "spectator", 4600)
 
 
+@pytest.mark.parametrize("alg", ["ES256", "EdDSA", "HS256"])
+def test_a_key_pair_mints_what_a_server_with_the_public_key_verifies(alg: str) -> None:
+    keys = pytest.importorskip("posecast.online.auth.keys")
+    tokens = pytest.importorskip("posecast.online.auth.tokens")
+    private, public = keys.generate(alg, "k-" + alg)
+    other, _ = keys.generate(alg, "k-other")
+    key_set = keys.parse_key_set(json.dumps({"keys": [public, _]}), "test")
+    tok = mint_token(private, room="r", player="p", role="backend", rooms=("b",), now=1000.0)
+    assert _part(tok, 0)["kid"] == "k-" + alg and _part(tok, 0)["alg"] == alg
+    assert tokens.verify(key_set, tok, now=1001.0).rooms == ("b",)
+    assert mint_token(private, room="r", player="p", alg=alg, kid="k-" + alg)
+    with pytest.raises(ValueError, match="does not fit"):
+        mint_token(private, room="r", player="p", alg="HS256" if alg != "HS256" else "ES256")
+    if alg != "HS256":
+        with pytest.raises(ValueError, match="public key"):
+            mint_token(public, room="r", player="p")
+    forged = mint_token(other, room="r", player="p", now=1000.0, kid="k-" + alg)
+    with pytest.raises(tokens.UnauthenticatedError, match="signature"):
+        tokens.verify(key_set, forged, now=1001.0)
+
+
 @pytest.mark.parametrize(
     "kw",
     [
-        {"secret": ""},
-        {"secret": "dev"},
-        {"secret": "s" * 15},
-        {"secret": b"s" * 15},
-        {"secret": b"\xff" * 32},  # not UTF-8: no server's secret
+        {"key": ""},
+        {"key": "dev"},
+        {"key": "s" * 31},
+        {"key": b"s" * 31},
+        {"key": {"kty": "RSA", "n": "AQAB", "e": "AQAB"}},  # no kind posecast verifies
+        {"key": b"\xff" * 32},  # not UTF-8: no server's secret
         {"role": "admin"},
         {"rooms": ("x",)},
         {"ttl_s": 0},
@@ -60,7 +81,7 @@ def test_the_server_verifies_minted_tokens() -> None:
     ],
 )
 def test_bad_requests_are_refused(kw: dict[str, object]) -> None:
-    args: dict[str, object] = {"secret": SECRET, "room": "r", "player": "p", **kw}
+    args: dict[str, object] = {"key": SECRET, "room": "r", "player": "p", **kw}
     with pytest.raises(ValueError):
         mint_token(**args)  # type: ignore[arg-type]
 
@@ -69,22 +90,22 @@ def test_bad_requests_are_refused(kw: dict[str, object]) -> None:
     ("secret", "chars"),
     [
         ("dev", 3),
-        ("s" * 15, 15),
-        ("é" * 8, 8),
-        ("é" * 8 + "s" * 7, 15),
-        (b"s" * 15, 15),
-        (("é" * 8).encode(), 8),
+        ("s" * 31, 31),
+        ("é" * 16, 16),
+        ("é" * 16 + "s" * 15, 31),
+        (b"s" * 31, 31),
+        (("é" * 16).encode(), 16),
     ],
 )
 def test_a_secret_no_server_takes_is_refused(secret: str | bytes, chars: int) -> None:
-    """Characters count as the server counts them (16 bytes of UTF-8 can be 8 characters):
+    """Characters count as the server counts them (32 bytes of UTF-8 can be 16 characters):
     a token minted with a shorter secret fails at join time, far from the mistake."""
     want = f"the secret has {chars} characters; a server takes none under {MIN_SECRET_CHARS}"
     with pytest.raises(ValueError, match=want):
         mint_token(secret, room="r", player="p")
 
 
-@pytest.mark.parametrize("secret", ["s" * 16, "é" * 16, "é" * 8 + "s" * 8, ("é" * 16).encode()])
+@pytest.mark.parametrize("secret", ["s" * 32, "é" * 32, "é" * 16 + "s" * 16, ("é" * 32).encode()])
 def test_a_secret_the_server_takes_mints(secret: str | bytes) -> None:
     tok = mint_token(secret, room="r", player="p", now=1000.0)
     config = pytest.importorskip("posecast.online.config")
@@ -97,6 +118,6 @@ def test_a_secret_the_server_takes_mints(secret: str | bytes) -> None:
 def test_the_server_refuses_what_mint_token_refuses() -> None:
     config = pytest.importorskip("posecast.online.config")
     assert config.MIN_SECRET_CHARS == MIN_SECRET_CHARS
-    for text in ("s" * 15, "é" * 15):
+    for text in ("s" * 31, "é" * 31):
         with pytest.raises(config.ConfigError):
             config.ServerConfig(token_secret=text)

@@ -1,6 +1,8 @@
 /**
  * A real `posecast serve --dev` process for the integration tests, and join tokens in
- * the server's format (`server/posecast/online/auth/tokens.py`), minted with Node's crypto.
+ * the server's format (JWTs, `server/posecast/online/auth/tokens.py`), minted HS256 with
+ * Node's crypto (synchronously, for the tests' token functions; `src/mint.ts` mints
+ * with `jose`, and test/mint.test.ts checks both against a server).
  */
 
 import { type ChildProcess, spawn } from "node:child_process";
@@ -34,9 +36,10 @@ export interface RunningServer {
 
 export const SECRET = "ts-sdk-test-secret-" + randomBytes(8).toString("hex");
 
-/** Start `posecast serve --dev` (8 samples) and wait until it listens. */
+/** Start `posecast serve --dev` (8 samples) and wait until it listens; `env`: more
+ * variables (POSECAST_TOKEN_KEYS). */
 export async function startServer(
-  options: { port?: number; secret?: string; args?: string[] } = {},
+  options: { port?: number; secret?: string; args?: string[]; env?: Record<string, string> } = {},
 ): Promise<RunningServer> {
   const bin = posecastBin();
   if (bin === undefined) throw new Error("no posecast binary");
@@ -46,7 +49,7 @@ export async function startServer(
     ["serve", "--dev", "--port", String(options.port ?? 0), "--samples", "8",
      "--log-level", "WARNING", ...(options.args ?? [])],
     {
-      env: { ...process.env, POSECAST_TOKEN_SECRET: secret },
+      env: { ...process.env, POSECAST_TOKEN_SECRET: secret, ...options.env },
       stdio: ["ignore", "pipe", "pipe"],
     },
   );
@@ -83,7 +86,7 @@ export async function startServer(
 
 const b64url = (b: Buffer): string => b.toString("base64url");
 
-/** A join token as `posecast token` mints it: base64url(claims JSON) "." base64url(HMAC). */
+/** A join token as `posecast token` mints it: a JWT, HS256 with `secret`, no kid. */
 export function mintToken(
   secret: string,
   claims: {
@@ -96,17 +99,15 @@ export function mintToken(
   },
 ): string {
   const iat = Math.floor(Date.now() / 1000) - (claims.ageS ?? 0);
-  // Sorted keys and compact separators, as the server's json.dumps(sort_keys=True) writes.
   const body = {
-    exp: iat + (claims.ttlS ?? 600),
-    iat,
-    jti: randomBytes(9).toString("base64url"),
+    room: claims.room,
     player: claims.player,
     role: claims.role ?? "player",
-    room: claims.room,
-    v: 1,
+    iat,
+    exp: iat + (claims.ttlS ?? 600),
+    jti: randomBytes(9).toString("base64url"),
   };
-  const payload = b64url(Buffer.from(JSON.stringify(body)));
-  const mac = createHmac("sha256", secret).update(payload, "ascii").digest();
-  return payload + "." + b64url(mac);
+  const header = b64url(Buffer.from(JSON.stringify({ alg: "HS256", typ: "JWT" })));
+  const signed = header + "." + b64url(Buffer.from(JSON.stringify(body)));
+  return signed + "." + b64url(createHmac("sha256", secret).update(signed, "ascii").digest());
 }

@@ -1,7 +1,8 @@
 """The live service: ``posecast serve`` (the pose-streaming server,
 :mod:`posecast.online.shell.app`, its configuration :mod:`posecast.online.config`,
 ``docs/server.md``), ``posecast token`` (a development join token,
-:mod:`posecast.online.auth.tokens`) and ``posecast demo`` (a server, two simulated
+:mod:`posecast.online.auth.tokens`), ``posecast keygen`` (a token key pair,
+:mod:`posecast.online.auth.keys`) and ``posecast demo`` (a server, two simulated
 headsets and a spectator on loopback, :mod:`posecast.demo`; what ``make run`` does)."""
 
 from __future__ import annotations
@@ -62,7 +63,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
         if "token secret" in exc.message:
             hint = (
                 f"export POSECAST_TOKEN_SECRET=<{MIN_SECRET_CHARS}+ random characters, the "
-                "game backend's key>, or pass --dev for a throwaway one"
+                "game backend's key>, or a key set (POSECAST_TOKEN_KEYS, --token-keys-file;"
+                " `posecast keygen`), or pass --dev for a throwaway one"
             )
         else:
             hint = "set it by its flag or POSECAST_* variable: see `posecast serve --help`"
@@ -74,7 +76,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
         logging.getLogger("posecast.server").warning(
             "unknown setting ignored", extra={"variable": name, "did_you_mean": meant}
         )
-    invented = cfg.dev and not os.environ.get("POSECAST_TOKEN_SECRET")
+    invented = cfg.dev and cfg.token_secret not in ("", os.environ.get("POSECAST_TOKEN_SECRET"))
     if invented:
         print(f"posecast: --dev: token secret for this run: {cfg.token_secret}", flush=True)
 
@@ -150,22 +152,48 @@ def _loopback_at(host: str) -> str | None:
 
 
 def cmd_token(args: argparse.Namespace) -> int:
+    import json
     import os
     import time
 
+    from posecast.online.auth.keys import ALGORITHMS, SigningKey
     from posecast.online.auth.tokens import MAX_TTL_S, mint
     from posecast.online.config import MIN_SECRET_CHARS
 
-    secret = args.secret or os.environ.get("POSECAST_TOKEN_SECRET", "")
-    if not secret:
+    if args.key is not None:
+        if args.secret:
+            raise config_error("--secret and --key both given", "mint with one of them")
+        try:
+            jwk = json.loads(Path(args.key).read_text("utf-8"))
+            key = SigningKey.from_jwk(jwk if isinstance(jwk, dict) else {})
+        except OSError as exc:
+            raise config_error(f"--key {args.key}: {exc.strerror or exc}", _KEY_HINT) from None
+        except ValueError as exc:  # not JSON (never quoted: it is a private key), or no key
+            why = str(exc) if not isinstance(exc, json.JSONDecodeError) else "not JSON"
+            raise config_error(f"--key {args.key}: {why}", _KEY_HINT) from None
+        except ConfigError as exc:
+            raise config_error(f"--key {args.key}: {exc.message}", _KEY_HINT) from None
+    else:
+        secret = args.secret or os.environ.get("POSECAST_TOKEN_SECRET", "")
+        if not secret:
+            raise config_error(
+                "no token secret or key",
+                "pass --secret KEY, set POSECAST_TOKEN_SECRET (the server's key), or pass"
+                " --key FILE (a private key from `posecast keygen`)",
+            )
+        if len(secret) < MIN_SECRET_CHARS:
+            raise config_error(
+                f"the token secret must be at least {MIN_SECRET_CHARS} characters",
+                "use the secret the server runs with (POSECAST_TOKEN_SECRET)",
+            )
+        key = SigningKey.from_secret(secret, kid=None)
+    if args.alg is not None and args.alg != key.alg:
         raise config_error(
-            "no token secret", "pass --secret KEY or set POSECAST_TOKEN_SECRET (the server's key)"
+            f"--alg {args.alg} does not fit the key, which signs {key.alg}",
+            f"drop --alg, or mint with a {args.alg} key ({', '.join(ALGORITHMS)})",
         )
-    if len(secret) < MIN_SECRET_CHARS:
-        raise config_error(
-            f"the token secret must be at least {MIN_SECRET_CHARS} characters",
-            "use the secret the server runs with (POSECAST_TOKEN_SECRET)",
-        )
+    if args.kid is not None:
+        key = SigningKey(key.alg, key.material, args.kid or None)
     if not 0 < args.ttl <= MAX_TTL_S:
         raise config_error(
             f"--ttl {args.ttl} outside [1, {MAX_TTL_S}] seconds", "e.g. --ttl 3600 (one hour)"
@@ -181,7 +209,7 @@ def cmd_token(args: argparse.Namespace) -> int:
         )
     try:
         token = mint(
-            secret.encode("utf-8"),
+            key,
             room=args.room,
             player=args.player,
             role=args.role,
@@ -192,6 +220,33 @@ def cmd_token(args: argparse.Namespace) -> int:
     except ValueError as exc:  # mint's own checks of the values above
         raise config_error(str(exc), "see `posecast token --help`") from None
     print(token)
+    return 0
+
+
+_KEY_HINT = "a private JWK file, as `posecast keygen --out FILE` writes"
+
+
+def cmd_keygen(args: argparse.Namespace) -> int:
+    """A new key: the private JWK to ``--out`` (mode 0600, for the game backend), the
+    public key set to stdout (for the servers' POSECAST_TOKEN_KEYS or key file)."""
+    import json
+    import os
+
+    from posecast.online.auth.keys import KID_PATTERN, generate
+
+    if not KID_PATTERN.fullmatch(args.kid):
+        raise config_error(f"--kid {args.kid!r} is not a key id", "1 to 64 of A-Z a-z 0-9 _ . : -")
+    private, public = generate(args.alg, args.kid)
+    try:
+        fd = os.open(args.out, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    except OSError as exc:
+        raise config_error(
+            f"--out {args.out}: {exc.strerror or exc}",
+            "name a new file: keygen never overwrites a key",
+        ) from None
+    with os.fdopen(fd, "w", encoding="utf-8") as f:
+        f.write(json.dumps(private, indent=2) + "\n")
+    print(json.dumps({"keys": [public]}, indent=2))
     return 0
 
 
@@ -221,21 +276,37 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def add_parsers(sub: argparse._SubParsersAction[Any]) -> None:
-    """Add ``posecast serve``, ``token`` and ``demo`` to ``sub`` (``posecast``'s commands)."""
+    """Add ``posecast serve``, ``token``, ``keygen`` and ``demo`` to ``sub``."""
     from posecast.online.config import add_arguments
 
     serve = sub.add_parser("serve", help="run the pose-streaming server (docs/server.md)")
     add_arguments(serve)
     serve.set_defaults(func=cmd_serve)
 
-    tok = sub.add_parser("token", help="mint a join token (development; the backend mints)")
-    tok.add_argument("--secret", help="HMAC key (default: $POSECAST_TOKEN_SECRET)")
+    tok = sub.add_parser("token", help="mint a join token, a JWT (development; the backend mints)")
+    tok.add_argument("--secret", help="HS256 key (default: $POSECAST_TOKEN_SECRET)")
+    tok.add_argument("--key", help="private JWK file to sign with (ES256, EdDSA or HS256)")
+    tok.add_argument("--kid", help="kid in the header (default: the key's; none for --secret)")
+    tok.add_argument("--alg", choices=("HS256", "ES256", "EdDSA"), help="must fit the key")
     tok.add_argument("--room", required=True, help="room the token joins")
     tok.add_argument("--player", required=True, help="player id (server-unique)")
     tok.add_argument("--role", default="player", choices=("player", "spectator", "backend"))
     tok.add_argument("--rooms", help="comma-separated extra rooms a backend may watch")
     tok.add_argument("--ttl", type=int, default=3600, help="seconds until it expires (3600)")
     tok.set_defaults(func=cmd_token)
+
+    gen = sub.add_parser(
+        "keygen", help="a new token key: private JWK to --out, public key set to stdout"
+    )
+    gen.add_argument(
+        "--alg",
+        default="ES256",
+        choices=("ES256", "EdDSA", "HS256"),
+        help="ES256 (default) or EdDSA: servers hold only the public key; HS256: a shared secret",
+    )
+    gen.add_argument("--kid", required=True, help="the key's id, e.g. 2026-12")
+    gen.add_argument("--out", required=True, help="new file for the private key (mode 0600)")
+    gen.set_defaults(func=cmd_keygen)
 
     demo = sub.add_parser("demo", help="server + two simulated headsets + a spectator (make run)")
     demo.add_argument("--port", type=int, default=8765, help="port (0: any free one)")

@@ -28,6 +28,7 @@ from typing import Any
 from urllib.parse import urlsplit
 
 from posecast.errors import ConfigError
+from posecast.online.auth.keys import MIN_SECRET_BYTES, Key, KeySet, parse_key_set, secret_key
 from posecast.online.auth.tokens import new_secret
 from posecast.online.config_bounds import BOUNDS, MAX_SNDBUF_BYTES, Bounds
 from posecast.online.engine.config import EngineConfig
@@ -37,7 +38,7 @@ from posecast.tracking.layouts import Layout
 
 ENV_PREFIX = "POSECAST_"
 _ID = re.compile(r"[A-Za-z0-9_.-]{1,64}")
-MIN_SECRET_CHARS = 16
+MIN_SECRET_CHARS = MIN_SECRET_BYTES  # 32: chars of text, so at least as many bytes
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
 __all__ = [  # Bounds, BOUNDS, MAX_SNDBUF_BYTES: config_bounds's, kept importable here
     "BOUNDS",
@@ -81,7 +82,21 @@ class ServerConfig:
 
     host: str = _opt("127.0.0.1", "interface to bind (0.0.0.0 for all)")
     port: int = _opt(8765, "TCP port for WebSocket and HTTP (0: pick a free one)")
-    token_secret: str = _opt("", "HMAC-SHA256 key shared with the game backend", repr=False)
+    token_secret: str = _opt(
+        "", "HS256 key shared with the game backend (kid 'secret' in the key set)", repr=False
+    )
+    token_keys: str = _opt(
+        "",
+        "token key set, JWKS JSON: HS256 secrets and ES256/EdDSA public keys, each with "
+        "a kid (docs/operations.md, Token keys)",
+        repr=False,
+    )
+    token_keys_file: str = _opt(
+        "", "file holding the token key set (JWKS JSON), re-read on SIGHUP and reload"
+    )
+    token_keys_reload_s: float = _opt(
+        0.0, "seconds between re-reads of --token-keys-file (0: on SIGHUP only)"
+    )
     dev: bool = _opt(False, "development mode: invent and print a secret if none is set")
     token_leeway_s: float = _opt(5.0, "clock skew allowed on token iat/exp, seconds")
     replay_cache: int = _opt(100_000, "ended-session token ids remembered (replay guard)")
@@ -256,6 +271,31 @@ class ServerConfig:
     def secret_bytes(self) -> bytes:
         return self.token_secret.encode("utf-8")
 
+    def key_set(self) -> KeySet:
+        """The token key set: ``token_secret``'s key (kid ``secret``), ``token_keys``'
+        and ``token_keys_file``'s keys, read now (the shell calls this again to reload
+        the file). Raises :class:`ConfigError` for a bad or empty set, never showing
+        key material."""
+        keys: list[Key] = []
+        if self.token_secret:
+            keys.append(secret_key(self.token_secret))
+        if self.token_keys:
+            keys += parse_key_set(self.token_keys, _variable("token_keys")).keys.values()
+        if self.token_keys_file:
+            try:
+                with open(self.token_keys_file, encoding="utf-8") as f:
+                    text = f.read(1 << 20)
+            except (OSError, UnicodeDecodeError) as exc:
+                why = getattr(exc, "strerror", None) or "not UTF-8 text"
+                raise ConfigError(f"token key file {self.token_keys_file}: {why}") from None
+            keys += parse_key_set(text, f"token key file {self.token_keys_file}").keys.values()
+        if not keys:
+            raise ConfigError(
+                "no token secret or key set: set POSECAST_TOKEN_SECRET, POSECAST_TOKEN_KEYS or"
+                " --token-keys-file (or pass --dev to invent one)"
+            )
+        return KeySet.of(keys)
+
     @classmethod
     def from_sources(
         cls,
@@ -279,7 +319,8 @@ class ServerConfig:
         for name, value in (overrides or {}).items():
             if value is not None:
                 values[name] = value
-        if values.get("dev") and not values.get("token_secret"):
+        keyless = not any(values.get(k) for k in ("token_keys", "token_keys_file"))
+        if values.get("dev") and not values.get("token_secret") and keyless:
             values["token_secret"] = new_secret()
         given = setting_names(env, overrides, flags)
         try:
@@ -385,11 +426,7 @@ def _check(cfg: ServerConfig, n: _Named) -> None:
     """Raise :class:`ConfigError` for the first bad setting of ``cfg``, each named by
     ``n`` as the user gave it, with the range it must be in. Secrets (the token secret,
     a Redis URL's password) are never shown."""
-    if not cfg.token_secret:
-        raise ConfigError(
-            "no token secret: set POSECAST_TOKEN_SECRET (or pass --dev to invent one)"
-        )
-    if len(cfg.token_secret) < MIN_SECRET_CHARS:
+    if cfg.token_secret and len(cfg.token_secret) < MIN_SECRET_CHARS:
         raise ConfigError(
             f"{n('token_secret')} has {len(cfg.token_secret)} characters: the token secret"
             f" must be at least {MIN_SECRET_CHARS}"
@@ -445,6 +482,7 @@ def _check(cfg: ServerConfig, n: _Named) -> None:
             " each once"
         )
     cfg.limits()  # anything else Limits refuses (a value that is not an int)
+    cfg.key_set()  # no key, a malformed one, a private key, two with one kid
 
 
 def _is_number(value: object) -> bool:
@@ -484,7 +522,7 @@ def option_help() -> list[tuple[str, str, str, str]]:
     """``(field, env var, default, help)`` of every option, for the CLI and the docs."""
     out = []
     for f in fields(ServerConfig):
-        if f.name == "token_secret":
+        if f.name in _NO_FLAG:
             default = ""
         else:
             default = f.default if isinstance(f.default, str) else repr(f.default)
@@ -535,10 +573,14 @@ class _Flag(argparse.Action):
 
 
 def _flags(f: dataclasses.Field[Any]) -> tuple[str, ...]:
-    """The option's command-line flags, its own first (none for the token secret)."""
-    if f.name == "token_secret":
+    """The option's command-line flags, its own first (none for the token secret and
+    key set: command lines show up in ``ps``)."""
+    if f.name in _NO_FLAG:
         return ()
     return ("--" + f.name.replace("_", "-"), *f.metadata["flags"])
+
+
+_NO_FLAG = frozenset({"token_secret", "token_keys"})  # secrets: environment only
 
 
 def _variable(name: str) -> str:

@@ -73,6 +73,7 @@ BOUNDS: dict[str, Bounds] = {
     # Kerberos' default clock skew: past it, a clock is broken, not skewed.
     "token_leeway_s": _seconds(300),
     "replay_cache": Bounds(1, 10 * MILLION),
+    "token_keys_reload_s": Bounds(0, 86400, unit="seconds"),  # 0: on SIGHUP only
     "tick_hz": Bounds(1, 240),
     "samples": Bounds(1, MAX_SAMPLES),
     "lookahead": Bounds(0, MAX_LOOKAHEAD_FRAMES, unit="frames"),  # welcome.lookahead_frames

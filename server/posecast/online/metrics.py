@@ -13,6 +13,8 @@ import contextlib
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
 from prometheus_client.exposition import CONTENT_TYPE_LATEST
 
+from posecast.online.auth.tokens import REASONS
+
 CONTENT_TYPE = CONTENT_TYPE_LATEST
 _TICK_BUCKETS = (0.001, 0.002, 0.004, 0.008, 0.012, 0.0167, 0.025, 0.05, 0.1, 0.25, 1.0)
 _BATCH_BUCKETS = (0, 1, 2, 4, 8, 16, 32, 64, 128, 256, 512)
@@ -95,6 +97,23 @@ class Metrics:
         )
         self.errors = Counter(
             "posecast_errors", "Protocol errors, by wire code", ["code"], registry=r
+        )
+        self.token_refusals = Counter(
+            "posecast_token_refusals",
+            "hello tokens refused (UNAUTHENTICATED, TOKEN_EXPIRED), by reason: "
+            + ", ".join(REASONS),
+            ["reason"],
+            registry=r,
+        )
+        self.key_reloads = Counter(
+            "posecast_token_key_reloads",
+            "Reloads of the token key set (SIGHUP, interval), by result (ok, failed: the "
+            "old set stays)",
+            ["result"],
+            registry=r,
+        )
+        self.token_keys = Gauge(
+            "posecast_token_keys", "Keys in the token key set in force", registry=r
         )
         self.bytes_in = Counter("posecast_bytes_in", "WebSocket payload bytes in", registry=r)
         self.bytes_out = Counter("posecast_bytes_out", "WebSocket payload bytes out", registry=r)

@@ -19,7 +19,8 @@ from typing import Any
 import jsonschema
 import pytest
 
-from posecast.online.config import option_help
+from posecast.online.auth.keys import generate
+from posecast.online.config import ServerConfig, option_help
 from tests.system.deploy.conftest import ROOT, compose, interpolate, load_yaml
 
 OPTIONS = {env for _, env, _, _ in option_help()}
@@ -83,7 +84,9 @@ def test_two_nodes_share_redis_and_secret_and_differ_in_node_id() -> None:
     for name, env in envs.items():
         assert set(env) <= OPTIONS, f"{name}: unknown POSECAST_* {set(env) - OPTIONS}"
         assert env["POSECAST_REDIS_URL"] == "redis://redis:6379/0"
-        assert len(env["POSECAST_TOKEN_SECRET"]) >= 16, "the default secret must be accepted"
+        assert len(env["POSECAST_TOKEN_SECRET"]) >= 32, "the default secret must be accepted"
+        assert env["POSECAST_TOKEN_KEYS"] == "", "a key set is passed through, none by default"
+        ServerConfig.from_sources(env)  # the defaults start a node
         assert env["POSECAST_NODE_ID"] == name
         assert nodes[name]["build"] == "." and "command" not in nodes[name]
         assert nodes[name]["depends_on"]["redis"]["condition"] == "service_healthy"
@@ -91,6 +94,11 @@ def test_two_nodes_share_redis_and_secret_and_differ_in_node_id() -> None:
         assert grace > float(env["POSECAST_DRAIN_TIMEOUT_S"]) + 4, "longer than the drain"
     a, b = envs["node-a"], envs["node-b"]
     assert a["POSECAST_TOKEN_SECRET"] == b["POSECAST_TOKEN_SECRET"], "tokens work on any node"
+    assert a["POSECAST_TOKEN_KEYS"] == b["POSECAST_TOKEN_KEYS"]
+    keys = {"keys": [generate("EdDSA", "k1")[1]]}  # what compose passes in is taken
+    given = {k: interpolate(str(v), {"POSECAST_TOKEN_KEYS": json.dumps(keys)})
+             for k, v in nodes["node-a"]["environment"].items()}  # fmt: skip
+    assert len(ServerConfig.from_sources(given).key_set()) == 2
     assert services["redis"]["image"].startswith("redis:")
 
 

@@ -99,15 +99,22 @@ def test_probes_secret_config_and_selectors_are_wired() -> None:
 
     refs = {k: v["name"] for e in c["envFrom"] for k, v in e.items()}
     config = by_kind("ConfigMap", refs["configMapRef"])["data"]
-    secret = by_kind("Secret", refs["secretRef"])
-    assert set(secret["stringData"]) == {"POSECAST_TOKEN_SECRET"}
-    assert "POSECAST_TOKEN_SECRET" not in config, "the key belongs in the Secret"
+    # The token key set: a Secret mounted as a directory (so rotations reach the pod),
+    # at the file the ConfigMap names, re-read at an interval.
+    (mount,) = [m for m in c["volumeMounts"] if m["name"] == "token-keys"]
+    (volume,) = [v for v in pod["spec"]["volumes"] if v["name"] == "token-keys"]
+    secret = by_kind("Secret", volume["secret"]["secretName"])
+    assert "subPath" not in mount and mount["readOnly"] is True
+    (name,) = secret["stringData"]
+    assert config["POSECAST_TOKEN_KEYS_FILE"] == f"{mount['mountPath']}/{name}"
+    assert float(config["POSECAST_TOKEN_KEYS_RELOAD_S"]) > 0
+    assert not {"POSECAST_TOKEN_SECRET", "POSECAST_TOKEN_KEYS"} & set(config), "keys: Secret"
     assert set(config) <= set(OPTIONS), f"unknown options {set(config) - set(OPTIONS)}"
     assert int(config["POSECAST_PORT"]) == port
     assert c["env"][0]["name"] == "POSECAST_NODE_ID"  # the pod's name
     # The ConfigMap is a valid configuration once a real secret is supplied.
     values = {OPTIONS[k]: v for k, v in config.items()}
-    cfg = ServerConfig.from_sources({**config, "POSECAST_TOKEN_SECRET": "x" * 32})
+    cfg = ServerConfig.from_sources(_with_keys(config))
     assert cfg.redis_url == values["redis_url"]
     redis_host = cfg.redis_url.split("//")[1].split(":")[0]
     assert by_kind("Service", redis_host)["spec"]["ports"][0]["port"] == 6379
@@ -125,7 +132,7 @@ def test_termination_grace_outlasts_prestop_and_drain() -> None:
     spec = dep["spec"]["template"]["spec"]
     (c,) = spec["containers"]
     config = by_kind("ConfigMap", "posecast-config")["data"]
-    cfg = ServerConfig.from_sources({**config, "POSECAST_TOKEN_SECRET": "x" * 32})
+    cfg = ServerConfig.from_sources(_with_keys(config))
     pre_stop = float(c["lifecycle"]["preStop"]["exec"]["command"][-1])
     needed = pre_stop + cfg.drain_timeout_s + cfg.close_timeout_s + cfg.redis_timeout_s
     assert spec["terminationGracePeriodSeconds"] > needed, needed
@@ -133,10 +140,19 @@ def test_termination_grace_outlasts_prestop_and_drain() -> None:
     assert spec["securityContext"]["runAsNonRoot"] is True
 
 
-def test_the_placeholder_secret_is_refused() -> None:
+def _with_keys(config: dict[str, str]) -> dict[str, str]:
+    """The ConfigMap's settings with a real key set in place of the mounted file."""
+    from posecast.online.auth.keys import generate
+
+    keys = json.dumps({"keys": [generate("ES256", "k")[1]]})
+    return {**config, "POSECAST_TOKEN_KEYS_FILE": "", "POSECAST_TOKEN_KEYS": keys}
+
+
+def test_the_placeholder_secret_is_refused(tmp_path: Path) -> None:
     """Applying secret.yaml unchanged must not give a running cluster with a known key."""
-    secret = by_kind("Secret", "posecast-token")["stringData"]["POSECAST_TOKEN_SECRET"]
+    (text,) = by_kind("Secret", "posecast-token-keys")["stringData"].values()
     from posecast.errors import ConfigError
 
-    with pytest.raises(ConfigError, match="at least"):
-        ServerConfig(token_secret=secret)
+    (tmp_path / "token-keys.json").write_text(text)
+    with pytest.raises(ConfigError, match="at least one key"):
+        ServerConfig(token_keys_file=str(tmp_path / "token-keys.json"))

@@ -425,6 +425,15 @@ def errors_by_code(samples: Samples) -> dict[str, float]:
     }
 
 
+def token_refusals(samples: Samples) -> dict[str, float]:
+    """``posecast_token_refusals_total`` by reason."""
+    return {
+        dict(labels)["reason"]: v
+        for (name, labels), v in samples.items()
+        if name == "posecast_token_refusals_total"
+    }
+
+
 def delta(after: dict[str, float], before: dict[str, float]) -> dict[str, float]:
     out = {k: after.get(k, 0.0) - before.get(k, 0.0) for k in set(after) | set(before)}
     return {k: v for k, v in out.items() if v}
@@ -462,14 +471,18 @@ class Rates:
 
 def serve_flags(cfg: ServerConfig) -> list[str]:
     """``posecast serve`` flags that rebuild ``cfg`` (every option that differs from
-    the default, except the secret, which travels in the environment)."""
+    the default, except the secret and key set, which travel in the environment)."""
     default = ServerConfig(token_secret=cfg.token_secret)
     flags: list[str] = []
     for name in ServerConfig.__dataclass_fields__:
         value = getattr(cfg, name)
-        if name in ("token_secret", "port", "samples", "lookahead") or value == getattr(
-            default, name
-        ):
+        if name in (
+            "token_secret",
+            "token_keys",
+            "port",
+            "samples",
+            "lookahead",
+        ) or value == getattr(default, name):
             continue
         flag = "--" + name.replace("_", "-")
         if isinstance(value, bool):
@@ -531,7 +544,10 @@ class Arena:
             secret=self.cfg.token_secret,
             samples=self.cfg.samples,
             lookahead=self.cfg.lookahead,
-            env={"POSECAST_LAYOUTS": Layout.HMD3_WAIST.value},  # one model: a faster start
+            env={
+                "POSECAST_LAYOUTS": Layout.HMD3_WAIST.value,  # one model: a faster start
+                **({"POSECAST_TOKEN_KEYS": self.cfg.token_keys} if self.cfg.token_keys else {}),
+            },
             preexec_fn=self._renice,
         )
         if split:  # this process, the attackers it starts and the healthy players

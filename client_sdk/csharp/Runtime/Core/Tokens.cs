@@ -1,10 +1,13 @@
 // Minting join tokens, for development and tests only.
 //
-// In production the game backend mints tokens and keeps the secret; a client only
+// In production the game backend mints tokens and keeps the key; a client only
 // passes its token on. For a `posecast serve --dev` server (which prints its secret)
-// this mints tokens in the server's format:
-//   base64url(JSON claims, compact, sorted keys) "." base64url(HMAC-SHA256(secret, first part))
-// without padding; claims v (1), room, player, role, iat and exp (Unix seconds), jti.
+// this mints the server's format, a JWT (RFC 7519, compact JWS) signed HS256 with the
+// secret, with the base class library's HMACSHA256 (proto/README.md, Join tokens):
+//   base64url(header) "." base64url(claims) "." base64url(HMAC-SHA256(secret, header.claims))
+// without padding; header alg HS256, typ JWT and an optional kid; claims room, player,
+// role, iat and exp (Unix seconds), jti. A backend in .NET mints with its JWT library
+// (System.IdentityModel.Tokens.Jwt), ES256 included.
 
 using System;
 using System.Security.Cryptography;
@@ -31,8 +34,9 @@ namespace Posecast.Client
             return sb.Append('"').ToString();
         }
 
-        /// <summary>The server refuses a shorter token secret (posecast.online.config), in characters.</summary>
-        public const int MinSecretChars = 16;
+        /// <summary>The server refuses a shorter token secret (posecast.online.config), in characters:
+        /// at least 32 bytes for HS256 (RFC 7518 3.2).</summary>
+        public const int MinSecretChars = 32;
 
         /// <summary>Characters as the server (Python) counts them: code points, a UTF-16 surrogate pair one.</summary>
         private static int Characters(string s)
@@ -59,8 +63,20 @@ namespace Posecast.Client
         /// (ArgumentException) as the Python SDK's mint_token refuses it: a secret shorter than any server
         /// takes (MinSecretChars), for no server would verify the token; a role that is none of
         /// Protocol.Roles; ttlS not in (0, MaxTtlS]; a room or player that is not a wire id, which the
-        /// server refuses at join.</summary>
-        public static string Mint(string secret, string room, string player, string role = "player", int ttlS = 3600)
+        /// server refuses at join. `kid`: the key id in the header, for a server whose key set holds
+        /// several keys (its POSECAST_TOKEN_SECRET is kid "secret"); none by default.</summary>
+        public static string Mint(string secret, string room, string player, string role = "player", int ttlS = 3600,
+                                  string kid = null)
+        {
+            var jti = new byte[12];
+            using (var rng = RandomNumberGenerator.Create()) rng.GetBytes(jti);
+            return MintAt(secret, room, player, role, ttlS, kid, DateTimeOffset.UtcNow.ToUnixTimeSeconds(), B64(jti));
+        }
+
+        /// <summary>Mint with a given issue time (Unix seconds) and jti: the same bytes as the Python
+        /// SDK's mint_token with the same arguments (a test compares them).</summary>
+        public static string MintAt(string secret, string room, string player, string role, int ttlS, string kid,
+                                    long iat, string jti)
         {
             if (secret == null) throw new ArgumentException("no token secret (POSECAST_TOKEN_SECRET)");
             int chars = Characters(secret);
@@ -71,15 +87,15 @@ namespace Posecast.Client
             if (ttlS <= 0 || ttlS > MaxTtlS) throw new ArgumentException("ttlS must be in (0, " + MaxTtlS + "], not " + ttlS);
             CheckId("room", room);
             CheckId("player", player);
-            long iat = DateTimeOffset.UtcNow.ToUnixTimeSeconds();
-            var jti = new byte[12];
-            using (var rng = RandomNumberGenerator.Create()) rng.GetBytes(jti);
-            // Keys sorted, compact separators: as the server's json.dumps(sort_keys=True).
-            string claims = "{\"exp\":" + (iat + ttlS) + ",\"iat\":" + iat + ",\"jti\":" + JsonStr(B64(jti))
-                            + ",\"player\":" + JsonStr(player) + ",\"role\":" + JsonStr(role) + ",\"room\":" + JsonStr(room) + ",\"v\":1}";
-            string payload = B64(Encoding.UTF8.GetBytes(claims));
+            if (string.IsNullOrEmpty(jti)) throw new ArgumentException("no jti");
+            // Compact JSON in PyJWT's order: header keys sorted, claims as mint_token writes them.
+            string header = kid == null ? "{\"alg\":\"HS256\",\"typ\":\"JWT\"}"
+                                        : "{\"alg\":\"HS256\",\"kid\":" + JsonStr(kid) + ",\"typ\":\"JWT\"}";
+            string claims = "{\"room\":" + JsonStr(room) + ",\"player\":" + JsonStr(player) + ",\"role\":" + JsonStr(role)
+                            + ",\"iat\":" + iat + ",\"exp\":" + (iat + ttlS) + ",\"jti\":" + JsonStr(jti) + "}";
+            string signed = B64(Encoding.UTF8.GetBytes(header)) + "." + B64(Encoding.UTF8.GetBytes(claims));
             using (var mac = new HMACSHA256(Encoding.UTF8.GetBytes(secret)))
-                return payload + "." + B64(mac.ComputeHash(Encoding.ASCII.GetBytes(payload)));
+                return signed + "." + B64(mac.ComputeHash(Encoding.ASCII.GetBytes(signed)));
         }
     }
 }

@@ -1,30 +1,35 @@
 """Minting join tokens, for development and tests.
 
-In production the game backend mints tokens and keeps the secret; a client only
-passes its token on. For a ``posecast serve --dev`` server (which prints its secret)
-and for simulators, this mints tokens in the server's format::
+In production the game backend mints tokens and keeps the key; a client only
+passes its token on. A token is a JWT (RFC 7519, compact JWS), as any JWT library
+writes it, signed with one of the server's keys:
 
-    base64url(JSON claims, compact, sorted keys) "." base64url(HMAC-SHA256(secret, first part))
+* ``HS256`` with a shared secret: the server's ``POSECAST_TOKEN_SECRET`` (a
+  ``posecast serve --dev`` server prints its own) or an ``oct`` key of its key set;
+* ``ES256`` or ``EdDSA`` with a private key (a JWK, as ``posecast keygen`` writes it),
+  whose public half is in the server's key set (needs ``posecast-client[keys]``).
 
-without padding. Claims: ``v`` (1), ``room``, ``player``, ``role``, ``iat`` and
-``exp`` (Unix seconds), ``jti`` (a unique id) and, for backends only, ``rooms``.
+The header names the key (``kid``) when the server holds several. Claims: ``room``,
+``player``, ``role``, ``iat`` and ``exp`` (Unix seconds), ``jti`` (a unique id) and,
+for backends only, ``rooms`` (proto/README.md, Join tokens).
 """
 
 from __future__ import annotations
 
-import base64
-import hashlib
-import hmac
-import json
 import secrets
 import time
+from collections.abc import Mapping
 from typing import Any
+
+import jwt
 
 from posecast_client.codec import ID_PATTERN as _ID
 from posecast_client.protocol import MAX_ID_BYTES, ROLES
 
 MAX_TTL_S = 7 * 24 * 3600  # what the server's minting tool allows
-MIN_SECRET_CHARS = 16  # the server refuses shorter secrets (posecast.online.config)
+MIN_SECRET_CHARS = 32  # the server refuses shorter secrets (posecast.online.config)
+ALGORITHMS = ("HS256", "ES256", "EdDSA")  # what a server verifies, each with its kind of key
+_KINDS = {("oct", None): "HS256", ("EC", "P-256"): "ES256", ("OKP", "Ed25519"): "EdDSA"}
 
 
 def secret_problem(secret: str | bytes) -> str | None:
@@ -46,12 +51,31 @@ def secret_problem(secret: str | bytes) -> str | None:
     return None
 
 
-def _b64(raw: bytes) -> str:
-    return base64.urlsafe_b64encode(raw).rstrip(b"=").decode("ascii")
+def _signing(key: str | bytes | Mapping[str, Any]) -> tuple[str, Any, str | None]:
+    """``(alg, key material, kid)`` of a secret or a private JWK."""
+    if isinstance(key, str | bytes):
+        problem = secret_problem(key)
+        if problem is not None:
+            raise ValueError(problem)
+        return "HS256", key.encode("utf-8") if isinstance(key, str) else key, None
+    kind = (key.get("kty"), key.get("crv") if key.get("kty") != "oct" else None)
+    alg = _KINDS.get(kind)  # type: ignore[arg-type]
+    if alg is None:
+        raise ValueError(f"a {kind[0]} {kind[1] or ''} key: posecast verifies {_KINDS}")
+    if alg != "HS256" and "d" not in key:
+        raise ValueError("this is a public key: minting needs the private key (its d)")
+    try:
+        material = jwt.PyJWK(dict(key), algorithm=alg).key
+    except jwt.PyJWTError as exc:  # its message names what is missing, never the key
+        raise ValueError(f"not a valid {alg} key ({type(exc).__name__})") from None
+    if alg == "HS256" and len(material) < MIN_SECRET_CHARS:
+        raise ValueError(f"an HS256 key must be at least {MIN_SECRET_CHARS} bytes")
+    kid = key.get("kid")
+    return alg, material, kid if isinstance(kid, str) else None
 
 
 def mint_token(
-    secret: str | bytes,
+    key: str | bytes | Mapping[str, Any],
     *,
     room: str,
     player: str,
@@ -60,22 +84,28 @@ def mint_token(
     rooms: tuple[str, ...] = (),
     now: float | None = None,
     jti: str | None = None,
+    kid: str | None = None,
+    alg: str | None = None,
 ) -> str:
-    """A join token for ``player`` in ``room``, valid ``ttl_s`` seconds from ``now``.
+    """A join token (a JWT) for ``player`` in ``room``, valid ``ttl_s`` seconds from ``now``.
 
     Args:
-        secret: the server's token secret (``POSECAST_TOKEN_SECRET``); text is UTF-8.
-            One shorter than any server takes (:data:`MIN_SECRET_CHARS` characters)
-            is refused: no server would verify the token.
+        key: the server's token secret (``POSECAST_TOKEN_SECRET``; text is UTF-8),
+            signing HS256; or a private JWK (a dict, as ``posecast keygen`` writes
+            it) signing ES256 or EdDSA, or an ``oct`` JWK signing HS256. A secret
+            shorter than any server takes (:data:`MIN_SECRET_CHARS` characters) is
+            refused: no server would verify the token.
         role: ``player``, ``spectator`` or ``backend``.
         rooms: further rooms a backend may watch.
         now: Unix time of issue (default: the wall clock).
         jti: the token's unique id (default: random).
+        kid: the key id written in the header (default: the JWK's ``kid``; none for
+            a secret, which a server holding one key takes).
+        alg: the algorithm, checked against the key's (default: the key's).
     """
-    problem = secret_problem(secret)
-    if problem is not None:
-        raise ValueError(problem)
-    key = secret.encode("utf-8") if isinstance(secret, str) else secret
+    key_alg, material, key_kid = _signing(key)
+    if alg is not None and alg != key_alg:
+        raise ValueError(f"alg {alg!r} does not fit the key, which signs {key_alg}")
     if role not in ROLES:
         raise ValueError(f"role must be one of {ROLES}, not {role!r}")
     if rooms and role != "backend":
@@ -90,7 +120,6 @@ def mint_token(
             )
     iat = int(time.time() if now is None else now)
     claims: dict[str, Any] = {
-        "v": 1,
         "room": room,
         "player": player,
         "role": role,
@@ -100,6 +129,6 @@ def mint_token(
     }
     if rooms:
         claims["rooms"] = list(rooms)
-    payload = _b64(json.dumps(claims, separators=(",", ":"), sort_keys=True).encode())
-    mac = hmac.new(key, payload.encode("ascii"), hashlib.sha256).digest()
-    return payload + "." + _b64(mac)
+    kid = kid if kid is not None else key_kid
+    headers = {"kid": kid} if kid else None
+    return jwt.encode(claims, material, algorithm=key_alg, headers=headers)

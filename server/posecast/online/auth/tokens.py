@@ -1,47 +1,65 @@
-"""Signed join tokens: minted by the game backend, verified by the server.
+"""Join tokens: JWTs (RFC 7519, compact JWS) minted by the game backend, verified here.
 
-Format (compact, URL-safe, no padding)::
+A token is ``base64url(header) "." base64url(claims) "." base64url(signature)``, as any
+JWT library writes it. The header's ``alg`` is one of :data:`~.keys.ALGORITHMS` and must
+be the one its key verifies; its ``kid`` names the key in the server's key set (a token
+without one is checked with the set's only key, when it holds exactly one). Claims:
 
-    base64url(JSON claims) "." base64url(HMAC-SHA256(secret, first part))
+=========  ========  ============================================================
+claim      type      meaning
+=========  ========  ============================================================
+``room``   str       the room this token joins
+``player`` str       the player id the connection takes (server-unique)
+``role``   str       ``player`` | ``spectator`` | ``backend``
+``rooms``  [str]     further rooms a ``backend`` may watch (optional, backends only)
+``iat``    int       issued at, Unix seconds
+``exp``    int       expires at, Unix seconds
+``jti``    str       unique token id (replay protection after ``bye``)
+``nbf``    int       not before, Unix seconds (optional; standard, checked if present)
+=========  ========  ============================================================
 
-The MAC covers the exact claim bytes that were sent, so the server never has to
-re-serialise JSON to check it. Claims:
+Signature and structure are PyJWT's (with ``algorithms`` pinned to the key's one);
+the times are checked here against the ``now`` passed in, so the clock stays the
+caller's. Every refusal carries a stable ``reason`` (:data:`REASONS`), counted in
+``/metrics``, and a message that never quotes the token.
 
-=======  ========  ==============================================================
-claim    type      meaning
-=======  ========  ==============================================================
-``v``    int       token format version (1)
-``room`` str       the room this token joins
-``player`` str     the player id the connection takes (server-unique)
-``role`` str       ``player`` | ``spectator`` | ``backend``
-``rooms`` [str]    further rooms a ``backend`` may watch (optional, backends only)
-``iat``  int       issued at, Unix seconds
-``exp``  int       expires at, Unix seconds
-``jti``  str       unique token id (replay protection after ``bye``)
-=======  ========  ==============================================================
-
-Pure functions plus one bounded in-memory set; the clock is always passed in.
+The pre-JWT format (``base64url(claims) "." base64url(HMAC)``, one dot) is refused
+with ``old_format``, naming the change (docs/operations.md, "Upgrading").
 """
 
 from __future__ import annotations
 
 import base64
 import binascii
-import hashlib
 import heapq
-import hmac
 import json
 import secrets
 from dataclasses import dataclass, field
 from typing import Any
 
+import jwt
+
 from posecast.errors import TokenExpiredError, UnauthenticatedError
+from posecast.online.auth.keys import ALGORITHMS, KID_PATTERN, Key, KeySet, SigningKey
 from posecast.online.protocol.fields import ID_PATTERN
 from posecast.online.protocol.messages import MAX_ID_BYTES, ROLES
 
-TOKEN_VERSION = 1
 MAX_TOKEN_CHARS = 4096
 MAX_TTL_S = 7 * 24 * 3600  # the minting CLI refuses longer-lived tokens
+# Why a token was refused: the label of posecast_token_refusals_total.
+REASONS = (
+    "missing",  # no token at all
+    "old_format",  # the pre-JWT posecast format
+    "malformed",  # not a compact JWS, or its header is not base64url JSON
+    "alg_refused",  # alg not allow-listed (none, RS256, HS512, ...)
+    "alg_mismatch",  # alg allow-listed, but not the one its key verifies
+    "unknown_kid",  # kid not in the key set (or none, with several keys)
+    "bad_signature",  # wrong key, tampered header or claims
+    "bad_claims",  # a claim missing or of the wrong type or value
+    "expired",  # TOKEN_EXPIRED: exp passed (with the leeway)
+    "not_yet_valid",  # TOKEN_EXPIRED: iat or nbf in the future (past the leeway)
+    "replayed",  # its session ended with bye or a kick
+)
 
 
 def _is_id(value: object) -> bool:
@@ -71,20 +89,16 @@ class Claims:
         return room == self.room or room in self.rooms
 
 
-def _b64e(raw: bytes) -> str:
-    return base64.urlsafe_b64encode(raw).rstrip(b"=").decode("ascii")
-
-
-def _b64d(text: str) -> bytes:
-    return base64.urlsafe_b64decode(text + "=" * (-len(text) % 4))
-
-
-def _mac(secret: bytes, payload: str) -> bytes:
-    return hmac.new(secret, payload.encode("ascii"), hashlib.sha256).digest()
+def _signing_key(key: bytes | str | SigningKey) -> SigningKey:
+    if isinstance(key, SigningKey):
+        return key
+    if not key:
+        raise ValueError("the token secret must not be empty")
+    return SigningKey("HS256", key.encode("utf-8") if isinstance(key, str) else key)
 
 
 def mint(
-    secret: bytes,
+    key: bytes | str | SigningKey,
     *,
     room: str,
     player: str,
@@ -94,9 +108,9 @@ def mint(
     rooms: tuple[str, ...] = (),
     jti: str | None = None,
 ) -> str:
-    """A token for ``player`` in ``room`` valid for ``ttl_s`` seconds from ``now``."""
-    if not secret:
-        raise ValueError("the token secret must not be empty")
+    """A JWT for ``player`` in ``room`` valid for ``ttl_s`` seconds from ``now``,
+    signed with ``key``: an HS256 secret (no ``kid``) or a :class:`SigningKey`."""
+    sk = _signing_key(key)
     if role not in ROLES:
         raise ValueError(f"role must be one of {ROLES}, not {role!r}")
     if rooms and role != "backend":
@@ -110,7 +124,6 @@ def mint(
             )
     iat = int(now)
     claims: dict[str, Any] = {
-        "v": TOKEN_VERSION,
         "room": room,
         "player": player,
         "role": role,
@@ -120,46 +133,132 @@ def mint(
     }
     if rooms:
         claims["rooms"] = list(rooms)
-    payload = _b64e(json.dumps(claims, separators=(",", ":"), sort_keys=True).encode())
-    return payload + "." + _b64e(_mac(secret, payload))
+    headers = {"kid": sk.kid} if sk.kid is not None else None
+    return jwt.encode(claims, sk.material, algorithm=sk.alg, headers=headers)
 
 
-def verify(secret: bytes, token: str, *, now: float, leeway_s: float = 0.0) -> Claims:
-    """The claims of a token whose MAC verifies and that is valid at ``now``.
+def _refused(reason: str, message: str) -> UnauthenticatedError:
+    return UnauthenticatedError(message, reason=reason, field="token")
+
+
+def _shown(value: object) -> str:
+    """A header value fit to quote in an error: a short id as is, anything else not."""
+    if isinstance(value, str) and KID_PATTERN.fullmatch(value):
+        return repr(value)
+    return "(not shown: not a short id)"
+
+
+def _header(token: str) -> dict[str, Any]:
+    """The JOSE header, read only to pick the key: PyJWT then reads the whole token
+    again, strictly, and verifies it (this saves its strict read of the header twice,
+    a third of a check's cost)."""
+    part = token.split(".", 1)[0]
+    try:
+        header = json.loads(base64.urlsafe_b64decode(part + "=" * (-len(part) % 4)))
+    except (ValueError, binascii.Error, RecursionError):
+        raise _refused("malformed", "token header is not base64url JSON") from None
+    if not isinstance(header, dict):
+        raise _refused("malformed", "token header is not a JSON object")
+    return header
+
+
+def _pick_key(keys: KeySet, token: str) -> Key:
+    """The key that must verify ``token``, from its header, before any signature
+    check: refused here are a non-JWT, an alg off the list, an unknown kid, and an
+    alg that is not the one its key verifies (algorithm confusion)."""
+    if not token:
+        raise _refused("missing", "no token: hello.token must be a JWT from the game backend")
+    if len(token) > MAX_TOKEN_CHARS:
+        raise _refused("malformed", f"token is longer than {MAX_TOKEN_CHARS} characters")
+    if token.count(".") == 1:
+        raise _refused(
+            "old_format",
+            "token is in posecast's pre-JWT format (claims.mac): servers now take JWTs"
+            " (RFC 7519); mint with a JWT library or an SDK of this release"
+            " (docs/operations.md, Upgrading)",
+        )
+    if token.count(".") != 2:
+        raise _refused("malformed", "token is not a JWT (header.claims.signature)")
+    header = _header(token)
+    alg = header.get("alg")
+    if alg not in ALGORITHMS:
+        raise _refused(
+            "alg_refused",
+            f"token alg {_shown(alg)} is not accepted: one of {', '.join(ALGORITHMS)}",
+        )
+    if "crit" in header or "b64" in header:  # extensions we do not implement (RFC 7515 4.1.11)
+        raise _refused("malformed", "token header asks for JWS extensions (crit, b64)")
+    kid = header.get("kid")
+    if kid is not None and not isinstance(kid, str):
+        raise _refused("malformed", "token kid is not a string")
+    if kid is None:
+        if len(keys) != 1:
+            raise _refused("unknown_kid", f"token has no kid and the server holds {len(keys)} keys")
+        key = next(iter(keys.keys.values()))
+    else:
+        found = keys.keys.get(kid) if isinstance(kid, str) else None
+        if found is None:
+            raise _refused("unknown_kid", f"token kid {_shown(kid)} is unknown to this server")
+        key = found
+    if alg != key.alg:
+        raise _refused(
+            "alg_mismatch",
+            f"token alg {alg!r} is not its key's: key {key.kid!r} verifies {key.alg} only",
+        )
+    return key
+
+
+def verify(keys: KeySet | bytes | str, token: str, *, now: float, leeway_s: float = 0.0) -> Claims:
+    """The claims of a token whose signature verifies and that is valid at ``now``.
+
+    ``keys``: the server's key set, or one HS256 secret (tests, tools).
 
     Raises:
-        UnauthenticatedError: malformed, forged or with bad claims.
-        TokenExpiredError: genuine but expired (or issued in the future, past leeway).
+        UnauthenticatedError: malformed, forged, of an unknown key or with bad claims.
+        TokenExpiredError: genuine but expired (or not valid yet), past ``leeway_s``.
     """
-    if len(token) > MAX_TOKEN_CHARS or token.count(".") != 1:
-        raise UnauthenticatedError("token is not <claims>.<mac>", field="token")
-    payload, mac_text = token.split(".")
+    if not isinstance(keys, KeySet):
+        keys = KeySet.from_secret(keys)
+    key = _pick_key(keys, token)
     try:
-        mac = _b64d(mac_text)
-        raw = _b64d(payload)
-    except (binascii.Error, ValueError):
-        raise UnauthenticatedError("token is not base64url", field="token") from None
-    # Constant-time: the comparison takes as long whatever prefix matches.
-    if not hmac.compare_digest(mac, _mac(secret, payload)):
-        raise UnauthenticatedError("token signature does not verify", field="token")
-    try:
-        c = json.loads(raw)
-    except (UnicodeDecodeError, ValueError):
-        raise UnauthenticatedError("token claims are not JSON", field="token") from None
+        c = jwt.decode(
+            token,
+            key.material,
+            algorithms=[key.alg],
+            # The times are checked below against the caller's clock, not PyJWT's.
+            # aud, iss and sub are the backend's own business (posecast's are room,
+            # player and role): present or not, they are not checked.
+            options={
+                "verify_exp": False,
+                "verify_iat": False,
+                "verify_nbf": False,
+                "verify_aud": False,
+                "verify_iss": False,
+                "verify_sub": False,
+                "verify_jti": False,
+            },
+        )
+    except jwt.InvalidSignatureError:
+        raise _refused("bad_signature", "token signature does not verify") from None
+    except jwt.PyJWTError:
+        raise _refused("malformed", "token claims are not a base64url JSON object") from None
     claims = _claims(c)
-    if now + leeway_s < claims.iat:
-        raise TokenExpiredError("token is not valid yet", field="token")
+    nbf = c.get("nbf", claims.iat)
+    if type(nbf) is not int:
+        raise _refused("bad_claims", "token claim nbf is not an integer")
+    if now + leeway_s < max(claims.iat, nbf):
+        raise TokenExpiredError("token is not valid yet", reason="not_yet_valid", field="token")
     if now - leeway_s >= claims.exp:
-        raise TokenExpiredError("token has expired", field="token")
+        raise TokenExpiredError("token has expired", reason="expired", field="token")
     return claims
 
 
 def _claims(c: object) -> Claims:
     def bad(what: str) -> UnauthenticatedError:
-        return UnauthenticatedError(f"token claim {what}", field="token")
+        return _refused("bad_claims", f"token claim {what}")
 
-    if not isinstance(c, dict) or c.get("v") != TOKEN_VERSION:
-        raise bad("v is missing or not 1")
+    if not isinstance(c, dict):
+        raise bad("set is not a JSON object")
     for key in ("room", "player", "role", "jti"):
         if not isinstance(c.get(key), str) or not c[key]:
             raise bad(f"{key} is missing or not a string")
@@ -170,13 +269,25 @@ def _claims(c: object) -> Claims:
         if type(c.get(key)) is not int:
             raise bad(f"{key} is missing or not an integer")
     if c["role"] not in ROLES:
-        raise bad(f"role {c['role']!r} is unknown")
+        raise bad(f"role {_shown(c['role'])} is unknown")
     rooms = c.get("rooms", [])
     if not isinstance(rooms, list) or not all(isinstance(r, str) and r for r in rooms):
         raise bad("rooms is not a list of strings")
     if rooms and c["role"] != "backend":
         raise bad("rooms is only for backends")
     return Claims(c["room"], c["player"], c["role"], c["iat"], c["exp"], c["jti"], tuple(rooms))
+
+
+@dataclass
+class Verifier:
+    """The server's token check: the current key set (swapped whole on a reload, so a
+    ``hello`` sees the old set or the new one, never a mix) and the leeway."""
+
+    keys: KeySet
+    leeway_s: float = 0.0
+
+    def verify(self, token: str, now: float) -> Claims:
+        return verify(self.keys, token, now=now, leeway_s=self.leeway_s)
 
 
 @dataclass
@@ -210,7 +321,9 @@ class ReplayGuard:
         """Raise UNAUTHENTICATED if ``claims.jti`` belongs to an ended session."""
         self._purge(now)
         if claims.jti in self._exp:
-            raise UnauthenticatedError("token was already used by a session that ended")
+            raise UnauthenticatedError(
+                "token was already used by a session that ended", reason="replayed"
+            )
 
     def __len__(self) -> int:
         return len(self._exp)
@@ -222,5 +335,5 @@ class ReplayGuard:
 
 
 def new_secret() -> str:
-    """A random secret for ``--dev`` (256 bits, URL-safe text)."""
+    """A random secret for ``--dev`` (256 bits, URL-safe text: 43 characters)."""
     return secrets.token_urlsafe(32)

@@ -36,8 +36,10 @@ from posecast.errors import (
     ServerShutdownError,
     SlowConsumerError,
     TimedOutError,
+    TokenExpiredError,
+    UnauthenticatedError,
 )
-from posecast.online.auth.tokens import ReplayGuard
+from posecast.online.auth.tokens import ReplayGuard, Verifier
 from posecast.online.cluster.bus import Bus
 from posecast.online.config import ServerConfig
 from posecast.online.core.clock import DRIFT_CAP_PPM
@@ -103,6 +105,7 @@ class Admission:
         router: Router,
         inbox: EngineInbox,
         replay: ReplayGuard,
+        verifier: Verifier,
         bus: Bus,
         *,
         wall_offset_s: float,
@@ -118,6 +121,7 @@ class Admission:
         self.router = router
         self.inbox = inbox
         self.replay = replay
+        self.verifier = verifier
         self.bus = bus
         self.wall_offset_s = wall_offset_s
         self._changed = changed
@@ -137,8 +141,9 @@ class Admission:
         """A new connection speaking protocol ``version`` (the handshake's subprotocol)."""
         conn = self.conns.next_id()
         session = Session(
-            conn, ip, self.cfg, opened_at=now, wall_offset_s=self.wall_offset_s, version=version
-        )
+            conn, ip, self.cfg, opened_at=now, wall_offset_s=self.wall_offset_s,
+            version=version, verifier=self.verifier,
+        )  # fmt: skip
         budget = TokenBucket(self.cfg.error_rate_hz, self.cfg.error_rate_hz)
         stream = PoseStream() if version >= PROTOCOL_V2 else None
         self.conns.conns[conn] = Conn(session, Outbox(self.cfg.reliable_queue, stream), budget)
@@ -344,6 +349,8 @@ class Admission:
 
     def refuse(self, c: Conn, exc: ProtocolError, now: float) -> None:
         self.metrics.errors.labels(exc.code).inc()
+        if isinstance(exc, UnauthenticatedError | TokenExpiredError):
+            self.metrics.token_refusals.labels(exc.reason).inc()
         if exc.code in _DROP_REASON and not exc.fatal:  # a fatal one drops no frame:
             # the connection ends (RATE_LIMITED for a flood, ``flooded``)
             self.metrics.frames_dropped.labels(_DROP_REASON[exc.code]).inc()

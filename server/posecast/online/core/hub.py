@@ -27,7 +27,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from posecast.errors import ProtocolError
-from posecast.online.auth.tokens import ReplayGuard
+from posecast.online.auth.keys import KeySet
+from posecast.online.auth.tokens import ReplayGuard, Verifier
 from posecast.online.cluster.bus import Bus
 from posecast.online.cluster.memory import MemoryBus
 from posecast.online.config import ServerConfig
@@ -52,9 +53,11 @@ class Hub:
         metrics: Metrics,
         wall_offset_s: float = 0.0,
         bus: Bus | None = None,
+        keys: KeySet | None = None,
     ) -> None:
         """``wall_offset_s`` turns server time into Unix time for token expiry.
-        Without a ``bus`` the hub is one embedded node."""
+        Without a ``bus`` the hub is one embedded node. ``keys``: the token key set
+        (default: ``cfg.key_set()``); :meth:`reload_keys` swaps it."""
         self.cfg = cfg
         self.metrics = metrics
         self.rooms = Rooms(cfg.max_players_per_room, cfg.max_watchers_per_room, cfg.max_rooms)
@@ -63,6 +66,7 @@ class Hub:
         self.inbox = EngineInbox(cfg.frame_queue)
         self.bus = bus or MemoryBus(clock=lambda: 0.0)
         replay = ReplayGuard(cfg.replay_cache, cfg.token_leeway_s)
+        self.verifier = Verifier(keys if keys is not None else cfg.key_set(), cfg.token_leeway_s)
         self.router = Router(self.connections, self.rooms, self.remote, self.bus, metrics)
         self.sink = ClusterSink(
             self.connections, self.rooms, self.remote, self.router, replay, self.bus, metrics,
@@ -71,11 +75,17 @@ class Hub:
         )  # fmt: skip
         self.admission = Admission(
             cfg, metrics, self.connections, self.rooms, self.remote, self.router, self.inbox,
-            replay, self.bus, wall_offset_s=wall_offset_s, changed=self.sink.refresh,
+            replay, self.verifier, self.bus, wall_offset_s=wall_offset_s,
+            changed=self.sink.refresh,
         )  # fmt: skip
         self.bus.attach(self.sink)
 
     # --- the shell's calls ---------------------------------------------------------------
+
+    def reload_keys(self, keys: KeySet) -> None:
+        """From the next ``hello`` on, tokens are checked with ``keys``. Joined
+        sessions stay: a token is checked once, at ``hello``."""
+        self.verifier.keys = keys
 
     def admits(self, ip: str, now: float) -> bool:
         return self.admission.admits(ip, now)

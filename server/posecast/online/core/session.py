@@ -34,7 +34,7 @@ from posecast.errors import (
     RateLimitedError,
 )
 from posecast.geometry.rotations import quat_identity
-from posecast.online.auth.tokens import Claims, verify
+from posecast.online.auth.tokens import Claims, Verifier
 from posecast.online.config import ServerConfig
 from posecast.online.core.clock import ClockEstimator, FrameTimes
 from posecast.online.core.ratelimit import TokenBucket
@@ -149,6 +149,7 @@ class Session:
     opened_at: float
     wall_offset_s: float = 0.0  # Unix time minus server time, for token iat/exp
     version: int = PROTOCOL_VERSION  # the subprotocol the handshake chose (1 or 2)
+    verifier: Verifier | None = None  # the hub's; None: one built from cfg (tests)
     phase: Phase = Phase.AWAIT_HELLO
     claims: Claims | None = None
     name: str = ""
@@ -214,12 +215,9 @@ class Session:
 
     def _hello(self, hello: Hello, now: float) -> Join:
         layout = requested_layout(hello)
-        claims = verify(
-            self.cfg.secret_bytes,
-            hello.token,
-            now=now + self.wall_offset_s,
-            leeway_s=self.cfg.token_leeway_s,
-        )
+        if self.verifier is None:
+            self.verifier = Verifier(self.cfg.key_set(), self.cfg.token_leeway_s)
+        claims = self.verifier.verify(hello.token, now + self.wall_offset_s)
         # After the token: what this server serves and how it is started is for
         # clients it admits, not for anyone who can open a socket.
         model = model_layout(layout)

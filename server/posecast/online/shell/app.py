@@ -39,7 +39,7 @@ from websockets.frames import CloseCode
 from websockets.protocol import State
 from websockets.typing import Subprotocol
 
-from posecast.errors import MalformedError, ProtocolError, TooLargeError
+from posecast.errors import ConfigError, MalformedError, ProtocolError, TooLargeError
 from posecast.online.cluster.auto import create_bus
 from posecast.online.config import ServerConfig
 from posecast.online.core.hub import Hub
@@ -83,9 +83,12 @@ class PosecastServer:
         self.cfg = cfg
         self.metrics = Metrics()
         self.bus = create_bus(cfg, self.metrics, clock=time.monotonic)
+        keys = cfg.key_set()
+        self.metrics.token_keys.set(len(keys))
         self.hub = Hub(
-            cfg, self.metrics, wall_offset_s=time.time() - time.monotonic(), bus=self.bus
-        )
+            cfg, self.metrics, wall_offset_s=time.time() - time.monotonic(), bus=self.bus,
+            keys=keys,
+        )  # fmt: skip
         self.bus.after = self._flush  # what other nodes sent lands in outboxes: wake writers
         self.http = HttpRoutes(
             cfg, self.metrics, self.hub, self.bus,
@@ -99,6 +102,7 @@ class PosecastServer:
         self.inline_writes = 0  # batches _flush wrote itself, without waking a writer
         self._server: Server | None = None
         self._ticks: asyncio.Task[None] | None = None
+        self._key_reloads: asyncio.Task[None] | None = None
         self._stop_ticks = asyncio.Event()
         self.ready = False
         self.stopping = False
@@ -136,6 +140,8 @@ class PosecastServer:
             )
         )
         await self.bus.start()
+        if self.cfg.token_keys_file and self.cfg.token_keys_reload_s > 0:
+            self._key_reloads = asyncio.create_task(self._reload_keys_every())
         # What start-up made (the models, numpy, onnxruntime's bindings: most of the
         # heap) lives as long as the node: frozen, a full collection no longer walks it.
         # A full collection during a join wave took 40-73 ms before and 7-22 ms after
@@ -207,12 +213,37 @@ class PosecastServer:
             client.ws.transport.abort()
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(self._server.wait_closed(), self.cfg.close_timeout_s)
+        if self._key_reloads is not None:
+            self._key_reloads.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._key_reloads
         self._stop_ticks.set()
         if self._ticks is not None:
             await self._ticks
         await bus_stopped
         self.executor.shutdown(wait=True)
         log.info("stopped", extra={"port": self.port})
+
+    def reload_keys(self) -> bool:
+        """Read the token key set again (SIGHUP, ``token_keys_reload_s``): the next
+        ``hello`` is checked with it; joined players stay. A set that does not load
+        (a half-written file, a bad key) is logged and counted, and the old one stays."""
+        try:
+            keys = self.cfg.key_set()
+        except ConfigError as exc:
+            self.metrics.key_reloads.labels("failed").inc()
+            log.error("token keys not reloaded: the old set stays", extra={"why": exc.message})
+            return False
+        self.hub.reload_keys(keys)
+        self.metrics.key_reloads.labels("ok").inc()
+        self.metrics.token_keys.set(len(keys))
+        log.info("token keys reloaded", extra={"keys": keys.describe()})
+        return True
+
+    async def _reload_keys_every(self) -> None:
+        while True:
+            await asyncio.sleep(self.cfg.token_keys_reload_s)
+            self.reload_keys()
 
     # --- one connection ---------------------------------------------------------------------
 
@@ -395,6 +426,7 @@ async def serve_until_signal(cfg: ServerConfig, on_ready: Callable[[int], None])
     for sig in (signal.SIGTERM, signal.SIGINT):
         loop.add_signal_handler(sig, stop.set)
     server = PosecastServer(cfg)
+    loop.add_signal_handler(signal.SIGHUP, server.reload_keys)  # the key set file, again
     await server.start()
     on_ready(server.port)
     try:

@@ -64,6 +64,7 @@ from urllib.parse import parse_qs, urlsplit
 from websockets.datastructures import Headers
 from websockets.http11 import Request, Response
 
+from posecast.online.auth.keys import SigningKey
 from posecast.online.auth.tokens import mint
 from posecast.online.cluster.bus import Bus
 from posecast.online.config import ServerConfig
@@ -186,7 +187,7 @@ def respond(connection: Peer, request: Request, cfg: ServerConfig, rooms: Rooms)
         else:
             body = _asset(name)
         return _response(200, body, content_type, [*extra, ("Cache-Control", "no-cache")])
-    if sub in ("token", "rooms") and cfg.dev:
+    if sub in ("token", "rooms") and cfg.dev and cfg.token_secret:  # minted with the secret
         if not _is_loopback(connection):
             return _text(403, "viewer tokens are handed to loopback clients only\n")
         if sub == "rooms":
@@ -197,7 +198,7 @@ def respond(connection: Peer, request: Request, cfg: ServerConfig, rooms: Rooms)
             return _text(400, "room must be 1 to 64 bytes of A-Z a-z 0-9 _ . : -\n")
         player = f"viewer-{secrets.token_hex(4)}"
         token = mint(
-            cfg.secret_bytes,
+            SigningKey.from_secret(cfg.secret_bytes),
             room=room,
             player=player,
             role="spectator",
