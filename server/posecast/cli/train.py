@@ -44,7 +44,6 @@ def train_device(name: str) -> str:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-
     cmd = "train"
     if args.steps is not None:
         at_least("--steps", args.steps, 1, cmd)
