@@ -6,15 +6,182 @@
 
 using System;
 using System.Collections.Generic;
+using System.Linq;
 
 namespace UnityEngine
 {
-    public class Object { }
+    /// <summary>Unity's base of every engine object. A destroyed one compares equal to
+    /// null, as in Unity (its == is overloaded).</summary>
+    public class Object
+    {
+        private string _name = "";
+        internal bool Destroyed;
+        public string name
+        {
+            get { var c = this as Component; return c != null && !ReferenceEquals(c.gameObject, null) ? c.gameObject.name : _name; }
+            set { var c = this as Component; if (c != null && !ReferenceEquals(c.gameObject, null)) c.gameObject.name = value; else _name = value; }
+        }
+
+        public static bool operator ==(Object a, Object b)
+        {
+            bool aNull = ReferenceEquals(a, null) || a.Destroyed, bNull = ReferenceEquals(b, null) || b.Destroyed;
+            if (aNull || bNull) return aNull && bNull;
+            return ReferenceEquals(a, b);
+        }
+        public static bool operator !=(Object a, Object b) { return !(a == b); }
+        public override bool Equals(object other) { return other is Object && this == (Object)other; }
+        public override int GetHashCode() { return base.GetHashCode(); }
+        public static implicit operator bool(Object exists) { return exists != null; }
+
+        /// <summary>A copy of `original` under `parent`: for a GameObject its whole hierarchy,
+        /// every component copied (an Animator's bones moved to the copy's), Awake called on
+        /// each MonoBehaviour of the copy, as Unity does.</summary>
+        public static T Instantiate<T>(T original, Transform parent) where T : Object
+        {
+            var go = original as GameObject;
+            if (go == null) throw new NotSupportedException("the stand-in instantiates GameObjects only");
+            var copy = go.CloneTree(parent);
+            return (T)(Object)copy;
+        }
+
+        /// <summary>Destroys a GameObject (its children too) or a component. Unity destroys at the
+        /// end of the frame; the stand-in at once (tests check `== null` after a frame).</summary>
+        public static void Destroy(Object obj)
+        {
+            if (ReferenceEquals(obj, null)) return;
+            var go = obj as GameObject;
+            if (go != null) { go.DestroyTree(); return; }
+            obj.Destroyed = true;
+        }
+    }
+
+    /// <summary>A scene object: a Transform and components. Components must be added with
+    /// AddComponent (which calls a MonoBehaviour's Awake), as in Unity.</summary>
+    public sealed class GameObject : Object
+    {
+        internal readonly List<Component> Components = new List<Component>();
+        private readonly Transform _transform;
+
+        public GameObject() : this("New Game Object") { }
+
+        public GameObject(string name)
+        {
+            this.name = name;
+            _transform = new Transform();
+            _transform.Attach(this);
+        }
+
+        public Transform transform { get { return _transform; } }
+        public GameObject gameObject { get { return this; } }
+
+        public T AddComponent<T>() where T : Component
+        {
+            var c = (T)Activator.CreateInstance(typeof(T), true);
+            c.Attach(this);
+            var mb = c as MonoBehaviour;
+            if (mb != null) mb.CallAwake();
+            return c;
+        }
+
+        public T GetComponent<T>()
+        {
+            foreach (var c in Components) if (c is T && !c.Destroyed) return (T)(object)c;
+            return default(T);
+        }
+
+        public T GetComponentInChildren<T>()
+        {
+            var all = new List<Transform>();
+            transform.Walk(all);
+            foreach (var t in all)
+            {
+                if (ReferenceEquals(t.gameObject, null)) continue;
+                var c = t.gameObject.GetComponent<T>();
+                if (c != null) return c;
+            }
+            return default(T);
+        }
+
+        internal GameObject CloneTree(Transform parent)
+        {
+            var map = new Dictionary<Transform, Transform>();
+            var copy = CloneNode(this, map);
+            copy.name = name + "(Clone)";
+            foreach (var kv in map)
+                if (!ReferenceEquals(kv.Key.gameObject, null))
+                    foreach (var c in kv.Key.gameObject.Components)
+                        if (!(c is Transform)) c.CopyTo(kv.Value.gameObject, map);
+            if (parent != null) copy.transform.SetParent(parent, false);
+            foreach (var kv in map)
+                foreach (var c in kv.Value.gameObject.Components)
+                {
+                    var mb = c as MonoBehaviour;
+                    if (mb != null) mb.CallAwake();
+                }
+            return copy;
+        }
+
+        private static GameObject CloneNode(GameObject g, Dictionary<Transform, Transform> map)
+        {
+            var copy = new GameObject(g.name);
+            copy.transform.localPosition = g.transform.localPosition;
+            copy.transform.localRotation = g.transform.localRotation;
+            map[g.transform] = copy.transform;
+            foreach (var child in g.transform.Children)
+            {
+                if (ReferenceEquals(child.gameObject, null)) throw new NotSupportedException("a child Transform without a GameObject");
+                CloneNode(child.gameObject, map).transform.SetParent(copy.transform, false);
+            }
+            return copy;
+        }
+
+        internal void DestroyTree()
+        {
+            Destroyed = true;
+            foreach (var c in Components) c.Destroyed = true;
+            foreach (var child in transform.Children.ToArray())
+                if (!ReferenceEquals(child.gameObject, null)) child.gameObject.DestroyTree();
+            if (transform.parent != null) transform.SetParent(null, false);
+        }
+    }
 
     public class Component : Object
     {
         private Transform _transform;
-        public Transform transform { get { return _transform ?? (_transform = this as Transform ?? new Transform()); } set { _transform = value; } }
+        private GameObject _gameObject;
+
+        /// <summary>Unity: read-only. The stand-in lets a test set one on a component built
+        /// without a GameObject (the older UnityTests build avatars so).</summary>
+        public Transform transform
+        {
+            get { return _gameObject != null ? _gameObject.transform : (_transform ?? (_transform = this as Transform ?? new Transform())); }
+            set { _transform = value; }
+        }
+
+        public GameObject gameObject { get { return _gameObject; } }
+
+        internal void Attach(GameObject go)
+        {
+            _gameObject = go;
+            go.Components.Add(this);
+        }
+
+        /// <summary>What Instantiate does with this component: a copy on `into` (fields copied,
+        /// references inside the copied hierarchy moved to the copy's).</summary>
+        internal virtual void CopyTo(GameObject into, Dictionary<Transform, Transform> map)
+        {
+            var c = (Component)MemberwiseClone();
+            c._gameObject = null; c._transform = null; c.Destroyed = false;
+            c.Attach(into);
+        }
+
+        public T GetComponent<T>() { return _gameObject != null ? _gameObject.GetComponent<T>() : (this is T ? (T)(object)this : default(T)); }
+
+        public T GetComponentInChildren<T>()
+        {
+            if (_gameObject != null) return _gameObject.GetComponentInChildren<T>();
+            return this is T ? (T)(object)this : default(T);
+        }
 
         public T[] GetComponentsInChildren<T>(bool includeInactive) where T : Component
         {
@@ -26,15 +193,67 @@ namespace UnityEngine
         }
     }
 
-    public class Behaviour : Component { }
-    public class MonoBehaviour : Behaviour { }
+    public class Behaviour : Component
+    {
+        public bool enabled = true;
+    }
 
+    /// <summary>Unity calls Awake when the component is added (AddComponent) or its
+    /// GameObject instantiated; Start, Update, LateUpdate and OnDestroy by the player loop,
+    /// which a test calls by hand (Loop).</summary>
+    public class MonoBehaviour : Behaviour
+    {
+        internal void CallAwake() { Loop.Call(this, "Awake"); }
+    }
+
+    /// <summary>Test-only: Unity's player loop by hand (Unity calls these itself).</summary>
+    public static class Loop
+    {
+        public static void Call(MonoBehaviour b, string message)
+        {
+            var m = b.GetType().GetMethod(message, System.Reflection.BindingFlags.Instance | System.Reflection.BindingFlags.Public
+                                                   | System.Reflection.BindingFlags.NonPublic);
+            if (m != null && m.GetParameters().Length == 0) m.Invoke(b, null);
+        }
+    }
+
+    /// <summary>A data asset: instances come from CreateInstance (or the editor), never `new`.</summary>
+    public class ScriptableObject : Object
+    {
+        public static T CreateInstance<T>() where T : ScriptableObject
+        {
+            return (T)Activator.CreateInstance(typeof(T), true);
+        }
+    }
+
+    [AttributeUsage(AttributeTargets.Field, AllowMultiple = true)]
     public sealed class TooltipAttribute : Attribute { public TooltipAttribute(string tooltip) { } }
+
+    [AttributeUsage(AttributeTargets.Field, AllowMultiple = true)]
+    public class HeaderAttribute : Attribute { public HeaderAttribute(string header) { } }
+
+    [AttributeUsage(AttributeTargets.Field)]
+    public sealed class SerializeField : Attribute { }
+
+    [AttributeUsage(AttributeTargets.Class, Inherited = false)]
+    public sealed class CreateAssetMenuAttribute : Attribute
+    {
+        public string fileName { get; set; }
+        public string menuName { get; set; }
+        public int order { get; set; }
+    }
+
+    [AttributeUsage(AttributeTargets.Class, AllowMultiple = true)]
+    public sealed class RequireComponent : Attribute { public RequireComponent(Type requiredComponent) { } }
 
     public static class Debug
     {
         public static readonly List<string> Warnings = new List<string>();
+        public static readonly List<string> Errors = new List<string>();
+        public static void Log(object message) { }
         public static void LogWarning(object message) { Warnings.Add(message == null ? "" : message.ToString()); }
+        public static void LogError(object message) { Errors.Add(message == null ? "" : message.ToString()); }
+        public static void LogException(Exception exception) { Errors.Add(exception.ToString()); }
     }
 
     public struct Vector3
@@ -84,7 +303,6 @@ namespace UnityEngine
     /// `parent` keeps the world pose, as Unity's does.</summary>
     public class Transform : Component
     {
-        public string name = "";
         public Vector3 localPosition;
         public Quaternion localRotation = Quaternion.identity;
         private Transform _parent;
@@ -114,6 +332,18 @@ namespace UnityEngine
             get { return _parent == null ? localRotation : _parent.rotation * localRotation; }
             set { localRotation = _parent == null ? value : Quaternion.Inverse(_parent.rotation) * value; }
         }
+
+        public void SetParent(Transform parent, bool worldPositionStays)
+        {
+            if (worldPositionStays) { this.parent = parent; return; }
+            if (_parent != null) _parent._children.Remove(this);
+            _parent = parent;
+            if (parent != null) parent._children.Add(this);
+        }
+
+        public int childCount { get { return _children.Count; } }
+        public Transform GetChild(int index) { return _children[index]; }
+        internal List<Transform> Children { get { return _children; } }
 
         public Vector3 TransformPoint(Vector3 p) { return position + rotation * p; }
         public Vector3 InverseTransformPoint(Vector3 p) { return Quaternion.Inverse(rotation) * (p - position); }
@@ -157,6 +387,13 @@ namespace UnityEngine
         public Avatar avatar;
         public readonly Dictionary<HumanBodyBones, Transform> Bones = new Dictionary<HumanBodyBones, Transform>();
         public Transform GetBoneTransform(HumanBodyBones b) { Transform t; return Bones.TryGetValue(b, out t) ? t : null; }
+
+        internal override void CopyTo(GameObject into, Dictionary<Transform, Transform> map)
+        {
+            var a = into.AddComponent<Animator>();
+            a.avatar = avatar;
+            foreach (var kv in Bones) a.Bones[kv.Key] = map[kv.Value];
+        }
     }
 }
 
