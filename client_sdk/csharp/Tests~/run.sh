@@ -33,7 +33,10 @@ MCS=(mcs -langversion:$LANGV -nologo -warnaserror+ -debug-)
 "${MCS[@]}" -target:library -out:"$OUT/UnityEngine.dll" "$SDK"/Tests~/UnityStub/*.cs
 "${MCS[@]}" -target:library -r:"$OUT/Posecast.Client.dll" -r:"$OUT/UnityEngine.dll" \
   -out:"$OUT/Posecast.Client.Unity.dll" "$SDK"/Runtime/Unity/*.cs
+# The XR avatars sample, against the same stand-in (its desktop mode runs in SampleTests).
+"${MCS[@]}" -target:library -r:"$OUT/Posecast.Client.dll" -r:"$OUT/UnityEngine.dll" -r:"$OUT/Posecast.Client.Unity.dll" \
+  -out:"$OUT/Posecast.Samples.XRAvatars.dll" "$SDK"/Samples~/XRAvatars/*.cs
 "${MCS[@]}" -r:"$OUT/Posecast.Client.dll" -r:"$OUT/UnityEngine.dll" -r:"$OUT/Posecast.Client.Unity.dll" \
-  -r:System.Core.dll -out:"$OUT/PosecastTests.exe" "$SDK"/Tests~/*.cs
+  -r:"$OUT/Posecast.Samples.XRAvatars.dll" -r:System.Core.dll -out:"$OUT/PosecastTests.exe" "$SDK"/Tests~/*.cs
 echo "cs-test: built with mcs -langversion:$LANGV ($(mcs --version))"
 exec mono "$OUT/PosecastTests.exe" --repo "$PWD" "$@"

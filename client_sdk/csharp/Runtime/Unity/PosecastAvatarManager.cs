@@ -51,7 +51,7 @@ namespace Posecast.Client.Unity
         public Func<string> TokenProvider;
 
         [Header("Avatars")]
-        [Tooltip("Any Humanoid rig; one copy per player in the room")]
+        [Tooltip("Any Humanoid rig (a prefab, or an inactive template in the scene); one copy per player in the room")]
         public GameObject AvatarPrefab;
         [Tooltip("Where the copies go (unset: under this GameObject); poses play in its frame")]
         public Transform AvatarParent;
@@ -236,6 +236,7 @@ namespace Posecast.Client.Unity
             if (AvatarPrefab != null)
             {
                 var avatar = Instantiate(AvatarPrefab, AvatarParent != null ? AvatarParent : transform);
+                avatar.SetActive(true); // a template kept inactive in the scene gives inactive copies
                 avatar.name = "posecast " + player + (string.IsNullOrEmpty(name) ? "" : " (" + name + ")");
                 driver = avatar.GetComponent<PosecastAvatarDriver>();
                 if (driver == null) driver = avatar.AddComponent<PosecastAvatarDriver>();

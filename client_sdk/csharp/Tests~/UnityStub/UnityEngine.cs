@@ -44,6 +44,22 @@ namespace UnityEngine
             return (T)(Object)copy;
         }
 
+        /// <summary>The first live object of type T made so far (Unity: the first active one loaded).</summary>
+        public static T FindObjectOfType<T>() where T : Object
+        {
+            lock (Live)
+                foreach (var o in Live)
+                {
+                    var t = o as T;
+                    if (t != null && !t.Destroyed) return t;
+                }
+            return null;
+        }
+
+        internal static readonly List<Object> Live = new List<Object>();
+
+        public Object() { lock (Live) Live.Add(this); }
+
         /// <summary>Destroys a GameObject (its children too) or a component. Unity destroys at the
         /// end of the frame; the stand-in at once (tests check `== null` after a frame).</summary>
         public static void Destroy(Object obj)
@@ -73,14 +89,55 @@ namespace UnityEngine
 
         public Transform transform { get { return _transform; } }
         public GameObject gameObject { get { return this; } }
+        public string tag = "Untagged";   // Unity: a property
+        private bool _active = true;
+        public bool activeSelf { get { return _active; } }
+
+        public bool activeInHierarchy
+        {
+            get
+            {
+                for (var t = transform; t != null; t = t.parent)
+                    if (!ReferenceEquals(t.gameObject, null) && !t.gameObject._active) return false;
+                return true;
+            }
+        }
+
+        /// <summary>As Unity: activating calls Awake on the components (and those below) not yet awake.</summary>
+        public void SetActive(bool value)
+        {
+            _active = value;
+            if (!value) return;
+            var all = new List<Transform>();
+            transform.Walk(all);
+            foreach (var t in all)
+                if (!ReferenceEquals(t.gameObject, null) && t.gameObject.activeInHierarchy)
+                    foreach (var c in t.gameObject.Components.ToArray())
+                    {
+                        var mb = c as MonoBehaviour;
+                        if (mb != null) mb.CallAwake();
+                    }
+        }
 
         public T AddComponent<T>() where T : Component
         {
             var c = (T)Activator.CreateInstance(typeof(T), true);
             c.Attach(this);
             var mb = c as MonoBehaviour;
-            if (mb != null) mb.CallAwake();
+            if (mb != null && activeInHierarchy) mb.CallAwake();
             return c;
+        }
+
+        /// <summary>A primitive with its MeshFilter, MeshRenderer and Collider (no mesh in the stand-in).</summary>
+        public static GameObject CreatePrimitive(PrimitiveType type)
+        {
+            var go = new GameObject(type.ToString());
+            go.AddComponent<MeshFilter>();
+            go.AddComponent<MeshRenderer>();
+            if (type == PrimitiveType.Sphere) go.AddComponent<SphereCollider>();
+            else if (type == PrimitiveType.Capsule) go.AddComponent<CapsuleCollider>();
+            else go.AddComponent<MeshCollider>();
+            return go;
         }
 
         public T GetComponent<T>()
@@ -111,21 +168,25 @@ namespace UnityEngine
                 if (!ReferenceEquals(kv.Key.gameObject, null))
                     foreach (var c in kv.Key.gameObject.Components)
                         if (!(c is Transform)) c.CopyTo(kv.Value.gameObject, map);
+            copy._active = _active;
             if (parent != null) copy.transform.SetParent(parent, false);
             foreach (var kv in map)
-                foreach (var c in kv.Value.gameObject.Components)
-                {
-                    var mb = c as MonoBehaviour;
-                    if (mb != null) mb.CallAwake();
-                }
+                if (kv.Value.gameObject.activeInHierarchy)
+                    foreach (var c in kv.Value.gameObject.Components)
+                    {
+                        var mb = c as MonoBehaviour;
+                        if (mb != null) mb.CallAwake();
+                    }
             return copy;
         }
 
         private static GameObject CloneNode(GameObject g, Dictionary<Transform, Transform> map)
         {
             var copy = new GameObject(g.name);
+            copy._active = g._active;
             copy.transform.localPosition = g.transform.localPosition;
             copy.transform.localRotation = g.transform.localRotation;
+            copy.transform.localScale = g.transform.localScale;
             map[g.transform] = copy.transform;
             foreach (var child in g.transform.Children)
             {
@@ -160,6 +221,8 @@ namespace UnityEngine
 
         public GameObject gameObject { get { return _gameObject; } }
 
+        internal virtual void ResetCopy() { }
+
         internal void Attach(GameObject go)
         {
             _gameObject = go;
@@ -172,6 +235,7 @@ namespace UnityEngine
         {
             var c = (Component)MemberwiseClone();
             c._gameObject = null; c._transform = null; c.Destroyed = false;
+            c.ResetCopy();
             c.Attach(into);
         }
 
@@ -203,12 +267,37 @@ namespace UnityEngine
     /// which a test calls by hand (Loop).</summary>
     public class MonoBehaviour : Behaviour
     {
-        internal void CallAwake() { Loop.Call(this, "Awake"); }
+        private bool _awake;
+        internal override void ResetCopy() { _awake = false; }
+        internal void CallAwake()
+        {
+            if (_awake) return;
+            _awake = true;
+            Loop.Call(this, "Awake");
+        }
     }
 
     /// <summary>Test-only: Unity's player loop by hand (Unity calls these itself).</summary>
     public static class Loop
     {
+        private static readonly HashSet<MonoBehaviour> Started = new HashSet<MonoBehaviour>();
+
+        /// <summary>How many objects exist now: Frame(mark) runs only those made after.</summary>
+        public static int Mark() { lock (Object.Live) return Object.Live.Count; }
+
+        /// <summary>One frame for the MonoBehaviours made since `mark` that are enabled in an active
+        /// GameObject: Start (once), then every Update, then every LateUpdate, as Unity orders them.</summary>
+        public static void Frame(int mark)
+        {
+            List<MonoBehaviour> live;
+            lock (Object.Live)
+                live = Object.Live.Skip(mark).OfType<MonoBehaviour>()
+                    .Where(b => !b.Destroyed && b.enabled && b.gameObject != null && b.gameObject.activeInHierarchy).ToList();
+            foreach (var b in live) if (Started.Add(b)) Call(b, "Start");
+            foreach (var b in live) if (!b.Destroyed) Call(b, "Update");
+            foreach (var b in live) if (!b.Destroyed) Call(b, "LateUpdate");
+        }
+
         public static void Call(MonoBehaviour b, string message)
         {
             var m = b.GetType().GetMethod(message, System.Reflection.BindingFlags.Instance | System.Reflection.BindingFlags.Public
@@ -261,6 +350,14 @@ namespace UnityEngine
         public float x, y, z;
         public Vector3(float x, float y, float z) { this.x = x; this.y = y; this.z = z; }
         public static Vector3 zero { get { return new Vector3(0, 0, 0); } }
+        public static Vector3 one { get { return new Vector3(1, 1, 1); } }
+        public static Vector3 up { get { return new Vector3(0, 1, 0); } }
+        public static Vector3 forward { get { return new Vector3(0, 0, 1); } }
+        public float magnitude { get { return (float)Math.Sqrt(x * x + y * y + z * z); } }
+        public Vector3 normalized { get { float m = magnitude; return m > 1e-5f ? new Vector3(x / m, y / m, z / m) : zero; } }
+        public static Vector3 Cross(Vector3 a, Vector3 b) { return new Vector3(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x); }
+        public static float Dot(Vector3 a, Vector3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+        public static Vector3 operator *(Vector3 a, float d) { return new Vector3(a.x * d, a.y * d, a.z * d); }
         public static Vector3 operator +(Vector3 a, Vector3 b) { return new Vector3(a.x + b.x, a.y + b.y, a.z + b.z); }
         public static Vector3 operator -(Vector3 a, Vector3 b) { return new Vector3(a.x - b.x, a.y - b.y, a.z - b.z); }
         public override string ToString() { return "(" + x + ", " + y + ", " + z + ")"; }
@@ -289,6 +386,32 @@ namespace UnityEngine
 
         public static Quaternion Inverse(Quaternion q) { return new Quaternion(-q.x, -q.y, -q.z, q.w); }
 
+        /// <summary>The shortest turn taking direction `from` to `to`.</summary>
+        public static Quaternion FromToRotation(Vector3 fromDirection, Vector3 toDirection)
+        {
+            var a = fromDirection.normalized; var b = toDirection.normalized;
+            float d = Vector3.Dot(a, b);
+            if (d < -0.999999f)
+            {
+                var axis = Vector3.Cross(new Vector3(1, 0, 0), a);
+                if (axis.magnitude < 1e-6f) axis = Vector3.Cross(new Vector3(0, 1, 0), a);
+                return AngleAxis(180f, axis.normalized);
+            }
+            var c = Vector3.Cross(a, b);
+            var q = new Quaternion(c.x, c.y, c.z, 1 + d);
+            float n = (float)Math.Sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
+            return new Quaternion(q.x / n, q.y / n, q.z / n, q.w / n);
+        }
+
+        /// <summary>A rotation whose +Z looks along `forward` with +Y as near `up` (world +Y) as it can.</summary>
+        public static Quaternion LookRotation(Vector3 forward)
+        {
+            var f = forward.normalized;
+            var yaw = FromToRotation(new Vector3(0, 0, 1), new Vector3(f.x, 0, f.z).magnitude > 1e-6f ? new Vector3(f.x, 0, f.z) : new Vector3(0, 0, 1));
+            var flat = yaw * new Vector3(0, 0, 1);
+            return FromToRotation(flat, f) * yaw;
+        }
+
         public static Quaternion AngleAxis(float angle, Vector3 axis)
         {
             double h = angle * Math.PI / 360.0, n = Math.Sqrt(axis.x * axis.x + axis.y * axis.y + axis.z * axis.z);
@@ -305,6 +428,7 @@ namespace UnityEngine
     {
         public Vector3 localPosition;
         public Quaternion localRotation = Quaternion.identity;
+        public Vector3 localScale = Vector3.one;   // kept, not applied (the stand-in has no scale)
         private Transform _parent;
         private readonly List<Transform> _children = new List<Transform>();
 
@@ -341,6 +465,8 @@ namespace UnityEngine
             if (parent != null) parent._children.Add(this);
         }
 
+        public void LookAt(Vector3 worldPosition) { rotation = Quaternion.LookRotation(worldPosition - position); }
+
         public int childCount { get { return _children.Count; } }
         public Transform GetChild(int index) { return _children[index]; }
         internal List<Transform> Children { get { return _children; } }
@@ -357,13 +483,17 @@ namespace UnityEngine
 
     public sealed class Avatar : Object
     {
-        public bool isHuman;
-        public HumanDescription humanDescription;  // Unity: a read-only property
+        public bool isHuman;                       // Unity: read-only properties
+        public bool isValid;
+        public HumanDescription humanDescription;
     }
 
     public struct HumanDescription
     {
+        public HumanBone[] human;
         public SkeletonBone[] skeleton;
+        public float upperArmTwist, lowerArmTwist, upperLegTwist, lowerLegTwist, armStretch, legStretch, feetSpacing;
+        public bool hasTranslationDoF;
     }
 
     /// <summary>A Transform's name and its T-pose in its parent's space (Unity's SkeletonBone).</summary>
@@ -375,6 +505,42 @@ namespace UnityEngine
         public Vector3 scale;
     }
 
+    /// <summary>Which Transform (boneName) is which human bone (humanName, HumanTrait.BoneName's spelling).</summary>
+    public struct HumanBone
+    {
+        public string boneName;
+        public string humanName;
+        public HumanLimit limit;
+    }
+
+    public struct HumanLimit
+    {
+        public bool useDefaultValues;
+        public Vector3 min, max, center;
+        public float axisLength;
+    }
+
+    public static class AvatarBuilder
+    {
+        private static readonly string[] Required =
+        {
+            "Hips", "LeftUpperLeg", "RightUpperLeg", "LeftLowerLeg", "RightLowerLeg", "LeftFoot", "RightFoot", "Spine", "Head",
+            "LeftUpperArm", "RightUpperArm", "LeftLowerArm", "RightLowerArm", "LeftHand", "RightHand",
+        };
+
+        /// <summary>A Humanoid Avatar for the hierarchy under `go`: valid when every required human
+        /// bone is mapped to a Transform found by name below it.</summary>
+        public static Avatar BuildHumanAvatar(GameObject go, HumanDescription humanDescription)
+        {
+            var names = new HashSet<string>();
+            foreach (var t in go.transform.GetComponentsInChildren<Transform>(true)) names.Add(t.name);
+            bool valid = humanDescription.human != null;
+            foreach (var r in Required)
+                valid &= humanDescription.human != null && humanDescription.human.Any(h => h.humanName == r && names.Contains(h.boneName));
+            return new Avatar { isHuman = true, isValid = valid, humanDescription = humanDescription, name = go.name };
+        }
+    }
+
     public enum HumanBodyBones
     {
         Hips, LeftUpperLeg, RightUpperLeg, LeftLowerLeg, RightLowerLeg, LeftFoot, RightFoot, Spine, Chest, Neck, Head,
@@ -382,11 +548,85 @@ namespace UnityEngine
         LeftToes, RightToes, LeftEye, RightEye, Jaw, UpperChest = 54, LastBone = 55,
     }
 
+    public enum PrimitiveType { Sphere, Capsule, Cylinder, Cube, Plane, Quad }
+    public sealed class MeshFilter : Component { }
+    public class Renderer : Component { }
+    public sealed class MeshRenderer : Renderer { }
+    public class Collider : Component { }
+    public sealed class SphereCollider : Collider { }
+    public sealed class CapsuleCollider : Collider { }
+    public sealed class MeshCollider : Collider { }
+
+    public sealed class Camera : Behaviour
+    {
+        /// <summary>The first enabled camera tagged MainCamera, or null.</summary>
+        public static Camera main
+        {
+            get
+            {
+                lock (Live)
+                    foreach (var o in Live)
+                    {
+                        var c = o as Camera;
+                        if (c != null && !c.Destroyed && c.gameObject != null && c.gameObject.tag == "MainCamera") return c;
+                    }
+                return null;
+            }
+        }
+    }
+
+    public enum LightType { Spot, Directional, Point, Area }
+    public sealed class Light : Behaviour { public LightType type = LightType.Point; }
+
+    public class TextAsset : Object
+    {
+        private readonly string _text;
+        public TextAsset(string text) { _text = text; }
+        public string text { get { return _text; } }
+    }
+
+    /// <summary>Assets under a Resources folder, by path without extension. The stand-in reads
+    /// them from the folders a test lists (Roots).</summary>
+    public static class Resources
+    {
+        public static readonly List<string> Roots = new List<string>();
+
+        public static T Load<T>(string path) where T : Object
+        {
+            foreach (var root in Roots)
+                foreach (var ext in new[] { ".txt", ".csv", ".json", ".bytes" })
+                {
+                    var file = System.IO.Path.Combine(root, path + ext);
+                    if (typeof(T) == typeof(TextAsset) && System.IO.File.Exists(file)) return (T)(Object)new TextAsset(System.IO.File.ReadAllText(file));
+                }
+            return null;
+        }
+    }
+
+    /// <summary>Time.time: seconds since the start of the game (the stand-in: of the process).</summary>
+    public static class Time
+    {
+        private static readonly System.Diagnostics.Stopwatch Clock = System.Diagnostics.Stopwatch.StartNew();
+        public static float time { get { return (float)Clock.Elapsed.TotalSeconds; } }
+    }
+
     public class Animator : Behaviour
     {
         public Avatar avatar;
         public readonly Dictionary<HumanBodyBones, Transform> Bones = new Dictionary<HumanBodyBones, Transform>();
-        public Transform GetBoneTransform(HumanBodyBones b) { Transform t; return Bones.TryGetValue(b, out t) ? t : null; }
+        /// <summary>The Transform of a human bone: through the Humanoid avatar's mapping (Unity's way),
+        /// or the test-only Bones table of rigs built without one.</summary>
+        public Transform GetBoneTransform(HumanBodyBones b)
+        {
+            Transform t;
+            if (Bones.TryGetValue(b, out t)) return t;
+            if (avatar == null || !avatar.isHuman || avatar.humanDescription.human == null) return null;
+            foreach (var h in avatar.humanDescription.human)
+                if (h.humanName == b.ToString())
+                    foreach (var c in transform.GetComponentsInChildren<Transform>(true))
+                        if (c.name == h.boneName) return c;
+            return null;
+        }
 
         internal override void CopyTo(GameObject into, Dictionary<Transform, Transform> map)
         {
