@@ -125,6 +125,7 @@ namespace Posecast.Client.Tests
                 new KeyValuePair<string, Action>("manager", ManagerTests.Register),
                 new KeyValuePair<string, Action>("alloc", AllocTests.Register),
                 new KeyValuePair<string, Action>("sample", SampleTests.Register),
+                new KeyValuePair<string, Action>("api", ApiTests.Register),
                 new KeyValuePair<string, Action>("e2e", E2ETests.Register),
             };
             foreach (var s in suites)

@@ -1,8 +1,14 @@
-// A stand-in for the few UnityEngine types Runtime/Unity uses, so run.sh can compile
-// the Unity layer and test its logic on Mono (UnityTests.cs). Same names and
-// signatures as Unity's; the behaviour is the part the tests need (Quaternion's
-// Hamilton product, a Transform hierarchy without scale, an Avatar's T-pose skeleton, XR devices the test sets up).
-// Not shipped: Unity does not import Tests~.
+// A stand-in for the UnityEngine types Runtime/Unity and the sample use, so run.sh can
+// compile the Unity layer and test its logic on Mono (UnityTests, ManagerTests,
+// SampleTests). No copy of Unity's own assemblies can be had from the package registries
+// this project reaches, so this is written from Unity's scripting reference: every
+// member the package uses is listed with Unity's signature in API.md, and ApiTests
+// holds the compiled assemblies' references to that list (same names, kinds and
+// types). The behaviour is the part the tests need (Quaternion's Hamilton product, a
+// Transform hierarchy without scale, Instantiate and Destroy, an Avatar's T-pose
+// skeleton, XR devices the test sets up); members marked test-only are not Unity's.
+// Not shipped: Unity does not import Tests~. Split by module: UnityEngine.cs (core),
+// .Animation.cs, .Scene.cs, .Events.cs, .XR.cs.
 
 using System;
 using System.Collections.Generic;
@@ -89,7 +95,8 @@ namespace UnityEngine
 
         public Transform transform { get { return _transform; } }
         public GameObject gameObject { get { return this; } }
-        public string tag = "Untagged";   // Unity: a property
+        private string _tag = "Untagged";
+        public string tag { get { return _tag; } set { _tag = value; } }
         private bool _active = true;
         public bool activeSelf { get { return _active; } }
 
@@ -259,7 +266,8 @@ namespace UnityEngine
 
     public class Behaviour : Component
     {
-        public bool enabled = true;
+        private bool _enabled = true;
+        public bool enabled { get { return _enabled; } set { _enabled = value; } }
     }
 
     /// <summary>Unity calls Awake when the component is added (AddComponent) or its
@@ -426,9 +434,12 @@ namespace UnityEngine
     /// `parent` keeps the world pose, as Unity's does.</summary>
     public class Transform : Component
     {
-        public Vector3 localPosition;
-        public Quaternion localRotation = Quaternion.identity;
-        public Vector3 localScale = Vector3.one;   // kept, not applied (the stand-in has no scale)
+        private Vector3 _localPosition;
+        private Quaternion _localRotation = Quaternion.identity;
+        private Vector3 _localScale = Vector3.one;
+        public Vector3 localPosition { get { return _localPosition; } set { _localPosition = value; } }
+        public Quaternion localRotation { get { return _localRotation; } set { _localRotation = value; } }
+        public Vector3 localScale { get { return _localScale; } set { _localScale = value; } }   // kept, not applied (no scale here)
         private Transform _parent;
         private readonly List<Transform> _children = new List<Transform>();
 
@@ -478,232 +489,6 @@ namespace UnityEngine
         {
             into.Add(this);
             foreach (var c in _children) c.Walk(into);
-        }
-    }
-
-    public sealed class Avatar : Object
-    {
-        public bool isHuman;                       // Unity: read-only properties
-        public bool isValid;
-        public HumanDescription humanDescription;
-    }
-
-    public struct HumanDescription
-    {
-        public HumanBone[] human;
-        public SkeletonBone[] skeleton;
-        public float upperArmTwist, lowerArmTwist, upperLegTwist, lowerLegTwist, armStretch, legStretch, feetSpacing;
-        public bool hasTranslationDoF;
-    }
-
-    /// <summary>A Transform's name and its T-pose in its parent's space (Unity's SkeletonBone).</summary>
-    public struct SkeletonBone
-    {
-        public string name;
-        public Vector3 position;
-        public Quaternion rotation;
-        public Vector3 scale;
-    }
-
-    /// <summary>Which Transform (boneName) is which human bone (humanName, HumanTrait.BoneName's spelling).</summary>
-    public struct HumanBone
-    {
-        public string boneName;
-        public string humanName;
-        public HumanLimit limit;
-    }
-
-    public struct HumanLimit
-    {
-        public bool useDefaultValues;
-        public Vector3 min, max, center;
-        public float axisLength;
-    }
-
-    public static class AvatarBuilder
-    {
-        private static readonly string[] Required =
-        {
-            "Hips", "LeftUpperLeg", "RightUpperLeg", "LeftLowerLeg", "RightLowerLeg", "LeftFoot", "RightFoot", "Spine", "Head",
-            "LeftUpperArm", "RightUpperArm", "LeftLowerArm", "RightLowerArm", "LeftHand", "RightHand",
-        };
-
-        /// <summary>A Humanoid Avatar for the hierarchy under `go`: valid when every required human
-        /// bone is mapped to a Transform found by name below it.</summary>
-        public static Avatar BuildHumanAvatar(GameObject go, HumanDescription humanDescription)
-        {
-            var names = new HashSet<string>();
-            foreach (var t in go.transform.GetComponentsInChildren<Transform>(true)) names.Add(t.name);
-            bool valid = humanDescription.human != null;
-            foreach (var r in Required)
-                valid &= humanDescription.human != null && humanDescription.human.Any(h => h.humanName == r && names.Contains(h.boneName));
-            return new Avatar { isHuman = true, isValid = valid, humanDescription = humanDescription, name = go.name };
-        }
-    }
-
-    public enum HumanBodyBones
-    {
-        Hips, LeftUpperLeg, RightUpperLeg, LeftLowerLeg, RightLowerLeg, LeftFoot, RightFoot, Spine, Chest, Neck, Head,
-        LeftShoulder, RightShoulder, LeftUpperArm, RightUpperArm, LeftLowerArm, RightLowerArm, LeftHand, RightHand,
-        LeftToes, RightToes, LeftEye, RightEye, Jaw, UpperChest = 54, LastBone = 55,
-    }
-
-    public enum PrimitiveType { Sphere, Capsule, Cylinder, Cube, Plane, Quad }
-    public sealed class MeshFilter : Component { }
-    public class Renderer : Component { }
-    public sealed class MeshRenderer : Renderer { }
-    public class Collider : Component { }
-    public sealed class SphereCollider : Collider { }
-    public sealed class CapsuleCollider : Collider { }
-    public sealed class MeshCollider : Collider { }
-
-    public sealed class Camera : Behaviour
-    {
-        /// <summary>The first enabled camera tagged MainCamera, or null.</summary>
-        public static Camera main
-        {
-            get
-            {
-                lock (Live)
-                    foreach (var o in Live)
-                    {
-                        var c = o as Camera;
-                        if (c != null && !c.Destroyed && c.gameObject != null && c.gameObject.tag == "MainCamera") return c;
-                    }
-                return null;
-            }
-        }
-    }
-
-    public enum LightType { Spot, Directional, Point, Area }
-    public sealed class Light : Behaviour { public LightType type = LightType.Point; }
-
-    public class TextAsset : Object
-    {
-        private readonly string _text;
-        public TextAsset(string text) { _text = text; }
-        public string text { get { return _text; } }
-    }
-
-    /// <summary>Assets under a Resources folder, by path without extension. The stand-in reads
-    /// them from the folders a test lists (Roots).</summary>
-    public static class Resources
-    {
-        public static readonly List<string> Roots = new List<string>();
-
-        public static T Load<T>(string path) where T : Object
-        {
-            foreach (var root in Roots)
-                foreach (var ext in new[] { ".txt", ".csv", ".json", ".bytes" })
-                {
-                    var file = System.IO.Path.Combine(root, path + ext);
-                    if (typeof(T) == typeof(TextAsset) && System.IO.File.Exists(file)) return (T)(Object)new TextAsset(System.IO.File.ReadAllText(file));
-                }
-            return null;
-        }
-    }
-
-    /// <summary>Time.time: seconds since the start of the game (the stand-in: of the process).</summary>
-    public static class Time
-    {
-        private static readonly System.Diagnostics.Stopwatch Clock = System.Diagnostics.Stopwatch.StartNew();
-        public static float time { get { return (float)Clock.Elapsed.TotalSeconds; } }
-    }
-
-    public class Animator : Behaviour
-    {
-        public Avatar avatar;
-        public readonly Dictionary<HumanBodyBones, Transform> Bones = new Dictionary<HumanBodyBones, Transform>();
-        /// <summary>The Transform of a human bone: through the Humanoid avatar's mapping (Unity's way),
-        /// or the test-only Bones table of rigs built without one.</summary>
-        public Transform GetBoneTransform(HumanBodyBones b)
-        {
-            Transform t;
-            if (Bones.TryGetValue(b, out t)) return t;
-            if (avatar == null || !avatar.isHuman || avatar.humanDescription.human == null) return null;
-            foreach (var h in avatar.humanDescription.human)
-                if (h.humanName == b.ToString())
-                    foreach (var c in transform.GetComponentsInChildren<Transform>(true))
-                        if (c.name == h.boneName) return c;
-            return null;
-        }
-
-        internal override void CopyTo(GameObject into, Dictionary<Transform, Transform> map)
-        {
-            var a = into.AddComponent<Animator>();
-            a.avatar = avatar;
-            foreach (var kv in Bones) a.Bones[kv.Key] = map[kv.Value];
-        }
-    }
-}
-
-namespace UnityEngine.XR
-{
-    public enum XRNode { LeftEye, RightEye, CenterEye, Head, LeftHand, RightHand, GameController, TrackingReference, HardwareTracker }
-
-    [Flags]
-    public enum TrackingOriginModeFlags { Unknown = 0, Device = 1, Floor = 2, TrackingReference = 4, Unbounded = 8 }
-
-    public class XRInputSubsystem
-    {
-        public TrackingOriginModeFlags Mode = TrackingOriginModeFlags.Device;
-        public TrackingOriginModeFlags Supported = TrackingOriginModeFlags.Device | TrackingOriginModeFlags.Floor;
-        public TrackingOriginModeFlags GetTrackingOriginMode() { return Mode; }
-        public TrackingOriginModeFlags GetSupportedTrackingOriginModes() { return Supported; }
-        public bool TrySetTrackingOriginMode(TrackingOriginModeFlags origin)
-        {
-            if ((Supported & origin) == 0) return false;
-            Mode = origin;
-            return true;
-        }
-    }
-
-    public struct InputFeatureUsage<T>
-    {
-        public string name;
-        public InputFeatureUsage(string name) { this.name = name; }
-    }
-
-    public static class CommonUsages
-    {
-        public static readonly InputFeatureUsage<bool> isTracked = new InputFeatureUsage<bool>("IsTracked");
-        public static readonly InputFeatureUsage<Vector3> devicePosition = new InputFeatureUsage<Vector3>("DevicePosition");
-        public static readonly InputFeatureUsage<Quaternion> deviceRotation = new InputFeatureUsage<Quaternion>("DeviceRotation");
-    }
-
-    /// <summary>A test device: its features by usage name; absent: TryGetFeatureValue fails.</summary>
-    public sealed class FakeDevice
-    {
-        public XRInputSubsystem Subsystem;
-        public readonly Dictionary<string, object> Features = new Dictionary<string, object>();
-    }
-
-    public struct InputDevice
-    {
-        internal FakeDevice Fake;
-        public bool isValid { get { return Fake != null; } }
-        public XRInputSubsystem subsystem { get { return Fake == null ? null : Fake.Subsystem; } }
-
-        private bool Get<T>(string name, out T value)
-        {
-            object o;
-            if (Fake != null && Fake.Features.TryGetValue(name, out o)) { value = (T)o; return true; }
-            value = default(T);
-            return false;
-        }
-
-        public bool TryGetFeatureValue(InputFeatureUsage<bool> usage, out bool value) { return Get(usage.name, out value); }
-        public bool TryGetFeatureValue(InputFeatureUsage<Vector3> usage, out Vector3 value) { return Get(usage.name, out value); }
-        public bool TryGetFeatureValue(InputFeatureUsage<Quaternion> usage, out Quaternion value) { return Get(usage.name, out value); }
-    }
-
-    public static class InputDevices
-    {
-        public static readonly Dictionary<XRNode, FakeDevice> Fakes = new Dictionary<XRNode, FakeDevice>();
-        public static InputDevice GetDeviceAtXRNode(XRNode node)
-        {
-            FakeDevice d;
-            return new InputDevice { Fake = Fakes.TryGetValue(node, out d) ? d : null };
         }
     }
 }
