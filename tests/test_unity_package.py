@@ -16,7 +16,9 @@ PACKAGE = Path(__file__).resolve().parent.parent / "client_sdk" / "csharp"
 
 
 def _load() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("unity_meta", PACKAGE / "Tests~" / "unity_meta.py")
+    spec = importlib.util.spec_from_file_location(
+        "unity_meta", PACKAGE / "Tests~" / "unity_meta.py"
+    )
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
@@ -49,7 +51,9 @@ def package(tmp_path: Path) -> tuple[Path, Path]:
     return root, manifest
 
 
-def test_the_check_fails_for_a_missing_meta_and_write_adds_a_stable_one(package: tuple[Path, Path]) -> None:
+def test_the_check_fails_for_a_missing_meta_and_write_adds_a_stable_one(
+    package: tuple[Path, Path],
+) -> None:
     root, manifest = package
     (root / "Runtime" / "Unity" / "New.cs").write_text("class New {}\n")
     assert meta.check(root, manifest) == [
@@ -68,22 +72,30 @@ def test_the_check_fails_for_a_changed_or_duplicated_guid(package: tuple[Path, P
     published = meta.read_guid(driver)
     driver.write_text(driver.read_text().replace(published, "0" * 32))
     assert meta.check(root, manifest) == [
-        f"Runtime/Unity/PosecastAvatarDriver.cs.meta: guid {'0' * 32}, but it was published as {published}",
+        f"Runtime/Unity/PosecastAvatarDriver.cs.meta: guid {'0' * 32}, "
+        f"but it was published as {published}",
     ]
     other = meta.read_guid(root / "Runtime" / "Unity" / "UnityFrames.cs.meta")
     driver.write_text(driver.read_text().replace("0" * 32, other))
     problems = meta.check(root, manifest)
-    assert f"Runtime/Unity/UnityFrames.cs.meta: guid {other} is also Runtime/Unity/PosecastAvatarDriver.cs's" in problems
+    clash = f"guid {other} is also Runtime/Unity/PosecastAvatarDriver.cs's"
+    assert f"Runtime/Unity/UnityFrames.cs.meta: {clash}" in problems
 
 
-def test_a_moved_file_keeps_no_other_files_guid_and_stale_metas_are_found(package: tuple[Path, Path]) -> None:
+def test_a_moved_file_keeps_no_other_files_guid_and_stale_metas_are_found(
+    package: tuple[Path, Path],
+) -> None:
     root, manifest = package
     (root / "Runtime" / "Unity" / "UnityFrames.cs").unlink()
-    assert meta.check(root, manifest) == ["Runtime/Unity/UnityFrames.cs.meta: no such asset (a stale .meta)"]
+    assert meta.check(root, manifest) == [
+        "Runtime/Unity/UnityFrames.cs.meta: no such asset (a stale .meta)"
+    ]
     folder = root / "Runtime" / "Extra"
     folder.mkdir()
     (root / "Runtime" / "Extra.meta").write_text("fileFormatVersion: 2\nguid: " + "1" * 32 + "\n")
-    assert "Runtime/Extra.meta: a folder's .meta without folderAsset: yes" in meta.check(root, manifest)
+    assert "Runtime/Extra.meta: a folder's .meta without folderAsset: yes" in meta.check(
+        root, manifest
+    )
 
 
 def test_package_json_declares_its_unity_modules_and_samples() -> None:

@@ -1,7 +1,9 @@
 """Write the XR avatars sample's recording: the Python SDK's built-in walk as tracker
 frames, the text format TrackerRecording.cs reads.
 
-    .venv/bin/python client_sdk/csharp/Tests~/make_recording.py   # rewrites Samples~/XRAvatars/Resources/posecast-walk.csv
+    .venv/bin/python client_sdk/csharp/Tests~/make_recording.py
+
+rewrites Samples~/XRAvatars/Resources/posecast-walk.csv.
 """
 
 from __future__ import annotations
@@ -10,7 +12,13 @@ from pathlib import Path
 
 from posecast_client import WalkSource
 
-OUT = Path(__file__).resolve().parent.parent / "Samples~" / "XRAvatars" / "Resources" / "posecast-walk.csv"
+OUT = (
+    Path(__file__).resolve().parent.parent
+    / "Samples~"
+    / "XRAvatars"
+    / "Resources"
+    / "posecast-walk.csv"
+)
 HEADER = (
     "# posecast tracker recording v1: the Python SDK's WalkSource(seconds=8, seed=0) at 60 Hz.\n"
     "# One frame a line: t_s, valid, then per slot (HEAD, LEFT_HAND, RIGHT_HAND, WAIST)\n"

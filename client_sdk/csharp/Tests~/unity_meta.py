@@ -45,7 +45,9 @@ _DEFAULT = "DefaultImporter:\n  externalObjects: {}\n" + _TAIL
 
 def ignored(name: str) -> bool:
     """Names Unity's asset database skips (and everything below them)."""
-    return name.startswith(".") or name.endswith("~") or name.endswith(".tmp") or name.lower() == "cvs"
+    return (
+        name.startswith(".") or name.endswith("~") or name.endswith(".tmp") or name.lower() == "cvs"
+    )
 
 
 def assets(root: Path = PACKAGE) -> list[str]:
@@ -87,7 +89,7 @@ def read_manifest(path: Path = MANIFEST) -> dict[str, str]:
 
 
 def write_manifest(entries: dict[str, str], path: Path = MANIFEST) -> None:
-    lines = ["# path\tguid: every GUID the package has given; never edit or remove a line (unity_meta.py)"]
+    lines = ["# path\tguid: every GUID given; never edit or remove a line (unity_meta.py)"]
     lines += [f"{p}\t{g}" for p, g in sorted(entries.items())]
     path.write_text("\n".join(lines) + "\n", "utf-8")
 
@@ -136,14 +138,14 @@ def check(root: Path = PACKAGE, manifest: Path = MANIFEST) -> list[str]:
 
 
 def write(root: Path = PACKAGE, manifest: Path = MANIFEST) -> list[str]:
-    """Add the missing .meta files (the manifest's GUID, else a derived one); returns their paths."""
+    """Add the missing .meta files (the manifest's GUID, else a derived one); their paths."""
     known = read_manifest(manifest)
     added: list[str] = []
     for path in assets(root):
         meta = root / (path + ".meta")
         if not meta.exists():
-            guid = known.get(path) or derive_guid(path)
-            meta.write_text(meta_text(path, guid, (root / path).is_dir()), "utf-8")
+            given = known.get(path) or derive_guid(path)
+            meta.write_text(meta_text(path, given, (root / path).is_dir()), "utf-8")
             added.append(path)
         guid = read_guid(meta)
         if guid is not None and path not in known:

@@ -254,12 +254,19 @@ namespace UnityEngine
             return this is T ? (T)(object)this : default(T);
         }
 
-        public T[] GetComponentsInChildren<T>(bool includeInactive) where T : Component
+        /// <summary>The components of type T here and below (the stand-in: Transforms, and the
+        /// components of GameObjects).</summary>
+        public T[] GetComponentsInChildren<T>(bool includeInactive)
         {
             var all = new List<Transform>();
             transform.Walk(all);
             var found = new List<T>();
-            foreach (var t in all) if (t is T) found.Add((T)(Component)t);
+            foreach (var t in all)
+            {
+                if (t is T) { found.Add((T)(object)t); continue; }
+                if (ReferenceEquals(t.gameObject, null)) continue;
+                foreach (var c in t.gameObject.Components) if (c is T) found.Add((T)(object)c);
+            }
             return found.ToArray();
         }
     }
