@@ -9,9 +9,10 @@
 // definition holds (Avatar.humanDescription.skeleton, which Unity's avatar setup puts
 // in a T-pose), taken at Awake and put back, so a rig that stands in an A-pose or
 // any other pose skins correctly; without a definition, the pose it stands in at
-// Awake. A PosecastAvatarManager adds one to each avatar it spawns and drives it (Apply);
-// placed by hand, it reads its Streamer's jitter buffer for Player. make cs-test compiles and tests it against a stand-in UnityEngine
-// (Tests~/UnityStub), not in Unity.
+// Awake. A PosecastAvatarManager adds one to each avatar it spawns and drives it
+// (Apply); placed by hand, it reads its Streamer's jitter buffer for Player. make
+// cs-test compiles and tests it against a stand-in UnityEngine (Tests~/UnityStub), not
+// in Unity.
 
 using System.Collections.Generic;
 using UnityEngine;
