@@ -278,7 +278,7 @@ namespace Posecast.Client.Tests
                     T.True(m.Client == null && m.Avatars.Count == 0, "gone");
                     m.TokenProvider = () => "not-a-token";
                     T.True(!m.Connect().Result, "refused");
-                    T.Equal("Connected Error(UNAUTHENTICATED)", rec.Joined(rec.Take()), "events");
+                    T.Equal("Connected Error(UNAUTHENTICATED) Disconnected", rec.Joined(rec.Take()), "events");
                 });
                 if (cs != null) cs.Stop().Wait();
             }

@@ -92,7 +92,8 @@ namespace Posecast.Client.Unity
 
         /// <summary>
         /// Connect to Url and join Room; true when joined. A failure raises Error (and returns
-        /// false): the server unreachable, a refused token, a full room.
+        /// false): the server unreachable, a refused token, a full room; after Connected, then
+        /// Disconnected.
         /// </summary>
         public async Task<bool> Connect()
         {
@@ -113,6 +114,7 @@ namespace Posecast.Client.Unity
                 if (client != null && Client == client) Client = null;
                 if (client != null) Forget(client.CloseAsync());
                 Fail(e);
+                if (client != null) Disconnected.Invoke(); // Connected was raised: close the pair
                 return false;
             }
             finally { _connecting = false; }
