@@ -253,9 +253,43 @@ namespace Posecast.Client.Tests
                     T.Equal("PlayerJoined(py-peer) PlayerLeft(py-peer)", rec.Joined(rec.Take()), "events");
                     T.Equal(1, tokens, "one token for the join");
                 });
+                T.Run("unity streamer e2e: without a manager it connects, feeds its buffer and passes every event on", () =>
+                {
+                    var rig = new GameObject("rig").AddComponent<PosecastXRStreamer>();
+                    rig.Url = server.Url;
+                    rig.Room = "unity-room";
+                    rig.Token = server.Token("unity-room", "unity-rig");
+                    var passed = new List<ClientEvent>();
+                    rig.EventReceived += e => passed.Add(e);
+                    Loop.Call(rig, "Start");
+                    Player late = null;
+                    try
+                    {
+                        var sw = Stopwatch.StartNew();
+                        Func<bool> done = () => passed.Any(e => e.Kind == EventKind.Welcome)
+                                                && passed.Any(e => e.Kind == EventKind.Pose && e.Pose.Player == "cs-walker")
+                                                && passed.Any(e => e.Kind == EventKind.Presence && e.Presence.Player == "cs-late");
+                        while (!done() && sw.Elapsed.TotalSeconds < 20)
+                        {
+                            Loop.Call(rig, "Update");
+                            if (late == null && rig.Client != null && rig.Client.Connected) late = Player.Join(server, "unity-room", "cs-late", -1.0).Result;
+                            Thread.Sleep(16);
+                        }
+                        T.True(done(), "welcome, poses and a presence join passed on: " + passed.Count + " events");
+                        T.True(rig.Poses.Buffer("cs-walker") != null, "its own buffer took the poses");
+                    }
+                    finally
+                    {
+                        if (late != null) late.Stop().Wait();
+                        if (rig.Client != null) rig.Client.CloseAsync().Wait();
+                    }
+                });
                 T.Run("unity manager e2e: a server restart removes the avatars, then the rejoin brings the C# player back", () =>
                 {
                     T.True(m != null && m.Client != null, "joined");
+                    // The streamer's and the late player's visit (the test before) is over.
+                    T.True(Pump(m, () => m.Avatars.Count == 1, 10), "only the C# walker: " + string.Join(",", m.Avatars.Keys));
+                    rec.Take();
                     server.Stop();
                     server.Start(server.Port);
                     T.True(Pump(m, () => m.Avatars.ContainsKey("cs-walker") && rec.Log.Contains("Joined(unity-me)"), 30),
