@@ -111,8 +111,10 @@ namespace Posecast.Client.Unity
             }
             catch (Exception e)
             {
+                bool ours = client == null || Client == client; // else Disconnect() came first and said so
                 if (client != null && Client == client) Client = null;
                 if (client != null) Forget(client.CloseAsync());
+                if (!ours) return false;
                 Fail(e);
                 if (client != null) Disconnected.Invoke(); // Connected was raised: close the pair
                 return false;
