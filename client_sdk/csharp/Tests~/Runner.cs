@@ -122,6 +122,10 @@ namespace Posecast.Client.Tests
                 new KeyValuePair<string, Action>("session", SessionTests.Register),
                 new KeyValuePair<string, Action>("connect", ConnectTests.Register),
                 new KeyValuePair<string, Action>("unity", UnityTests.Register),
+                new KeyValuePair<string, Action>("manager", ManagerTests.Register),
+                new KeyValuePair<string, Action>("alloc", AllocTests.Register),
+                new KeyValuePair<string, Action>("sample", SampleTests.Register),
+                new KeyValuePair<string, Action>("api", ApiTests.Register),
                 new KeyValuePair<string, Action>("e2e", E2ETests.Register),
             };
             foreach (var s in suites)

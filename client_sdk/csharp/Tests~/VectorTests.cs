@@ -98,14 +98,28 @@ namespace Posecast.Client.Tests
             T.Equal(c.Has("field") ? c["field"].S : null, e.Field, "field");
         }
 
+        private sealed class Snapshots : IRecordSink
+        {
+            public readonly List<Tuple<long, long, bool, bool, Vec3, Quat[], Vec3[]>> Taken = new List<Tuple<long, long, bool, bool, Vec3, Quat[], Vec3[]>>();
+
+            public void Record(AvatarState a)
+            {
+                a.Rebuild();
+                Taken.Add(Tuple.Create(a.Handle, a.Seq, a.Keyframe, a.ReachLimited, a.Root, (Quat[])a.Items.Clone(), (Vec3[])a.Positions.Clone()));
+            }
+        }
+
         private static void Stream(Json c)
         {
             var refs = new Dictionary<long, Recon>();
             var bones = new Dictionary<long, Vec3[]>();
+            var inPlace = new RecordDecoder(); // the allocation-free decoder, alongside
+            var seen = new Snapshots();
             foreach (var a in c["avatars"].Items)
             {
                 refs[a["handle"].L] = null;
                 bones[a["handle"].L] = Records.BytesToSkeleton(T.Hex(a["skeleton"]["$bin"].S));
+                inPlace.Announce(a["handle"].L, T.Hex(a["skeleton"]["$bin"].S), true);
             }
             double tol = c["tolerance"].D;
             var messages = c["messages"].Items;
@@ -118,11 +132,15 @@ namespace Posecast.Client.Tests
                     var e = T.Throws<ProtocolException>(() => Records.Decode(msg.Data, refs), "records");
                     T.Equal(c["error"].S, e.Code, "code");
                     T.Equal(c["field"].S, e.Field, "field");
+                    var e2 = T.Throws<ProtocolException>(() => inPlace.Decode(msg.Data, 0, msg.Data.Length, null), "records in place");
+                    T.Equal(e.Code + " " + e.Field + " " + e.Message, e2.Code + " " + e2.Field + " " + e2.Message, "the same error in place");
                     return;
                 }
                 var got = Records.Decode(msg.Data, refs);
                 var want = c["expect"][k];
                 T.Equal(want.Count, got.Count, "records in message " + k);
+                seen.Taken.Clear();
+                T.Equal(got.Count, inPlace.Decode(msg.Data, 0, msg.Data.Length, seen), "records in place in message " + k);
                 for (int i = 0; i < got.Count; i++)
                 {
                     var w = want[i];
@@ -146,6 +164,15 @@ namespace Posecast.Client.Tests
                     {
                         var p = w["positions"][j].Doubles();
                         T.Near(new Vec3(p[0], p[1], p[2]), pos[j], tol, at + " position " + j);
+                    }
+                    // In place: the very same numbers (one code path), FK into the state's arrays.
+                    var s = seen.Taken[i];
+                    T.Equal(r.Handle + " " + r.Recon.Seq + " " + r.Keyframe + " " + r.ReachLimited + " " + r.Recon.Root,
+                            s.Item1 + " " + s.Item2 + " " + s.Item3 + " " + s.Item4 + " " + s.Item5, at + " in place");
+                    for (int j = 0; j < Protocol.NumJoints; j++)
+                    {
+                        T.Equal(r.Recon.Items[j], s.Item6[j], at + " in place item " + j);
+                        T.Equal(pos[j], s.Item7[j], at + " in place position " + j);
                     }
                 }
             }

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import posecast_client as pc
 
+from posecast.geometry.rotations import quat2mat
 from posecast.offline.motion.synthetic import walk_clip
 from posecast.online.protocol import codec, records
 from posecast.online.protocol import messages as m
@@ -35,7 +36,7 @@ def world_and_positions(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per frame: world rotations (F, 19, 4) and FK positions (F, 19, 3)."""
     world = np.stack([records.items2world(q) for q in local])
-    mats = records._quat2mat(world)  # (F, 19, 3, 3)
+    mats = quat2mat(world)  # (F, 19, 3, 3)
     pos = np.empty((len(local), NUM_JOINTS, 3))
     pos[:, 0] = root
     for j in range(1, NUM_JOINTS):

@@ -33,7 +33,13 @@ MCS=(mcs -langversion:$LANGV -nologo -warnaserror+ -debug-)
 "${MCS[@]}" -target:library -out:"$OUT/UnityEngine.dll" "$SDK"/Tests~/UnityStub/*.cs
 "${MCS[@]}" -target:library -r:"$OUT/Posecast.Client.dll" -r:"$OUT/UnityEngine.dll" \
   -out:"$OUT/Posecast.Client.Unity.dll" "$SDK"/Runtime/Unity/*.cs
+# The XR avatars sample, against the same stand-in (its desktop mode runs in SampleTests).
+"${MCS[@]}" -target:library -r:"$OUT/Posecast.Client.dll" -r:"$OUT/UnityEngine.dll" -r:"$OUT/Posecast.Client.Unity.dll" \
+  -out:"$OUT/Posecast.Samples.XRAvatars.dll" "$SDK"/Samples~/XRAvatars/*.cs
+# ApiTests reads the Unity assemblies' references to UnityEngine with Mono.Cecil (mono-devel's).
+CECIL=()
+for dll in /usr/lib/mono/gac/Mono.Cecil/0.11*/Mono.Cecil.dll; do [ -f "$dll" ] && CECIL=(-define:CECIL -r:"$dll"); done
 "${MCS[@]}" -r:"$OUT/Posecast.Client.dll" -r:"$OUT/UnityEngine.dll" -r:"$OUT/Posecast.Client.Unity.dll" \
-  -r:System.Core.dll -out:"$OUT/PosecastTests.exe" "$SDK"/Tests~/*.cs
+  -r:"$OUT/Posecast.Samples.XRAvatars.dll" "${CECIL[@]}" -r:System.Core.dll -out:"$OUT/PosecastTests.exe" "$SDK"/Tests~/*.cs
 echo "cs-test: built with mcs -langversion:$LANGV ($(mcs --version))"
 exec mono "$OUT/PosecastTests.exe" --repo "$PWD" "$@"

@@ -17,7 +17,8 @@
 //   root  <- root + d                                           (0.1 mm)
 //   rot_i <- normalise(rot_i * exp(v * STEP) * exp(r * STEP))    (rotation vectors)
 //
-// Every malformed record is BAD_FIELD with field "data".
+// Every malformed record is BAD_FIELD with field "data". The per-record code is
+// RecordDecoder's (in place, allocation-free); Decode here wraps it in immutable Recons.
 
 using System;
 using System.Collections.Generic;
@@ -68,20 +69,26 @@ namespace Posecast.Client
         public const int FlagsKnown = FlagKeyframe | FlagReachLimited;
         public const int KeyframeBytes = 1 + 4 + 12 + Protocol.NumJoints * 6; // 131, after the handle
         public const long MaxHandle = Protocol.UInt32Max;
-        private const long RootMax = 10000000; // 1000 m in 0.1 mm
+        internal const long RootMax = 10000000; // 1000 m in 0.1 mm
 
         private static ProtocolException Bad(string m) { return ErrorCodes.BadField("data", m); }
+        internal static ProtocolException BadData(string m) { return Bad(m); }
 
         // --- skeletons -----------------------------------------------------------------
 
         /// <summary>108 bytes to the 18 bone offsets SPINE..RIGHT_TOE from their parents, metres.</summary>
         public static Vec3[] BytesToSkeleton(byte[] blob)
         {
-            var out_ = new Vec3[Protocol.NumJoints - 1];
-            for (int j = 0; j < out_.Length; j++)
-                out_[j] = new Vec3(Quantize.I16(blob, 6 * j) * SkeletonUnitM, Quantize.I16(blob, 6 * j + 2) * SkeletonUnitM,
+            return BytesToSkeleton(blob, new Vec3[Protocol.NumJoints - 1]);
+        }
+
+        /// <summary>BytesToSkeleton into `into` (18 offsets); returns it.</summary>
+        public static Vec3[] BytesToSkeleton(byte[] blob, Vec3[] into)
+        {
+            for (int j = 0; j < Protocol.NumJoints - 1; j++)
+                into[j] = new Vec3(Quantize.I16(blob, 6 * j) * SkeletonUnitM, Quantize.I16(blob, 6 * j + 2) * SkeletonUnitM,
                                    Quantize.I16(blob, 6 * j + 4) * SkeletonUnitM);
-            return out_;
+            return into;
         }
 
         // --- LEB128 handles -----------------------------------------------------------
@@ -143,121 +150,37 @@ namespace Posecast.Client
         /// Every record of a poses.data blob, against refs (handle to the last state; a null
         /// value for an announced avatar without one yet). Updates refs as it goes.
         /// BAD_FIELD (field "data") for a malformed record, an unknown handle or a delta
-        /// without a reference.
+        /// without a reference. (RecordDecoder does the same in place, allocating nothing.)
         /// </summary>
         public static List<Record> Decode(byte[] data, IDictionary<long, Recon> refs)
         {
             var out_ = new List<Record>();
+            var state = new AvatarState();
+            var residuals = new long[(Protocol.NumJoints + 1) * 3];
             int pos = 0, end = data.Length;
             while (pos < end)
             {
                 long handle = ReadLeb128(data, end, ref pos);
                 Recon ref_;
                 if (!refs.TryGetValue(handle, out ref_)) throw Bad("a record for handle " + handle + ", never announced");
-                if (pos >= end) throw Bad("a record is cut short");
-                int flags = data[pos];
-                if ((flags & ~FlagsKnown) != 0) throw Bad("a record has reserved flag bits set");
-                Recon recon;
-                if ((flags & FlagKeyframe) != 0)
-                {
-                    if (end - (pos + 1) < KeyframeBytes - 1) throw Bad("a keyframe is cut short");
-                    int at = pos + 1;
-                    long seq = (uint)(data[at] | data[at + 1] << 8 | data[at + 2] << 16 | data[at + 3] << 24);
-                    long rx = I32(data, at + 4), ry = I32(data, at + 8), rz = I32(data, at + 12);
-                    if (Math.Max(Math.Abs(rx), Math.Max(Math.Abs(ry), Math.Abs(rz))) > RootMax)
-                        throw Bad("a keyframe root is beyond +-1000 m");
-                    var items = new Quat[Protocol.NumJoints];
-                    for (int j = 0; j < items.Length; j++) items[j] = Smallest3(data, at + 16 + 6 * j);
-                    recon = new Recon(seq, rx, ry, rz, items, new long[3], new long[Protocol.NumJoints * 3]);
-                    pos += KeyframeBytes;
-                }
-                else
-                {
-                    if (ref_ == null) throw Bad("a delta for handle " + handle + " without a keyframe");
-                    recon = ReadDelta(data, end, ref pos, ref_);
-                }
+                state.Handle = handle;
+                state.SetReference(ref_);
+                RecordDecoder.Step(data, end, ref pos, state, residuals);
+                var recon = state.ToRecon();
                 refs[handle] = recon;
-                out_.Add(new Record
-                {
-                    Handle = handle, Keyframe = (flags & FlagKeyframe) != 0,
-                    ReachLimited = (flags & FlagReachLimited) != 0, Recon = recon,
-                });
+                out_.Add(new Record { Handle = handle, Keyframe = state.Keyframe, ReachLimited = state.ReachLimited, Recon = recon });
             }
             return out_;
-        }
-
-        private static long I32(byte[] d, int at) { return (int)(d[at] | d[at + 1] << 8 | d[at + 2] << 16 | d[at + 3] << 24); }
-
-        private static Recon ReadDelta(byte[] data, int end, ref int pos, Recon r)
-        {
-            pos += 1; // the flags
-            if (pos >= end || data[pos] == 0) throw Bad("a delta's seq step is missing or 0");
-            long seq = (r.Seq + data[pos]) & Protocol.UInt32Max;
-            pos += 1;
-            var bits = new BitReader(data, pos, end);
-            var res = new long[(Protocol.NumJoints + 1) * 3]; // residuals: root, then 19 rotations
-            for (int item = 0; item <= Protocol.NumJoints; item++)
-            {
-                int w = (item == 0 ? RootWidths : RotWidths)[bits.Read(2)];
-                for (int c = 0; c < 3; c++) res[3 * item + c] = w == 0 ? 0 : bits.ReadSigned(w);
-            }
-            if (bits.Overrun) throw Bad("a delta is cut short");
-            pos += (bits.Count + 7) / 8;
-            var stepRoot = new long[3];
-            for (int c = 0; c < 3; c++) stepRoot[c] = r.StepRoot[c] + res[c];
-            long rx = r.RootX + stepRoot[0], ry = r.RootY + stepRoot[1], rz = r.RootZ + stepRoot[2];
-            if (Math.Max(Math.Abs(rx), Math.Max(Math.Abs(ry), Math.Abs(rz))) > RootMax)
-                throw Bad("a delta takes the root beyond +-1000 m");
-            var stepRot = new long[Protocol.NumJoints * 3];
-            var items = new Quat[Protocol.NumJoints];
-            for (int j = 0; j < Protocol.NumJoints; j++)
-            {
-                long v0 = r.StepRot[3 * j], v1 = r.StepRot[3 * j + 1], v2 = r.StepRot[3 * j + 2];
-                long e0 = res[3 + 3 * j], e1 = res[4 + 3 * j], e2 = res[5 + 3 * j];
-                stepRot[3 * j] = v0 + e0; stepRot[3 * j + 1] = v1 + e1; stepRot[3 * j + 2] = v2 + e2;
-                var pred = r.Items[j] * Quat.FromRotationVector(v0 * RotStepRad, v1 * RotStepRad, v2 * RotStepRad);
-                items[j] = (pred * Quat.FromRotationVector(e0 * RotStepRad, e1 * RotStepRad, e2 * RotStepRad)).Normalised;
-            }
-            return new Recon(seq, rx, ry, rz, items, stepRoot, stepRot);
-        }
-
-        /// <summary>Little-endian bits (bit n is bit n % 8 of byte n / 8); zeros past the end.</summary>
-        private struct BitReader
-        {
-            private readonly byte[] _d;
-            private readonly int _start, _end;
-            public int Count;
-
-            public BitReader(byte[] d, int start, int end) { _d = d; _start = start; _end = end; Count = 0; }
-
-            public bool Overrun { get { return Count > 8 * (_end - _start); } }
-
-            public int Read(int w)
-            {
-                int v = 0;
-                for (int i = 0; i < w; i++)
-                {
-                    int n = Count + i;
-                    int at = _start + (n >> 3);
-                    if (at < _end && (_d[at] >> (n & 7) & 1) != 0) v |= 1 << i;
-                }
-                Count += w;
-                return v;
-            }
-
-            public long ReadSigned(int w)
-            {
-                int v = Read(w);
-                return (v >> (w - 1) & 1) != 0 ? v - (1 << w) : v;
-            }
         }
 
         // --- rotations and FK ------------------------------------------------------------
 
         /// <summary>Items (PELVIS world, then local rotations) to world rotations, parents first.</summary>
-        public static Quat[] ItemsToWorld(Quat[] items)
+        public static Quat[] ItemsToWorld(Quat[] items) { return ItemsToWorld(items, new Quat[Protocol.NumJoints]); }
+
+        /// <summary>ItemsToWorld into `world` (19); returns it.</summary>
+        public static Quat[] ItemsToWorld(Quat[] items, Quat[] world)
         {
-            var world = new Quat[Protocol.NumJoints];
             world[0] = items[0];
             for (int j = 1; j < Protocol.NumJoints; j++) world[j] = world[Protocol.Parents[j]] * items[j];
             return world;
@@ -275,7 +198,12 @@ namespace Posecast.Client
         /// <summary>Joint positions by FK: p[j] = p[parent] + R(world[parent]) offsets[j - 1].</summary>
         public static Vec3[] Positions(Vec3 root, Quat[] world, Vec3[] offsets)
         {
-            var p = new Vec3[Protocol.NumJoints];
+            return Positions(root, world, offsets, new Vec3[Protocol.NumJoints]);
+        }
+
+        /// <summary>Positions into `p` (19); returns it.</summary>
+        public static Vec3[] Positions(Vec3 root, Quat[] world, Vec3[] offsets, Vec3[] p)
+        {
             p[0] = root;
             for (int j = 1; j < Protocol.NumJoints; j++)
             {

@@ -105,8 +105,7 @@ namespace Posecast.Client
         private readonly int _rememberFrames;
         // v2: the avatars this connection was told about.
         private readonly Dictionary<long, string> _playerOf = new Dictionary<long, string>();
-        private readonly Dictionary<long, Vec3[]> _bones = new Dictionary<long, Vec3[]>();
-        private readonly Dictionary<long, Recon> _refs = new Dictionary<long, Recon>();
+        private readonly RecordDecoder _records = new RecordDecoder();  // each avatar's skeleton and reference
         private double _lastResync = double.NegativeInfinity;
 
         public ClientSession(long seq0 = 0, int rememberFrames = 1024)
@@ -238,20 +237,18 @@ namespace Posecast.Client
 
         private void ForgetAvatars()
         {
-            _playerOf.Clear(); _bones.Clear(); _refs.Clear();
+            _playerOf.Clear(); _records.Clear();
             _lastResync = double.NegativeInfinity;
         }
 
         private void Announce(string player, long handle, byte[] skeleton)
         {
             string had;
-            if (!_playerOf.TryGetValue(handle, out had) || had != player)
-            {
-                ForgetPlayer(player); // moved to another handle: its old one is gone (as in the Python and TS SDKs)
-                _refs[handle] = null; // a keyframe comes first
-            }
+            bool fresh = !_playerOf.TryGetValue(handle, out had) || had != player;
+            // Moved to another handle: its old one is gone (as in the Python and TS SDKs).
+            if (fresh) ForgetPlayer(player);
             _playerOf[handle] = player;
-            _bones[handle] = Records.BytesToSkeleton(skeleton);
+            _records.Announce(handle, skeleton, fresh); // fresh: a keyframe comes first
         }
 
         /// <summary>The players this connection knows by handle (v2), for tests and tools.</summary>
@@ -348,22 +345,21 @@ namespace Posecast.Client
         {
             var gone = new List<long>();
             foreach (var kv in _playerOf) if (kv.Value == player) gone.Add(kv.Key);
-            foreach (var h in gone) { _playerOf.Remove(h); _bones.Remove(h); _refs.Remove(h); }
+            foreach (var h in gone) { _playerOf.Remove(h); _records.Forget(h); }
         }
 
         private void DecodePoses(Poses msg, double now, Received r)
         {
-            List<Record> records;
-            try { records = Records.Decode(msg.Data, _refs); }
+            var poses = new PoseCollector(this, msg.T);
+            try { _records.Decode(msg.Data, 0, msg.Data.Length, poses); }
             catch (ProtocolException e)
             {
                 // The rest of the message cannot be parsed (records carry no lengths), so the
                 // references of the avatars after the bad record are unknown: start over from
-                // keyframes, which a resync asks for.
+                // keyframes, which a resync asks for. None of this message's poses is shown.
                 Stats.BadMessages++;
                 r.Events.Add(new ClientEvent { Kind = EventKind.Bad, Cause = e });
-                var handles = new List<long>(_refs.Keys);
-                foreach (var h in handles) _refs[h] = null;
+                _records.DropReferences();
                 if (now - _lastResync >= ResyncEveryS)
                 {
                     _lastResync = now;
@@ -372,19 +368,35 @@ namespace Posecast.Client
                 }
                 return;
             }
-            foreach (var rec in records)
+            foreach (var pose in poses.Poses)
             {
-                var world = Records.ItemsToWorld(rec.Recon.Items);
+                Stats.Poses++;
+                if (pose.Keyframe) Stats.Keyframes++;
+                r.Events.Add(new ClientEvent { Kind = EventKind.Pose, Pose = pose });
+            }
+        }
+
+        // Each record of one poses message as a PlayerPose of its own (events leave this
+        // thread, so the decoder's reused state is copied).
+        private sealed class PoseCollector : IRecordSink
+        {
+            public readonly List<PlayerPose> Poses = new List<PlayerPose>();
+            private readonly ClientSession _session;
+            private readonly double _t;
+
+            public PoseCollector(ClientSession session, double t) { _session = session; _t = t; }
+
+            public void Record(AvatarState a)
+            {
+                a.Rebuild();
                 var pose = new PlayerPose
                 {
-                    Player = _playerOf[rec.Handle], Seq = rec.Recon.Seq, T = msg.T,
-                    Positions = Records.Positions(rec.Recon.Root, world, _bones[rec.Handle]),
-                    Rotations = world, Keyframe = rec.Keyframe, ReachLimited = rec.ReachLimited,
+                    Player = _session._playerOf[a.Handle], Seq = a.Seq, T = _t,
+                    Positions = (Vec3[])a.Positions.Clone(), Rotations = (Quat[])a.World.Clone(),
+                    Keyframe = a.Keyframe, ReachLimited = a.ReachLimited,
                 };
-                pose.LocalRotations = rec.Recon.Items;
-                Stats.Poses++;
-                if (rec.Keyframe) Stats.Keyframes++;
-                r.Events.Add(new ClientEvent { Kind = EventKind.Pose, Pose = pose });
+                pose.LocalRotations = (Quat[])a.Items.Clone();
+                Poses.Add(pose);
             }
         }
 

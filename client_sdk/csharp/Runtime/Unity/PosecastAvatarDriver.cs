@@ -9,8 +9,10 @@
 // definition holds (Avatar.humanDescription.skeleton, which Unity's avatar setup puts
 // in a T-pose), taken at Awake and put back, so a rig that stands in an A-pose or
 // any other pose skins correctly; without a definition, the pose it stands in at
-// Awake. make cs-test compiles and tests it against a stand-in UnityEngine
-// (Tests~/UnityStub), not in Unity.
+// Awake. A PosecastAvatarManager adds one to each avatar it spawns and drives it
+// (Apply); placed by hand, it reads its Streamer's jitter buffer for Player. make
+// cs-test compiles and tests it against a stand-in UnityEngine (Tests~/UnityStub), not
+// in Unity.
 
 using System.Collections.Generic;
 using UnityEngine;
@@ -19,9 +21,11 @@ namespace Posecast.Client.Unity
 {
     public sealed class PosecastAvatarDriver : MonoBehaviour
     {
+        [Tooltip("Where the poses come from; unset on avatars a PosecastAvatarManager spawned (it drives them)")]
         public PosecastXRStreamer Streamer;
         public string Player;                 // the remote player's id
-        public Animator Avatar;               // a Humanoid rig facing its root's +Z
+        [Tooltip("A Humanoid rig facing its root's +Z; unset: the Animator on this GameObject or below it")]
+        public Animator Avatar;
         [Tooltip("Rest from the avatar's Humanoid T-pose; off: from the pose it stands in at Awake (then a T-pose)")]
         public bool RestFromDefinition = true;
         [Tooltip("Scale the hips' height by the avatar's leg length over the player's, so the feet stay on the floor")]
@@ -32,6 +36,13 @@ namespace Posecast.Client.Unity
         private float _hipsHeight; // the hips above the root in the rest pose, the root's units
 
         private void Awake()
+        {
+            if (Avatar == null) Avatar = GetComponentInChildren<Animator>();
+            if (Avatar != null) CaptureRest();
+        }
+
+        // Each bone's rest rotation in the root's frame (see the file's head), once.
+        private void CaptureRest()
         {
             var humans = UnityFrames.HumanBones();
             var toRoot = Quaternion.Inverse(Avatar.transform.rotation);
@@ -97,15 +108,30 @@ namespace Posecast.Client.Unity
         /// <summary>Pose the avatar's bones as `shown` (a pose without rotations is skipped).</summary>
         public void Apply(InterpolatedPose shown)
         {
-            if (shown == null || shown.Rotations == null) return;
+            if (shown != null) Apply(shown.Positions, shown.Rotations);
+        }
+
+        /// <summary>
+        /// Pose the avatar's bones from 19 world positions and rotations (posecast's frame,
+        /// joint order; null rotations: skipped). Allocates nothing: call it every frame.
+        /// </summary>
+        public void Apply(Vec3[] positions, Quat[] rotations)
+        {
+            if (positions == null || rotations == null) return;
+            if (_bones == null)
+            {
+                if (Avatar == null) return;
+                CaptureRest();
+            }
             var root = Avatar.transform;
             if (_bones[0] != null)
             {
-                var p = shown.Positions[0];
-                _bones[0].position = root.TransformPoint(UnityFrames.ToUnity(new Vec3(p.X, p.Y * Fit(shown.Positions), p.Z)));
+                var p = positions[0];
+                _bones[0].position = root.TransformPoint(UnityFrames.ToUnity(new Vec3(p.X, p.Y * Fit(positions), p.Z)));
             }
+            var rootRotation = root.rotation;
             for (int j = 0; j < _bones.Length; j++)
-                if (_bones[j] != null) _bones[j].rotation = root.rotation * UnityFrames.ToUnity(shown.Rotations[j]) * _rest[j];
+                if (_bones[j] != null) _bones[j].rotation = rootRotation * UnityFrames.ToUnity(rotations[j]) * _rest[j];
         }
     }
 }

@@ -1,9 +1,13 @@
 // Unity-only: reads the headset and both controllers through Unity's XR input and
-// streams them as posecast frames (layout "hmd3": no waist tracker). Everything it
+// streams them as posecast frames (layout "hmd3": no waist tracker). With a Manager
+// (PosecastAvatarManager) it sends through the manager's connection, which owns the
+// events and the avatars; without one it connects by itself (Token) and feeds its own
+// jitter buffer, passing every event on to EventReceived. Everything it
 // calls (the client, frame checks, frame conversion) is the tested library; make
 // cs-test compiles this component against a stand-in UnityEngine (Tests~/UnityStub)
 // and tests its device reads, but it was not run in Unity or on a headset.
 
+using System;
 using System.Collections.Generic;
 using System.Threading.Tasks;
 using UnityEngine;
@@ -13,6 +17,8 @@ namespace Posecast.Client.Unity
 {
     public sealed class PosecastXRStreamer : MonoBehaviour
     {
+        [Tooltip("Send through this manager's connection (it joins, spawns avatars and raises the events); unset: connect here")]
+        public PosecastAvatarManager Manager;
         public string Url = "ws://127.0.0.1:8765/";
         public string Token = "";            // minted by your game backend
         public string Room = "lobby";
@@ -20,9 +26,15 @@ namespace Posecast.Client.Unity
         [Tooltip("Poses per second to receive: 60, 30, 20 or 15")]
         public float PoseRateHz = 60f;
 
-        public PosecastClient Client { get; private set; }
-        /// <summary>Every player's jitter buffer, fed in Update (read it from PosecastAvatarDriver).</summary>
-        public readonly Interpolator Poses = new Interpolator();
+        /// <summary>The connection frames go through: the Manager's, or this component's own.</summary>
+        public PosecastClient Client { get { return Manager != null ? Manager.Client : _own; } }
+        /// <summary>Every player's jitter buffer (the Manager's, or fed here in Update; read it from PosecastAvatarDriver).</summary>
+        public Interpolator Poses { get { return Manager != null ? Manager.Poses : _poses; } }
+        /// <summary>Without a Manager: every event this component drained, passed on after its jitter buffer took it.</summary>
+        public event Action<ClientEvent> EventReceived;
+
+        private PosecastClient _own;
+        private readonly Interpolator _poses = new Interpolator();
 
         private readonly Vec3[] _pos = new Vec3[4];
         private readonly Quat[] _rot = new Quat[4];
@@ -31,8 +43,9 @@ namespace Posecast.Client.Unity
 
         private async void Start()
         {
-            Client = await PosecastClient.ConnectAsync(Url, Token);
-            await Client.JoinAsync(Room, DisplayName, layout: "hmd3", poseRateHz: PoseRateHz);
+            if (Manager != null) return;
+            _own = await PosecastClient.ConnectAsync(Url, Token);
+            await _own.JoinAsync(Room, DisplayName, layout: "hmd3", poseRateHz: PoseRateHz);
         }
 
         // A controller that lost tracking (out of the cameras' view) still reports its last
@@ -65,15 +78,27 @@ namespace Posecast.Client.Unity
 
         private async void Update()
         {
-            if (Client == null || !Client.Connected) return;
-            ClientEvent e;
-            while (Client.TryGetEvent(out e)) Poses.Feed(e);
+            var client = Client;
+            if (client == null || !client.Connected) return;
+            if (Manager == null) Drain(client);
             if (_sending) return; // one frame in flight at a time; frames supersede each other
             if (!_floor) _floor = RequestFloor(InputDevices.GetDeviceAtXRNode(XRNode.Head).subsystem);
             int valid = ReadTrackers(_pos, _rot);
             _sending = true;
-            try { await Client.SendFrameAsync(_pos, _rot, valid); }
+            try { await client.SendFrameAsync(_pos, _rot, valid); }
             finally { _sending = false; }
+        }
+
+        // Without a Manager: every waiting event into the jitter buffer, then on to EventReceived.
+        private void Drain(PosecastClient client)
+        {
+            ClientEvent e;
+            while (client.TryGetEvent(out e))
+            {
+                _poses.Feed(e);
+                var listeners = EventReceived;
+                if (listeners != null) listeners(e);
+            }
         }
 
         private static readonly XRNode[] Nodes = { XRNode.Head, XRNode.LeftHand, XRNode.RightHand };
@@ -124,7 +149,7 @@ namespace Posecast.Client.Unity
 
         private async void OnDestroy()
         {
-            if (Client != null) await Client.CloseAsync("quit");
+            if (_own != null) await _own.CloseAsync("quit");
         }
     }
 }
