@@ -101,7 +101,7 @@ def test_sim_replays_bvh_with_noise_and_dropout(
 def test_sim_reports_refused_players(
     dev_server: DevServer, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    code = sim.main(["--url", dev_server.url, "--secret", "wrong-secret-xxxxxxxx", "--players", "1",
+    code = sim.main(["--url", dev_server.url, "--secret", "w" * 32, "--players", "1",
                      "--duration", "1"])  # fmt: skip
     assert code == 1
     out, err = capsys.readouterr()
@@ -132,14 +132,14 @@ def test_record_failures_print_a_code_and_a_hint(
     no server at the URL, a file to export that is missing or not a recording."""
     out = ["--out", str(tmp_path / "r.pcrec"), "--seconds", "1"]
     server = ["--url", dev_server.url, *out]
-    err = _failure(capsys, record.main, [*server, "--secret", "w" * 20, "--room", "r"],
+    err = _failure(capsys, record.main, [*server, "--secret", "w" * 32, "--room", "r"],
                    "UNAUTHENTICATED")  # fmt: skip
     assert "token signature does not verify" in err
     token = mint_token(dev_server.secret, room="r", player="rec")
     err = _failure(capsys, record.main, [*server, "--token", token, "--room", "other"],
                    "FORBIDDEN")  # fmt: skip
     assert "room" in err
-    err = _failure(capsys, record.main, ["--url", "ws://127.0.0.1:9/", "--secret", "s" * 20,
+    err = _failure(capsys, record.main, ["--url", "ws://127.0.0.1:9/", "--secret", "s" * 32,
                                          "--room", "r", *out], "UNREACHABLE")  # fmt: skip
     assert "ws://127.0.0.1:9/" in err and "posecast serve --dev" in err
     export = ["--bvh", str(tmp_path / "bvh"), "--export"]
@@ -152,7 +152,7 @@ def test_record_failures_print_a_code_and_a_hint(
 
 
 def test_sim_failures_print_a_code_and_a_hint(capsys: pytest.CaptureFixture[str]) -> None:
-    code = sim.main(["--url", "ws://127.0.0.1:9/", "--secret", "s" * 20, "--duration", "0.5",
+    code = sim.main(["--url", "ws://127.0.0.1:9/", "--secret", "s" * 32, "--duration", "0.5",
                      "-q"])  # fmt: skip
     err = capsys.readouterr().err
     assert code == 1 and "Traceback" not in err

@@ -70,9 +70,7 @@ def test_refusals_raise_typed_errors(
     room = f"room-{uid}"
     tokens: dict[str, Callable[[], str]] = {
         "other_room": lambda: dev_server.token("elsewhere", f"p-{uid}"),
-        "wrong_secret": lambda: pc.mint_token(
-            "not-the-secret-at-all-0123456789abc", room=room, player="p"
-        ),
+        "wrong_secret": lambda: pc.mint_token("n" * 32, room=room, player="p"),
         "expired": lambda: dev_server.token(room, f"p-{uid}", now=time.time() - 7200),
     }
 
