@@ -341,8 +341,10 @@ try {
   const cdp = await page.context().newCDPSession(page);
   await cdp.send("HeapProfiler.enable");
   const prepared = await page.evaluate((n) => window.posecastViewer.benchPrepare(n), BENCH_AVATARS);
-  await page.evaluate(() => window.posecastViewer.benchRun(120, false)); // warm up (JIT)
-  await page.evaluate(() => window.posecastViewer.benchRun(120, true));
+  // Warm up: until V8 has optimised the loop, its interpreter boxes doubles (an
+  // allocation now and then in three.js's quaternion-to-Euler sync), gone after ~600 frames.
+  await page.evaluate((f) => window.posecastViewer.benchRun(f, false), BENCH_FRAMES);
+  await page.evaluate((f) => window.posecastViewer.benchRun(f, true), 120);
   /** Bytes allocated inside benchRun over one run, and the run's timings. */
   async function heapRun(allocate) {
     await cdp.send("HeapProfiler.collectGarbage");
