@@ -136,3 +136,33 @@ test("AvatarRoom: one avatar per player, added on join, removed on leave", async
   assert.deepEqual(disposed, ["a"]);
   assert.equal(parent.children.length, 1);
 });
+
+test("the core entry point bundles neither three.js nor the binding", async () => {
+  const { build } = await import("esbuild");
+  const { fileURLToPath } = await import("node:url");
+  const root = fileURLToPath(new URL("../..", import.meta.url)); // .test-build/test -> the package
+  const out = await build({
+    entryPoints: [`${root}/src/index.ts`],
+    bundle: true,
+    write: false,
+    metafile: true,
+    format: "esm",
+    platform: "neutral",
+    logLevel: "silent",
+  });
+  const inputs = Object.keys(out.metafile.inputs);
+  assert.ok(inputs.some((f) => f.endsWith("src/client.ts")), inputs.join(" "));
+  assert.deepEqual(inputs.filter((f) => /three|src\/rest\.ts/.test(f)), []);
+  const three = await build({
+    entryPoints: [`${root}/src/three/index.ts`],
+    bundle: true,
+    write: false,
+    metafile: true,
+    format: "esm",
+    platform: "neutral",
+    external: ["three"],
+    logLevel: "silent",
+  });
+  assert.deepEqual(Object.keys(three.metafile.outputs).length, 1);
+  assert.ok(!Object.keys(three.metafile.inputs).some((f) => f.includes("node_modules")), "three stays external");
+});
