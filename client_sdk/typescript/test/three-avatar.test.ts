@@ -166,3 +166,25 @@ test("the core entry point bundles neither three.js nor the binding", async () =
   assert.deepEqual(Object.keys(three.metafile.outputs).length, 1);
   assert.ok(!Object.keys(three.metafile.inputs).some((f) => f.includes("node_modules")), "three stays external");
 });
+
+test("the WebXR example: under 60 lines, and it bundles against the package's entry points", async () => {
+  const { build } = await import("esbuild");
+  const { readFileSync } = await import("node:fs");
+  const { fileURLToPath } = await import("node:url");
+  const root = fileURLToPath(new URL("../..", import.meta.url));
+  const main = `${root}/examples/webxr-avatars/main.ts`;
+  const lines = readFileSync(main, "utf8").trimEnd().split("\n").length;
+  assert.ok(lines < 60, `${lines} lines`);
+  const out = await build({
+    entryPoints: [main],
+    bundle: true,
+    write: false,
+    format: "esm",
+    platform: "browser",
+    target: "es2022",
+    alias: { "@posecast/client/three": `${root}/src/three/index.ts`, "@posecast/client": `${root}/src/index.ts` },
+    logLevel: "silent",
+  });
+  assert.equal(out.errors.length, 0);
+  assert.ok(out.outputFiles[0]!.text.includes("recording.json"));
+});
