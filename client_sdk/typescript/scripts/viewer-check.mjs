@@ -342,9 +342,9 @@ try {
   await cdp.send("HeapProfiler.enable");
   const prepared = await page.evaluate((n) => window.posecastViewer.benchPrepare(n), BENCH_AVATARS);
   // Warm up: until V8 has optimised the loop, its interpreter boxes doubles (an
-  // allocation now and then in three.js's quaternion-to-Euler sync), gone after ~600 frames.
-  await page.evaluate((f) => window.posecastViewer.benchRun(f, false), BENCH_FRAMES);
-  await page.evaluate((f) => window.posecastViewer.benchRun(f, true), 120);
+  // allocation now and then in three.js's quaternion-to-Euler sync), gone after ~600
+  // frames. The copying run comes last: its other pose shape would deoptimise `update`.
+  await page.evaluate((f) => window.posecastViewer.benchRun(f, false), 2 * BENCH_FRAMES);
   /** Bytes allocated inside benchRun over one run, and the run's timings. */
   async function heapRun(allocate) {
     await cdp.send("HeapProfiler.collectGarbage");

@@ -76,6 +76,12 @@ for (const kind of MODELS) {
       const { max, joint } = worstError(avatar, pose.positions);
       assert.ok(max < 1e-4, `pose ${k}: ${joint} is ${(max * 1000).toFixed(2)} mm off`);
     }
+    // Never culled: three.js's skinned bounds would stay where the pose was when first culled.
+    let skinned = 0;
+    humanoid.root.traverse((o) => {
+      if ((o as { isSkinnedMesh?: boolean }).isSkinnedMesh === true) skinned += o.frustumCulled ? 100 : 1;
+    });
+    assert.equal(skinned, 2); // the body and its stripes, neither culled
     // Scales: uniform on every bone (a bone's mesh is scaled, never stretched).
     humanoid.root.traverse((o) => {
       assert.ok(Math.abs(o.scale.x - o.scale.y) < 1e-9 && Math.abs(o.scale.x - o.scale.z) < 1e-9, o.name);

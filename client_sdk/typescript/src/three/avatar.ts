@@ -135,6 +135,9 @@ export class HumanoidAvatar {
     this.object.name = "posecast-avatar";
     this.object.add(humanoid.root);
     humanoid.root.traverse((o) => {
+      // A skinned mesh's bounds are three.js's of its pose when first culled: a player who
+      // walks away from there would vanish. Avatars are never culled.
+      if ((o as { isSkinnedMesh?: boolean }).isSkinnedMesh === true) o.frustumCulled = false;
       this.rest.push({ object: o, position: o.position.clone(), quaternion: o.quaternion.clone(), scale: o.scale.clone() });
     });
     const joint = new Map<Object3D, number>();
