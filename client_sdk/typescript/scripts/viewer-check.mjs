@@ -345,51 +345,47 @@ try {
   // allocation now and then in three.js's quaternion-to-Euler sync), gone after ~600
   // frames. The copying run comes last: its other pose shape would deoptimise `update`.
   await page.evaluate((f) => window.posecastViewer.benchRun(f, false), 2 * BENCH_FRAMES);
-  /** Bytes allocated inside benchRun over one run, and the run's timings. */
-  async function heapRun(allocate) {
-    await cdp.send("HeapProfiler.collectGarbage");
-    await cdp.send("HeapProfiler.startSampling", {
-      samplingInterval: 32,
-      includeObjectsCollectedByMinorGC: true,
-      includeObjectsCollectedByMajorGC: true,
-    });
-    const timing = await page.evaluate(([f, a]) => window.posecastViewer.benchRun(f, a), [BENCH_FRAMES, allocate]);
-    const { profile } = await cdp.send("HeapProfiler.stopSampling");
-    /** Bytes allocated in the subtrees of the calls named `name` (below a call named `below`). */
-    const inside = (node, name, below, seen = below === undefined) => {
-      const here = seen && node.callFrame.functionName === name;
-      const deeper = seen || node.callFrame.functionName === below;
-      if (here) return subtree(node);
-      return node.children.reduce((sum, c) => sum + inside(c, name, below, deeper), 0);
-    };
-    const subtree = (node) => node.selfSize + node.children.reduce((sum, c) => sum + subtree(c), 0);
-    const where = {}; // bytes by allocating function (name and line), inside benchRun
-    const blame = (node, under) => {
-      const here = under || node.callFrame.functionName === "benchRun";
-      if (here && node.selfSize > 0) {
-        const key = `${node.callFrame.functionName || "(anonymous)"}:${node.callFrame.lineNumber}:${node.callFrame.columnNumber}`;
-        where[key] = (where[key] ?? 0) + node.selfSize;
-      }
-      node.children.forEach((c) => blame(c, here));
-    };
-    blame(profile.head, false);
-    const names = new Set();
-    const visit = (node) => {
-      names.add(node.callFrame.functionName);
-      node.children.forEach(visit);
-    };
-    visit(profile.head);
-    return {
-      ...timing,
-      // The binding's update path: HumanoidAvatar.update and all it calls, below benchRun.
-      update_allocated_bytes: inside(profile.head, "update", "benchRun"),
-      // The whole benchmark loop (its own timing arithmetic and three.js's matrix update too).
-      loop_allocated_bytes: inside(profile.head, "benchRun"),
-      found_update_frame: names.has("update"),
-      by_function: where,
-    };
-  }
-  const benchmark = { ...prepared, run: await heapRun(false), allocating: await heapRun(true) };
+  // One sampling session, read at marks: starting the profiler costs a one-time
+  // allocation (some 6 KB, as V8 re-tiers the code), which the settling run absorbs;
+  // then the measured run, then the copying run, each the difference between two marks.
+  /** Bytes allocated in the subtrees of the calls named `name` (below a call named `below`). */
+  const inside = (node, name, below, seen = below === undefined) => {
+    if (seen && node.callFrame.functionName === name) return subtree(node);
+    const deeper = seen || node.callFrame.functionName === below;
+    return node.children.reduce((sum, c) => sum + inside(c, name, below, deeper), 0);
+  };
+  const subtree = (node) => node.selfSize + node.children.reduce((sum, c) => sum + subtree(c), 0);
+  const names = (node, into = new Set()) => {
+    into.add(node.callFrame.functionName);
+    node.children.forEach((c) => names(c, into));
+    return into;
+  };
+  const mark = async () => {
+    const { profile } = await cdp.send("HeapProfiler.getSamplingProfile");
+    // The binding's update path: HumanoidAvatar.update and all it calls, below benchRun;
+    // and the whole benchmark loop (its own timing arithmetic and three.js's matrix update too).
+    return { update: inside(profile.head, "update", "benchRun"), loop: inside(profile.head, "benchRun"), names: names(profile.head) };
+  };
+  await cdp.send("HeapProfiler.collectGarbage");
+  await cdp.send("HeapProfiler.startSampling", {
+    samplingInterval: 32,
+    includeObjectsCollectedByMinorGC: true,
+    includeObjectsCollectedByMajorGC: true,
+  });
+  await page.evaluate(() => window.posecastViewer.benchRun(300, false)); // settle
+  const m0 = await mark();
+  const timing = await page.evaluate((f) => window.posecastViewer.benchRun(f, false), BENCH_FRAMES);
+  const m1 = await mark();
+  const copying = await page.evaluate((f) => window.posecastViewer.benchRun(f, true), BENCH_FRAMES);
+  const m2 = await mark();
+  await cdp.send("HeapProfiler.stopSampling");
+  const window_ = (a, b) => ({ update_allocated_bytes: b.update - a.update, loop_allocated_bytes: b.loop - a.loop });
+  const benchmark = {
+    ...prepared,
+    settle_update_allocated_bytes: m0.update,
+    run: { ...timing, ...window_(m0, m1) },
+    allocating: { ...copying, ...window_(m1, m2), found_update_frame: m2.names.has("update") },
+  };
   await page.evaluate(() => window.posecastViewer.benchEnd());
 
   const names = await page.evaluate(() => ({

@@ -14,7 +14,11 @@ from posecast.demo import motion
 from posecast.tracking.features import TrackerSlot
 
 frames = motion(None, seed=1)
-KEYS = {"head": TrackerSlot.HEAD, "leftHand": TrackerSlot.LEFT_HAND, "rightHand": TrackerSlot.RIGHT_HAND}
+KEYS = {
+    "head": TrackerSlot.HEAD,
+    "leftHand": TrackerSlot.LEFT_HAND,
+    "rightHand": TrackerSlot.RIGHT_HAND,
+}
 out = [
     {
         key: {
