@@ -355,16 +355,16 @@ try {
     return node.children.reduce((sum, c) => sum + inside(c, name, below, deeper), 0);
   };
   const subtree = (node) => node.selfSize + node.children.reduce((sum, c) => sum + subtree(c), 0);
-  const names = (node, into = new Set()) => {
+  const frameNames = (node, into = new Set()) => {
     into.add(node.callFrame.functionName);
-    node.children.forEach((c) => names(c, into));
+    node.children.forEach((c) => frameNames(c, into));
     return into;
   };
   const mark = async () => {
     const { profile } = await cdp.send("HeapProfiler.getSamplingProfile");
     // The binding's update path: HumanoidAvatar.update and all it calls, below benchRun;
     // and the whole benchmark loop (its own timing arithmetic and three.js's matrix update too).
-    return { update: inside(profile.head, "update", "benchRun"), loop: inside(profile.head, "benchRun"), names: names(profile.head) };
+    return { update: inside(profile.head, "update", "benchRun"), loop: inside(profile.head, "benchRun"), names: frameNames(profile.head) };
   };
   await cdp.send("HeapProfiler.collectGarbage");
   await cdp.send("HeapProfiler.startSampling", {
