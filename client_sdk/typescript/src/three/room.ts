@@ -110,19 +110,27 @@ export class AvatarRoom {
    * the skeleton read off its first pose. Allocates nothing while no skeleton changes.
    */
   update(poses: ReadonlyMap<string, PoseLike>, skeletonOf?: (player: string) => ArrayLike<number> | undefined): void {
-    for (const [player, avatar] of this.ready) {
-      const pose = poses.get(player);
-      if (pose === undefined) {
-        avatar.object.visible = false;
-        continue;
-      }
-      const skeleton = skeletonOf?.(player);
-      if (skeleton !== undefined ? avatar.fittedTo !== skeleton : avatar.fittedTo === undefined) {
-        avatar.fit(skeleton ?? offsetsFromPose(pose.positions, pose.rotations));
-      }
-      avatar.object.visible = avatar.update(pose);
-    }
+    this.framePoses = poses;
+    this.frameSkeletonOf = skeletonOf;
+    this.ready.forEach(this.step); // forEach: no iterator, no entry arrays
+    this.framePoses = undefined;
+    this.frameSkeletonOf = undefined;
   }
+
+  private framePoses: ReadonlyMap<string, PoseLike> | undefined;
+  private frameSkeletonOf: ((player: string) => ArrayLike<number> | undefined) | undefined;
+  private readonly step = (avatar: HumanoidAvatar, player: string): void => {
+    const pose = this.framePoses!.get(player);
+    if (pose === undefined) {
+      avatar.object.visible = false;
+      return;
+    }
+    const skeleton = this.frameSkeletonOf?.(player);
+    if (skeleton !== undefined ? avatar.fittedTo !== skeleton : avatar.fittedTo === undefined) {
+      avatar.fit(skeleton ?? offsetsFromPose(pose.positions, pose.rotations));
+    }
+    avatar.object.visible = avatar.update(pose);
+  };
 
   /** Removes every avatar. */
   clear(): void {
