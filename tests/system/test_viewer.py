@@ -130,7 +130,9 @@ def test_viewer_draws_moving_avatars_with_names(
     log = tmp_path / "demo.out"
     with log.open("wb") as out:
         demo = subprocess.Popen(
-            [sys.executable, "-m", "posecast", "demo", "--port=0", "--seconds=120", "--samples=8"],
+            # Long enough for every pass of the check on a loaded 2-core machine (it takes
+            # 80 to 190 s); the check's own deadline comes first.
+            [sys.executable, "-m", "posecast", "demo", "--port=0", "--seconds=480", "--samples=8"],
             stdout=out,
             stderr=subprocess.STDOUT,
         )
@@ -143,7 +145,7 @@ def test_viewer_draws_moving_avatars_with_names(
             env={**os.environ, "CHROMIUM": str(chromium)},
             capture_output=True,
             text=True,
-            timeout=240,
+            timeout=420,
         )
     finally:
         demo.terminate()
@@ -219,7 +221,9 @@ def test_viewer_draws_moving_avatars_with_names(
         for t in track.values():
             assert t["frames"] >= 15, t  # 5 s of frames, at 3 fps or more on software GL
             assert t["hands_max_m"] <= MODEL_ENDS_M and t["feet_max_m"] <= MODEL_ENDS_M, (kind, t)
-            assert t["hips_path_m"] >= 0.5 and t["hand_path_m"] >= 0.5, (kind, t)  # they move
+            # They move: the demo's walkers pause 2.4 s of each 12 s clip, and cover 0.4 to
+            # 3.5 m in 5 s (some 15 m when the clip loops back); still, 0.01 m.
+            assert t["hips_path_m"] >= 0.2 and t["hand_path_m"] >= 0.2, (kind, t)
 
     # The binding for 16 avatars: its cost (printed), and no allocation in its update path.
     bench = result["benchmark"]
