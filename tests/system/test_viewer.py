@@ -4,16 +4,22 @@ Headless Chromium (Debian's ``chromium``, driven by ``playwright-core`` from
 ``client_sdk/typescript``) opens the ``viewer:`` URL the demo prints while its two
 simulated headsets walk. ``client_sdk/typescript/scripts/viewer-check.mjs`` takes
 real screenshots a few hundred milliseconds apart and measures them, first of the
-skinned meshes the page opens with, then of the stick figures (``&avatar=sticks``);
-this test asserts on the numbers. Both ways, both players are drawn (enough pixels in
-each player's colour), they move between two screenshots (avatar pixels change), and
-the players' names are on the page. The meshes' limbs stay on their joints: on a
-frozen frame, next to no pixel of a player's colour lies outside that player's body as
-the streamed joints place it (each piece's half-width plus 4 cm around its bone, at its
-depth), and the page's CPU skinning puts the mesh's
-rings at the joints and halfway along each bone within 3 cm of the streamed joint
-positions; with four bones turned off their joints on purpose, both checks fail. The
-``s`` key switches to sticks and back. The screenshots stay in
+procedural skinned meshes (``&avatar=mesh``), then of the stick figures
+(``&avatar=sticks``), then of the humanoid models the page opens with (a generated VRM
+and, ``&model=gltf``, a glTF humanoid of other proportions, bound by the TypeScript
+SDK's three.js binding); this test asserts on the numbers. The models' bound
+skeletons are read back in the page on every frame for 5 s: their hands and feet stay
+within 2 cm of the streamed positions. The binding's cost for 16 avatars is printed,
+and V8's sampling heap profiler sees no allocation in its update path over 600 frames
+(and does see one when each avatar's pose copies its rotations). Every way, both
+players are drawn (enough pixels in each player's colour), they move between two
+screenshots (avatar pixels change), and the players' names are on the page. The
+procedural meshes' limbs stay on their joints: on a frozen frame, next to no pixel of a
+player's colour lies outside that player's body as the streamed joints place it (each
+piece's half-width plus 4 cm around its bone, at its depth), and the page's CPU skinning
+puts the mesh's rings at the joints and halfway along each bone within 3 cm of the
+streamed joint positions; with four bones turned off their joints on purpose, both
+checks fail. The ``s`` key switches to sticks and back. The screenshots stay in
 ``$TMPDIR/posecast-viewer/`` for a human to look at.
 
 Setup, done here so that ``make test`` needs nothing else: ``npm ci`` in
@@ -52,6 +58,8 @@ MIN_PLAYER_PIXELS = 1000  # each stick figure is ~4000-8000 pixels at 1000 x 640
 MIN_MESH_PIXELS = 5000  # each skinned mesh ~10000-20000
 ATTACHED_M = 0.03  # the mesh's rings from the streamed joints (0 with FK-consistent poses)
 MAX_STRAY_SHARE = 0.01  # of a player's pixels, outside its body around the streamed bones
+MODEL_ENDS_M = 0.02  # the models' hands and feet from the streamed hand and foot positions
+BENCH_CELLS = 600 * 16  # frames x avatars in the heap check: one allocation each, >= these bytes
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
 
@@ -122,7 +130,9 @@ def test_viewer_draws_moving_avatars_with_names(
     log = tmp_path / "demo.out"
     with log.open("wb") as out:
         demo = subprocess.Popen(
-            [sys.executable, "-m", "posecast", "demo", "--port=0", "--seconds=120", "--samples=8"],
+            # Long enough for every pass of the check on a loaded 2-core machine (it takes
+            # 80 to 190 s); the check's own deadline comes first.
+            [sys.executable, "-m", "posecast", "demo", "--port=0", "--seconds=480", "--samples=8"],
             stdout=out,
             stderr=subprocess.STDOUT,
         )
@@ -135,7 +145,7 @@ def test_viewer_draws_moving_avatars_with_names(
             env={**os.environ, "CHROMIUM": str(chromium)},
             capture_output=True,
             text=True,
-            timeout=240,
+            timeout=420,
         )
     finally:
         demo.terminate()
@@ -147,7 +157,7 @@ def test_viewer_draws_moving_avatars_with_names(
     assert "error" not in result, result
     assert check.returncode == 0, check.stderr
 
-    # The page opens on the skinned meshes, drawn and moving.
+    # The procedural skinned meshes (avatar=mesh), drawn and moving.
     mesh = result["mesh"]
     assert mesh["mode"] == "mesh", mesh
     players = _drawn_and_moving(mesh, MIN_MESH_PIXELS)
@@ -199,7 +209,37 @@ def test_viewer_draws_moving_avatars_with_names(
     assert {"Alice", "Bob"} <= set(result["label_names"]), result
     assert result["status"].startswith("room demo · 2 players"), result["status"]
     assert "· posecast.v2" in result["status"], result["status"]  # the SDK's default
-    assert len(result["screenshots"]) == 6
+    # The models (the page opens on them): a VRM, and a glTF humanoid of other proportions.
+    models = result["models"]
+    for kind in ("vrm", "gltf"):
+        m = models[kind]
+        assert (m["mode"], m["model"]) == ("model", kind), m
+        players = _drawn_and_moving(m, MIN_MESH_PIXELS)
+        assert {p["shown"] for p in players.values()} == {"model"}, players
+        track = {t["player"]: t for t in m["track"]}
+        assert set(track) == {"alice", "bob"}, m["track"]
+        for t in track.values():
+            assert t["frames"] >= 15, t  # 5 s of frames, at 3 fps or more on software GL
+            assert t["hands_max_m"] <= MODEL_ENDS_M and t["feet_max_m"] <= MODEL_ENDS_M, (kind, t)
+            # They move: the demo's walkers pause 2.4 s of each 12 s clip, and cover 0.4 to
+            # 3.5 m in 5 s (some 15 m when the clip loops back); still, 0.01 m.
+            assert t["hips_path_m"] >= 0.2 and t["hand_path_m"] >= 0.2, (kind, t)
+
+    # The binding for 16 avatars: its cost (printed), and no allocation in its update path.
+    bench = result["benchmark"]
+    run, allocating = bench["run"], bench["allocating"]
+    assert (run["avatars"], run["frames"]) == (16, 600), run
+    print(
+        f"three.js binding, 16 avatars: {run['update_ms_per_frame']:.3f} ms/frame "
+        f"(+ {run['matrices_ms_per_frame']:.3f} ms/frame three.js matrix update); "
+        f"update path allocated {run['update_allocated_bytes']} B over 600 frames "
+        f"(copying each pose: {allocating['update_allocated_bytes']} B)"
+    )
+    assert run["update_allocated_bytes"] < BENCH_CELLS, run
+    assert allocating["found_update_frame"], allocating
+    assert allocating["update_allocated_bytes"] >= 10 * BENCH_CELLS, allocating
+
+    assert len(result["screenshots"]) == 10
     for path in result["screenshots"]:
         assert Path(path).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     errors = [line for line in result["logs"] if line.startswith(("error", "pageerror"))]

@@ -19,7 +19,7 @@ const ts = (dir) =>
 
 rmSync(out, { recursive: true, force: true });
 await build({
-  entryPoints: [...ts("src"), ...ts("test"), ...ts("viewer")], // viewer/: its avatar's tests
+  entryPoints: [...ts("src"), ...ts("src/three"), ...ts("test"), ...ts("viewer")], // viewer/: its avatar's tests
   outdir: out,
   outbase: root,
   format: "esm",

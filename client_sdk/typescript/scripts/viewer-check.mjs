@@ -41,7 +41,11 @@ const gapMs = Number(gapArg ?? 400);
 const tries = Number(triesArg ?? 12);
 const MOVED_PIXELS = 400; // avatar pixels that must change between two shots
 // Pixels of a player's colour that make it visible in a shot (test_viewer.py's minimums).
-const VISIBLE_PIXELS = { mesh: 5000, sticks: 1000 };
+const VISIBLE_PIXELS = { mesh: 5000, sticks: 1000, model: 5000 };
+const TRACK_S = 5; // the models' hands and feet read back over this span
+const BENCH_AVATARS = 16;
+const BENCH_FRAMES = 600;
+const withParam = (address, param) => `${address}${address.includes("?") ? "&" : "?"}${param}`;
 
 /**
  * Runs in the page: pixel statistics of two PNG screenshots (base64), or of one (`b`
@@ -179,7 +183,7 @@ try {
     );
 
   /** Opens `address`, waits for two drawn players, and measures motion between screenshots. */
-  async function motion(address, name) {
+  async function motion(address, name, kind = name) {
     stage = `${name}: opening ${address}`;
     await page.goto(address, { waitUntil: "load", timeout: 20_000 });
     await page.waitForFunction(
@@ -201,7 +205,7 @@ try {
       const stats = await page.evaluate(analyse, { a, b });
       pairs.push(stats);
       const visible = stats.players.length >= 2 && stats.players.every(
-        (p) => Math.min(p.pixels_a, p.pixels_b) >= VISIBLE_PIXELS[name],
+        (p) => Math.min(p.pixels_a, p.pixels_b) >= VISIBLE_PIXELS[kind],
       );
       if (visible && stats.changed_skeleton_pixels >= MOVED_PIXELS) break;
     }
@@ -210,8 +214,8 @@ try {
     return { mode, ...pairs.at(-1), pairs: pairs.length };
   }
 
-  // The page as it opens: skinned meshes.
-  const mesh = await motion(url, "mesh");
+  // The procedural skinned body (`avatar=mesh`; the page opens on the models).
+  const mesh = await motion(withParam(url, "avatar=mesh"), "mesh");
 
   stage = "mesh: attachment checks";
   /**
@@ -309,7 +313,80 @@ try {
   const restOffsets = await page.evaluate(() => window.posecastViewer.restOffsets());
 
   // The stick figures, by URL parameter.
-  const sticks = await motion(`${url}${url.includes("?") ? "&" : "?"}avatar=sticks`, "sticks");
+  const sticks = await motion(withParam(url, "avatar=sticks"), "sticks");
+
+  // The models (the page as it opens), a VRM and a glTF humanoid of other proportions:
+  // drawn and moving on screenshots, then their bound skeletons read back each frame
+  // for TRACK_S seconds against the poses that drove them.
+  const models = {};
+  for (const kind of ["vrm", "gltf"]) {
+    // `interp=off`: each frame draws the newest pose as streamed, so the bound skeleton
+    // is compared with streamed positions (the jitter buffer's samples are not FK-consistent).
+    const address = withParam(url, kind === "vrm" ? "interp=off" : `model=${kind}&interp=off`);
+    const m = await motion(address, `model-${kind}`, "model");
+    stage = `model-${kind}: tracking`;
+    m.model = await page.evaluate(() => window.posecastViewer.model);
+    m.track = await page.evaluate((s) => window.posecastViewer.track(s), TRACK_S);
+    // For the record: the same through the jitter buffer (its samples' own FK disagreement shows).
+    await page.evaluate(() => window.posecastViewer.interpolate(true));
+    m.track_interpolated = await page.evaluate((s) => window.posecastViewer.track(s), 2);
+    models[kind] = m;
+  }
+
+  // The binding's cost for BENCH_AVATARS avatars, and its heap: V8's sampling heap
+  // profiler (every allocation, those collected since included) over BENCH_FRAMES
+  // frames of the page's synchronous benchmark loop; then the same loop copying each
+  // pose first (one allocation per avatar per frame), which it must see.
+  stage = "benchmark";
+  const cdp = await page.context().newCDPSession(page);
+  await cdp.send("HeapProfiler.enable");
+  const prepared = await page.evaluate((n) => window.posecastViewer.benchPrepare(n), BENCH_AVATARS);
+  // Warm up: until V8 has optimised the loop, its interpreter boxes doubles (an
+  // allocation now and then in three.js's quaternion-to-Euler sync), gone after ~600
+  // frames. The copying run comes last: its other pose shape would deoptimise `update`.
+  await page.evaluate((f) => window.posecastViewer.benchRun(f, false), 2 * BENCH_FRAMES);
+  // One sampling session, read at marks: starting the profiler costs a one-time
+  // allocation (some 6 KB, as V8 re-tiers the code), which the settling run absorbs;
+  // then the measured run, then the copying run, each the difference between two marks.
+  /** Bytes allocated in the subtrees of the calls named `name` (below a call named `below`). */
+  const inside = (node, name, below, seen = below === undefined) => {
+    if (seen && node.callFrame.functionName === name) return subtree(node);
+    const deeper = seen || node.callFrame.functionName === below;
+    return node.children.reduce((sum, c) => sum + inside(c, name, below, deeper), 0);
+  };
+  const subtree = (node) => node.selfSize + node.children.reduce((sum, c) => sum + subtree(c), 0);
+  const frameNames = (node, into = new Set()) => {
+    into.add(node.callFrame.functionName);
+    node.children.forEach((c) => frameNames(c, into));
+    return into;
+  };
+  const mark = async () => {
+    const { profile } = await cdp.send("HeapProfiler.getSamplingProfile");
+    // The binding's update path: HumanoidAvatar.update and all it calls, below benchRun;
+    // and the whole benchmark loop (its own timing arithmetic and three.js's matrix update too).
+    return { update: inside(profile.head, "update", "benchRun"), loop: inside(profile.head, "benchRun"), names: frameNames(profile.head) };
+  };
+  await cdp.send("HeapProfiler.collectGarbage");
+  await cdp.send("HeapProfiler.startSampling", {
+    samplingInterval: 32,
+    includeObjectsCollectedByMinorGC: true,
+    includeObjectsCollectedByMajorGC: true,
+  });
+  await page.evaluate(() => window.posecastViewer.benchRun(300, false)); // settle
+  const m0 = await mark();
+  const timing = await page.evaluate((f) => window.posecastViewer.benchRun(f, false), BENCH_FRAMES);
+  const m1 = await mark();
+  const copying = await page.evaluate((f) => window.posecastViewer.benchRun(f, true), BENCH_FRAMES);
+  const m2 = await mark();
+  await cdp.send("HeapProfiler.stopSampling");
+  const window_ = (a, b) => ({ update_allocated_bytes: b.update - a.update, loop_allocated_bytes: b.loop - a.loop });
+  const benchmark = {
+    ...prepared,
+    settle_update_allocated_bytes: m0.update,
+    run: { ...timing, ...window_(m0, m1) },
+    allocating: { ...copying, ...window_(m1, m2), found_update_frame: m2.names.has("update") },
+  };
+  await page.evaluate(() => window.posecastViewer.benchEnd());
 
   const names = await page.evaluate(() => ({
     list_names: [...document.querySelectorAll("#players .name")].map((e) => e.textContent),
@@ -319,7 +396,7 @@ try {
     status: document.getElementById("status").textContent,
     frames: window.posecastViewer.frames,
   }));
-  console.log(JSON.stringify({ mesh, sticks, rest_offsets: restOffsets, ...names, screenshots, logs }));
+  console.log(JSON.stringify({ mesh, sticks, models, benchmark, rest_offsets: restOffsets, ...names, screenshots, logs }));
 } catch (err) {
   console.log(JSON.stringify({ error: `${err} (at ${stage})`, logs }));
   process.exitCode = 1;

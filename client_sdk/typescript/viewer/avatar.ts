@@ -134,8 +134,13 @@ const across = (v: Vec3, d: Vec3): Vec3 => {
 };
 const restOf = (j: number): Vec3 => [REST_POSITIONS_M[3 * j]!, REST_POSITIONS_M[3 * j + 1]!, REST_POSITIONS_M[3 * j + 2]!];
 
-/** The merged body geometry in the bind pose (the reference body's T-pose, pelvis at the origin). */
-export function buildAvatarGeometry(): AvatarGeometry {
+/**
+ * The merged body geometry in the bind pose: the T-pose of `rest` (joint positions, 19 x
+ * 3, pelvis at the origin; the reference body's by default). Other proportions make the
+ * generated models of `humanoid.ts`.
+ */
+export function buildAvatarGeometry(rest: Float64Array = REST_POSITIONS_M): AvatarGeometry {
+  const restAt = (j: number): Vec3 => [rest[3 * j]!, rest[3 * j + 1]!, rest[3 * j + 2]!];
   const pos: number[] = [];
   const nrm: number[] = [];
   const skinIndex: number[] = [];
@@ -151,8 +156,8 @@ export function buildAvatarGeometry(): AvatarGeometry {
     const to = piece.to;
     const child = typeof to === "string" ? Joint[to] : -1;
     const name = `${piece.bone}>${typeof to === "string" ? to : "tip"}`;
-    const a = restOf(bone);
-    const b: Vec3 = typeof to === "string" ? restOf(Joint[to]) : [a[0] + to[0], a[1] + to[1], a[2] + to[2]];
+    const a = restAt(bone);
+    const b: Vec3 = typeof to === "string" ? restAt(Joint[to]) : [a[0] + to[0], a[1] + to[1], a[2] + to[2]];
     const ab: Vec3 = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
     const length = Math.hypot(...ab);
     const d = unit(ab);

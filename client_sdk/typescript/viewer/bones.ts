@@ -12,49 +12,12 @@
  * is simply (position p[j], rotation R_world[j], the body's scale).
  */
 
-import { NUM_JOINTS, PARENTS } from "../src/messages.js";
+import { NUM_JOINTS } from "../src/messages.js";
+import { bodyScale } from "../src/rest.js";
 
-type Vec3 = readonly [number, number, number];
-
-/**
- * Rest offsets of the reference body (head joint 1.60 m up, about 1.75 m tall) from each
- * joint's parent, metres, joint order: a copy of `_REFERENCE_OFFSETS_M` in
- * `server/posecast/skeleton.py` (tests/system/test_viewer.py compares the two).
- */
-export const REFERENCE_OFFSETS_M: readonly Vec3[] = [
-  [0.0, 0.0, 0.0], // PELVIS
-  [0.0, 0.1, 0.0], // SPINE
-  [0.0, 0.2, 0.0], // CHEST
-  [0.0, 0.22, 0.0], // NECK
-  [0.0, 0.1, 0.0], // HEAD
-  [0.17, 0.17, 0.0], // LEFT_UPPER_ARM
-  [0.28, 0.0, 0.0], // LEFT_FOREARM
-  [0.25, 0.0, 0.0], // LEFT_HAND
-  [-0.17, 0.17, 0.0], // RIGHT_UPPER_ARM
-  [-0.28, 0.0, 0.0], // RIGHT_FOREARM
-  [-0.25, 0.0, 0.0], // RIGHT_HAND
-  [0.09, -0.05, 0.0], // LEFT_THIGH
-  [0.0, -0.43, 0.0], // LEFT_SHIN
-  [0.0, -0.42, 0.0], // LEFT_FOOT
-  [0.0, -0.06, 0.13], // LEFT_TOE
-  [-0.09, -0.05, 0.0], // RIGHT_THIGH
-  [0.0, -0.43, 0.0], // RIGHT_SHIN
-  [0.0, -0.42, 0.0], // RIGHT_FOOT
-  [0.0, -0.06, 0.13], // RIGHT_TOE
-];
-
-/** Rest (T-pose) joint positions with the pelvis at the origin, metres, 19 x 3: the bind pose. */
-export const REST_POSITIONS_M: Float64Array = (() => {
-  const rest = new Float64Array(3 * NUM_JOINTS);
-  for (let j = 1; j < NUM_JOINTS; j++) {
-    const p = PARENTS[j]!;
-    for (let k = 0; k < 3; k++) rest[3 * j + k] = rest[3 * p + k]! + REFERENCE_OFFSETS_M[j]![k]!;
-  }
-  return rest;
-})();
-
-/** The sum of the reference body's 18 bone lengths, metres. */
-const REFERENCE_BONE_SUM_M = REFERENCE_OFFSETS_M.reduce((sum, [x, y, z]) => sum + Math.hypot(x, y, z), 0);
+// The rest pose and the fit helpers live in the SDK (`src/rest.ts`, shipped with the
+// three.js binding, `@posecast/client/three`); re-exported for the viewer's modules.
+export { REFERENCE_OFFSETS_M, REST_POSITIONS_M } from "../src/rest.js";
 
 /** Each bone's world transform: the skinned mesh's bone j is placed by entry j. */
 export interface BoneTransforms {
@@ -89,16 +52,7 @@ export function poseToBones(
   if (positions.length !== 3 * NUM_JOINTS || worldRotations.length !== 4 * NUM_JOINTS) {
     throw new RangeError(`poseToBones wants 19 x 3 positions and 19 x 4 rotations`);
   }
-  let bones = 0;
-  for (let j = 1; j < NUM_JOINTS; j++) {
-    const p = PARENTS[j]!;
-    bones += Math.hypot(
-      positions[3 * j]! - positions[3 * p]!,
-      positions[3 * j + 1]! - positions[3 * p + 1]!,
-      positions[3 * j + 2]! - positions[3 * p + 2]!,
-    );
-  }
-  out.scale = bones > 1e-6 ? bones / REFERENCE_BONE_SUM_M : 1;
+  out.scale = bodyScale(positions);
   for (let i = 0; i < 3 * NUM_JOINTS; i++) out.positions[i] = positions[i]!;
   for (let j = 0; j < NUM_JOINTS; j++) {
     const i = 4 * j;

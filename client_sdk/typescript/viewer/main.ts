@@ -1,8 +1,10 @@
 /**
  * The posecast live viewer: joins a room as a spectator with the SDK and draws every
- * player in 3D (three.js) as a skinned humanoid mesh driven by the streamed joint
- * rotations (`avatar.ts`), or as a stick figure from the joint positions (`sticks.ts`;
- * the button in the panel, the `s` key or `?avatar=sticks` switch), with name labels,
+ * player in 3D (three.js) as a humanoid model (a generated VRM or glTF, `humanoid.ts`,
+ * bound with the SDK's three.js binding `src/three`, `?model=vrm|gltf`), as the
+ * procedural skinned body driven by the streamed joint rotations (`avatar.ts`), or as a
+ * stick figure from the joint positions (`sticks.ts`; the button in the panel cycles
+ * them, the `s` key switches to sticks and back, `?avatar=model|mesh|sticks`), with name labels,
  * a player list and a room picker. It speaks protocol v2 (the SDK's default: poses
  * rebuilt by FK from rotation records, about 53 bytes a pose) and falls back to v1 on a
  * server that only has v1; the status line names the version. `scripts/build-viewer.mjs` bundles it into the one file the server
@@ -19,6 +21,7 @@ import {
   AmbientLight,
   BufferGeometry,
   Color,
+  Material,
   DirectionalLight,
   Float32BufferAttribute,
   HemisphereLight,
@@ -35,8 +38,11 @@ import { OrbitControls } from "three/addons/controls/OrbitControls.js";
 
 import { connect, Interpolator, type PosecastClient, PosecastError, type TokenSource } from "../src/index.js";
 import { Joint, type JointName, NUM_JOINTS } from "../src/messages.js";
+import { fk } from "../src/records.js";
 import { avatarMaterials, buildAvatarGeometry, PIECES, SkinnedAvatar, stripeMaterial } from "./avatar.js";
 import { REFERENCE_OFFSETS_M } from "./bones.js";
+import { AvatarRoom, HumanoidAvatar } from "../src/three/index.js";
+import { loadHumanoid, type ModelKind } from "./humanoid.js";
 import { StickFigure } from "./sticks.js";
 
 /** Saturated, well-separated hues on a dark background; players take them in join order. */
@@ -68,26 +74,35 @@ const labels = $<HTMLDivElement>("labels");
 const roomInput = $<HTMLInputElement>("room");
 roomInput.value = room;
 
-/** `mesh`: the skinned avatar (poses without rotations fall back to sticks); `sticks`: the stick figure. */
-type AvatarMode = "mesh" | "sticks";
-let mode: AvatarMode = params.get("avatar") === "sticks" ? "sticks" : "mesh";
+/**
+ * `model`: the humanoid model (the default); `mesh`: the procedural skinned body; (both:
+ * poses without rotations fall back to sticks); `sticks`: the stick figure.
+ */
+type AvatarMode = "model" | "mesh" | "sticks";
+const MODES: readonly AvatarMode[] = ["model", "mesh", "sticks"];
+let mode: AvatarMode = MODES.find((m) => m === params.get("avatar")) ?? "model";
+/** The last mode that was not sticks: the `s` key goes back to it. */
+let body: Exclude<AvatarMode, "sticks"> = mode === "sticks" ? "model" : mode;
+const modelKind: ModelKind = params.get("model") === "gltf" ? "gltf" : "vrm";
 const modeButton = $<HTMLButtonElement>("avatar-mode");
+const nextMode = (m: AvatarMode): AvatarMode => MODES[(MODES.indexOf(m) + 1) % MODES.length]!;
 
 function setMode(next: AvatarMode): void {
   mode = next;
-  modeButton.textContent = next === "mesh" ? "show sticks" : "show mesh";
-  modeButton.setAttribute("aria-pressed", String(next === "sticks"));
+  if (next !== "sticks") body = next;
+  modeButton.textContent = `show ${nextMode(next) === "mesh" ? "body" : nextMode(next)}`;
+  modeButton.setAttribute("aria-pressed", String(next !== "model"));
   const q = new URLSearchParams(location.search);
-  if (next === "mesh") q.delete("avatar");
+  if (next === "model") q.delete("avatar");
   else q.set("avatar", next);
   history.replaceState(null, "", `${location.pathname}?${q}${location.hash}`); // a reload keeps it
 }
 setMode(mode);
-modeButton.addEventListener("click", () => setMode(mode === "mesh" ? "sticks" : "mesh"));
+modeButton.addEventListener("click", () => setMode(nextMode(mode)));
 document.addEventListener("keydown", (ev) => {
   if (ev.key !== "s" || ev.ctrlKey || ev.metaKey || ev.altKey) return;
   if (ev.target instanceof HTMLInputElement) return; // typing a room name
-  setMode(mode === "mesh" ? "sticks" : "mesh");
+  setMode(mode === "sticks" ? body : "sticks");
 });
 
 function setStatus(text: string, error = false): void {
@@ -217,6 +232,30 @@ interface Drawn {
 const avatars = new Map<string, Avatar>();
 let colorsUsed = 0;
 
+/**
+ * The models, one per player, made and dropped on presence by the SDK's `AvatarRoom`
+ * (fed in the event loop below), tinted in the player's colour; their poses and fits
+ * come from the frame loop.
+ */
+const models = new AvatarRoom({
+  parent: scene,
+  create: async () => (await loadHumanoid(modelKind)).humanoid,
+  added: (model, player, name) => tint(model, avatarFor(player, name).color),
+  dispose: (model) =>
+    model.object.traverse((o) => {
+      if ("geometry" in o && o.geometry instanceof BufferGeometry) o.geometry.dispose();
+    }),
+});
+
+/** The model's body in the player's colour, its stripes pale (the generated models' two materials). */
+function tint(model: HumanoidAvatar, color: string): void {
+  const [skin] = avatarMaterials(color, stripes);
+  model.object.traverse((o) => {
+    if (!("material" in o) || !(o.material instanceof Material)) return;
+    o.material = o.material.name === "stripes" ? stripes : skin;
+  });
+}
+
 function avatarFor(player: string, name: string): Avatar {
   const existing = avatars.get(player);
   if (existing !== undefined) {
@@ -276,7 +315,15 @@ const tamperedRotations = new Float64Array(4 * NUM_JOINTS);
 const turned = new Quaternion();
 
 function place(avatar: Avatar, pose: Drawn): void {
-  const asMesh = mode === "mesh" && pose.rotations !== undefined;
+  const model = models.avatars.get(avatar.player);
+  const asModel = mode === "model" && pose.rotations !== undefined && model?.object.visible === true;
+  if (asModel) {
+    avatar.skinned.mesh.visible = avatar.sticks.visible = false;
+    avatar.shown = { pose, as: "model" };
+    return;
+  }
+  if (model !== undefined) model.object.visible = false;
+  const asMesh = (mode === "mesh" || mode === "model") && pose.rotations !== undefined;
   let rotations = pose.rotations;
   if (asMesh && tampered.size > 0) {
     tamperedRotations.set(rotations!);
@@ -293,8 +340,16 @@ function place(avatar: Avatar, pose: Drawn): void {
 // --- the frame loop -------------------------------------------------------------------------
 
 let client: PosecastClient | undefined;
+const skeletonOf = (player: string): Float64Array | undefined => client?.skeletonOf(player);
+/** While the benchmark runs (`posecastViewer.bench`), the page draws nothing. */
+let benching = false;
 /** Every player's jitter buffer: poses arrive at 60 Hz or less, unevenly; frames come at the display's rate. */
 const buffers = new Interpolator();
+/**
+ * Debug switch (`?interp=off`, `posecastViewer.interpolate`): off, each frame draws the
+ * newest pose as streamed (the checks compare the models with streamed positions).
+ */
+let interpolate = params.get("interp") !== "off";
 let frames = 0;
 
 /**
@@ -304,7 +359,7 @@ let frames = 0;
  */
 function posesNow(c: PosecastClient | undefined): ReadonlyMap<string, Drawn> {
   if (c === undefined) return new Map();
-  if (c.clock.offsetS === undefined) return c.poses; // displayTime throws until the first pong
+  if (c.clock.offsetS === undefined || !interpolate) return c.poses; // displayTime throws until the first pong
   return buffers.posesAt(c.clock.displayTime(performance.now() / 1000));
 }
 const centroid = new Vector3();
@@ -335,6 +390,9 @@ function draw(): void {
   let n = 0;
   centroid.set(0, 0, 0);
   const poses = freezing ? (client?.poses ?? new Map<string, Drawn>()) : frozen ? new Map<string, Drawn>() : posesNow(client);
+  if (mode === "model" && (freezing || !frozen) && !benching) {
+    models.update(poses, skeletonOf); // fits on a new skeleton, hides a model without a pose
+  }
   freezing = false;
   for (const [player, pose] of poses) {
     const avatar = avatarFor(player, client?.members.get(player)?.name ?? player);
@@ -368,11 +426,68 @@ function draw(): void {
     avatar.label.style.left = `${((head.x + 1) / 2) * w}px`;
     avatar.label.style.top = `${((1 - head.y) / 2) * h}px`;
   }
+  if (tracking !== undefined) trackModels(tracking);
   frames++;
 }
 
+// --- debug hooks for the models: read back from the bound skeletons, and a benchmark ---------
+
+/** Per player, over a tracked span: its model's hands and feet against the poses that drove it. */
+interface Track {
+  frames: number;
+  hands_max_m: number;
+  feet_max_m: number;
+  /** How far the model's hips and left hand travelled (summed frame to frame), metres. */
+  hips_path_m: number;
+  hand_path_m: number;
+  /** The drawn poses' own disagreement: their hands and feet against FK of their rotations, metres. */
+  pose_fk_max_m: number;
+  /** Frames by the jitter buffer's sample mode. */
+  readonly modes: Record<string, number>;
+  readonly last: Vector3[];
+}
+let tracking: Map<string, Track> | undefined;
+const ENDS = [Joint.LEFT_HAND, Joint.RIGHT_HAND, Joint.LEFT_FOOT, Joint.RIGHT_FOOT] as const;
+const bonePos = new Vector3();
+
+function trackModels(into: Map<string, Track>): void {
+  for (const a of avatars.values()) {
+    const model = models.avatars.get(a.player);
+    if (a.shown?.as !== "model" || model === undefined || !model.object.visible) continue;
+    const p = a.shown.pose.positions;
+    const t = into.get(a.player) ?? { frames: 0, hands_max_m: 0, feet_max_m: 0, hips_path_m: 0, hand_path_m: 0, pose_fk_max_m: 0, modes: {}, last: [] };
+    into.set(a.player, t);
+    model.object.updateMatrixWorld(true);
+    for (const j of ENDS) {
+      model.jointPosition(j, bonePos);
+      const e = Math.hypot(bonePos.x - p[3 * j]!, bonePos.y - p[3 * j + 1]!, bonePos.z - p[3 * j + 2]!);
+      if (j === Joint.LEFT_HAND || j === Joint.RIGHT_HAND) t.hands_max_m = Math.max(t.hands_max_m, e);
+      else t.feet_max_m = Math.max(t.feet_max_m, e);
+    }
+    const hips = model.jointPosition(Joint.PELVIS, new Vector3());
+    const hand = model.jointPosition(Joint.LEFT_HAND, new Vector3());
+    if (t.last.length === 2) {
+      t.hips_path_m += hips.distanceTo(t.last[0]!);
+      t.hand_path_m += hand.distanceTo(t.last[1]!);
+    }
+    t.last.splice(0, 2, hips, hand);
+    const skeleton = skeletonOf(a.player);
+    const r = a.shown.pose.rotations;
+    if (skeleton !== undefined && r !== undefined) {
+      const q = fk(r, p, skeleton);
+      for (const j of ENDS) t.pose_fk_max_m = Math.max(t.pose_fk_max_m, Math.hypot(q[3 * j]! - p[3 * j]!, q[3 * j + 1]! - p[3 * j + 1]!, q[3 * j + 2]! - p[3 * j + 2]!));
+    }
+    const mode = (a.shown.pose as { mode?: string }).mode ?? "newest";
+    t.modes[mode] = (t.modes[mode] ?? 0) + 1;
+    t.frames++;
+  }
+}
+
+/** The benchmark's avatars (not in the scene) and the poses it drives them with. */
+let bench: { avatars: HumanoidAvatar[]; poses: Drawn[] } | undefined;
+
 function loop(): void {
-  draw();
+  if (!benching) draw();
   requestAnimationFrame(loop);
 }
 
@@ -449,7 +564,7 @@ Object.assign(window, {
         player: a.player,
         name: a.name,
         color: a.color,
-        drawn: a.skinned.mesh.visible || a.sticks.visible,
+        drawn: a.skinned.mesh.visible || a.sticks.visible || models.avatars.get(a.player)?.object.visible === true,
         shown: a.shown?.as ?? null,
       })),
     /** Per player: how far the skinned mesh is from the joints it was placed from (`avatar.ts`). */
@@ -461,6 +576,72 @@ Object.assign(window, {
     screen: () => [...avatars.values()].map((a) => ({ player: a.player, segments: screenBones(a) })),
     /** The reference body's rest offsets the mesh is built on (tests compare them with the server's). */
     restOffsets: () => REFERENCE_OFFSETS_M.map((o) => [...o]),
+    model: modelKind,
+    interpolate(on: boolean) {
+      interpolate = on;
+    },
+    /** Per player, over `seconds` of drawn frames: see Track. */
+    async track(seconds: number) {
+      const into = new Map<string, Track>();
+      tracking = into;
+      await new Promise((done) => setTimeout(done, seconds * 1000));
+      tracking = undefined;
+      return [...into].map(([player, { last: _, ...t }]) => ({ player, ...t }));
+    },
+    /**
+     * The benchmark, step 1: `n` models (VRM and glTF in turn), each fitted to a player's
+     * skeleton, driven by the players' newest poses; the page stops drawing meanwhile.
+     */
+    async benchPrepare(n: number) {
+      const c = client;
+      if (c === undefined || c.poses.size === 0) throw new Error("no poses to drive the benchmark with");
+      benching = true;
+      const poses = [...c.poses.values()].filter((p) => p.rotations !== undefined);
+      const players = [...c.poses.keys()];
+      const made: HumanoidAvatar[] = [];
+      for (let k = 0; k < n; k++) {
+        const avatar = new HumanoidAvatar((await loadHumanoid(k % 2 === 0 ? "vrm" : "gltf")).humanoid);
+        const skeleton = c.skeletonOf(players[k % players.length]!);
+        if (skeleton !== undefined) avatar.fit(skeleton);
+        made.push(avatar);
+      }
+      bench = { avatars: made, poses };
+      return { avatars: made.length, poses: poses.length };
+    },
+    /**
+     * Step 2, one synchronous run (nothing else runs meanwhile): `frames` frames, each
+     * driving every avatar from a pose (the players' poses in turn), timed alone and
+     * with three.js's matrix update (what a render adds); `allocate` hands each avatar a
+     * pose whose rotations getter copies them, an allocation per avatar per frame inside
+     * the update path, which the heap check must see.
+     */
+    benchRun(count: number, allocate: boolean) {
+      const b = bench!;
+      const nPoses = b.poses.length;
+      const copying = b.poses.map((p) => ({
+        positions: p.positions,
+        get rotations() {
+          return p.rotations!.slice();
+        },
+      }));
+      let updateMs = 0;
+      let matricesMs = 0;
+      for (let f = 0; f < count; f++) {
+        const t0 = performance.now();
+        for (let k = 0; k < b.avatars.length; k++) {
+          b.avatars[k]!.update((allocate ? copying : b.poses)[(k + f) % nPoses]!);
+        }
+        const t1 = performance.now();
+        for (let k = 0; k < b.avatars.length; k++) b.avatars[k]!.object.updateMatrixWorld(true);
+        updateMs += t1 - t0;
+        matricesMs += performance.now() - t1;
+      }
+      return { frames: count, avatars: b.avatars.length, update_ms_per_frame: updateMs / count, matrices_ms_per_frame: matricesMs / count };
+    },
+    benchEnd() {
+      bench = undefined;
+      benching = false;
+    },
   },
 });
 
@@ -487,11 +668,13 @@ async function run(): Promise<void> {
       buffers.feed(ev); // poses, leaves, welcomes
       switch (ev.type) {
         case "welcome":
+          models.feed(ev);
           for (const player of [...avatars.keys()]) if (!c.members.has(player)) removeAvatar(player);
           for (const mem of c.members.values()) avatarFor(mem.player, mem.name);
           describeStatus(c);
           break;
         case "presence":
+          models.feed(ev);
           if (ev.event === "leave") removeAvatar(ev.player);
           else {
             const avatar = avatarFor(ev.player, ev.name);
