@@ -67,11 +67,11 @@ def budget(
     time. A pose whose frame is unknown (sent before the record began) is left out."""
     rows = []
     for d in displayed:
-        capture = captures.get(d.sender, {}).get(d.seq)
-        if capture is not None and window[0] <= capture < window[1]:
-            rows.append((capture, d.t, d.received, d.shown))
+        at = captures.get(d.sender, {}).get(d.seq)
+        if at is not None and window[0] <= at < window[1]:
+            rows.append((at, d.t, d.received, d.shown))
     a = np.array(rows, dtype=np.float64).reshape(-1, 4)  # (P, 4)
-    capture, pose_t, received, shown = a.T
+    capture, pose_t, received, shown = a.T  # (P,) each
     parts = {
         "lookahead": np.full(len(a), lookahead_s),
         "server_queue_tick": pose_t + tick_s - capture - lookahead_s,

@@ -60,7 +60,7 @@ class DisplayWatch:
     def frame(self, now: float, shown_t: Mapping[str, float]) -> list[Displayed]:
         """The display frame at client time ``now`` showed each sender at server time
         ``shown_t[sender]``: the poses it displays for the first time."""
-        out = []
+        out: list[Displayed] = []
         for sender, t in shown_t.items():
             waiting = self._waiting.get(sender)
             if not waiting:

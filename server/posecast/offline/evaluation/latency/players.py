@@ -27,6 +27,8 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
 
+import posecast_client as pc
+
 from posecast.offline.evaluation.latency.display import Displayed, DisplayWatch, JumpMeter
 
 TAIL_S = 1.0  # display goes on after the last frame, for the poses still on their way
@@ -80,19 +82,15 @@ class WorkerResult:
 class _Receiver:
     """One player's receiving side: its interpolator and what it showed."""
 
-    def __init__(self, client: Any, display_hz: float) -> None:
-        import posecast_client as pc
-
+    def __init__(self, client: pc.Client, me: str, display_hz: float) -> None:
         self.client = client
-        self.me: str = client.player
+        self.me = me
         self.interp = pc.Interpolator()
         self.watch = DisplayWatch()
         self.jumps = JumpMeter(display_hz)
         self.displayed: list[Displayed] = []
 
-    def feed(self, event: Any, now: float) -> None:
-        import posecast_client as pc
-
+    def feed(self, event: pc.Event, now: float) -> None:
         self.interp.feed(event)
         if isinstance(event, pc.Pose) and event.player != self.me:
             self.watch.received(event.player, event.seq, event.t, now)
@@ -115,10 +113,10 @@ async def _sleep_until(t: float) -> None:
         await asyncio.sleep(delay)
 
 
-async def _stream(client: Any, plan: WorkerPlan, p: PlayerPlan, captures: dict[int, float]) -> None:
+async def _stream(
+    client: pc.Client, plan: WorkerPlan, p: PlayerPlan, captures: dict[int, float]
+) -> None:
     """Replay the walk from ``plan.start_at`` (plus a phase) until ``plan.stop_at``."""
-    import posecast_client as pc
-
     rng = random.Random(p.seed)
     await _sleep_until(plan.start_at + rng.random() / plan.frame_hz)
     offset = ((p.slot % 4) * 1.2, 0.0, (p.slot // 4) * 1.2)  # side by side, as posecast-sim
@@ -133,9 +131,7 @@ async def _stream(client: Any, plan: WorkerPlan, p: PlayerPlan, captures: dict[i
             captures[seq] = s.t
 
 
-async def _read(client: Any, receiver: _Receiver, out: WorkerResult) -> None:
-    import posecast_client as pc
-
+async def _read(client: pc.Client, receiver: _Receiver, out: WorkerResult) -> None:
     async for event in client.events():
         receiver.feed(event, time.monotonic())
         if isinstance(event, pc.Error):
@@ -173,10 +169,8 @@ async def _display(receivers: list[_Receiver], plan: WorkerPlan, out: WorkerResu
 
 
 async def _main(plan: WorkerPlan) -> WorkerResult:
-    import posecast_client as pc
-
     out = WorkerResult()
-    clients: list[Any] = []
+    clients: list[pc.Client] = []
     receivers: list[_Receiver] = []
     tasks: list[asyncio.Task[None]] = []
     try:
@@ -185,12 +179,13 @@ async def _main(plan: WorkerPlan) -> WorkerResult:
             client = await pc.connect(plan.url, token, reconnect=False, protocol=plan.protocol)
             clients.append(client)
             welcome = await client.join(p.room, p.player)
+            me = welcome.player
             out.welcome = {"lookahead_frames": welcome.lookahead_frames,
                            "rate_hz": welcome.rate_hz, "version": client.version}  # fmt: skip
-            out.members[client.player] = p.room
-            receiver = _Receiver(client, plan.display_hz)
+            out.members[me] = p.room
+            receiver = _Receiver(client, me, plan.display_hz)
             receivers.append(receiver)
-            captures = out.captures.setdefault(client.player, {})
+            captures = out.captures.setdefault(me, {})
             tasks.append(asyncio.create_task(_read(client, receiver, out)))
             tasks.append(asyncio.create_task(_stream(client, plan, p, captures)))
         display = asyncio.create_task(_display(receivers, plan, out))
