@@ -109,15 +109,31 @@ def print_report(report: dict[str, Any]) -> None:
         )
         if phase["failures"] or phase["errors"]:
             print(f"{name}: errors {phase['errors']}, failures {phase['failures']}")
+        if _starved(phase):
+            print(
+                f"{name}: WARNING the machine was too busy for these figures to be the "
+                "stream's (tick overruns, or over 5 % of display frames late): run on a "
+                "quiet machine"
+            )
     lossy = report.get("lossy")
     if lossy:
         relay = lossy["relay"]
         print(
             f"lossy relay: {relay['frames_dropped']} of {relay['frames_in']} frames dropped, "
             f"{relay['frames_reordered']} overtaken, 0-{relay['jitter_ms']:g} ms uplink jitter; "
-            f"p99 {lossy['p99_vs_clean']}x clean, max joint jump "
-            f"{lossy['max_joint_jump_vs_clean']}x clean"
+            f"p99 {_x(lossy['p99_vs_clean'])} clean, max joint jump "
+            f"{_x(lossy['max_joint_jump_vs_clean'])} clean"
         )
+
+
+def _x(ratio: float | None) -> str:
+    return "-" if ratio is None else f"{ratio:.2f}x"
+
+
+def _starved(phase: dict[str, Any]) -> bool:
+    """Whether the machine held up the server or the clients (then the figures are the
+    machine's more than the stream's)."""
+    return bool(phase["tick_overruns"] > 0 or (phase["display_frames_late_share"] or 0) > 0.05)
 
 
 def add_parser(bench_sub: argparse._SubParsersAction[Any]) -> None:
