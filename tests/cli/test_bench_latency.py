@@ -29,6 +29,7 @@ from tests.cli.conftest import user_error
         ["--lookahead", "256"],
         ["--drop", "1"],
         ["--jitter-ms", "-5"],
+        ["--down-jitter-ms", "inf"],
         ["--json", "/no/such/dir/latency.json"],
     ],
 )
@@ -59,6 +60,7 @@ def test_bench_latency_reports_the_budget_clean_and_lossy(capsys, tmp_path: Path
     out = tmp_path / "latency.json"
     argv = ["bench", "latency", "--players", "3", "--room-size", "3", "--seconds", "2"]
     argv += ["--warmup", "1", "--samples", "8", "--lookahead", "3", "--lossy"]
+    argv += ["--down-jitter-ms", "20"]
     assert main([*argv, "--json", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "capture to display" in printed and "client buffer" in printed

@@ -34,6 +34,7 @@ def cmd_bench_latency(args: argparse.Namespace) -> int:
     finite("--warmup", args.warmup, CMD)
     finite("--display-hz", args.display_hz, CMD, positive=True)
     finite("--jitter-ms", args.jitter_ms, CMD)
+    finite("--down-jitter-ms", args.down_jitter_ms, CMD)
     if args.samples is not None:
         check_samples("--samples", [args.samples], CMD)
     if args.lookahead is not None and not 0 <= args.lookahead <= MAX_LOOKAHEAD_FRAMES:
@@ -65,6 +66,7 @@ def cmd_bench_latency(args: argparse.Namespace) -> int:
         lossy=args.lossy,
         drop=args.drop,
         jitter_s=args.jitter_ms / 1000.0,
+        down_jitter_s=args.down_jitter_ms / 1000.0,
     )
     report = run_latency(cfg)
     print_report(report)
@@ -120,7 +122,8 @@ def print_report(report: dict[str, Any]) -> None:
         relay = lossy["relay"]
         print(
             f"lossy relay: {relay['frames_dropped']} of {relay['frames_in']} frames dropped, "
-            f"{relay['frames_reordered']} overtaken, 0-{relay['jitter_ms']:g} ms uplink jitter; "
+            f"{relay['frames_reordered']} overtaken, 0-{relay['jitter_ms']:g} ms uplink and "
+            f"0-{relay['down_jitter_ms']:g} ms downlink jitter; "
             f"p99 {_x(lossy['p99_vs_clean'])} clean, max joint jump "
             f"{_x(lossy['max_joint_jump_vs_clean'])} clean"
         )
@@ -193,6 +196,13 @@ def add_parser(bench_sub: argparse._SubParsersAction[Any]) -> None:
         type=float,
         default=40.0,
         help="--lossy: each message up held uniform(0, this) ms (default %(default)s)",
+    )
+    bl.add_argument(
+        "--down-jitter-ms",
+        type=float,
+        default=0.0,
+        help="--lossy: each message down held uniform(0, this) ms, in order (default "
+        "%(default)s, as the reliability suite's relay)",
     )
     bl.add_argument("--json", type=Path, help="write the report here")
     bl.set_defaults(func=cmd_bench_latency)

@@ -3,8 +3,10 @@ reliability suite (``tests/system/reliability``) and ``posecast bench latency``.
 
 Client-to-server ``frame`` messages are dropped with probability ``drop``; every
 client-to-server message is held for a random ``0..jitter_s`` (independently, so
-frames overtake each other). Server-to-client traffic passes untouched. Seeded: the
-same seed, the same faults.
+frames overtake each other). Server-to-client traffic passes untouched, unless
+``down_jitter_s`` holds each message a random ``0..down_jitter_s`` too, in order (as
+TCP delivers a stream whose packets were delayed: none overtakes another, and a v2
+client's delta records stay applicable). Seeded: the same seed, the same faults.
 
 TCP itself never loses a byte, so loss is applied to whole messages, as a link that
 loses packets would look to the application after its retransmit gives up.
@@ -46,6 +48,8 @@ class LossyRelay:
         seed: seeds the drops and the delays.
         protocols: the subprotocols offered to clients, preferred first (``posecast.v1``
             only by default); the relay speaks to ``upstream`` the one its client chose.
+        down_jitter_s: every server-to-client message is held ``uniform(0, this)``,
+            in order (0: none).
     """
 
     def __init__(
@@ -56,8 +60,10 @@ class LossyRelay:
         jitter_s: float,
         seed: int,
         protocols: Sequence[str] = (SUBPROTOCOL,),
+        down_jitter_s: float = 0.0,
     ) -> None:
         self.upstream, self.drop, self.jitter_s = upstream, drop, jitter_s
+        self.down_jitter_s = down_jitter_s
         self.protocols = tuple(Subprotocol(p) for p in protocols)
         self.rng = random.Random(seed)
         self.stats = RelayStats()
@@ -117,8 +123,30 @@ class LossyRelay:
                     task.add_done_callback(pending.discard)
 
             async def server_to_client() -> None:
-                async for data in up:
-                    await down.send(data)
+                if not self.down_jitter_s:
+                    async for data in up:
+                        await down.send(data)
+                    return
+                loop = asyncio.get_running_loop()
+                held: asyncio.Queue[tuple[float, bytes]] = asyncio.Queue()
+                sender = asyncio.create_task(send_held(held))
+                release = 0.0
+                try:
+                    async for data in up:  # each after the one before it: in order
+                        release = max(
+                            release, loop.time() + self.rng.uniform(0.0, self.down_jitter_s)
+                        )
+                        held.put_nowait((release, data))
+                finally:
+                    sender.cancel()
+
+            async def send_held(held: asyncio.Queue[tuple[float, bytes]]) -> None:
+                loop = asyncio.get_running_loop()
+                while True:
+                    release, data = await held.get()
+                    await asyncio.sleep(max(0.0, release - loop.time()))
+                    with contextlib.suppress(ConnectionClosed):
+                        await down.send(data)
 
             tasks = [
                 asyncio.create_task(client_to_server()),

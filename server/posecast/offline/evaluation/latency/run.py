@@ -5,7 +5,8 @@ reliability suite's lossy relay (:mod:`posecast.testing.relay`).
 
 A run is one or two phases on one server: the clean phase, then (``lossy``) the same
 players, fresh connections, each through the relay (``drop`` of its frames lost and
-every message held ``0..jitter_s`` on the way in). A phase starts the client
+every message held ``0..jitter_s`` on the way in, and, if asked, ``0..down_jitter_s``
+on the way out, in order). A phase starts the client
 processes (:mod:`.players`), lets the players join and stream for ``warmup_s``, then
 measures ``seconds``: the frames captured in that window, the poses made from them
 (as every room-mate displayed them), the server's ``/metrics`` and CPU at both ends.
@@ -53,7 +54,8 @@ class LatencyConfig:
         samples, lookahead: the server's ``--samples`` and ``--lookahead`` (``None``:
             its defaults, what ``posecast serve`` runs).
         lossy: also run the phase behind the lossy relay, ``drop`` of the frames lost
-            and ``jitter_s`` of uplink jitter (the reliability suite's 0.2 and 40 ms).
+            and ``jitter_s`` of uplink jitter (the reliability suite's 0.2 and 40 ms),
+            and ``down_jitter_s`` of in-order downlink jitter (0, as the suite).
         seed: seeds the relay's faults.
         protocol: the newest protocol the SDK offers (2: ``posecast.v2``).
     """
@@ -69,6 +71,7 @@ class LatencyConfig:
     lossy: bool = False
     drop: float = 0.2
     jitter_s: float = 0.040
+    down_jitter_s: float = 0.0
     seed: int = 7
     protocol: int = 2
 
@@ -177,7 +180,8 @@ def _relay(upstream: str, cfg: LatencyConfig) -> Iterator[LossyRelay]:
     from posecast.online.protocol.messages import SUBPROTOCOL, SUBPROTOCOL_V2
 
     relay = LossyRelay(upstream, drop=cfg.drop, jitter_s=cfg.jitter_s, seed=cfg.seed,
-                       protocols=(SUBPROTOCOL_V2, SUBPROTOCOL))  # fmt: skip
+                       protocols=(SUBPROTOCOL_V2, SUBPROTOCOL),
+                       down_jitter_s=cfg.down_jitter_s)  # fmt: skip
     loop = asyncio.new_event_loop()
     thread = threading.Thread(target=loop.run_forever, name="lossy-relay", daemon=True)
     thread.start()
@@ -214,6 +218,7 @@ def run_latency(cfg: LatencyConfig) -> dict[str, Any]:
             lossy["relay"] = {
                 "drop": cfg.drop,
                 "jitter_ms": round(cfg.jitter_s * 1000.0, 1),
+                "down_jitter_ms": round(cfg.down_jitter_s * 1000.0, 1),
                 "frames_in": st.frames_in,
                 "frames_dropped": st.frames_dropped,
                 "frames_reordered": st.frames_reordered,
