@@ -128,7 +128,7 @@ class LossyRelay:
                         await down.send(data)
                     return
                 loop = asyncio.get_running_loop()
-                held: asyncio.Queue[tuple[float, bytes]] = asyncio.Queue()
+                held: asyncio.Queue[tuple[float, str | bytes]] = asyncio.Queue()
                 sender = asyncio.create_task(send_held(held))
                 release = 0.0
                 try:
@@ -140,7 +140,7 @@ class LossyRelay:
                 finally:
                     sender.cancel()
 
-            async def send_held(held: asyncio.Queue[tuple[float, bytes]]) -> None:
+            async def send_held(held: asyncio.Queue[tuple[float, str | bytes]]) -> None:
                 loop = asyncio.get_running_loop()
                 while True:
                     release, data = await held.get()
