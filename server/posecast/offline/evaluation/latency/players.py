@@ -31,7 +31,7 @@ import posecast_client as pc
 
 from posecast.offline.evaluation.latency.display import Displayed, DisplayWatch, JumpMeter
 
-TAIL_S = 1.0  # display goes on after the last frame, for the poses still on their way
+TAIL_S = 1.5  # display goes on after the last frame, for the poses still on their way
 
 
 @dataclass(frozen=True)
@@ -168,17 +168,23 @@ async def _display(receivers: list[_Receiver], plan: WorkerPlan, out: WorkerResu
         k += 1
 
 
+async def _join(
+    plan: WorkerPlan, p: PlayerPlan, clients: list[pc.Client]
+) -> tuple[pc.Client, pc.Welcome]:
+    token = pc.mint_token(plan.secret, room=p.room, player=p.player)
+    client = await pc.connect(plan.url, token, reconnect=False, protocol=plan.protocol)
+    clients.append(client)  # closed at the end, whatever happens next
+    return client, await client.join(p.room, p.player)
+
+
 async def _main(plan: WorkerPlan) -> WorkerResult:
     out = WorkerResult()
     clients: list[pc.Client] = []
     receivers: list[_Receiver] = []
     tasks: list[asyncio.Task[None]] = []
     try:
-        for p in plan.players:
-            token = pc.mint_token(plan.secret, room=p.room, player=p.player)
-            client = await pc.connect(plan.url, token, reconnect=False, protocol=plan.protocol)
-            clients.append(client)
-            welcome = await client.join(p.room, p.player)
+        joined = await asyncio.gather(*(_join(plan, p, clients) for p in plan.players))
+        for p, (client, welcome) in zip(plan.players, joined, strict=True):
             me = welcome.player
             out.welcome = {"lookahead_frames": welcome.lookahead_frames,
                            "rate_hz": welcome.rate_hz, "version": client.version}  # fmt: skip
