@@ -52,7 +52,11 @@ def _check_phase(phase: dict[str, Any]) -> None:
     total = sum(stats["mean"] for stats in parts.values())
     assert total == pytest.approx(phase["capture_to_display_ms_mean"], abs=0.05)
     assert parts["client_buffer"]["p50"] >= 0.0  # displayed after it arrived
-    assert phase["max_joint_jump_cm"] is not None and phase["display_frames"] > 0
+    assert phase["display_frames"] > 0
+    # Jumps are read on the window's display frames: on a machine so busy that no pose
+    # reached a screen before the window closed (all shown in the tail), there are none.
+    jump = phase["max_joint_jump_cm"]
+    assert jump is None or 0.0 <= phase["p99_joint_jump_cm"] <= jump
 
 
 @pytest.mark.timeout(180)
