@@ -148,7 +148,9 @@ async def _display(receivers: list[_Receiver], plan: WorkerPlan, out: WorkerResu
     end = plan.stop_at + TAIL_S
     while True:
         due = start + k * period
-        await _sleep_until(due)
+        # Always yield, even when behind: a loop that only awaited when early would
+        # starve the players' readers and senders on a busy machine.
+        await asyncio.sleep(max(0.0, due - time.monotonic()))
         now = time.monotonic()
         if now >= end:
             break
