@@ -16,6 +16,8 @@ Subcommands (each a thin edge over the module named):
   (:mod:`posecast.offline.evaluation.applications`)
 * ``posecast bench engine`` - per-tick cost of the SSI engine
   (:mod:`posecast.offline.evaluation.engine_speed`, ``docs/engine.md``)
+* ``posecast bench latency`` - capture to display with SDK clients on loopback
+  (:mod:`posecast.offline.evaluation.latency`, ``docs/latency-benchmark.md``)
 * ``posecast serve [--dev] [--port N] ...`` - the pose-streaming server
   (:mod:`posecast.online.shell.app`, :mod:`posecast.online.config`, ``docs/server.md``)
 * ``posecast token --room R --player P --role player`` - mint a development join token
@@ -26,8 +28,10 @@ Subcommands (each a thin edge over the module named):
 Modules: one per command or small family of commands (:mod:`~posecast.cli.data`:
 ``data``; :mod:`~posecast.cli.train`: ``train`` and ``export``;
 :mod:`~posecast.cli.evaluate`: ``eval`` and ``eval-apps``; :mod:`~posecast.cli.bench`:
-``bench``; :mod:`~posecast.cli.serve`: ``serve``, ``token`` and ``demo``), each with
-its commands' functions and an ``add_parsers``; :mod:`~posecast.cli.parser`, the
+``bench`` and ``bench engine``; :mod:`~posecast.cli.bench_latency`: ``bench latency``;
+:mod:`~posecast.cli.serve`: ``serve``, ``token`` and ``demo``), each with its
+commands' functions and an ``add_parsers`` (``bench latency``'s ``add_parser``, called
+by ``bench``'s); :mod:`~posecast.cli.parser`, the
 parser that gathers them and turns argparse's refusals into the CLI's errors;
 :mod:`~posecast.cli.common`, what they share (hints, and the checks at the edge).
 

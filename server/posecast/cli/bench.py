@@ -1,5 +1,6 @@
 """``posecast bench engine``: the per-tick cost of the SSI engine at each player count
-(:mod:`posecast.offline.evaluation.engine_speed`, ``docs/engine.md``)."""
+(:mod:`posecast.offline.evaluation.engine_speed`, ``docs/engine.md``); ``posecast bench
+latency`` is :mod:`posecast.cli.bench_latency`."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from posecast.cli import bench_latency
 from posecast.cli.common import (
     at_least,
     backend_names,
@@ -130,7 +132,8 @@ def _print_bench(report: dict[str, Any], samples: int) -> None:
 
 
 def add_parsers(sub: argparse._SubParsersAction[Any]) -> None:
-    """Add ``posecast bench engine`` to ``sub`` (``posecast``'s commands)."""
+    """Add ``posecast bench engine`` and ``bench latency`` to ``sub`` (``posecast``'s
+    commands)."""
     bench = sub.add_parser("bench", help="benchmarks")
     bench_sub = bench.add_subparsers(dest="bench_command", required=True)
     be = bench_sub.add_parser(
@@ -184,3 +187,4 @@ def add_parsers(sub: argparse._SubParsersAction[Any]) -> None:
     )
     be.add_argument("--json", type=Path, help="write the report here")
     be.set_defaults(func=cmd_bench_engine)
+    bench_latency.add_parser(bench_sub)

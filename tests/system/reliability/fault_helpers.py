@@ -1,36 +1,31 @@
 """Helpers of the fault-injection tests: a ``posecast serve`` subprocess
 (:class:`posecast.testing.serve.ServeProcess`) with RSS sampling, a raw client that
-never reads, a lossy WebSocket relay, and the measures the tests report (pose rates,
-gaps, joint jumps, lost poses).
+never reads, and the measures the tests report (pose rates, gaps, joint jumps, lost
+poses). The lossy relay the network tests put between a client and the server is
+:mod:`posecast.testing.relay` (``posecast bench latency`` runs it too).
 
 Everything runs on loopback against real processes; nothing here fakes the server.
 """
 
 from __future__ import annotations
 
-import asyncio
 import base64
 import contextlib
 import itertools
 import os
-import random
 import socket
 import struct
 import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from websockets.asyncio.client import ClientConnection
-from websockets.asyncio.client import connect as ws_connect
-from websockets.asyncio.server import Server, ServerConnection, serve
-from websockets.exceptions import ConnectionClosed
-from websockets.typing import Subprotocol
 
-from posecast.online.protocol import decode, encode
+from posecast.online.protocol import encode
 from posecast.online.protocol.messages import SUBPROTOCOL, Frame, Hello, Message, Pose
 from posecast.testing.serve import ServeProcess, rss_bytes
 from posecast.tracking.layouts import Layout
@@ -168,101 +163,6 @@ def abort_with_reset(ws: ClientConnection) -> None:
     sock = ws.transport.get_extra_info("socket")
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
     ws.transport.abort()
-
-
-# --- a lossy, jittery relay ------------------------------------------------------------------
-
-
-@dataclass
-class RelayStats:
-    frames_in: int = 0
-    frames_dropped: int = 0
-    frames_reordered: int = 0  # forwarded after a frame with a higher seq
-    other_in: int = 0
-    delays_s: list[float] = field(default_factory=list)
-
-
-class LossyRelay:
-    """A WebSocket relay between clients and ``upstream``: client-to-server ``frame``
-    messages are dropped with probability ``drop``; every client-to-server message is
-    held for a random ``0..jitter_s`` (independently, so frames overtake each other).
-    Server-to-client traffic passes untouched. Seeded: the same seed, the same faults.
-
-    TCP itself never loses a byte, so loss is applied to whole messages, as a link
-    that loses packets would look to the application after its retransmit gives up.
-    """
-
-    def __init__(self, upstream: str, *, drop: float, jitter_s: float, seed: int) -> None:
-        self.upstream, self.drop, self.jitter_s = upstream, drop, jitter_s
-        self.rng = random.Random(seed)
-        self.stats = RelayStats()
-        self._server: Server | None = None
-        self.port = 0
-
-    @property
-    def url(self) -> str:
-        return f"ws://127.0.0.1:{self.port}/"
-
-    async def start(self) -> None:
-        self._server = await serve(
-            self._relay, "127.0.0.1", 0, subprotocols=[Subprotocol(SUBPROTOCOL)],
-            compression=None, ping_interval=None,
-        )  # fmt: skip
-        self.port = self._server.sockets[0].getsockname()[1]
-
-    async def stop(self) -> None:
-        if self._server is not None:
-            self._server.close()
-            await self._server.wait_closed()
-
-    async def _relay(self, down: ServerConnection) -> None:
-        async with ws_connect(
-            self.upstream, subprotocols=[Subprotocol(SUBPROTOCOL)], compression=None,
-            ping_interval=None,
-        ) as up:  # fmt: skip
-            pending: set[asyncio.Task[None]] = set()
-            last_seq = [-1]
-
-            async def later(data: bytes, delay: float, seq: int | None) -> None:
-                await asyncio.sleep(delay)
-                if seq is not None:
-                    if seq < last_seq[0]:
-                        self.stats.frames_reordered += 1
-                    last_seq[0] = max(last_seq[0], seq)
-                with contextlib.suppress(ConnectionClosed):
-                    await up.send(data)
-
-            async def client_to_server() -> None:
-                async for data in down:
-                    assert isinstance(data, bytes)
-                    msg = decode(data)
-                    seq = msg.seq if isinstance(msg, Frame) else None
-                    if seq is not None:
-                        self.stats.frames_in += 1
-                        if self.rng.random() < self.drop:
-                            self.stats.frames_dropped += 1
-                            continue
-                    else:
-                        self.stats.other_in += 1
-                    delay = self.rng.uniform(0.0, self.jitter_s)
-                    self.stats.delays_s.append(delay)
-                    task = asyncio.create_task(later(data, delay, seq))
-                    pending.add(task)
-                    task.add_done_callback(pending.discard)
-
-            async def server_to_client() -> None:
-                async for data in up:
-                    await down.send(data)
-
-            tasks = [
-                asyncio.create_task(client_to_server()),
-                asyncio.create_task(server_to_client()),
-            ]
-            with contextlib.suppress(ConnectionClosed):
-                await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
-            for t in (*tasks, *pending):
-                t.cancel()
-            await asyncio.gather(*tasks, *pending, return_exceptions=True)
 
 
 # --- measures -------------------------------------------------------------------------------

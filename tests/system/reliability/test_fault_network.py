@@ -21,11 +21,11 @@ import posecast_client as pc
 import pytest
 
 from posecast.online.protocol.messages import Pose, Welcome
+from posecast.testing.relay import LossyRelay
 from tests.online.conftest import token
 from tests.online.wsclient import Client
 from tests.system.reliability.fault_helpers import (
     TICK_HZ,
-    LossyRelay,
     ServerProc,
     fmt,
     joint_jumps,

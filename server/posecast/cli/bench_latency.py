@@ -1,0 +1,208 @@
+"""``posecast bench latency``: capture to display with real SDK clients on loopback
+against a real ``posecast serve``, split into look-ahead, server queue and tick,
+transport and client buffer (:mod:`posecast.offline.evaluation.latency`,
+``docs/latency-benchmark.md``)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from posecast.cli.common import at_least, check_json_out, check_samples, config_error, finite
+
+CMD = "bench latency"
+ROWS = (
+    ("capture to display", None),
+    ("  look-ahead", "lookahead"),
+    ("  server queue+tick", "server_queue_tick"),
+    ("  transport", "transport"),
+    ("  client buffer", "client_buffer"),
+)
+
+
+def cmd_bench_latency(args: argparse.Namespace) -> int:
+    import importlib.util
+    import json
+
+    from posecast.online.protocol.messages import MAX_LOOKAHEAD_FRAMES
+
+    at_least("--players", args.players, 2, CMD)
+    at_least("--room-size", args.room_size, 2, CMD)
+    at_least("--procs", args.procs, 1, CMD)
+    finite("--seconds", args.seconds, CMD, positive=True)
+    finite("--warmup", args.warmup, CMD)
+    finite("--display-hz", args.display_hz, CMD, positive=True)
+    finite("--jitter-ms", args.jitter_ms, CMD)
+    finite("--down-jitter-ms", args.down_jitter_ms, CMD)
+    if args.samples is not None:
+        check_samples("--samples", [args.samples], CMD)
+    if args.lookahead is not None and not 0 <= args.lookahead <= MAX_LOOKAHEAD_FRAMES:
+        raise config_error(
+            f"--lookahead {args.lookahead} outside [0, {MAX_LOOKAHEAD_FRAMES}]",
+            "frames the engine holds a pose back; leave it out for the server's default",
+        )
+    if not 0.0 <= args.drop < 1.0:
+        raise config_error(
+            f"--drop {args.drop} outside [0, 1)", "the share of frames the relay loses, e.g. 0.2"
+        )
+    if importlib.util.find_spec("posecast_client") is None:
+        raise config_error(
+            "this benchmark runs the Python SDK (posecast_client), which is not installed",
+            "pip install -e client_sdk/python (make run and make test install it)",
+        )
+    check_json_out(args.json)
+    from posecast.offline.evaluation.latency.run import LatencyConfig, run_latency
+
+    cfg = LatencyConfig(
+        players=args.players,
+        room_size=args.room_size,
+        seconds=args.seconds,
+        warmup_s=args.warmup,
+        display_hz=args.display_hz,
+        procs=args.procs,
+        samples=args.samples,
+        lookahead=args.lookahead,
+        lossy=args.lossy,
+        drop=args.drop,
+        jitter_s=args.jitter_ms / 1000.0,
+        down_jitter_s=args.down_jitter_ms / 1000.0,
+    )
+    report = run_latency(cfg)
+    print_report(report)
+    if args.json is not None:
+        args.json.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
+    return 0
+
+
+def _cells(phase: dict[str, Any], key: str | None) -> str:
+    if key is None:
+        p50, p99 = phase["capture_to_display_ms_p50"], phase["capture_to_display_ms_p99"]
+        mean = phase["capture_to_display_ms_mean"]
+    else:
+        c = phase["components_ms"][key]
+        p50, p99, mean = c["p50"], c["p99"], c["mean"]
+    return "".join(" " + (f"{v:8.1f}" if v is not None else f"{'-':>8s}") for v in (p50, p99, mean))
+
+
+def print_report(report: dict[str, Any]) -> None:
+    """The figures of a ``bench latency`` report as a table, a column group per phase."""
+    cfg = report["config"]
+    phases = [("clean", report)] + ([("lossy", report["lossy"])] if "lossy" in report else [])
+    print(
+        f"capture to display: {cfg['players']} players in rooms of {cfg['room_size']}, "
+        f"{report['rate_hz']:g} Hz frames, {cfg['display_hz']:g} Hz display, "
+        f"posecast.v{report['protocol']}, look-ahead {report['lookahead_frames']} frames, "
+        f"{cfg['seconds']:g} s measured"
+    )
+    head = "".join(f" {n + ' p50':>8s} {n + ' p99':>8s} {n + ' mean':>8s}"
+                   for n, _ in phases)  # fmt: skip
+    print(f"{'ms':20s}{head}")
+    for label, key in ROWS:
+        print(f"{label:20s}" + "".join(_cells(phase, key) for _, phase in phases))
+    for name, phase in phases:
+        print(
+            f"{name}: {phase['poses_displayed']} poses displayed of {phase['poses_expected']} "
+            f"expected; max joint jump at {cfg['display_hz']:g} Hz {phase['max_joint_jump_cm']} cm "
+            f"(p99 {phase['p99_joint_jump_cm']} cm); tick {phase['tick_ms_mean']} ms mean, "
+            f"{phase['tick_overruns']:g} overruns; server {phase['server_cpu_cores']} cores, "
+            f"clients {phase['clients_cpu_cores']} cores of {report['machine_cores']}; display "
+            f"frames late {100 * (phase['display_frames_late_share'] or 0):.1f} %"
+        )
+        if phase["failures"] or phase["errors"]:
+            print(f"{name}: errors {phase['errors']}, failures {phase['failures']}")
+        if _starved(phase):
+            print(
+                f"{name}: WARNING the machine was too busy for these figures to be the "
+                "stream's (tick overruns, or over 5 % of display frames late): run on a "
+                "quiet machine"
+            )
+    lossy = report.get("lossy")
+    if lossy:
+        relay = lossy["relay"]
+        print(
+            f"lossy relay: {relay['frames_dropped']} of {relay['frames_in']} frames dropped, "
+            f"{relay['frames_reordered']} overtaken, 0-{relay['jitter_ms']:g} ms uplink and "
+            f"0-{relay['down_jitter_ms']:g} ms downlink jitter; "
+            f"p99 {_x(lossy['p99_vs_clean'])} clean, max joint jump "
+            f"{_x(lossy['max_joint_jump_vs_clean'])} clean"
+        )
+
+
+def _x(ratio: float | None) -> str:
+    return "-" if ratio is None else f"{ratio:.2f}x"
+
+
+def _starved(phase: dict[str, Any]) -> bool:
+    """Whether the machine held up the server or the clients (then the figures are the
+    machine's more than the stream's)."""
+    return bool(phase["tick_overruns"] > 0 or (phase["display_frames_late_share"] or 0) > 0.05)
+
+
+def add_parser(bench_sub: argparse._SubParsersAction[Any]) -> None:
+    """Add ``posecast bench latency`` to ``bench_sub`` (``posecast bench``'s commands)."""
+    bl = bench_sub.add_parser(
+        "latency",
+        help="capture-to-display latency with SDK clients on loopback",
+        description="Python SDK players on loopback against a real posecast serve, 60 Hz "
+        "frames of a generated walk, every room-mate's pose shown through the SDK's "
+        "interpolator at 90 Hz: capture to first display, p50 and p99, split into "
+        "look-ahead, server queue and tick, transport and client buffer.",
+    )
+    bl.add_argument("--players", type=int, default=16, help="players (default %(default)s)")
+    bl.add_argument(
+        "--room-size", type=int, default=8, help="players per room (default %(default)s)"
+    )
+    bl.add_argument(
+        "--seconds", type=float, default=10.0, help="measured seconds (default %(default)s)"
+    )
+    bl.add_argument(
+        "--warmup",
+        type=float,
+        default=3.0,
+        help="seconds of streaming before the measured window (default %(default)s)",
+    )
+    bl.add_argument(
+        "--display-hz",
+        type=float,
+        default=90.0,
+        help="each receiver's display rate (default %(default)s)",
+    )
+    bl.add_argument(
+        "--procs",
+        type=int,
+        default=2,
+        help="client processes the players are dealt over (default %(default)s)",
+    )
+    bl.add_argument(
+        "--samples", type=int, help="the server's latent samples N (default: the server's)"
+    )
+    bl.add_argument(
+        "--lookahead", type=int, help="the server's look-ahead in frames (default: the server's)"
+    )
+    bl.add_argument(
+        "--lossy",
+        action="store_true",
+        help="then run again with every player behind the reliability suite's lossy relay",
+    )
+    bl.add_argument(
+        "--drop",
+        type=float,
+        default=0.2,
+        help="--lossy: the share of frames the relay loses (default %(default)s)",
+    )
+    bl.add_argument(
+        "--jitter-ms",
+        type=float,
+        default=40.0,
+        help="--lossy: each message up held uniform(0, this) ms (default %(default)s)",
+    )
+    bl.add_argument(
+        "--down-jitter-ms",
+        type=float,
+        default=0.0,
+        help="--lossy: each message down held uniform(0, this) ms, in order (default "
+        "%(default)s, as the reliability suite's relay)",
+    )
+    bl.add_argument("--json", type=Path, help="write the report here")
+    bl.set_defaults(func=cmd_bench_latency)
