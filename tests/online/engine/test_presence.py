@@ -9,13 +9,12 @@ import numpy as np
 import pytest
 
 from posecast.body.forecast import forecast
-from posecast.online.config import ServerConfig
 from posecast.online.engine.config import PAPER_LOOKAHEAD, EngineConfig
 from posecast.online.engine.forecasting import HISTORY
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import PoseOut, TrackerFrame
 from posecast.skeleton import Joint
-from tests.online.engine.test_ssi import Forced, run
+from tests.online.engine.test_ssi import Forced, Never, run
 
 MakeEngine = Callable[..., Engine]
 WalkFrames = Callable[..., list[TrackerFrame]]
@@ -27,14 +26,6 @@ def test_the_default_is_present_and_the_papers_setting_one_option_away() -> None
     paper = EngineConfig(lookahead=PAPER_LOOKAHEAD, delayed_emission=True)
     assert paper.delay == 10
     assert EngineConfig(lookahead=10).delay == 0  # the look-ahead alone delays nothing
-
-
-def test_welcome_lookahead_frames_is_the_delay_poses_carry() -> None:
-    served = ServerConfig.from_sources({}, {"lookahead": 10})
-    assert served.delay_frames == 0 == served.engine_config().delay
-    paper = ServerConfig.from_sources({}, {"lookahead": 10, "delayed_emission": True})
-    assert paper.delay_frames == 10 == paper.engine_config().delay
-    assert ServerConfig.from_sources({}).delay_frames == 0
 
 
 def test_every_tick_emits_the_newest_frame_with_head_and_hands_on_it(
@@ -65,7 +56,7 @@ def test_delayed_emission_lags_by_tau_and_shows_the_same_poses_later(
     outs = []
     for cfg in ({}, {"lookahead": 3, "delayed_emission": True}):
         engine = make_engine(samples=4, pelvis_smoothing=False, **cfg)
-        engine.add_player("a", seed=1)
+        engine.add_player("a", seed=1, selector=Never())
         outs.append(run(engine, frames)["a"])
     present, late = outs
     assert len(late) == len(present) - 3
