@@ -29,8 +29,9 @@ F64 = NDArray[np.float64]
 MAX_FORECAST_MS = 100.0
 # Frames the velocities are measured over (the newest minus the one SPAN frames back).
 SPAN = 2
-# Each frame ahead moves this share of the frame before's step.
-DAMPING = 0.9
+# Each frame ahead moves this share of the frame before's step. Undamped was best at
+# every horizon on the validation split (spans 1-3, damping 0.7-1; docs/latency.md).
+DAMPING = 1.0
 # A pelvis faster than this moved as a whole (a gap, a recalibration): held, not
 # extrapolated (the swing clearance's bound for the same jumps).
 MAX_SPEED_M_S = 6.0
