@@ -101,10 +101,10 @@ def _offline(
 def test_the_pelvis_comes_from_the_decoder_under_the_head(
     hmd3_decoder: Artifact, hmd3_engine: Callable[..., Engine], walk_frames: WalkFrames
 ) -> None:
-    """With one sample, no look-ahead: the emitted pelvis is the decoder's pelvis
+    """With one sample, no pelvis smoothing: the emitted pelvis is the decoder's pelvis
     output moved out of the head frame, as an offline decode on ONNX Runtime gives it
     (without the upper-body pass, which may move a guessed pelvis toward the headset)."""
-    e = hmd3_engine(samples=1, lookahead=0, upper_body_ik=False)
+    e = hmd3_engine(samples=1, pelvis_smoothing=False, upper_body_ik=False)
     e.add_player("a", seed=0)
     frames = walk_frames(0)[:30]
     got = []
@@ -122,7 +122,7 @@ def test_a_guessed_pelvis_leans_toward_a_headset_lower_than_the_networks_head(
     hmd3_decoder: Artifact, hmd3_engine: Callable[..., Engine], walk_frames: WalkFrames
 ) -> None:
     """The headset 15 cm lower and 20 cm further along the walk than the walk's head
-    (a player bending over). With one sample and no look-ahead, the streamed pelvis
+    (a player bending over). With one sample and no pelvis smoothing, the streamed pelvis
     turns by the swing that aims the line from the decoder's pelvis to its head (FK of
     its pose, offline on ONNX Runtime) at the headset (``pelvis_lean``, the default),
     and keeps the decoder's rotation with ``pelvis_lean=False``."""
@@ -140,7 +140,7 @@ def test_a_guessed_pelvis_leans_toward_a_headset_lower_than_the_networks_head(
         np.degrees(np.arccos(np.clip((np.trace(turn, axis1=1, axis2=2) - 1) / 2, -1, 1))).min() > 5
     )
     for lean, want in ((True, turn @ root_mat), (False, root_mat)):
-        e = hmd3_engine(samples=1, lookahead=0, pelvis_lean=lean)
+        e = hmd3_engine(samples=1, pelvis_smoothing=False, pelvis_lean=lean)
         e.add_player("a", seed=0)
         got = []
         for f in frames:
@@ -211,7 +211,7 @@ def test_a_guessed_body_keeps_the_networks_torso_to_a_headset_under_its_head(
     hmd3_decoder: Artifact, hmd3_engine: Callable[..., Engine], walk_frames: WalkFrames
 ) -> None:
     """The headset 1.2 m lower than the walk's head, under the head of the random decoder
-    (whose pelvis stands 0.9 m up and whose spine hangs): one sample, no look-ahead,
+    (whose pelvis stands 0.9 m up and whose spine hangs): one sample, no pelvis smoothing,
     no lean. With ``torso_span`` (the default) the streamed body is moved, against
     ``torso_span=False``, by what ``reach_root`` adds for the torso's span on the
     decoder's pose (FK, offline on ONNX Runtime), eased like the reach: down, the
@@ -231,7 +231,7 @@ def test_a_guessed_body_keeps_the_networks_torso_to_a_headset_under_its_head(
     assert want[:, 1].max() < -0.05
     pelvis = {}
     for span in (True, False):
-        e = hmd3_engine(samples=1, lookahead=0, pelvis_lean=False, torso_span=span)
+        e = hmd3_engine(samples=1, pelvis_smoothing=False, pelvis_lean=False, torso_span=span)
         e.add_player("a", seed=0)
         got = []
         for f in frames:
