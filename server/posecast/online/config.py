@@ -171,9 +171,10 @@ class ServerConfig:
     )
     no_pelvis_smoothing: bool = _engine(
         "pelvis_smoothing",
-        "stream each pose on its own frame's pelvis instead of a smoothed one (its rotation "
-        "averaged 1:3 with the frame before's; with --delayed-emission the 1-2-1 average "
-        "with the frames either side), which takes the pelvis's shake out of the legs",
+        "stream each pose on its own frame's pelvis instead of a smoothed one (averaged 1:3 "
+        "with the frame before's, a waist tracker's position its own; with "
+        "--delayed-emission the 1-2-1 average with the frames either side), which takes "
+        "the pelvis's shake out of the legs",
         off=True,
     )
     engine_threads: int = _opt(

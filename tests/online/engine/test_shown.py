@@ -185,6 +185,29 @@ def test_the_headset_only_engine_smooths_its_own_pelvis(
     assert np.abs(got_p - p_off).max() > 1e-4  # it did something
 
 
+def test_served_present_a_guessed_pelvis_is_smoothed_with_the_frame_before(
+    backend: BackendLoader, walk_frames: WalkFrames
+) -> None:
+    """3 points, one sample, served by default (no delay): the streamed pelvis, the
+    decoder's guess, is the 1:3 average of the unsmoothed engine's at the frame before
+    and its own, position and rotation (a guess, not a measurement)."""
+    frames = walk_frames(1)
+    cfg = {"samples": 1, "upper_body_ik": False}
+    on = run_player(backend.engine("hmd3", **cfg), frames)
+    off = run_player(backend.engine("hmd3", **cfg, pelvis_smoothing=False), frames)
+    assert [p.seq for p in on] == [p.seq for p in off] == [f.seq for f in frames]
+    m_off = quat2mat(np.stack([p.rotations[Joint.PELVIS] for p in off]).astype(np.float64))
+    p_off = np.stack([p.positions[Joint.PELVIS] for p in off]).astype(np.float64)
+    m_before = np.concatenate([m_off[:1], m_off[:-1]])
+    p_before = np.concatenate([p_off[:1], p_off[:-1]])
+    want_m, want_p = smooth_pelvis((m_before, m_off, m_off), (p_before, p_off, p_off))
+    got_m = quat2mat(np.stack([p.rotations[Joint.PELVIS] for p in on]).astype(np.float64))
+    got_p = np.stack([p.positions[Joint.PELVIS] for p in on])
+    np.testing.assert_allclose(got_p, want_p, atol=1e-5)
+    np.testing.assert_allclose(got_m, want_m, atol=1e-5)
+    assert np.abs(got_p - p_off).max() > 1e-4  # it did something
+
+
 def test_served_present_the_pelvis_rotation_is_smoothed_and_its_position_its_own(
     backend: BackendLoader, walk_frames: WalkFrames
 ) -> None:

@@ -359,8 +359,8 @@ def run_shown(
     rot, con, root_mat, root_pos = (padded([d[k] for d in decoded]) for k in range(4))
     tp, tq = padded([tr.values for tr in clips]), padded([tr.quat for tr in clips])
     smooth = cfg.pelvis_smoothing
-    # Without a delay frame t stands in for t + 1 and the position is frame t's own, as
-    # the engine's (online/engine/ring.py pelvis_neighbours).
+    # Without a delay frame t stands in for t + 1, and a waist tracker's position is
+    # frame t's own, as the engine's (online/engine/ring.py pelvis_neighbours).
     ahead = 1 if cfg.delay >= 1 else 0
     state = ShownState.zeros(C)
     out_pos = np.zeros((C, T, 19, 3), np.float32)
@@ -374,7 +374,7 @@ def run_shown(
             )
             both = np.concatenate([rows, rows])
             E = len(rows)
-            places = root_pos[both, at] if ahead else root_pos[both, t]
+            places = root_pos[both, at] if ahead or not root_from_waist else root_pos[both, t]
             neighbours = (root_mat[both, at].reshape(2, E, 3, 3), places.reshape(2, E, 3))
         batch = Decoded(
             rot[rows, t],

@@ -138,9 +138,9 @@ def pelvis_neighbours(
     and that sample's at ``e`` (``own``; they differ during a transition's blend; None:
     no blend); a player's ``first`` frame stands in for its missing ``e - 1``. Without
     a delay (``ahead`` False: ``e`` is the newest frame) frame ``e`` stands in for
-    ``e + 1`` and both neighbours' positions are the shown pelvis's: the rotation is
-    then ``(e - 1) + 3 e``, a quarter of a frame late, the position frame ``e``'s own
-    (chosen on the validation split, docs/latency.md)."""
+    ``e + 1``: the average is then ``(e - 1) + 3 e``, a quarter of a frame late, except
+    that a waist tracker's position (a measurement, unlike the decoder's guess) stays
+    frame ``e``'s own (chosen on the validation split, docs/latency.md)."""
     # Both neighbours in one call: frame e - 1 (or e, on a first frame), then e + 1
     # (or e, on the last rest frame before a player's first real one).
     E = len(slots)
@@ -163,6 +163,9 @@ def pelvis_neighbours(
     if own is not None:  # a blend: move the sample's own motion onto the shown pelvis
         mats = (mats @ np.swapaxes(own[0], -1, -2)) @ shown[0]
         places = shown[1] + (places - own[1])
-    if not ahead:  # the position is the newest frame's, unsmoothed
-        places = np.broadcast_to(np.asarray(shown[1], places.dtype), places.shape)
+    if not ahead:  # a waist tracker's position is the newest frame's, unsmoothed
+        tracked = np.ones(E, np.bool_) if not layout.predicts_root else waist
+        if tracked is not None and tracked.any():
+            places = places.copy()
+            places[:, tracked] = np.asarray(shown[1], places.dtype)[tracked]
     return mats, places
