@@ -183,7 +183,12 @@ def test_a_guessed_pelvis_follows_a_controller_held_out_of_reach(
         # toward the far controller, and the torso's span (the next test): the reach
         # alone.
         e = hmd3_engine(
-            samples=4, lookahead=2, hand_reach=reach, pelvis_lean=False, torso_span=False
+            samples=4,
+            lookahead=2,
+            delayed_emission=True,
+            hand_reach=reach,
+            pelvis_lean=False,
+            torso_span=False,
         )
         e.add_player("a", seed=0)
         poses = []
@@ -259,7 +264,10 @@ def test_a_players_eased_reach_is_its_own(
         out[1] = 0.0
         pos[TrackerSlot.LEFT_HAND] += 0.4 * out / np.linalg.norm(out)
         far.append(TrackerFrame(f.seq, pos, f.quat))
-    both, alone = hmd3_engine(samples=4, lookahead=2), hmd3_engine(samples=4, lookahead=2)
+    both, alone = (
+        hmd3_engine(samples=4, lookahead=2, delayed_emission=True),
+        hmd3_engine(samples=4, lookahead=2, delayed_emission=True),
+    )
     both.add_player("reach", seed=1)
     for e in (both, alone):
         e.add_player("calm", seed=2)
@@ -280,7 +288,7 @@ def test_the_waist_slot_is_never_read(
 ) -> None:
     runs = []
     for waist in (None, np.array([1e5, -3.0, 7.0])):
-        e = hmd3_engine(samples=4, lookahead=2)
+        e = hmd3_engine(samples=4, lookahead=2, delayed_emission=True)
         e.add_player("a", seed=1)
         out = []
         for f in walk_frames(1)[:20]:
@@ -302,8 +310,8 @@ def test_each_model_steps_its_own_players_in_one_batch(
     emit every tick, and a player's poses equal those of an engine of its own."""
     multi = MultiEngine(
         {
-            "hmd3+waist": _engine4(backend, samples=4, lookahead=2),
-            "hmd3": hmd3_engine(samples=4, lookahead=2),
+            "hmd3+waist": _engine4(backend, samples=4, lookahead=2, delayed_emission=True),
+            "hmd3": hmd3_engine(samples=4, lookahead=2, delayed_emission=True),
         }
     )
     assert multi.backends == {"hmd3+waist": backend.name, "hmd3": backend.name}
@@ -311,7 +319,7 @@ def test_each_model_steps_its_own_players_in_one_batch(
     multi.add_player("three", 12, "hmd3")
     multi.add_player("three-b", 13, "hmd3")
     assert multi.counts() == {"hmd3+waist": 1, "hmd3": 2} and multi.player_count == 3
-    alone = hmd3_engine(samples=4, lookahead=2)
+    alone = hmd3_engine(samples=4, lookahead=2, delayed_emission=True)
     alone.add_player("three", 12)
     frames = walk_frames(2)[:15]
     seen: dict[str, int] = {}
