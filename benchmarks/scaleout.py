@@ -12,9 +12,11 @@ classed **same-node** (its source player is on the receiver's node) or **cross-n
 the same ticks; their difference is the bus's cost.
 
 Latency is frame sent -> that seq's pose received by a room-mate, minus the SSI
-look-ahead tau / 60 s (all processes share CLOCK_MONOTONIC). Redis load comes from
-``INFO stats`` / ``INFO commandstats`` over the measured window: commands, PUBLISH
-calls and network bytes per second, plus the nodes' own ``posecast_bus_*`` counters.
+look-ahead tau / 60 s with ``--lookahead tau`` (the paper's delayed emission; 0 by
+default, every pose at its own frame's tick; all processes share CLOCK_MONOTONIC).
+Redis load comes from ``INFO stats`` / ``INFO commandstats`` over the measured
+window: commands, PUBLISH calls and network bytes per second, plus the nodes' own
+``posecast_bus_*`` counters.
 """
 
 from __future__ import annotations
@@ -71,6 +73,7 @@ def start_node(name: str, redis_url: str, args: argparse.Namespace) -> ServeProc
     return ServeProcess(
         "--node-id", name, "--redis", redis_url, "--conn-per-ip-per-min", "100000",
         "--sockets-per-ip", "100000",
+        *(["--delayed-emission"] if args.lookahead else []),
         secret=SECRET, samples=args.samples, lookahead=args.lookahead,
     )  # fmt: skip
 
@@ -214,7 +217,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rooms", type=int, default=8)
     ap.add_argument("--per-room", type=int, default=8, help="players per room (half per node)")
     ap.add_argument("--samples", type=int, default=8, help="latent samples N (engine cost)")
-    ap.add_argument("--lookahead", type=int, default=10, help="tau, frames")
+    ap.add_argument(
+        "--lookahead",
+        type=int,
+        default=0,
+        help="tau, frames: with tau > 0 the server runs the paper's delayed emission "
+        "(--delayed-emission), poses tau ticks late, subtracted from the latency (0: the "
+        "served default, every pose at its own frame's tick)",
+    )
     ap.add_argument("--seconds", type=float, default=10.0, help="measured window")
     ap.add_argument("--warmup", type=float, default=3.0)
     ap.add_argument("--procs", type=int, default=2, help="client processes")

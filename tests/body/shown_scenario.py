@@ -55,6 +55,7 @@ SET_TEXT = {
 CFG = {
     "samples": 6,
     "lookahead": 4,
+    "delayed_emission": True,  # the golden streams were recorded with the paper's delay
     "transition_frames": 3,
     "outlier_factor": 0.3,  # transitions often, so their blends are streamed
 }

@@ -36,6 +36,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from posecast.offline.evaluation.runner import VARIANTS, evaluate, format_table
     from posecast.online.config import ENGINE_SWITCHES, engine_settings
     from posecast.online.engine.config import EngineConfig
+    from posecast.online.protocol.messages import MAX_LOOKAHEAD_FRAMES
     from posecast.tracking.layouts import parse_layout
     from posecast.tracking.sites import TrackerSetError
 
@@ -81,6 +82,14 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.ik_release_frames is not None:
         at_least("--ik-release-frames", args.ik_release_frames, 1, "eval")
         release = args.ik_release_frames
+    lookahead = ssi_defaults.lookahead if args.lookahead is None else args.lookahead
+    at_least("--lookahead", lookahead, 0, "eval")
+    if lookahead > MAX_LOOKAHEAD_FRAMES:
+        raise config_error(
+            f"--lookahead {lookahead} must be <= {MAX_LOOKAHEAD_FRAMES}",
+            "the paper's is 10; see `posecast eval --help`",
+        )
+    at_least("--transition-frames", args.transition_frames, 1, "eval")
     switches = {name: getattr(args, name) for name in ENGINE_SWITCHES}  # --no-upper-ik, ...
     engine_cfg = EngineConfig(  # a ConfigError for a bad --samples or --home-factor
         **engine_settings({**switches, "samples": args.samples, "wrist_elbow": wrist}),
@@ -90,6 +99,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
         ik_release_frames=release,
         latent_scale=latent_scale,
         home_factor=home,
+        lookahead=lookahead,
+        delayed_emission=args.delayed_emission,
+        transition_frames=args.transition_frames,
     )
     check_json_out(args.json)
     check_models_dir(args.models)
@@ -205,6 +217,29 @@ def add_parsers(sub: argparse._SubParsersAction[Any]) -> None:
         "where the extension does not load), onnx or torch",
     )
     ev.add_argument("--outlier-factor", type=float, default=2.0, help="SSI outlier factor (2)")
+    ev.add_argument(
+        "--lookahead",
+        type=int,
+        default=None,
+        metavar="TAU",
+        help="SSI look-ahead tau in frames (default: the served one, 0): how far a "
+        "transition's blend has got at the frame of detection, min(tau, T)/T; with "
+        "--delayed-emission the engine shows frame n - tau (the paper: --lookahead 10 "
+        "--delayed-emission)",
+    )
+    ev.add_argument(
+        "--delayed-emission",
+        action="store_true",
+        help="emit each pose tau frames after its frame (the paper's look-ahead), not at "
+        "once; the present_* metrics then compare it with the truth tau frames later",
+    )
+    ev.add_argument(
+        "--transition-frames",
+        type=int,
+        default=10,
+        metavar="T",
+        help="SSI: frames a transition's blend takes (10)",
+    )
     ev.add_argument(
         "--ik-max-drift",
         default=None,

@@ -102,7 +102,18 @@ class ServerConfig:
     replay_cache: int = _opt(100_000, "ended-session token ids remembered (replay guard)")
     tick_hz: float = _engine("fps", "engine ticks per second (the shipped model runs at 60)")
     samples: int = _engine("samples", "latent samples per player, N")
-    lookahead: int = _engine("lookahead", "look-ahead tau in frames; poses lag frames by tau ticks")
+    lookahead: int = _engine(
+        "lookahead",
+        "look-ahead tau in frames: how far a sample transition's blend has got at the frame "
+        "it is detected (min(tau, 10)/10); with --delayed-emission poses lag frames by tau "
+        "ticks (the paper: --lookahead 10 --delayed-emission)",
+    )
+    delayed_emission: bool = _engine(
+        "delayed_emission",
+        "emit each pose tau ticks after its frame (the paper's look-ahead: a transition is "
+        "blended before the outlier shows) instead of at once; welcome.lookahead_frames "
+        "says tau then, 0 otherwise",
+    )
     no_upper_ik: bool = _engine(
         "upper_body_ik",
         "stream the poses without the upper-body pass (head on the headset, hands on the "
@@ -175,8 +186,10 @@ class ServerConfig:
     )
     no_pelvis_smoothing: bool = _engine(
         "pelvis_smoothing",
-        "stream each pose on its own frame's pelvis instead of the 1-2-1 average with "
-        "the frames either side (which takes the pelvis's shake out of the legs)",
+        "stream each pose on its own frame's pelvis instead of a smoothed one (averaged 1:3 "
+        "with the frame before's, a waist tracker's position its own; with "
+        "--delayed-emission the 1-2-1 average with the frames either side), which takes "
+        "the pelvis's shake out of the legs",
         off=True,
     )
     engine_threads: int = _opt(
@@ -266,6 +279,12 @@ class ServerConfig:
         return EngineConfig(
             **engine_settings({f.name: getattr(self, f.name) for f in fields(self)})
         )
+
+    @property
+    def delay_frames(self) -> int:
+        """Ticks a pose lags its frame (welcome ``lookahead_frames``): ``lookahead``
+        with ``delayed_emission``, else 0 (:attr:`EngineConfig.delay`)."""
+        return self.lookahead if self.delayed_emission else 0
 
     @property
     def secret_bytes(self) -> bytes:

@@ -113,3 +113,27 @@ def test_jitter_is_zero_for_constant_velocity_and_exact_for_a_cubic() -> None:
     cubic[..., 1] = 0.5 * t[:, None] ** 3  # jerk = 3 m/s^3 everywhere
     s, n = m.jitter(cubic, 60.0)
     assert s / n == pytest.approx(3.0, rel=1e-6)
+
+
+def test_present_errors_compare_the_pose_emitted_at_a_tick_with_the_truth_then() -> None:
+    """A pose emitted ``d`` ticks after its frame is compared with the truth ``d``
+    frames on: a body walking 1 cm a frame is 2 cm behind the present at ``d = 2``,
+    and on its own frame (``d = 0``) the present errors are the aligned ones."""
+    T = 20
+    gt = np.zeros((T, 19, 3))
+    gt += np.arange(T)[:, None, None] * np.array([0.01, 0.0, 0.0])
+    pred = gt.copy()
+    pred[:, int(Joint.HEAD)] += [0.0, 0.05, 0.0]
+    now = m.present(gt, gt, 2)
+    for key in ("present_mpjpe_cm", "present_lower_mpjpe_cm", "present_root_pe_cm"):
+        total, count = now[key]
+        assert total / count == pytest.approx(2.0)
+    assert now["present_mpjpe_cm"][1] == (T - 2) * 19  # ticks from d on
+    assert now["present_head_pe_cm"][0] / now["present_head_pe_cm"][1] == pytest.approx(2.0)
+    assert now["present_hand_pe_cm"][1] == (T - 2) * 2
+    aligned = m.present(pred, gt, 0)
+    assert aligned["present_mpjpe_cm"] == m.mpjpe(pred, gt)
+    assert aligned["present_head_pe_cm"] == m.head_pe(pred, gt)
+    assert aligned["present_hand_pe_cm"] == m.hand_pe(pred, gt)
+    assert _mean(aligned["present_head_pe_cm"]) == pytest.approx(5.0)
+    assert m.present(gt[:3], gt[:3], 5)["present_mpjpe_cm"] == (0.0, 0)  # too short a clip

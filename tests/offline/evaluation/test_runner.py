@@ -183,3 +183,34 @@ def test_cvae_ik_is_the_engine_with_one_sample(layout: str) -> None:
         atol=1e-3,
         err_msg=str(keys),
     )
+
+
+def test_present_errors_are_the_aligned_ones_unless_the_poses_are_delayed(
+    report: dict[str, object],
+) -> None:
+    """Served by default (no delay) every variant's present errors are its aligned
+    ones; with the paper's delayed emission (tau = 10) the streamed pose is a walk's
+    10 frames behind the present, its head and hands included."""
+    variants = report["variants"]
+    assert isinstance(variants, dict)
+    pairs = [("mpjpe_cm", "present_mpjpe_cm"), ("head_pe_cm", "present_head_pe_cm")]
+    pairs += [("hand_pe_cm", "present_hand_pe_cm"), ("root_pe_cm", "present_root_pe_cm")]
+    pairs += [("lower_mpjpe_cm", "present_lower_mpjpe_cm")]
+    for name, res in variants.items():
+        for aligned, present in pairs:
+            assert res[present] == pytest.approx(res[aligned], abs=1e-4), (name, present)
+    clips = [derive_frames(walk_clip(3.0, 60.0, seed=s)) for s in (0, 1)]
+    paper = EngineConfig(samples=12, lookahead=10, delayed_emission=True)
+    late = evaluate(clips, 60.0, ["cvae_ik_ssi"], engine_cfg=paper)["variants"]["cvae_ik_ssi"]
+    assert late["present_mpjpe_cm"] > late["mpjpe_cm"] + 5.0
+    assert late["present_head_pe_cm"] > 5.0 and late["present_hand_pe_cm"] > 5.0
+    assert late["head_pe_cm"] < 0.5  # on its own frame the head is on the headset
+
+
+def test_the_forecast_beats_holding_the_last_pose_on_a_walk(report: dict[str, object]) -> None:
+    variants = report["variants"]
+    assert isinstance(variants, dict)
+    res = variants["cvae_ik_ssi"]
+    for ms in (33, 67, 100):
+        assert res[f"forecast_{ms}ms_mpjpe_cm"] < res[f"hold_{ms}ms_mpjpe_cm"], ms
+    assert res["hold_33ms_mpjpe_cm"] < res["hold_100ms_mpjpe_cm"]

@@ -101,10 +101,10 @@ def _offline(
 def test_the_pelvis_comes_from_the_decoder_under_the_head(
     hmd3_decoder: Artifact, hmd3_engine: Callable[..., Engine], walk_frames: WalkFrames
 ) -> None:
-    """With one sample, no look-ahead: the emitted pelvis is the decoder's pelvis
+    """With one sample, no pelvis smoothing: the emitted pelvis is the decoder's pelvis
     output moved out of the head frame, as an offline decode on ONNX Runtime gives it
     (without the upper-body pass, which may move a guessed pelvis toward the headset)."""
-    e = hmd3_engine(samples=1, lookahead=0, upper_body_ik=False)
+    e = hmd3_engine(samples=1, pelvis_smoothing=False, upper_body_ik=False)
     e.add_player("a", seed=0)
     frames = walk_frames(0)[:30]
     got = []
@@ -122,7 +122,7 @@ def test_a_guessed_pelvis_leans_toward_a_headset_lower_than_the_networks_head(
     hmd3_decoder: Artifact, hmd3_engine: Callable[..., Engine], walk_frames: WalkFrames
 ) -> None:
     """The headset 15 cm lower and 20 cm further along the walk than the walk's head
-    (a player bending over). With one sample and no look-ahead, the streamed pelvis
+    (a player bending over). With one sample and no pelvis smoothing, the streamed pelvis
     turns by the swing that aims the line from the decoder's pelvis to its head (FK of
     its pose, offline on ONNX Runtime) at the headset (``pelvis_lean``, the default),
     and keeps the decoder's rotation with ``pelvis_lean=False``."""
@@ -140,7 +140,7 @@ def test_a_guessed_pelvis_leans_toward_a_headset_lower_than_the_networks_head(
         np.degrees(np.arccos(np.clip((np.trace(turn, axis1=1, axis2=2) - 1) / 2, -1, 1))).min() > 5
     )
     for lean, want in ((True, turn @ root_mat), (False, root_mat)):
-        e = hmd3_engine(samples=1, lookahead=0, pelvis_lean=lean)
+        e = hmd3_engine(samples=1, pelvis_smoothing=False, pelvis_lean=lean)
         e.add_player("a", seed=0)
         got = []
         for f in frames:
@@ -183,7 +183,12 @@ def test_a_guessed_pelvis_follows_a_controller_held_out_of_reach(
         # toward the far controller, and the torso's span (the next test): the reach
         # alone.
         e = hmd3_engine(
-            samples=4, lookahead=2, hand_reach=reach, pelvis_lean=False, torso_span=False
+            samples=4,
+            lookahead=2,
+            delayed_emission=True,
+            hand_reach=reach,
+            pelvis_lean=False,
+            torso_span=False,
         )
         e.add_player("a", seed=0)
         poses = []
@@ -211,7 +216,7 @@ def test_a_guessed_body_keeps_the_networks_torso_to_a_headset_under_its_head(
     hmd3_decoder: Artifact, hmd3_engine: Callable[..., Engine], walk_frames: WalkFrames
 ) -> None:
     """The headset 1.2 m lower than the walk's head, under the head of the random decoder
-    (whose pelvis stands 0.9 m up and whose spine hangs): one sample, no look-ahead,
+    (whose pelvis stands 0.9 m up and whose spine hangs): one sample, no pelvis smoothing,
     no lean. With ``torso_span`` (the default) the streamed body is moved, against
     ``torso_span=False``, by what ``reach_root`` adds for the torso's span on the
     decoder's pose (FK, offline on ONNX Runtime), eased like the reach: down, the
@@ -231,7 +236,7 @@ def test_a_guessed_body_keeps_the_networks_torso_to_a_headset_under_its_head(
     assert want[:, 1].max() < -0.05
     pelvis = {}
     for span in (True, False):
-        e = hmd3_engine(samples=1, lookahead=0, pelvis_lean=False, torso_span=span)
+        e = hmd3_engine(samples=1, pelvis_smoothing=False, pelvis_lean=False, torso_span=span)
         e.add_player("a", seed=0)
         got = []
         for f in frames:
@@ -259,7 +264,10 @@ def test_a_players_eased_reach_is_its_own(
         out[1] = 0.0
         pos[TrackerSlot.LEFT_HAND] += 0.4 * out / np.linalg.norm(out)
         far.append(TrackerFrame(f.seq, pos, f.quat))
-    both, alone = hmd3_engine(samples=4, lookahead=2), hmd3_engine(samples=4, lookahead=2)
+    both, alone = (
+        hmd3_engine(samples=4, lookahead=2, delayed_emission=True),
+        hmd3_engine(samples=4, lookahead=2, delayed_emission=True),
+    )
     both.add_player("reach", seed=1)
     for e in (both, alone):
         e.add_player("calm", seed=2)
@@ -280,7 +288,7 @@ def test_the_waist_slot_is_never_read(
 ) -> None:
     runs = []
     for waist in (None, np.array([1e5, -3.0, 7.0])):
-        e = hmd3_engine(samples=4, lookahead=2)
+        e = hmd3_engine(samples=4, lookahead=2, delayed_emission=True)
         e.add_player("a", seed=1)
         out = []
         for f in walk_frames(1)[:20]:
@@ -302,8 +310,8 @@ def test_each_model_steps_its_own_players_in_one_batch(
     emit every tick, and a player's poses equal those of an engine of its own."""
     multi = MultiEngine(
         {
-            "hmd3+waist": _engine4(backend, samples=4, lookahead=2),
-            "hmd3": hmd3_engine(samples=4, lookahead=2),
+            "hmd3+waist": _engine4(backend, samples=4, lookahead=2, delayed_emission=True),
+            "hmd3": hmd3_engine(samples=4, lookahead=2, delayed_emission=True),
         }
     )
     assert multi.backends == {"hmd3+waist": backend.name, "hmd3": backend.name}
@@ -311,7 +319,7 @@ def test_each_model_steps_its_own_players_in_one_batch(
     multi.add_player("three", 12, "hmd3")
     multi.add_player("three-b", 13, "hmd3")
     assert multi.counts() == {"hmd3+waist": 1, "hmd3": 2} and multi.player_count == 3
-    alone = hmd3_engine(samples=4, lookahead=2)
+    alone = hmd3_engine(samples=4, lookahead=2, delayed_emission=True)
     alone.add_player("three", 12)
     frames = walk_frames(2)[:15]
     seen: dict[str, int] = {}

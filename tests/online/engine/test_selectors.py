@@ -305,7 +305,7 @@ def test_set_selector_takes_effect_for_that_player_only(
     frames = walk_frames(2)
 
     def play(selector: SampleSelector, ticks: int) -> Engine:
-        engine = make_engine(samples=N, lookahead=3)
+        engine = make_engine(samples=N, lookahead=3, delayed_emission=True)
         engine.add_player("a", seed=5, selector=Never())
         engine.add_player("b", seed=5, selector=Never())
         for i, frame in enumerate(frames[:ticks]):

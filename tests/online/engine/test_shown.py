@@ -11,7 +11,7 @@ import pytest
 
 from posecast.body.clearance import CLEARANCE_M, SPEEDS_M_S, TOES, clip_toe_speed
 from posecast.body.hinge import KNEES, hinge_elbows_quat
-from posecast.body.pelvis import smooth_pelvis_clip
+from posecast.body.pelvis import smooth_pelvis, smooth_pelvis_clip
 from posecast.body.upper_ik import solve_upper_body
 from posecast.geometry.rotations import aa2mat, mat2quat, quat2mat
 from posecast.online.engine.calibration import Calibration
@@ -134,13 +134,14 @@ def _jerk(pos: np.ndarray) -> float:
 def test_the_engine_streams_the_smoothed_pelvis_without_lag(
     backend: BackendLoader, walk_frames: WalkFrames
 ) -> None:
-    """4 points, a shaky waist tracker: with the smoothing (the default) each streamed
+    """4 points, a shaky waist tracker, the paper's delayed emission: with the smoothing
+    (the default) each streamed
     pelvis is the 1-2-1 average of the unsmoothed engine's at the same seq and either
     side (the first frame standing in for its missing neighbour), seq for seq; the legs
     then shake less (mean jerk of the leg joints at most 0.6x); with the smoothing off,
     the pelvis is the waist tracker's."""
     frames = _shaky(walk_frames(0), seed=1)
-    cfg = {"samples": 10, "lookahead": 2, "upper_body_ik": False}
+    cfg = {"samples": 10, "lookahead": 2, "delayed_emission": True, "upper_body_ik": False}
     on = run_player(backend.engine(**cfg), frames)
     off = run_player(backend.engine(**cfg, pelvis_smoothing=False), frames)
     assert [p.seq for p in on] == [p.seq for p in off] == [f.seq for f in frames[:-2]]
@@ -165,10 +166,11 @@ def test_the_engine_streams_the_smoothed_pelvis_without_lag(
 def test_the_headset_only_engine_smooths_its_own_pelvis(
     backend: BackendLoader, walk_frames: WalkFrames
 ) -> None:
-    """3 points, one sample (so no transitions): the streamed pelvis is the 1-2-1 average
+    """3 points, one sample (so no transitions), delayed by one frame: the streamed
+    pelvis is the 1-2-1 average
     of the decoder's own pelvis, as the unsmoothed engine streams it."""
     frames = walk_frames(1)
-    cfg = {"samples": 1, "lookahead": 1, "upper_body_ik": False}
+    cfg = {"samples": 1, "lookahead": 1, "delayed_emission": True, "upper_body_ik": False}
     on = run_player(backend.engine("hmd3", **cfg), frames)
     off = run_player(backend.engine("hmd3", **cfg, pelvis_smoothing=False), frames)
     assert [p.seq for p in on] == [p.seq for p in off]
@@ -183,9 +185,62 @@ def test_the_headset_only_engine_smooths_its_own_pelvis(
     assert np.abs(got_p - p_off).max() > 1e-4  # it did something
 
 
+def test_served_present_a_guessed_pelvis_is_smoothed_with_the_frame_before(
+    backend: BackendLoader, walk_frames: WalkFrames
+) -> None:
+    """3 points, one sample, served by default (no delay): the streamed pelvis, the
+    decoder's guess, is the 1:3 average of the unsmoothed engine's at the frame before
+    and its own, position and rotation (a guess, not a measurement)."""
+    frames = walk_frames(1)
+    cfg = {"samples": 1, "upper_body_ik": False}
+    on = run_player(backend.engine("hmd3", **cfg), frames)
+    off = run_player(backend.engine("hmd3", **cfg, pelvis_smoothing=False), frames)
+    assert [p.seq for p in on] == [p.seq for p in off] == [f.seq for f in frames]
+    m_off = quat2mat(np.stack([p.rotations[Joint.PELVIS] for p in off]).astype(np.float64))
+    p_off = np.stack([p.positions[Joint.PELVIS] for p in off]).astype(np.float64)
+    m_before = np.concatenate([m_off[:1], m_off[:-1]])
+    p_before = np.concatenate([p_off[:1], p_off[:-1]])
+    want_m, want_p = smooth_pelvis((m_before, m_off, m_off), (p_before, p_off, p_off))
+    got_m = quat2mat(np.stack([p.rotations[Joint.PELVIS] for p in on]).astype(np.float64))
+    got_p = np.stack([p.positions[Joint.PELVIS] for p in on])
+    np.testing.assert_allclose(got_p, want_p, atol=1e-5)
+    np.testing.assert_allclose(got_m, want_m, atol=1e-5)
+    assert np.abs(got_p - p_off).max() > 1e-4  # it did something
+
+
+def test_served_present_the_pelvis_rotation_is_smoothed_and_its_position_its_own(
+    backend: BackendLoader, walk_frames: WalkFrames
+) -> None:
+    """4 points, a shaky waist tracker, served by default (no delay, no frame ``e + 1``):
+    each streamed pelvis stands where the waist tracker is, and its rotation is the
+    1:3 average of the unsmoothed engine's at the frame before and its own (the first
+    frame its own); the legs shake less than on each frame's own pelvis (mean jerk of
+    the leg joints at most 0.75x)."""
+    frames = _shaky(walk_frames(0), seed=1)
+    cfg = {"samples": 10, "upper_body_ik": False}
+    on = run_player(backend.engine(**cfg), frames)
+    off = run_player(backend.engine(**cfg, pelvis_smoothing=False), frames)
+    assert [p.seq for p in on] == [p.seq for p in off] == [f.seq for f in frames]
+    waist = np.stack([f.pos[TrackerSlot.WAIST] for f in frames])
+    got_p = np.stack([p.positions[Joint.PELVIS] for p in on])
+    np.testing.assert_allclose(got_p, waist, atol=1e-5)
+    m_off = quat2mat(np.stack([p.rotations[Joint.PELVIS] for p in off]).astype(np.float64))
+    before = np.concatenate([m_off[:1], m_off[:-1]])
+    here = np.zeros((len(m_off), 3))
+    want_m, _ = smooth_pelvis((before, m_off, m_off), (here, here, here))
+    got_m = quat2mat(np.stack([p.rotations[Joint.PELVIS] for p in on]).astype(np.float64))
+    np.testing.assert_allclose(got_m, want_m, atol=1e-5)
+    assert np.abs(got_m - m_off).max() > 1e-3  # it did something
+    legs = [int(j) for j in LOWER_BODY]
+    shown_on = np.stack([p.positions for p in on])[:, legs]
+    shown_off = np.stack([p.positions for p in off])[:, legs]
+    assert _jerk(shown_on) <= 0.75 * _jerk(shown_off)  # measured 0.63 on every backend
+
+
 def test_without_look_ahead_the_pelvis_is_its_own(
     backend: BackendLoader, walk_frames: WalkFrames
 ) -> None:
+    """Served present (no delay): the pelvis position is the newest waist tracker's."""
     frames = _shaky(walk_frames(2), seed=2)
     poses = run_player(backend.engine(samples=4, lookahead=0, upper_body_ik=False), frames)
     waist = np.stack([f.pos[TrackerSlot.WAIST] for f in frames])
@@ -246,11 +301,9 @@ def test_the_engine_streams_head_and_hands_on_the_trackers(
     pelvis and legs are the same either way."""
     frames = walk_frames(0)
     by_seq = {f.seq: f for f in frames}
-    on = run_calibrated(backend.engine(samples=10, lookahead=2), frames)
-    off = run_calibrated(
-        backend.engine(samples=10, lookahead=2, upper_body_ik=False, elbow_hinge=False), frames
-    )
-    assert len(on) == len(off) == len(frames) - 2
+    on = run_calibrated(backend.engine(samples=10), frames)
+    off = run_calibrated(backend.engine(samples=10, upper_body_ik=False, elbow_hinge=False), frames)
+    assert len(on) == len(off) == len(frames)  # served present: every frame's pose at once
     for pose in on:
         f = by_seq[pose.seq]
         for joint, slot in ((Joint.HEAD, TrackerSlot.HEAD), *HANDS):

@@ -40,7 +40,7 @@ def _run(backend: str) -> dict[str, list[np.ndarray]]:
 def test_mixed_sets_share_one_batch_and_stand_on_their_trackers() -> None:
     out = _run("onnx")
     for i, (name, poses) in enumerate(out.items()):
-        assert len(poses) == 40 - EngineConfig().lookahead, name
+        assert len(poses) == 40 - EngineConfig().delay, name
         last = poses[-1]
         assert np.isfinite(last).all()
         # Head near its tracker (within reach of the upper-body pass), each player where

@@ -137,7 +137,7 @@ def test_same_seeds_give_identical_poses(make_engine: MakeEngine, walk_frames: W
     frames = {"a": walk_frames(0), "b": walk_frames(1)}
     outs = []
     for _ in range(2):
-        engine = make_engine(samples=10, lookahead=5)
+        engine = make_engine(samples=10, lookahead=5, delayed_emission=True)
         engine.add_player("a", seed=1)
         engine.add_player("b", seed=2, selector=Forced(at=31, to=4))
         outs.append(run(engine, frames))
@@ -177,7 +177,7 @@ def test_a_different_seed_gives_a_different_sample(
     """Shown from the start on sample 5, the same walk differs between seeds 1 and 2."""
     shown = []
     for seed in (1, 2):
-        engine = make_engine(samples=10, lookahead=10)
+        engine = make_engine(samples=10, lookahead=10, delayed_emission=True)
         engine.add_player("p", seed=seed, selector=Forced(at=1, to=5))
         poses = run(engine, {"p": walk_frames(0)[:30]})["p"]
         assert all(p.sample == 5 and not p.transitioning for p in poses)
@@ -220,7 +220,7 @@ def inject(
     Stops 10 ticks after the first transition (when its last frame is out), or 2 ticks
     after the injection if none has started by then.
     """
-    engine = make_engine(samples=20, lookahead=10, transition_frames=10)
+    engine = make_engine(samples=20, lookahead=10, delayed_emission=True, transition_frames=10)
     engine.pool = scorer = RecordingPool(engine.pool)
     engine.add_player("p", seed=0, selector=Never())
     log: list[tuple[int, np.ndarray, int, int]] = []
@@ -312,7 +312,7 @@ def test_no_new_transition_while_one_is_in_flight(
     """The selector is not asked while a transition is under way; it is asked again on
     the tick after the transition's last frame is out."""
     selector = Forced(at=5, to=7)
-    engine = make_engine(samples=10, lookahead=3, transition_frames=10)
+    engine = make_engine(samples=10, lookahead=3, delayed_emission=True, transition_frames=10)
     engine.add_player("p", seed=3, selector=selector)
     asked = []
     for t, frame in enumerate(walk_frames(0)[:30]):
@@ -356,7 +356,13 @@ def test_ssi_leaves_a_sample_sunk_below_the_floor_for_the_best_standing_one(
     though by its error alone sample 0 is no outlier; with ``floor_select=False`` it
     decides on the errors alone, as the paper's selector would."""
     N, sink = 10, [0, 2, 4, 6, 8]
-    engine = make_engine(samples=N, lookahead=10, transition_frames=10, floor_select=floor_select)
+    engine = make_engine(
+        samples=N,
+        lookahead=10,
+        delayed_emission=True,
+        transition_frames=10,
+        floor_select=floor_select,
+    )
     engine.pool = pool = SinkingPool(engine.pool, N, sink, at=WARMUP + 1)
     engine.add_player("p", seed=0, selector=Never())
     selector = AnomalySelector(factor=2.0, home=1.0)
@@ -413,7 +419,13 @@ def test_transition_jumps_stay_bounded(
     no_contacts = NoContacts(backend().decoder)
 
     def show(selector: SampleSelector) -> list[PoseOut]:
-        engine = backend.engine(decoder=no_contacts, samples=20, lookahead=tau, transition_frames=T)
+        engine = backend.engine(
+            decoder=no_contacts,
+            samples=20,
+            lookahead=tau,
+            delayed_emission=True,
+            transition_frames=T,
+        )
         engine.add_player("p", seed=3, selector=selector)
         return run(engine, frames)["p"]
 
@@ -447,16 +459,20 @@ def test_transition_jumps_stay_bounded(
 # --- look-ahead delay -------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("tau", [0, 3, 10])
-def test_output_lags_input_by_exactly_tau_frames(
-    make_engine: MakeEngine, walk_frames: WalkFrames, tau: int
+@pytest.mark.parametrize(("tau", "delayed"), [(0, True), (3, True), (10, True), (10, False)])
+def test_output_lags_input_by_exactly_its_delay(
+    make_engine: MakeEngine, walk_frames: WalkFrames, tau: int, delayed: bool
 ) -> None:
-    """With ``lookahead = tau`` nothing comes out for ticks 0 .. tau-1; from tick tau on,
-    each tick emits one pose whose seq is that of the frame pushed tau ticks earlier
-    (tau = 0: the frame pushed this tick)."""
+    """With ``lookahead = tau`` and ``delayed_emission`` (the paper's) nothing comes out
+    for ticks 0 .. tau-1; from tick tau on, each tick emits one pose whose seq is that
+    of the frame pushed tau ticks earlier (tau = 0: the frame pushed this tick).
+    Without ``delayed_emission`` (the default) every tick emits the frame pushed on it,
+    whatever ``tau``."""
     frames = walk_frames(0)[:30]
     seqs = [1000 + 7 * i for i in range(len(frames))]
-    engine = make_engine(samples=10, lookahead=tau)
+    engine = make_engine(samples=10, lookahead=tau, delayed_emission=delayed)
+    assert engine.cfg.delay == (tau if delayed else 0)
+    tau = engine.cfg.delay
     engine.add_player("p", seed=0)
     for t, (frame, seq) in enumerate(zip(frames, seqs, strict=True)):
         engine.push("p", TrackerFrame(seq, frame.pos, frame.quat))
@@ -476,7 +492,7 @@ def test_the_newest_push_before_a_tick_wins(
     make_engine: MakeEngine, walk_frames: WalkFrames
 ) -> None:
     frames = walk_frames(0)
-    engine = make_engine(samples=10, lookahead=0)
+    engine = make_engine(samples=10, lookahead=0, delayed_emission=True)
     engine.add_player("p", seed=0)
     engine.push("p", frames[0])
     engine.push("p", frames[1])
@@ -500,12 +516,12 @@ def test_batched_players_equal_single_player_runs(
             return AnomalySelector(baseline="zero")
         return Forced(at=10) if pid == "p1" else Forced(at=20, to=3)
 
-    batched = make_engine(samples=10, lookahead=5)
+    batched = make_engine(samples=10, lookahead=5, delayed_emission=True)
     for pid, (seed, _) in players.items():
         batched.add_player(pid, seed=seed, selector=selector(pid))
     together = run(batched, frames)
     for pid, (seed, _) in players.items():
-        single = make_engine(samples=10, lookahead=5)
+        single = make_engine(samples=10, lookahead=5, delayed_emission=True)
         single.add_player(pid, seed=seed, selector=selector(pid))
         alone = run(single, {pid: frames[pid]})
         assert_same_poses(together[pid], alone[pid], atol=1e-5)
@@ -523,7 +539,9 @@ def test_players_join_and_leave_between_ticks(
     seeds = {"a": 1, "b": 2, "c": 3, "d": 4}
 
     def room(leave: bool) -> tuple[Engine, dict[str, list[PoseOut]]]:
-        engine = make_engine(samples=10, lookahead=3, capacity=2)  # grows on the 3rd join
+        engine = make_engine(
+            samples=10, lookahead=3, delayed_emission=True, capacity=2
+        )  # grows on the 3rd join
         out: dict[str, list[PoseOut]] = {p: [] for p in walks}
         for pid in "abc":
             engine.add_player(pid, seed=seeds[pid])
@@ -547,7 +565,7 @@ def test_players_join_and_leave_between_ticks(
     for pid in ("a", "c", "d"):
         assert len(out[pid]) == (40 if pid != "d" else 30) - 3
         assert_same_poses(out[pid], ref[pid], atol=1e-5)
-    alone = make_engine(samples=10, lookahead=3)
+    alone = make_engine(samples=10, lookahead=3, delayed_emission=True)
     alone.add_player("d", seed=seeds["d"])
     assert_same_poses(out["d"], run(alone, {"d": walks["d"][:30]})["d"], atol=1e-5)
     with pytest.raises(ValueError, match="already"):
@@ -574,7 +592,7 @@ def test_missing_frames_are_held_then_stale_then_active(
     is marked held and repeats frame 5's seq. From tick 10 no frames come: one "stale"
     event on the 5th empty tick (14), none after; the frame at tick 17 brings "active"."""
     frames = walk_frames(0)
-    engine = make_engine(samples=10, lookahead=2, stale_after_frames=5)
+    engine = make_engine(samples=10, lookahead=2, delayed_emission=True, stale_after_frames=5)
     engine.add_player("p", seed=0)
     engine.add_player("q", seed=1)  # always on time: never held, never stale
     poses: dict[int, PoseOut] = {}
@@ -612,7 +630,7 @@ def test_a_frame_after_missing_ones_reads_its_velocity_over_the_gap(
     from posecast.tracking.layouts import Layout, spec
 
     frames = walk_frames(0)
-    engine = make_engine(samples=10, lookahead=3)
+    engine = make_engine(samples=10, lookahead=3, delayed_emission=True)
     engine.add_player("p", seed=1)
     for t in range(26):
         if not 10 <= t < 25:
@@ -640,7 +658,7 @@ def test_the_waist_filter_starts_on_the_first_real_frame(
     frames = [TrackerFrame(f.seq, f.pos, quat_mul(turn, f.quat)) for f in walk_frames(0)[:6]]
     waists = []
     for rest in (0, 5):
-        engine = make_engine(samples=4, lookahead=2, waist_filter_hz=4.0)
+        engine = make_engine(samples=4, lookahead=2, delayed_emission=True, waist_filter_hz=4.0)
         engine.add_player("p", seed=1)
         for _ in range(rest):
             engine.tick()
@@ -660,7 +678,7 @@ def test_the_last_rest_frame_is_not_smoothed_toward_the_first_real_one(
     3 m away, is shown: the pelvis smoothing does not pull the last rest pose a
     quarter of the way there (0.75 m before the fix)."""
     frames = _three_metres_away(walk_frames(0))
-    engine = make_engine(samples=4, lookahead=2)
+    engine = make_engine(samples=4, lookahead=2, delayed_emission=True)
     engine.add_player("p", seed=1)
     shown = []
     for t in range(8):
@@ -675,7 +693,7 @@ def test_the_last_rest_frame_is_not_smoothed_toward_the_first_real_one(
 
 
 def test_a_player_without_any_frame_stands_at_the_origin(make_engine: MakeEngine) -> None:
-    engine = make_engine(samples=10, lookahead=0, stale_after_frames=3)
+    engine = make_engine(samples=10, lookahead=0, delayed_emission=True, stale_after_frames=3)
     engine.add_player("p", seed=0)
     results = [engine.tick() for _ in range(3)]
     for r in results:
@@ -694,10 +712,10 @@ def test_output_is_at_the_users_own_scale(make_engine: MakeEngine, walk_frames: 
     come back at half size, where the user stands."""
     frames = walk_frames(0)[:30]
     small = [TrackerFrame(f.seq, f.pos * 0.5, f.quat) for f in frames]
-    ref_engine = make_engine(samples=10, lookahead=2)
+    ref_engine = make_engine(samples=10, lookahead=2, delayed_emission=True)
     ref_engine.add_player("p", seed=0)
     ref = run(ref_engine, {"p": frames})["p"]
-    engine = make_engine(samples=10, lookahead=2)
+    engine = make_engine(samples=10, lookahead=2, delayed_emission=True)
     engine.add_player("p", seed=0, calibration=Calibration(scale=2.0))
     got = run(engine, {"p": small})["p"]
     np.testing.assert_allclose(positions(got), 0.5 * positions(ref), atol=1e-6)
@@ -715,7 +733,7 @@ def test_a_new_calibration_reaches_the_frames_already_in_the_look_ahead(
     scale with the old one in them: 9 cm off), and the next frame's velocities are
     measured from the same calibration (a walk's speed, not a jump)."""
     frames = _three_metres_away(walk_frames(0))
-    engine = make_engine(samples=4, lookahead=4)
+    engine = make_engine(samples=4, lookahead=4, delayed_emission=True)
     engine.add_player("p", seed=1)
     shown = []
     for t in range(40):
@@ -742,7 +760,7 @@ def test_a_new_calibration_reorients_the_frames_already_held(
     from posecast.geometry.rotations import quat_mul, quat_normalize, yaw2quat
 
     frames = walk_frames(0)
-    engine = make_engine(samples=4, lookahead=2)
+    engine = make_engine(samples=4, lookahead=2, delayed_emission=True)
     engine.add_player("p", seed=1)
     for f in frames[:5]:
         engine.push("p", f)

@@ -115,7 +115,7 @@ def test_native_emits_the_onnx_samples_and_poses_within_1mm(
         np.mean(diff > 1e-4),
     )
     # Poses: every one made before the split (look-ahead: seq < split - lookahead).
-    cut = max(0, split - EngineConfig().lookahead - 1)
+    cut = max(0, split - EngineConfig().delay - 1)
     shown = [i for i, k in enumerate(ref.keys) if k[1] < cut]
     assert [got.keys[i] for i in shown] == [ref.keys[i] for i in shown], "a different sample"
     err = np.linalg.norm(got.poses[shown] - ref.poses[shown], axis=-1).max(axis=-1)

@@ -60,6 +60,26 @@ def test_rooms_see_their_own_players_and_nothing_else(engine_factory: Factory) -
     run(scenario())
 
 
+def test_welcome_lookahead_frames_is_the_delay_the_poses_carry(engine_factory: Factory) -> None:
+    """The welcome says how many ticks a pose lags its frame: none by default, whatever
+    the look-ahead (a transition's head start), tau with the paper's delayed emission."""
+
+    async def welcome(**cfg: Any) -> Welcome:
+        async with serving(make_cfg(**cfg), engine_factory) as server:
+            assert server.cfg.engine_config().delay == server.cfg.delay_frames
+            cl = await Client.open(server.port)
+            w = await cl.hello(token("r1", "a"))
+            await cl.close()
+            assert isinstance(w, Welcome)
+            return w
+
+    async def scenario() -> None:
+        assert (await welcome(lookahead=10)).lookahead_frames == 0
+        assert (await welcome(lookahead=3, delayed_emission=True)).lookahead_frames == 3
+
+    run(scenario())
+
+
 def test_auth_failures_are_refused_with_their_codes(engine_factory: Factory) -> None:
     async def refused(port: int, tok: str, room: str = "r1") -> Error:
         cl = await Client.open(port)

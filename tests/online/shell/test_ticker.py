@@ -33,7 +33,8 @@ def _frame(seq: int, seed: int = 0) -> TrackerFrame:
 
 @pytest.fixture
 def worker(engine_factory: Callable[[ServerConfig], Callable[[], Engine]]) -> EngineWorker:
-    return EngineWorker(MultiEngine({"hmd3+waist": engine_factory(make_cfg(lookahead=2))()}))
+    cfg = make_cfg(lookahead=2, delayed_emission=True)  # the paper's: poses 2 ticks late
+    return EngineWorker(MultiEngine({"hmd3+waist": engine_factory(cfg)()}))
 
 
 def test_one_step_batches_every_player_and_encodes_their_poses(worker: EngineWorker) -> None:

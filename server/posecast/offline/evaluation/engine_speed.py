@@ -128,12 +128,17 @@ def bench(
     ticks: int = 120,
     warmup: int = 20,
     threads: int = 2,
-    lookahead: int = 10,
+    lookahead: int | None = None,
     hmd3_share: float = 0.0,
     backend: str = "native",
     sets: bool = False,
 ) -> BenchResult:
-    cfg = EngineConfig(samples=samples, lookahead=lookahead)
+    # The served look-ahead unless told (``lookahead``: the paper's delayed emission).
+    cfg = (
+        EngineConfig(samples=samples)
+        if lookahead is None
+        else EngineConfig(samples=samples, lookahead=lookahead, delayed_emission=True)
+    )
     n3 = round(hmd3_share * players)
     engine: Engine | MultiEngine
     if sets:

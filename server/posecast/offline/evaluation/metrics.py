@@ -108,6 +108,22 @@ def jitter(pred: F64, fps: float) -> Acc:
     return float(d.sum()), int(d.size)
 
 
+def present(pred: F64, gt: F64, delay: int) -> dict[str, Acc]:
+    """The error a room-mate sees: the pose emitted at tick ``n`` (``pred`` is aligned
+    with its own frames, emitted ``delay`` ticks after them) against the truth at frame
+    ``n``, over ``n >= delay`` (nothing is emitted before). ``delay = 0``: the aligned
+    errors."""
+    T = len(pred) - delay
+    shown, now = pred[: max(T, 0)], gt[delay : delay + max(T, 0)]
+    return {
+        "present_mpjpe_cm": mpjpe(shown, now),
+        "present_lower_mpjpe_cm": lower_mpjpe(shown, now),
+        "present_head_pe_cm": head_pe(shown, now),
+        "present_hand_pe_cm": hand_pe(shown, now),
+        "present_root_pe_cm": root_pe(shown, now),
+    }
+
+
 def flag_rates(flags: dict[str, NDArray[np.bool_]]) -> dict[str, Acc]:
     """Per-frame plausibility flags of one clip (:func:`posecast.offline.evaluation.
     plausibility.flags`) -> ``flagged_rate`` (any category) and ``flagged_<category>_rate``

@@ -10,10 +10,11 @@ from typing import Any
 
 import numpy as np
 
+from posecast.body.forecast import SPAN, forecast
 from posecast.body.passes import Passes
 from posecast.body.pelvis import pelvis_poses
 from posecast.body.pipeline import Decoded, ShownState, show
-from posecast.geometry.rotations import quat2mat
+from posecast.geometry.rotations import mat2quat, quat2mat
 from posecast.offline.dataset.frames import Frames
 from posecast.offline.evaluation import metrics as m
 from posecast.offline.evaluation import plausibility as pl
@@ -42,6 +43,23 @@ from posecast.tracking.sites import (
     site_tracks,
 )
 
+# The pose a server emits at tick n against the truth at frame n (what a room-mate
+# sees now): a variant emitting frame n - d at tick n is compared over n >= d.
+PRESENT_KEYS = (
+    "present_mpjpe_cm",
+    "present_lower_mpjpe_cm",
+    "present_head_pe_cm",
+    "present_hand_pe_cm",
+    "present_root_pe_cm",
+)
+# A variant's stream forecast h frames ahead (body.forecast) against holding its last
+# pose, both against the truth h frames after the tick (33, 67, 100 ms at 60 fps).
+FORECAST_FRAMES = (2, 4, 6)
+FORECAST_KEYS = tuple(
+    f"{kind}_{round(h * 1000 / 60)}ms_mpjpe_cm"
+    for h in FORECAST_FRAMES
+    for kind in ("hold", "forecast")
+)
 VARIANTS = ("cvae_1sample", "cvae_ik", "cvae_ik_ssi", "ae_ik", "baseline_mean_lower_body")
 FLAG_KEYS = ("flagged_rate", *(f"flagged_{c}_rate" for c in pl.CATEGORIES))
 METRIC_KEYS = (
@@ -55,6 +73,8 @@ METRIC_KEYS = (
     "root_pe_cm",
     *FLAG_KEYS,
     "transitions_per_min",
+    *PRESENT_KEYS,
+    *FORECAST_KEYS,
     "mpjve_cm_s",
     "mpjae_cm_s2",
     "foot_skate_cm_s",
@@ -163,6 +183,7 @@ def evaluate(
     # The pelvis of a single-sample variant: the waist tracker's, or the decoder's own.
     root_from_waist = tracker_set.tracks_waist if tracker_set is not None else not ls.predicts_root
     engine_cfg = engine_cfg or EngineConfig()
+    delay = engine_cfg.delay  # ticks the engine's poses (and the _ik variants') lag
     kinds = tracker_set.kinds() if tracker_set is not None else None
     shown_by = (
         load_backend(backend, ls.layout, models_dir, cfg=engine_cfg)
@@ -200,6 +221,8 @@ def evaluate(
                 poses.append(pose_from_rotations(rot, *_true_waist(fr)))
         else:
             raise ValueError(f"unknown variant {name!r}")
+        # The engine's variants emit frame n - delay at tick n; the others at once.
+        lag = delay if name == "cvae_ik_ssi" or name.endswith("_ik") else 0
         for ci, fr in enumerate(clips):
             wm, wp = poses[ci]
             gt_mat, gt = truth[ci]
@@ -219,6 +242,10 @@ def evaluate(
             acc.add("mpjre_deg", m.mpjre(wm, gt_mat))
             acc.add("jitter", m.jitter(wp, fps))
             for key, pair in m.flag_rates(pl.flags(wm, wp, fps)).items():
+                acc.add(key, pair)
+            for key, pair in m.present(wp, gt, lag).items():
+                acc.add(key, pair)
+            for key, pair in _forecast_errors(wm, wp, gt, lag, fps).items():
                 acc.add(key, pair)
         means = acc.means()
         if name == "cvae_ik_ssi":
@@ -245,6 +272,31 @@ def evaluate(
         "implausible_threshold_m": scorer.threshold_m,
         "ground_truth": ground_truth,
     }
+
+
+def _forecast_errors(
+    wm: np.ndarray, wp: np.ndarray, gt: np.ndarray, lag: int, fps: float
+) -> dict[str, m.Acc]:
+    """The stream emitted at tick ``n`` (frame ``n - lag`` of ``wm (T, 19, 3, 3)``,
+    ``wp (T, 19, 3)``), forecast ``h`` frames ahead from its last poses
+    (:func:`posecast.body.forecast.forecast`) and held, against the truth at ``n + h``,
+    for each ``h`` of :data:`FORECAST_FRAMES` (ticks with a full history)."""
+    out: dict[str, m.Acc] = {}
+    T = len(wp)
+    quat = mat2quat(wm)
+    for h in FORECAST_FRAMES:
+        ms = round(h * 1000 / 60)
+        # Ticks n whose emitted frame e = n - lag has SPAN frames before it and whose
+        # truth n + h exists: e from SPAN to T - 1 - lag - h.
+        e = np.arange(SPAN, T - lag - h)
+        if len(e) == 0:
+            continue
+        window = e[:, None] + np.arange(-SPAN, 1)[None, :]  # (n, K)
+        fp, _ = forecast(wp[window], quat[window], np.full(len(e), float(h)), fps)
+        now = gt[e + lag + h]
+        out[f"forecast_{ms}ms_mpjpe_cm"] = m.mpjpe(fp, now)
+        out[f"hold_{ms}ms_mpjpe_cm"] = m.mpjpe(wp[e], now)
+    return out
 
 
 def _true_waist(fr: Frames) -> tuple[np.ndarray, np.ndarray]:
@@ -306,7 +358,10 @@ def run_shown(
 
     rot, con, root_mat, root_pos = (padded([d[k] for d in decoded]) for k in range(4))
     tp, tq = padded([tr.values for tr in clips]), padded([tr.quat for tr in clips])
-    smooth = cfg.pelvis_smoothing and cfg.lookahead >= 1
+    smooth = cfg.pelvis_smoothing
+    # Without a delay frame t stands in for t + 1, and a waist tracker's position is
+    # frame t's own, as the engine's (online/engine/ring.py pelvis_neighbours).
+    ahead = 1 if cfg.delay >= 1 else 0
     state = ShownState.zeros(C)
     out_pos = np.zeros((C, T, 19, 3), np.float32)
     out_rot = np.zeros((C, T, 19, 4), np.float32)
@@ -314,13 +369,13 @@ def run_shown(
         rows = np.flatnonzero(lengths > t)
         neighbours = None
         if smooth:
-            at = np.concatenate([np.full(len(rows), max(t - 1, 0)), np.minimum(t + 1, last[rows])])
+            at = np.concatenate(
+                [np.full(len(rows), max(t - 1, 0)), np.minimum(t + ahead, last[rows])]
+            )
             both = np.concatenate([rows, rows])
             E = len(rows)
-            neighbours = (
-                root_mat[both, at].reshape(2, E, 3, 3),
-                root_pos[both, at].reshape(2, E, 3),
-            )
+            places = root_pos[both, at] if ahead or not root_from_waist else root_pos[both, t]
+            neighbours = (root_mat[both, at].reshape(2, E, 3, 3), places.reshape(2, E, 3))
         batch = Decoded(
             rot[rows, t],
             con[rows, t],
@@ -355,8 +410,8 @@ def run_ssi(
     together.
 
     Returns per clip the emitted world rotations ``(T, 19, 3, 3)`` and positions
-    ``(T, 19, 3)``, aligned with the input frames (the engine's ``tau``-frame delay
-    undone by ``seq``), and the number of transitions.
+    ``(T, 19, 3)``, aligned with the input frames (the engine's delay, ``tau`` frames
+    with ``delayed_emission``, undone by ``seq``), and the number of transitions.
     """
     engine = Engine(
         backend.decoder, backend.pool, cfg, capacity=len(clips), backend_name=backend.name
@@ -367,7 +422,7 @@ def run_ssi(
     rots = [np.full((len(tr.values), 19, 4), np.nan, np.float32) for tr in clips]
     done: dict[int, int] = {}
     longest = max(len(tr.values) for tr in clips)
-    for t in range(longest + cfg.lookahead):
+    for t in range(longest + cfg.delay):
         for i, tr in enumerate(clips):
             if t < len(tr.values):
                 engine.push(str(i), TrackerFrame(t, tr.values[t], tr.quat[t]))
@@ -377,7 +432,7 @@ def run_ssi(
                 out[i][pose.seq] = pose.positions
                 rots[i][pose.seq] = pose.rotations
         for i, tr in enumerate(clips):
-            if i not in done and t + 1 >= len(tr.values) + cfg.lookahead:
+            if i not in done and t + 1 >= len(tr.values) + cfg.delay:
                 done[i] = engine.transitions(str(i))
                 engine.remove_player(str(i))
     if any(np.isnan(o).any() for o in out):

@@ -340,7 +340,7 @@ class Admission:
             room=s.rooms[0],
             t=now,
             rate_hz=self.cfg.tick_hz,
-            lookahead_frames=self.cfg.lookahead,
+            lookahead_frames=self.cfg.delay_frames,  # what the poses lag, not tau itself
             members=self.router.members(room)[: self.limits.max_players],  # a race can overfill
             limits=self.limits,
         )

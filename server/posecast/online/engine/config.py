@@ -13,6 +13,8 @@ from posecast.errors import ConfigError
 # and a tick takes longer than its period anyway (the paper and the server use 100;
 # eval-apps goes to 1000).
 MAX_SAMPLES = 4096
+# The paper's look-ahead tau (Sec. 3.2.4), with delayed emission: poses 10 frames late.
+PAPER_LOOKAHEAD = 10
 
 
 @dataclass(frozen=True)
@@ -21,7 +23,17 @@ class EngineConfig:
 
     Attributes:
         samples: latent samples per player, ``N`` (default 100).
-        lookahead: ``tau``, frames of look-ahead; output lags input by this (default 10).
+        lookahead: ``tau``, frames of look-ahead (paper Sec. 3.2.4): a transition to a
+            better sample, detected at the newest frame ``n``, has its first blended
+            frame at ``n - min(tau, T) + 1``. With ``delayed_emission`` the engine shows
+            frame ``n - tau`` (the paper: the blend is done before the outlier would
+            show); without it (the default) it shows frame ``n``, so ``tau`` is only
+            how far the blend has got at the frame of detection, ``min(tau, T) / T``
+            (default 0, chosen on the validation split, docs/latency.md).
+        delayed_emission: emit frame ``n - tau`` at tick ``n`` (the paper's setting,
+            with ``lookahead=10``: poses lag their frames by ``tau`` ticks) instead of
+            frame ``n`` (default off: every pose is the newest frame's). :attr:`delay`
+            is the lag either way.
         transition_frames: ``T``, frames a transition to a better sample takes (10).
         outlier_factor: the current sample is an outlier when ``R_c > factor * r``,
             ``r = median(R) - min(R)`` (2.0, the paper's trimmed estimator).
@@ -79,7 +91,7 @@ class EngineConfig:
             about its thigh's axis, no joint moving (:mod:`posecast.body.hinge`;
             default on, off for research evaluation).
         pelvis_smoothing: build the shown pose on the pelvis averaged over frames
-            ``e - 1, e, e + 1`` (weights 1, 2, 1; needs ``lookahead >= 1``, adds no lag;
+            ``e - 1, e, e + 1`` (weights 1, 2, 1; needs ``delay >= 1``, adds no lag;
             :mod:`posecast.body.pelvis`): default on, chosen on the validation
             split (docs/evaluation.md, "Jitter"); off for research evaluation.
         floor_select: SSI leaves out of the pool, frame by frame, every sample with a
@@ -96,7 +108,8 @@ class EngineConfig:
     """
 
     samples: int = 100
-    lookahead: int = 10
+    lookahead: int = 0
+    delayed_emission: bool = False
     transition_frames: int = 10
     outlier_factor: float = 2.0
     outlier_baseline: str = "zero"
@@ -119,6 +132,12 @@ class EngineConfig:
     floor_select: bool = True
     latent_scale: float = 1.0
     home_factor: float | None = 1.0
+
+    @property
+    def delay(self) -> int:
+        """Ticks between a frame's arrival and its pose's emission: ``lookahead`` with
+        ``delayed_emission``, else 0 (the server's welcome ``lookahead_frames``)."""
+        return self.lookahead if self.delayed_emission else 0
 
     @property
     def reaches(self) -> bool:

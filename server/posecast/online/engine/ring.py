@@ -127,6 +127,7 @@ def pelvis_neighbours(
     own: tuple[F32, F32] | None,
     shown: tuple[F32, F32],
     waist: NDArray[np.bool_] | None,
+    ahead: bool = True,
 ) -> tuple[NDArray[np.floating], NDArray[np.floating]]:
     """The shown pelvis's neighbours at ring row ``k`` (frame ``e``) of the players in
     ``slots``, each showing its sample of ``samples``: frames ``e - 1`` and ``e + 1``,
@@ -135,11 +136,15 @@ def pelvis_neighbours(
     look-ahead holds ``e + 1``, the ring still holds ``e - 1``). A neighbour is the
     emitted sample's own pelvis there, moved by the difference between the shown pelvis
     and that sample's at ``e`` (``own``; they differ during a transition's blend; None:
-    no blend); a player's ``first`` frame stands in for its missing ``e - 1``."""
+    no blend); a player's ``first`` frame stands in for its missing ``e - 1``. Without
+    a delay (``ahead`` False: ``e`` is the newest frame) frame ``e`` stands in for
+    ``e + 1``: the average is then ``(e - 1) + 3 e``, a quarter of a frame late, except
+    that a waist tracker's position (a measurement, unlike the decoder's guess) stays
+    frame ``e``'s own (chosen on the validation split, docs/latency.md)."""
     # Both neighbours in one call: frame e - 1 (or e, on a first frame), then e + 1
     # (or e, on the last rest frame before a player's first real one).
     E = len(slots)
-    nxt = (k + 1) % ring
+    nxt = (k + 1) % ring if ahead else k
     last_rest = (s["ring_seq"][k, slots] < 0) & (s["ring_seq"][nxt, slots] >= 0)
     rows = np.concatenate([np.where(first, k, (k - 1) % ring), np.where(last_rest, k, nxt)])
     at = np.concatenate([slots, slots])
@@ -158,4 +163,9 @@ def pelvis_neighbours(
     if own is not None:  # a blend: move the sample's own motion onto the shown pelvis
         mats = (mats @ np.swapaxes(own[0], -1, -2)) @ shown[0]
         places = shown[1] + (places - own[1])
+    if not ahead:  # a waist tracker's position is the newest frame's, unsmoothed
+        tracked = np.ones(E, np.bool_) if not layout.predicts_root else waist
+        if tracked is not None and tracked.any():
+            places = places.copy()
+            places[:, tracked] = np.asarray(shown[1], places.dtype)[tracked]
     return mats, places

@@ -11,33 +11,30 @@ Per tick, for all ``P`` players x ``N`` samples at once:
    of every sample
 4. each player's selector decides whether its current sample must give way (detected
    at frame ``n``, the newest)
-5. emit frame ``n - tau`` per player: the current sample's pose, or during a
-   transition the decoder re-run on the interpolated latent and hidden state
-   (one more batched call), on its pelvis, through the shown pose's passes
-   (:func:`posecast.body.pipeline.show`: the pelvis averaged with frames
-   ``n - tau -+ 1`` read from the ring, a guessed pelvis's lean and reach, the
-   player's own display IK, legs apart, the floor pass and swing clearance, a tracker
-   set's legs, the knees onto their hinges, head and hands on their trackers, the
-   elbows onto their hinges; FK with the display IK, the upper-body pass and the
-   hinges run in the backend's pool, ``Pool.emit``, ``Pool.upper_body``, ``Pool.hinge``)
+5. emit frame ``e = n - d`` per player (``d``: :attr:`EngineConfig.delay`; 0, the
+   newest frame, unless ``delayed_emission``): the current sample's pose, or during a
+   transition the decoder re-run on the interpolated latent and hidden state (one
+   more batched call), through the shown pose's passes
+   (:func:`posecast.body.pipeline.show`, docs/engine.md; FK with the display IK, the
+   upper-body pass and the hinges run in the backend's pool), then a forecasting
+   player's forecast (:mod:`.forecasting`)
 
 The engine is pure: frames go in with :meth:`Engine.push`, :meth:`Engine.tick`
-returns poses and events (:mod:`posecast.online.engine.types`). No sockets, no
-clocks, no threads; steps 2 and 3 are a backend's :class:`~posecast.online.engine.ports.StepDecoder`
-and :class:`~posecast.online.engine.ports.Pool`, which arrive built
-(:func:`posecast.online.inference.loader.load_engine` loads the shipped models on the backend
-named). One engine serves one model (one layout);
-:class:`posecast.online.engine.multi.MultiEngine` batches each model's players together
-when a server serves several. The ``sites`` model serves every tracker set
-(:mod:`posecast.tracking.sites`) in one batch: a player's frame has one row per site
-(absent ones ignored), its features carry which sites it tracks and how, and its
-pelvis is its waist tracker's when the set has a positional waist, else the decoder's.
+returns poses and events (:mod:`posecast.online.engine.types`); no sockets, clocks or
+threads. Steps 2 and 3 are a backend's :class:`~.ports.StepDecoder` and
+:class:`~.ports.Pool`, which arrive built (:func:`posecast.online.inference.loader.
+load_engine`). One engine serves one model (one layout); :class:`.multi.MultiEngine`
+batches each model's players when a server serves several. The ``sites`` model serves
+every tracker set (:mod:`posecast.tracking.sites`) in one batch: a player's frame has
+one row per site, its features carry which sites it tracks and how, and its pelvis is
+its waist tracker's when the set has a positional waist, else the decoder's.
 
 Look-ahead (paper Sec. 3.2.4): each player keeps a ring of ``tau + 1`` frames of
 inputs, pre-step hidden states and raw outputs for all samples. An outlier found at
 frame ``n`` starts a transition whose first interpolated frame is
-``n - min(tau, T) + 1``, none of which has been emitted yet; with ``tau = T`` the
-new sample is fully in place exactly at the frame where the outlier would have shown.
+``n - min(tau, T) + 1``: with ``delayed_emission`` and ``tau = T`` (the paper) the new
+sample is in place where the outlier would have shown, every pose ``tau`` frames late;
+without it frame ``n`` shows at once, ``min(tau, T) / T`` into the blend (docs/latency.md).
 """
 
 from __future__ import annotations
@@ -48,11 +45,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from posecast.body.forecast import MAX_FORECAST_MS
 from posecast.body.pelvis import pelvis_poses
 from posecast.body.pipeline import Decoded, ShownState, show
 from posecast.geometry.rotations import quat2mat
 from posecast.online.engine.calibration import Calibration, WaistFilter, recalibrate
 from posecast.online.engine.config import EngineConfig
+from posecast.online.engine.forecasting import HISTORY, step_forecast
 from posecast.online.engine.ports import Pool, PoolIK, StepDecoder
 from posecast.online.engine.ring import Fed, pelvis_neighbours, rest_frame, write_inputs
 from posecast.online.engine.selectors import (
@@ -101,6 +100,8 @@ class _Player:
     missing: int = 0
     stale: bool = False
     transitions: int = 0
+    forecast_ms: float = 0.0  # poses predicted this far ahead (body.forecast)
+    shown: int = 0  # frames of shown history kept for the forecast (at most HISTORY)
 
 
 class Engine:
@@ -136,7 +137,7 @@ class Engine:
         rows = self.layout.rows
         N = self.cfg.samples
         # Ring rows: tau + 1 frames of history, plus the row the decoder writes the next
-        # hidden states into while frame n - tau is still being emitted.
+        # hidden states into while frame n - d (d <= tau) is still being emitted.
         L = self._ring = self.cfg.lookahead + 2
         self._tick = 0
         self.slots = SlotArrays(
@@ -166,6 +167,9 @@ class Engine:
                 "kinds": ((rows,), np.int8),  # sites: each row's Kind (0 elsewhere)
                 "ring_rootm": ((3, 3), np.float32, L),  # the waist's rotation (waist layouts)
                 "ring_seq": ((), np.int64, L),
+                # The last shown poses, newest last, of players with a forecast.
+                "fc_pos": ((HISTORY, NUM_JOINTS, 3), np.float32),
+                "fc_rot": ((HISTORY, NUM_JOINTS, 4), np.float32),
                 "ring_held": ((), np.bool_, L),
             },
             capacity,
@@ -268,6 +272,17 @@ class Engine:
         s["ring_pos"][:, k], s["ring_quat"][:, k] = pos, q
         for name in ("ik_lock_pos", "disp_lock_pos", "disp_toe_xz", "disp_reach"):
             s[name][k] *= ratio
+        p.shown = 0  # the forecast's velocities start again in the new calibration
+
+    def set_forecast(self, player: str, ms: float) -> None:
+        """Stream ``player``'s poses predicted ``ms`` (0 to 100; 0: none) ahead of their
+        frame, from its last ``HISTORY`` shown poses since this call or its last
+        recalibration (:mod:`.forecasting`; a pose's ``ahead_ms`` says how far)."""
+        if not 0.0 <= ms <= MAX_FORECAST_MS:  # NaN fails too
+            raise ValueError(f"forecast_ms must be in [0, {MAX_FORECAST_MS:g}]")
+        p = self.players[player]
+        if ms != p.forecast_ms:
+            p.forecast_ms, p.shown = float(ms), 0
 
     def push(self, player: str, frame: TrackerFrame) -> None:
         """Offer the newest frame; a newer push before the tick replaces it."""
@@ -402,10 +417,8 @@ class Engine:
 
     def _floor_check(self, scores: F64, positions: F32) -> F64:
         """``scores (P, N)`` with ``+inf`` for every sample out of its player's pool this
-        frame (``EngineConfig.floor_select``; :func:`.selectors.off_the_floor`).
-        The anomaly error judges a pose in the character frame and cannot see the
-        floor; without the check SSI moved crouching players onto straight-legged
-        samples whose feet then showed half a metre under it (docs/evaluation.md)."""
+        frame (``EngineConfig.floor_select``; :func:`.selectors.off_the_floor`: the
+        anomaly error cannot see the floor, docs/evaluation.md)."""
         if not (self.cfg.floor_select and self.cfg.floor_ik):
             return scores
         return np.asarray(off_the_floor(scores, positions), np.float64)
@@ -452,9 +465,9 @@ class Engine:
         return len(moves)
 
     def _emit(self) -> list[PoseOut]:
-        tau, T = self.cfg.lookahead, self.cfg.transition_frames
+        d, T = self.cfg.delay, self.cfg.transition_frames
         s = self.slots
-        k = (self._tick - tau) % self._ring  # ring row of frame n - tau, for every player
+        k = (self._tick - d) % self._ring  # ring row of frame n - d, for every player
         emit: list[tuple[_Player, int, float]] = []  # player, sample, weight
         # Frame e is the player's first, or its first real one after rest frames (a
         # player added before its first frame stands at the origin): no frame e - 1.
@@ -462,7 +475,7 @@ class Engine:
         before = s["ring_seq"][(k - 1) % self._ring]
         for pid in self._order:
             p = self.players[pid]
-            e = p.frames - tau
+            e = p.frames - d
             if e < 0:
                 continue
             firsts.append(e == 0 or bool(before[p.slot] < 0 <= s["ring_seq"][k, p.slot]))
@@ -513,13 +526,13 @@ class Engine:
         waist = self._waist_rows(slots)
         root_mat, root_pos, _ = pelvis_poses(pos, quat, s["ring_rootm"][k, slots], root, 1, waist)
         neighbours = None
-        if self.cfg.pelvis_smoothing and tau >= 1:
+        if self.cfg.pelvis_smoothing:
             own = None  # the emitted samples' own pelvises, where a blend replaced them
             if root_own is not None:
                 own = pelvis_poses(pos, quat, s["ring_rootm"][k, slots], root_own, 1, waist)[:2]
             neighbours = pelvis_neighbours(
                 s, k, self._ring, self.layout, slots, samples, np.array(firsts), own,
-                (root_mat, root_pos), waist,
+                (root_mat, root_pos), waist, ahead=d >= 1,
             )  # fmt: skip
         free = None  # per emitted pose, whether its pelvis is the decoder's guess
         if self.layout.predicts_root:
@@ -547,6 +560,9 @@ class Engine:
         positions = wp / scale[:, None, None]
         seqs, held = s["ring_seq"][k, slots].tolist(), s["ring_held"][k, slots].tolist()
         scales = scale.astype(np.float64).tolist()
+        ahead = step_forecast(
+            self.slots, [p for p, _, _ in emit], slots, positions, rotations, self.cfg.fps
+        )
         return [
             PoseOut(
                 player=p.id,
@@ -559,6 +575,7 @@ class Engine:
                 held=held[i],
                 reach_limited=limited[i],
                 scale=scales[i],
+                ahead_ms=ahead[i],
             )
             for i, (p, sample, w) in enumerate(emit)
         ]

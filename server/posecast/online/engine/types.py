@@ -30,7 +30,8 @@ class TrackerFrame:
 
 @dataclass(frozen=True)
 class PoseOut:
-    """A reconstructed pose, ``tau`` frames behind the newest input."""
+    """A reconstructed pose: the newest input's frame, or ``tau`` frames behind it
+    with ``EngineConfig.delayed_emission`` (``seq`` says which)."""
 
     player: str
     seq: int  # seq of the tracker frame this pose is for
@@ -47,6 +48,9 @@ class PoseOut:
     # The calibration scale the positions were divided by (canonical metres per user
     # metre): FK of the rotations with the reference bones / scale gives the positions.
     scale: float = 1.0
+    # A forecast (Engine.set_forecast): the pose is predicted this many milliseconds
+    # after frame ``seq``'s time, not frame ``seq``'s own (0: it is frame ``seq``'s).
+    ahead_ms: float = 0.0
 
 
 class EngineEventKind(StrEnum):
