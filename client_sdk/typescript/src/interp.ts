@@ -226,15 +226,18 @@ function fit(dst: Float64Array | undefined, src: ArrayLike<number>): Float64Arra
 /** `out` (length 4 * J) set to the per-joint slerp of `q0` and `q1` at `u` (see {@link quatSlerp}). */
 function slerpInto(q0: ArrayLike<number>, q1: ArrayLike<number>, u: number, out: Float64Array): void {
   for (let j = 0; j < q0.length; j += 4) {
-    const n0 = Math.hypot(q0[j]!, q0[j + 1]!, q0[j + 2]!, q0[j + 3]!);
-    const n1 = Math.hypot(q1[j]!, q1[j + 1]!, q1[j + 2]!, q1[j + 3]!);
+    // Not Math.hypot: a call to it boxes its arguments (garbage every frame).
+    const n0 = Math.sqrt(q0[j]! * q0[j]! + q0[j + 1]! * q0[j + 1]! + q0[j + 2]! * q0[j + 2]! + q0[j + 3]! * q0[j + 3]!);
+    const n1 = Math.sqrt(q1[j]! * q1[j]! + q1[j + 1]! * q1[j + 1]! + q1[j + 2]! * q1[j + 2]! + q1[j + 3]! * q1[j + 3]!);
     let dot = 0;
     for (let k = 0; k < 4; k++) dot += (q0[j + k]! / n0) * (q1[j + k]! / n1);
     const sign = dot < 0 ? -1 : 1; // the same rotation, on q0's hemisphere
     const omega = Math.acos(Math.min(Math.abs(dot), 1));
     const sin = Math.sin(omega);
     let w0 = 1 - u;
-    let w1 = u;
+    // `+ 0` makes w1 a number computed here: merged with the sine branch, the argument
+    // itself would make V8 box the sine's result on every call (garbage every frame).
+    let w1 = u + 0;
     if (sin >= 1e-6) {
       // Nearly equal rotations keep the lerp weights: the sines would cancel badly.
       w0 = Math.sin((1 - u) * omega) / sin;
@@ -498,7 +501,10 @@ export class PoseBuffer {
     if (b.keyframe && seqDelta(b.seq, a.seq) <= 0) return true;
     const ap = a.positions; // joint 0, the pelvis
     const bp = b.positions;
-    return Math.hypot(bp[0]! - ap[0]!, bp[1]! - ap[1]!, bp[2]! - ap[2]!) > this.options.teleportM;
+    const dx = bp[0]! - ap[0]!;
+    const dy = bp[1]! - ap[1]!;
+    const dz = bp[2]! - ap[2]!;
+    return Math.sqrt(dx * dx + dy * dy + dz * dz) > this.options.teleportM;
   }
 
   private hold(a: Entry, tau: number, out: PoseSample): true {
@@ -508,7 +514,7 @@ export class PoseBuffer {
     if (q !== undefined) {
       const r = out.rotationData;
       for (let j = 0; j < q.length; j += 4) {
-        const n = Math.hypot(q[j]!, q[j + 1]!, q[j + 2]!, q[j + 3]!);
+        const n = Math.sqrt(q[j]! * q[j]! + q[j + 1]! * q[j + 1]! + q[j + 2]! * q[j + 2]! + q[j + 3]! * q[j + 3]!);
         for (let k = 0; k < 4; k++) r[j + k] = q[j + k]! / n;
       }
     }

@@ -46,7 +46,9 @@ export class RenderDelay {
   private readonly sorted: Float64Array; // the same needs, ascending, in [0, count)
   private count = 0;
   private next = 0;
-  private time: number | undefined; // the latest query time
+  private time = 0; // the latest query time, while hasTime
+  private hasTime = false;
+  private target = Number.NaN; // the target (NaN: no need yet); numbers only, so V8 boxes none
 
   constructor(private readonly o: RenderDelayOptions) {
     this.startS = Math.min(Math.max(o.startS, o.minS), o.maxS);
@@ -62,14 +64,12 @@ export class RenderDelay {
 
   /** The delay aimed at (undefined before the first need). */
   get targetS(): number | undefined {
-    if (this.count === 0) return undefined;
-    const q = nearestRank(this.sorted, this.count, this.o.quantile);
-    return Math.min(Math.max(q + this.o.marginS, this.o.minS), this.o.maxS);
+    return this.count === 0 ? undefined : this.target;
   }
 
-  /** Whether poses first seen at query `time` tell their arrival. */
+  /** Whether poses first seen at query `time` tell their arrival (false before any query). */
   measures(time: number, gapS: number): boolean {
-    return this.time !== undefined && time - this.time >= 0 && time - this.time <= gapS;
+    return this.hasTime && time - this.time >= 0 && time - this.time <= gapS;
   }
 
   /** Keep one pose's need, forgetting the oldest beyond `window`. */
@@ -88,18 +88,22 @@ export class RenderDelay {
     const i = this.upperBound(needS, n);
     s.copyWithin(i + 1, i, n);
     s[i] = needS;
+    const q = nearestRank(s, this.count, this.o.quantile);
+    this.target = Math.min(Math.max(q + this.o.marginS, this.o.minS), this.o.maxS);
   }
 
-  /** Move the delay toward the target for the query time `time`; the delay. */
-  advance(time: number): number {
-    const target = this.targetS;
-    if (this.time !== undefined && time > this.time && target !== undefined) {
+  /** Move the delay ({@link delayS}) toward the target for the query time `time`. */
+  advance(time: number): void {
+    const target = this.target;
+    if (this.hasTime && time > this.time && this.count > 0) {
       const step = this.o.slew * (time - this.time);
       if (Math.abs(target - this.delayS) <= step) this.delayS = target;
       else this.delayS += target > this.delayS ? step : -step;
     }
-    if (this.time === undefined || time > this.time) this.time = time;
-    return this.delayS;
+    if (!this.hasTime || time > this.time) {
+      this.time = time;
+      this.hasTime = true;
+    }
   }
 
   /** Forget every need and go back to the start delay. */
@@ -107,7 +111,8 @@ export class RenderDelay {
     this.count = 0;
     this.next = 0;
     this.delayS = this.startS;
-    this.time = undefined;
+    this.hasTime = false;
+    this.target = Number.NaN;
   }
 
   private lowerBound(v: number, n: number): number {

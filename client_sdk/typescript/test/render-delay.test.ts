@@ -78,12 +78,16 @@ test("the window keeps the last needs sorted", () => {
 test("slew, bounds, measures and reset", () => {
   const rd = new RenderDelay({ startS: 0.1, minS: 0.02, maxS: 0.25, quantile: 1, window: 4, marginS: 0, slew: 0.05 });
   assert.equal(rd.measures(10, 0.25), false); // the first query
-  assert.equal(rd.advance(10), 0.1);
+  rd.advance(10);
+  assert.equal(rd.delayS, 0.1);
   assert.ok(rd.measures(10.1, 0.25) && !rd.measures(10.5, 0.25) && !rd.measures(9.9, 0.25));
   rd.observe(0.03);
-  assert.ok(Math.abs(rd.advance(11) - 0.05) < 1e-12);
-  assert.ok(Math.abs(rd.advance(10.5) - 0.05) < 1e-12); // an earlier time moves nothing
-  assert.equal(rd.advance(11.5), 0.03);
+  rd.advance(11);
+  assert.ok(Math.abs(rd.delayS - 0.05) < 1e-12);
+  rd.advance(10.5); // an earlier time moves nothing
+  assert.ok(Math.abs(rd.delayS - 0.05) < 1e-12);
+  rd.advance(11.5);
+  assert.equal(rd.delayS, 0.03);
   rd.observe(1);
   assert.equal(rd.targetS, 0.25);
   rd.reset();
