@@ -55,9 +55,12 @@
 
 import type { ClientEvent } from "./events.js";
 import { seqDelta } from "./messages.js";
+import { type InterpolatedPose, PoseSample, type SampleMode } from "./pose-sample.js";
 import { RenderDelay } from "./render-delay.js";
+import { slerpInto } from "./slerp.js";
 
-export type SampleMode = "interpolate" | "extrapolate" | "hold";
+export { type InterpolatedPose, PoseSample, type SampleMode } from "./pose-sample.js";
+export { quatSlerp } from "./slerp.js";
 
 /** What a buffer reads from a pose; a decoded `Pose` fits. */
 export interface PoseInput {
@@ -67,69 +70,6 @@ export interface PoseInput {
   readonly t: number;
   readonly positions: ArrayLike<number>;
   readonly rotations?: ArrayLike<number> | undefined;
-}
-
-/** One player's pose as shown at `t` (the query time minus the delay). */
-export interface InterpolatedPose {
-  readonly player: string;
-  /** Server time shown, seconds. */
-  readonly t: number;
-  /** `seq` of the received pose at or before `t` (the first one while holding it). */
-  readonly seq: number;
-  /** World positions, metres, joint order (length 3 * J). */
-  readonly positions: Float64Array;
-  /** World rotations, unit xyzw (length 4 * J); absent when the poses had none. */
-  readonly rotations?: Float64Array;
-  readonly mode: SampleMode;
-}
-
-/**
- * A caller-owned sample that {@link PoseBuffer.poseAtInto} fills in place: its arrays
- * are reused from frame to frame (reallocated only when the joint count changes), so
- * sampling every player every frame allocates nothing once warm.
- */
-export class PoseSample {
-  player = "";
-  /** Server time shown, seconds. */
-  t = 0;
-  seq = 0;
-  mode: SampleMode = "hold";
-  /** World positions, metres (length 3 * J). */
-  positions = new Float64Array(0);
-  /** World rotations, unit xyzw (length 4 * J); meaningful while `hasRotations`. */
-  rotationData = new Float64Array(0);
-  hasRotations = false;
-  /** @internal the Interpolator frame that last filled it */
-  frame = -1;
-
-  /** The rotations, or undefined when the poses had none. */
-  get rotations(): Float64Array | undefined {
-    return this.hasRotations ? this.rotationData : undefined;
-  }
-
-  /** A plain {@link InterpolatedPose} with copies of the arrays. */
-  toPose(): InterpolatedPose {
-    const base = { player: this.player, t: this.t, seq: this.seq, positions: this.positions.slice(), mode: this.mode };
-    return this.hasRotations ? { ...base, rotations: this.rotationData.slice() } : base;
-  }
-
-  /** @internal size the arrays for `nPos` position and `nRot` rotation numbers */
-  shape(nPos: number, nRot: number): void {
-    if (this.positions.length !== nPos) this.positions = new Float64Array(nPos);
-    this.hasRotations = nRot > 0;
-    if (this.hasRotations && this.rotationData.length !== nRot) this.rotationData = new Float64Array(nRot);
-  }
-
-  /** @internal */
-  copyFrom(o: PoseSample): void {
-    this.shape(o.positions.length, o.hasRotations ? o.rotationData.length : 0);
-    this.player = o.player;
-    this.t = o.t;
-    this.seq = o.seq;
-    this.mode = o.mode;
-    this.positions.set(o.positions);
-    if (o.hasRotations) this.rotationData.set(o.rotationData);
-  }
 }
 
 export interface InterpOptions {
@@ -221,48 +161,6 @@ function fit(dst: Float64Array | undefined, src: ArrayLike<number>): Float64Arra
   if (dst === undefined || dst.length !== src.length) return Float64Array.from(src);
   for (let i = 0; i < src.length; i++) dst[i] = src[i]!;
   return dst;
-}
-
-/** `out` (length 4 * J) set to the per-joint slerp of `q0` and `q1` at `u` (see {@link quatSlerp}). */
-function slerpInto(q0: ArrayLike<number>, q1: ArrayLike<number>, u: number, out: Float64Array): void {
-  for (let j = 0; j < q0.length; j += 4) {
-    // Not Math.hypot: a call to it boxes its arguments (garbage every frame).
-    const n0 = Math.sqrt(q0[j]! * q0[j]! + q0[j + 1]! * q0[j + 1]! + q0[j + 2]! * q0[j + 2]! + q0[j + 3]! * q0[j + 3]!);
-    const n1 = Math.sqrt(q1[j]! * q1[j]! + q1[j + 1]! * q1[j + 1]! + q1[j + 2]! * q1[j + 2]! + q1[j + 3]! * q1[j + 3]!);
-    let dot = 0;
-    for (let k = 0; k < 4; k++) dot += (q0[j + k]! / n0) * (q1[j + k]! / n1);
-    const sign = dot < 0 ? -1 : 1; // the same rotation, on q0's hemisphere
-    const omega = Math.acos(Math.min(Math.abs(dot), 1));
-    const sin = Math.sin(omega);
-    let w0 = 1 - u;
-    // `+ 0` makes w1 a number computed here: merged with the sine branch, the argument
-    // itself would make V8 box the sine's result on every call (garbage every frame).
-    let w1 = u + 0;
-    if (sin >= 1e-6) {
-      // Nearly equal rotations keep the lerp weights: the sines would cancel badly.
-      w0 = Math.sin((1 - u) * omega) / sin;
-      w1 = Math.sin(u * omega) / sin;
-    }
-    let norm = 0;
-    for (let k = 0; k < 4; k++) {
-      const v = (w0 * q0[j + k]!) / n0 + (sign * w1 * q1[j + k]!) / n1;
-      out[j + k] = v;
-      norm += v * v;
-    }
-    norm = Math.sqrt(norm);
-    for (let k = 0; k < 4; k++) out[j + k] = out[j + k]! / norm;
-  }
-}
-
-/**
- * Spherical interpolation of every xyzw quaternion in `q0` and `q1` (length 4 * J) on
- * the shorter arc; `u` outside [0, 1] extrapolates along the same great circle.
- * Inputs need not be unit.
- */
-export function quatSlerp(q0: ArrayLike<number>, q1: ArrayLike<number>, u: number): Float64Array {
-  const out = new Float64Array(q0.length);
-  slerpInto(q0, q1, u, out);
-  return out;
 }
 
 /** The jitter buffer of one player (see the module comment for the rules). */
