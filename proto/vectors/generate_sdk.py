@@ -1,5 +1,5 @@
-"""Write the SDK behaviour tables ``proto/vectors/sdk/interp.json``, ``conventions.json``
-and ``clock.json``.
+"""Write the SDK behaviour tables ``proto/vectors/sdk/interp.json``, ``delay.json``,
+``conventions.json`` and ``clock.json``.
 
     .venv/bin/python proto/vectors/generate_sdk.py           # rewrite the files
     .venv/bin/python proto/vectors/generate_sdk.py --check   # exit 1 if they are stale
@@ -13,7 +13,11 @@ flag, whether the buffer keeps it) or a query (a server time and the pose expect
 then, or ``null``). The expected poses are worked out here from the rules with other
 math than the SDKs use: slerp as ``q0 * exp(u * log(q0^-1 q1))`` on the server's
 axis-angle helpers (the SDKs use the sine formula), extrapolation as the same
-exponential with ``u > 1``.
+exponential with ``u > 1``. These cases pin the rules at a fixed delay
+(``adaptive: false``).
+
+``delay.json``: the adaptive render delay on simulated arrival sequences
+(``_sdk_delay.py``).
 
 ``conventions.json``: each engine's frame as up/forward/right axes and a unit, poses
 converted by the rotation-matrix route ``R' = M R M^T`` (the SDKs flip quaternion
@@ -44,19 +48,15 @@ from posecast.geometry.rotations import aa2quat, mat2quat, quat2aa, quat2mat, qu
 from posecast.skeleton import Joint
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))  # the helper modules beside this script
+from _sdk_delay import DELAY_DEFAULTS, render_delay_table  # noqa: E402
+
 OUT = HERE / "sdk"
 F64 = NDArray[np.float64]
 J = len(Joint)
 DT = 1.0 / 60.0
 T0 = 100.0  # server time of the first pose, seconds
-DEFAULTS = {
-    "delay_s": 0.1,
-    "max_extrapolate_s": 0.1,
-    "teleport_m": 1.0,
-    "gap_s": 0.25,
-    "capacity": 32,
-    "correction_s": 0.05,
-}
+DEFAULTS = {**DELAY_DEFAULTS, "adaptive": False}  # the rules, at a fixed delay
 TOLERANCE = {"position_m": 1e-9, "rotation": 1e-9}
 
 
@@ -743,6 +743,7 @@ def _render(v: Any, depth: int) -> str:
 def main(argv: list[str]) -> int:
     outputs = {
         OUT / "interp.json": render(interp()),
+        OUT / "delay.json": render_delay_table(),
         OUT / "conventions.json": render(conventions()),
         OUT / "clock.json": render(clock()),
     }

@@ -22,6 +22,17 @@ namespace Posecast.Client.Tests
             return new PlayerPose { Player = "p", Seq = p["seq"].L, T = p["t"].D, Positions = pos.ToArray(), Rotations = rot };
         }
 
+        /// <summary>A shared table's config (Python names); every knob must be named.</summary>
+        public static InterpConfig ConfigOf(Json cfg)
+        {
+            T.Equal(13, cfg.Count, "every knob is named");
+            return new InterpConfig(cfg["delay_s"].D, cfg["max_extrapolate_s"].D, cfg["teleport_m"].D,
+                                    cfg["gap_s"].D, (int)cfg["capacity"].L, cfg["correction_s"].D,
+                                    cfg["adaptive"].Bool, cfg["min_delay_s"].D, cfg["max_delay_s"].D,
+                                    cfg["delay_quantile"].D, (int)cfg["delay_window"].L, cfg["delay_margin_s"].D,
+                                    cfg["delay_slew"].D);
+        }
+
         public static void Register()
         {
             var table = T.Load("proto", "vectors", "sdk", "interp.json");
@@ -31,10 +42,7 @@ namespace Posecast.Client.Tests
             {
                 T.Run("interp/" + c["name"].S, () =>
                 {
-                    var cfg = c["config"];
-                    T.Equal(6, cfg.Count, "every knob is named");
-                    var buf = new PoseBuffer(new InterpConfig(cfg["delay_s"].D, cfg["max_extrapolate_s"].D, cfg["teleport_m"].D,
-                                                              cfg["gap_s"].D, (int)cfg["capacity"].L, cfg["correction_s"].D));
+                    var buf = new PoseBuffer(ConfigOf(c["config"]));
                     int k = 0;
                     foreach (var step in c["steps"].Items)
                     {
@@ -68,18 +76,24 @@ namespace Posecast.Client.Tests
                 });
             }
             T.Run("interp: the table exercises interpolate, extrapolate and hold", () => T.Equal(3, modes.Count, "modes"));
-            T.Run("interp: the table's first config is the SDK's defaults", () =>
+            T.Run("interp: the table's first config is the SDK's defaults at a fixed delay", () =>
             {
                 var cfg = table["cases"][0]["config"];
                 var d = InterpConfig.Default;
                 T.True(cfg["delay_s"].D == d.DelayS && cfg["max_extrapolate_s"].D == d.MaxExtrapolateS && cfg["teleport_m"].D == d.TeleportM
                        && cfg["gap_s"].D == d.GapS && cfg["capacity"].L == d.Capacity && cfg["correction_s"].D == d.CorrectionS, "defaults");
+                T.True(!cfg["adaptive"].Bool && d.Adaptive, "the rules are pinned at a fixed delay; the default adapts");
             });
             T.Run("interp: bad configs are refused", () =>
             {
                 T.Throws<ArgumentException>(() => new InterpConfig(delayS: -1), "negative delay");
                 T.Throws<ArgumentException>(() => new InterpConfig(capacity: 1), "capacity 1");
                 T.Throws<ArgumentException>(() => new InterpConfig(gapS: 0), "gap 0");
+                T.Throws<ArgumentException>(() => new InterpConfig(minDelayS: 0.3), "min above max");
+                T.Throws<ArgumentException>(() => new InterpConfig(maxDelayS: double.PositiveInfinity), "infinite max");
+                T.Throws<ArgumentException>(() => new InterpConfig(delayQuantile: 0), "quantile 0");
+                T.Throws<ArgumentException>(() => new InterpConfig(delayWindow: 0), "window 0");
+                T.Throws<ArgumentException>(() => new InterpConfig(delaySlew: -0.05), "negative slew");
             });
             T.Run("interp: the Interpolator routes by player, forgets on leave, clears on welcome, caps players", () =>
             {

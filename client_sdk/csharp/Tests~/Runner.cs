@@ -118,6 +118,7 @@ namespace Posecast.Client.Tests
                 new KeyValuePair<string, Action>("vectors", VectorTests.Register),
                 new KeyValuePair<string, Action>("codec", CodecTests.Register),
                 new KeyValuePair<string, Action>("interp", InterpTests.Register),
+                new KeyValuePair<string, Action>("delay", DelayTests.Register),
                 new KeyValuePair<string, Action>("clock", ClockTests.Register),
                 new KeyValuePair<string, Action>("session", SessionTests.Register),
                 new KeyValuePair<string, Action>("connect", ConnectTests.Register),

@@ -60,11 +60,12 @@ def test_interp_vector(case: dict[str, Any]) -> None:
 
 @needs_table
 def test_the_table_config_is_the_sdk_config() -> None:
-    """Every case names every knob, with the SDK's own names and defaults."""
+    """Every case names every knob, with the SDK's own names and defaults; the rules
+    are pinned at a fixed delay (``delay.json`` pins the adaptive one)."""
     names = {f.name for f in fields(InterpConfig)}
     defaults = {f.name: f.default for f in fields(InterpConfig)}
     assert all(set(c["config"]) == names for c in VECTORS["cases"])
-    assert VECTORS["cases"][0]["config"] == defaults
+    assert VECTORS["cases"][0]["config"] == {**defaults, "adaptive": False}
 
 
 def axis_angle(axis: list[float], angle: float) -> np.ndarray:
@@ -101,6 +102,13 @@ def test_slerp_turns_at_a_constant_rate_on_the_short_arc() -> None:
         {"gap_s": -1.0},
         {"capacity": 1},
         {"correction_s": -0.01},
+        {"min_delay_s": 0.3},  # above max_delay_s
+        {"max_delay_s": math.inf},
+        {"delay_quantile": 0.0},
+        {"delay_quantile": 1.5},
+        {"delay_window": 0},
+        {"delay_slew": -0.05},
+        {"delay_margin_s": math.nan},
     ],
 )
 def test_bad_config_is_refused(bad: dict[str, float]) -> None:
@@ -143,12 +151,13 @@ def test_memory_stays_bounded_over_a_long_stream() -> None:
 
 
 def test_arrival_jitter_under_the_delay_does_not_show() -> None:
-    """Seeded arrival jitter of 0-40 ms under the 100 ms delay: the stream sampled at
-    90 Hz is the clean one, exactly, because the buffer reads server times only."""
+    """Seeded arrival jitter of 0-40 ms under a fixed 100 ms delay: the stream sampled
+    at 90 Hz is the clean one, exactly, because the buffer reads server times only."""
     rng = np.random.default_rng(3)
     sent = [walk_pose("ada", k, 5.0 + k / 60) for k in range(120)]
     arrive = [p.t + rng.uniform(0.0, 0.040) for p in sent]
-    jittery, clean = PoseBuffer(), PoseBuffer()
+    fixed = InterpConfig(adaptive=False)
+    jittery, clean = PoseBuffer(fixed), PoseBuffer(fixed)
     order = sorted(range(len(sent)), key=lambda k: arrive[k])
     nxt = 0
     for frame in range(150):

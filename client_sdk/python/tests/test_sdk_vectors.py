@@ -39,6 +39,27 @@ def test_tables_are_well_formed() -> None:
             elif step["expect"] is not None:
                 modes.add(step["expect"]["mode"])
     assert modes == {"interpolate", "extrapolate", "hold"}  # every rule is exercised
+    delay = json.loads((VECTORS / "sdk" / "delay.json").read_text("utf-8"))
+    names = [c["name"] for c in delay["cases"]]
+    assert len(names) == len(set(names))
+    for case in delay["cases"]:
+        cfg, prev = case["config"], None
+        for step in case["steps"]:
+            assert ("push" in step) != ("query" in step)
+            if "query" not in step or step["expect"] is None:
+                continue
+            e = step["expect"]
+            assert e["mode"] in {"interpolate", "extrapolate", "hold"}
+            if not cfg["adaptive"]:
+                assert e["delay_s"] == cfg["delay_s"] and e["target_s"] is None
+                continue
+            assert cfg["min_delay_s"] - 1e-12 <= e["delay_s"] <= cfg["max_delay_s"] + 1e-12
+            if prev is not None and step["query"] > prev[0]:  # the slew bound, time forward
+                dt = step["query"] - prev[0]
+                assert abs(e["delay_s"] - prev[1]) <= cfg["delay_slew"] * dt + 1e-9, case["name"]
+                assert e["t"] > prev[2], case["name"]  # the shown time goes on
+            if prev is None or step["query"] > prev[0]:
+                prev = (step["query"], e["delay_s"], e["t"])
     conv = json.loads((VECTORS / "sdk" / "conventions.json").read_text("utf-8"))
     assert {c["engine"] for c in conv["cases"]} == set(conv["engines"])
     assert len(conv["bones"]) == 19

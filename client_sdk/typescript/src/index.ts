@@ -9,7 +9,8 @@
  * - {@link encode} / {@link decode}: the canonical codec, for tools and tests.
  * - {@link decodeRecords}, {@link fk}: v2 pose records against an avatar's state; FK.
  * - Errors: one class per wire code ({@link ProtocolError} and subclasses).
- * - {@link Interpolator} / {@link PoseBuffer}: a jitter buffer, poses at any display rate.
+ * - {@link Interpolator} / {@link PoseBuffer}: a jitter buffer, poses at any display rate,
+ *   its render delay adapting to the measured jitter ({@link RenderDelay}).
  * - {@link poseToEngine}, {@link BONES}: Unity, Unreal and three.js frames; bone names.
  */
 
@@ -100,9 +101,11 @@ export {
 export {
   Interpolator,
   PoseBuffer,
+  PoseSample,
   quatSlerp,
   type InterpOptions,
   type InterpolatedPose,
   type PoseInput,
   type SampleMode,
 } from "./interp.js";
+export { nearestRank, RenderDelay, type RenderDelayOptions } from "./render-delay.js";

@@ -6,8 +6,12 @@
  *
  * Poses arrive at uneven moments, but each carries the server time `t` of the tick
  * that made it. A {@link PoseBuffer} keeps a player's recent poses ordered by `t` and
- * shows them a fixed `delayS` late on the server's timeline, so arrival jitter up to
- * the delay never shows:
+ * shows them a render delay late on the server's timeline, so arrival jitter up to
+ * the delay never shows. The delay adapts (`adaptive`, the default): it follows the
+ * jitter the buffer measures, the smallest delay at which 99 % of the recent pose
+ * intervals interpolate, within `minDelayS` to `maxDelayS`, changing by at most 5 %
+ * of real time (`render-delay.ts`, pinned by `proto/vectors/sdk/delay.json`);
+ * `adaptive: false` keeps it at `delayS`:
  *
  * ```ts
  * const buffers = new Interpolator();                  // one PoseBuffer per player
@@ -21,8 +25,8 @@
  * clock estimate steps by up to tens of ms when its best ping leaves the window, and
  * the display clock slews such steps instead of popping every avatar.
  *
- * At query time `time` the buffer shows `tau = time - delayS`. With `a` the newest
- * pose at or before `tau` and `b` the one after it:
+ * At query time `time` the buffer shows `tau = time - delay` ({@link PoseBuffer.delayS}).
+ * With `a` the newest pose at or before `tau` and `b` the one after it:
  *
  * 1. **interpolate**: positions lerp and rotations slerp (shortest arc) from a to b.
  * 2. **snap**: b starts a new segment when its pelvis moved more than `teleportM`
@@ -43,12 +47,20 @@
  *
  * Memory: `capacity` poses per player, `maxPlayers` buffers per {@link Interpolator}.
  * Arrays: positions `3 * J` metres, rotations `4 * J` xyzw (unit on the way out).
+ *
+ * Without allocation: {@link PoseBuffer.poseAtInto} and {@link Interpolator.posesAtInto}
+ * write each frame into caller-owned {@link PoseSample}s (their arrays are reused);
+ * `poseAt` / `posesAt` copy such a sample into fresh objects.
  */
 
 import type { ClientEvent } from "./events.js";
 import { seqDelta } from "./messages.js";
+import { type InterpolatedPose, PoseSample, type SampleMode } from "./pose-sample.js";
+import { RenderDelay } from "./render-delay.js";
+import { slerpInto } from "./slerp.js";
 
-export type SampleMode = "interpolate" | "extrapolate" | "hold";
+export { type InterpolatedPose, PoseSample, type SampleMode } from "./pose-sample.js";
+export { quatSlerp } from "./slerp.js";
 
 /** What a buffer reads from a pose; a decoded `Pose` fits. */
 export interface PoseInput {
@@ -60,28 +72,31 @@ export interface PoseInput {
   readonly rotations?: ArrayLike<number> | undefined;
 }
 
-/** One player's pose as shown at `t` (the query time minus the delay). */
-export interface InterpolatedPose {
-  readonly player: string;
-  /** Server time shown, seconds. */
-  readonly t: number;
-  /** `seq` of the received pose at or before `t` (the first one while holding it). */
-  readonly seq: number;
-  /** World positions, metres, joint order (length 3 * J). */
-  readonly positions: Float64Array;
-  /** World rotations, unit xyzw (length 4 * J); absent when the poses had none. */
-  readonly rotations?: Float64Array;
-  readonly mode: SampleMode;
-}
-
 export interface InterpOptions {
-  /** Render delay, seconds behind the query time. Default 0.1. */
+  /**
+   * The render delay follows the measured arrival jitter (default true; see
+   * `render-delay.ts`); false: it stays `delayS`.
+   */
+  readonly adaptive?: boolean;
+  /** The fixed render delay, seconds, and the adaptive one's start (clamped to its bounds). Default 0.1. */
   readonly delayS?: number;
+  /** The adaptive delay's lower bound, seconds. Default 0.02 (a bit above a 60 Hz pose interval). */
+  readonly minDelayS?: number;
+  /** Its upper bound, seconds. Default 0.25. */
+  readonly maxDelayS?: number;
+  /** The share of recent pose intervals it lets interpolate whole (nearest rank). Default 0.99. */
+  readonly delayQuantile?: number;
+  /** The recent poses it measures. Default 256 (about 4 s at 60 Hz). */
+  readonly delayWindow?: number;
+  /** Added to that quantile, seconds. Default 0.002. */
+  readonly delayMarginS?: number;
+  /** The most it changes per second of query time. Default 0.05 (shown time at 0.95 to 1.05 of real speed). */
+  readonly delaySlew?: number;
   /** Longest carry past the newest pose before holding, seconds. Default 0.1. */
   readonly maxExtrapolateS?: number;
   /** A pelvis jump between consecutive poses beyond this snaps, metres. Default 1. */
   readonly teleportM?: number;
-  /** Consecutive poses further apart than this snap, seconds. Default 0.25. */
+  /** Consecutive poses further apart than this snap (and count toward no delay), seconds. Default 0.25. */
   readonly gapS?: number;
   /** Poses kept per player. Default 32 (a 0.5 s delay at 60 Hz). */
   readonly capacity?: number;
@@ -95,7 +110,14 @@ export interface InterpOptions {
 type Config = Required<InterpOptions>;
 
 const DEFAULTS: Config = {
+  adaptive: true,
   delayS: 0.1,
+  minDelayS: 0.02,
+  maxDelayS: 0.25,
+  delayQuantile: 0.99,
+  delayWindow: 256,
+  delayMarginS: 0.002,
+  delaySlew: 0.05,
   maxExtrapolateS: 0.1,
   teleportM: 1.0,
   gapS: 0.25,
@@ -105,7 +127,10 @@ const DEFAULTS: Config = {
 
 function config(options: InterpOptions): Config {
   const c: Config = { ...DEFAULTS, ...options };
-  for (const k of ["delayS", "maxExtrapolateS", "correctionS"] as const) {
+  const nonNegative = [
+    "delayS", "maxExtrapolateS", "correctionS", "minDelayS", "maxDelayS", "delayMarginS", "delaySlew",
+  ] as const;
+  for (const k of nonNegative) {
     if (!(Number.isFinite(c[k]) && c[k] >= 0)) throw new RangeError(`${k} must be finite and >= 0`);
   }
   for (const k of ["teleportM", "gapS"] as const) {
@@ -114,89 +139,28 @@ function config(options: InterpOptions): Config {
   if (!(Number.isInteger(c.capacity) && c.capacity >= 2)) {
     throw new RangeError("capacity must be an integer >= 2");
   }
+  if (c.minDelayS > c.maxDelayS) throw new RangeError("minDelayS must be <= maxDelayS");
+  if (!(c.delayQuantile > 0 && c.delayQuantile <= 1)) throw new RangeError("delayQuantile must be in (0, 1]");
+  if (!(Number.isInteger(c.delayWindow) && c.delayWindow >= 1)) {
+    throw new RangeError("delayWindow must be an integer >= 1");
+  }
   return c;
 }
 
 interface Entry {
-  readonly t: number;
-  readonly seq: number;
-  readonly keyframe: boolean;
-  readonly positions: Float64Array;
-  readonly rotations: Float64Array | undefined;
+  t: number;
+  seq: number;
+  keyframe: boolean;
+  positions: Float64Array;
+  rotations: Float64Array | undefined;
+  seen: boolean; // a query ran since it was pushed (its need is counted)
 }
 
-function unit(q: Float64Array): Float64Array {
-  const out = new Float64Array(q.length);
-  for (let j = 0; j < q.length; j += 4) {
-    const n = Math.hypot(q[j]!, q[j + 1]!, q[j + 2]!, q[j + 3]!);
-    for (let k = 0; k < 4; k++) out[j + k] = q[j + k]! / n;
-  }
-  return out;
-}
-
-function identities(n: number): Float64Array {
-  const out = new Float64Array(4 * n);
-  for (let j = 3; j < out.length; j += 4) out[j] = 1;
-  return out;
-}
-
-/** Hamilton products `a[j] * b[j]` of every xyzw quaternion (apply b, then a). */
-function quatMul(a: ArrayLike<number>, b: ArrayLike<number>): Float64Array {
-  const out = new Float64Array(a.length);
-  for (let j = 0; j < a.length; j += 4) {
-    const [x1, y1, z1, w1] = [a[j]!, a[j + 1]!, a[j + 2]!, a[j + 3]!];
-    const [x2, y2, z2, w2] = [b[j]!, b[j + 1]!, b[j + 2]!, b[j + 3]!];
-    out[j] = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2;
-    out[j + 1] = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2;
-    out[j + 2] = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2;
-    out[j + 3] = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2;
-  }
-  return out;
-}
-
-/** `a[j] * conj(b[j])`: the world turn from unit `b` to `a`. */
-function quatMulConj(a: ArrayLike<number>, b: ArrayLike<number>): Float64Array {
-  const conj = Float64Array.from(b);
-  for (let j = 0; j < conj.length; j += 4) {
-    conj[j] = -conj[j]!;
-    conj[j + 1] = -conj[j + 1]!;
-    conj[j + 2] = -conj[j + 2]!;
-  }
-  return quatMul(a, conj);
-}
-
-/**
- * Spherical interpolation of every xyzw quaternion in `q0` and `q1` (length 4 * J) on
- * the shorter arc; `u` outside [0, 1] extrapolates along the same great circle.
- * Inputs need not be unit.
- */
-export function quatSlerp(q0: ArrayLike<number>, q1: ArrayLike<number>, u: number): Float64Array {
-  const out = new Float64Array(q0.length);
-  for (let j = 0; j < q0.length; j += 4) {
-    const n0 = Math.hypot(q0[j]!, q0[j + 1]!, q0[j + 2]!, q0[j + 3]!);
-    const n1 = Math.hypot(q1[j]!, q1[j + 1]!, q1[j + 2]!, q1[j + 3]!);
-    let dot = 0;
-    for (let k = 0; k < 4; k++) dot += (q0[j + k]! / n0) * (q1[j + k]! / n1);
-    const sign = dot < 0 ? -1 : 1; // the same rotation, on q0's hemisphere
-    const omega = Math.acos(Math.min(Math.abs(dot), 1));
-    const sin = Math.sin(omega);
-    let w0 = 1 - u;
-    let w1 = u;
-    if (sin >= 1e-6) {
-      // Nearly equal rotations keep the lerp weights: the sines would cancel badly.
-      w0 = Math.sin((1 - u) * omega) / sin;
-      w1 = Math.sin(u * omega) / sin;
-    }
-    let norm = 0;
-    for (let k = 0; k < 4; k++) {
-      const v = (w0 * q0[j + k]!) / n0 + (sign * w1 * q1[j + k]!) / n1;
-      out[j + k] = v;
-      norm += v * v;
-    }
-    norm = Math.sqrt(norm);
-    for (let k = 0; k < 4; k++) out[j + k] = out[j + k]! / norm;
-  }
-  return out;
+/** `dst` holding a copy of `src`: `dst` itself when the lengths match. */
+function fit(dst: Float64Array | undefined, src: ArrayLike<number>): Float64Array {
+  if (dst === undefined || dst.length !== src.length) return Float64Array.from(src);
+  for (let i = 0; i < src.length; i++) dst[i] = src[i]!;
+  return dst;
 }
 
 /** The jitter buffer of one player (see the module comment for the rules). */
@@ -204,10 +168,21 @@ export class PoseBuffer {
   readonly options: Readonly<Config>;
   player: string | undefined;
   private readonly entries: Entry[] = []; // sorted by t, no two with the same t
-  private last: InterpolatedPose | undefined; // what poseAt showed last
+  private readonly delay: RenderDelay;
+  private unseen = 0; // entries pushed since the last poseAt
+  private readonly last = new PoseSample(); // what poseAt showed last, while hasLast
+  private hasLast = false;
+  private readonly before = new PoseSample(); // rule 5's scratch
+  private off = new Float64Array(0); // rule 5's per-joint turns, reused
+  private rest = new Float64Array(0); // identities, as many as off
 
   constructor(options: InterpOptions = {}) {
     this.options = config(options);
+    const o = this.options;
+    this.delay = new RenderDelay({
+      startS: o.delayS, minS: o.minDelayS, maxS: o.maxDelayS, quantile: o.delayQuantile,
+      window: o.delayWindow, marginS: o.delayMarginS, slew: o.delaySlew,
+    });
   }
 
   get size(): number {
@@ -219,67 +194,162 @@ export class PoseBuffer {
     return this.entries[this.entries.length - 1]?.t;
   }
 
+  /** The render delay now, seconds: `options.delayS` when not adaptive. */
+  get delayS(): number {
+    return this.options.adaptive ? this.delay.delayS : this.options.delayS;
+  }
+
+  /** The delay the adaptive delay moves toward (undefined before it measured a pose interval, and when not adaptive). */
+  get targetDelayS(): number | undefined {
+    return this.options.adaptive ? this.delay.targetS : undefined;
+  }
+
+  /**
+   * The server time the last {@link poseAt} showed (its `tau`); undefined before it
+   * showed a pose. A received pose is first on screen at the first frame whose
+   * `shownT` reaches its `t`.
+   */
+  get shownT(): number | undefined {
+    return this.hasLast ? this.last.t : undefined;
+  }
+
   /**
    * Keep `pose`; false when it was dropped: a duplicate of a kept `t`, a non-finite
    * `t`, or older than everything kept while the buffer is full. `keyframe`: a resync
    * point (a v2 keyframe); when its `seq` is not newer than its predecessor's (a new
-   * sequence) it snaps instead of being blended into.
+   * sequence) it snaps instead of being blended into. Once full, the oldest pose's
+   * arrays are reused for the new one.
    */
   push(pose: PoseInput, keyframe = false): boolean {
     const t = pose.t;
     if (!Number.isFinite(t)) return false;
-    const i = this.lowerBound(t);
-    if (this.entries[i]?.t === t) return false;
-    if (i === 0 && this.entries.length >= this.options.capacity) return false;
+    const e = this.entries;
+    let i = this.lowerBound(t);
+    if (e[i]?.t === t) return false;
+    if (i === 0 && e.length >= this.options.capacity) return false;
     this.player = pose.player;
-    this.entries.splice(i, 0, {
-      t,
-      seq: pose.seq,
-      keyframe,
-      positions: Float64Array.from(pose.positions),
-      rotations: pose.rotations === undefined ? undefined : Float64Array.from(pose.rotations),
-    });
-    if (this.entries.length > this.options.capacity) this.entries.shift();
+    let entry: Entry | undefined;
+    if (e.length >= this.options.capacity) {
+      entry = e[0]!; // the oldest goes (i >= 1 here): reuse its arrays
+      if (!entry.seen) this.unseen--;
+      for (let k = 1; k < e.length; k++) e[k - 1] = e[k]!;
+      e.length--;
+      i--;
+    }
+    const positions = fit(entry?.positions, pose.positions);
+    const rotations = pose.rotations === undefined ? undefined : fit(entry?.rotations, pose.rotations);
+    if (entry === undefined) entry = { t, seq: pose.seq, keyframe, positions, rotations, seen: false };
+    else {
+      entry.t = t;
+      entry.seq = pose.seq;
+      entry.keyframe = keyframe;
+      entry.positions = positions;
+      entry.rotations = rotations;
+      entry.seen = false;
+    }
+    e.push(entry);
+    for (let k = e.length - 1; k > i; k--) e[k] = e[k - 1]!;
+    e[i] = entry;
+    this.unseen++;
     return true;
   }
 
   /** Forget every pose (after a reconnect: the server's clock may have changed). */
   clear(): void {
     this.entries.length = 0;
-    this.last = undefined;
+    this.hasLast = false;
+    this.unseen = 0;
+    this.delay.reset();
   }
 
   /**
    * The pose shown at server time `time` (`time - delayS` on the poses' timeline), or
    * undefined before the first pose arrived. Call it once per displayed frame, with
    * times that do not go back: a correction since the last call fades out over
-   * `correctionS` (rule 5). {@link sampleAt} is the same sample without that memory.
+   * `correctionS` (rule 5); adaptive, it also counts the poses pushed since the last
+   * call as arrived at `time` and moves the delay. {@link sampleAt} is the same sample
+   * without that memory. {@link poseAtInto} is the same without allocating.
    */
   poseAt(time: number): InterpolatedPose | undefined {
-    const tau = time - this.options.delayS;
-    const raw = this.raw(tau);
-    const last = this.last;
-    this.last = undefined;
-    if (raw === undefined) return undefined;
-    let shown = raw;
-    if (last !== undefined && this.blends(last.t, tau)) {
-      const before = this.raw(last.t)!; // what the last frame would show with today's poses
-      const k = Math.exp(-(tau - last.t) / this.options.correctionS);
-      const positions = raw.positions.map((v, i) => v + (last.positions[i]! - before.positions[i]!) * k);
-      let rotations = raw.rotations;
-      if (rotations && last.rotations && before.rotations) {
-        const off = quatMulConj(last.rotations, before.rotations); // per joint, world delta
-        rotations = quatMul(quatSlerp(identities(off.length / 4), off, k), rotations);
-      }
-      shown = this.sample(raw.seq, tau, positions, raw.mode, rotations);
-    }
-    this.last = shown;
-    return shown;
+    const out = new PoseSample();
+    return this.poseAtInto(time, out) ? out.toPose() : undefined;
   }
 
-  /** The pose at server time `time` from the poses kept now: rules 1 to 4, no memory. */
+  /** {@link poseAt} written into `out` (false, `out` untouched: no pose yet). */
+  poseAtInto(time: number, out: PoseSample): boolean {
+    if (this.options.adaptive) {
+      this.observe(time);
+      this.delay.advance(time);
+    }
+    const tau = time - this.delayS;
+    const hadLast = this.hasLast;
+    this.hasLast = false;
+    if (!this.rawInto(tau, out)) return false;
+    const last = this.last;
+    if (hadLast && this.blends(last.t, tau)) {
+      const before = this.before; // what the last frame would show with today's poses
+      this.rawInto(last.t, before);
+      const k = Math.exp(-(tau - last.t) / this.options.correctionS);
+      const pos = out.positions;
+      for (let i = 0; i < pos.length; i++) pos[i] = pos[i]! + (last.positions[i]! - before.positions[i]!) * k;
+      if (out.hasRotations && last.hasRotations && before.hasRotations) this.fadeTurns(last, before, k, out);
+    }
+    last.copyFrom(out);
+    this.hasLast = true;
+    return true;
+  }
+
+  /** The pose at server time `time` from the poses kept now: rules 1 to 4, no memory, at the current delay. */
   sampleAt(time: number): InterpolatedPose | undefined {
-    return this.raw(time - this.options.delayS);
+    const out = new PoseSample();
+    return this.rawInto(time - this.delayS, out) ? out.toPose() : undefined;
+  }
+
+  /** Each pose pushed since the last query arrived, for the display, at `time` (see render-delay.ts). */
+  private observe(time: number): void {
+    if (this.unseen === 0) return;
+    const gap = this.options.gapS;
+    const measures = this.delay.measures(time, gap);
+    const e = this.entries;
+    for (let k = 0; k < e.length; k++) {
+      const entry = e[k]!;
+      if (entry.seen) continue;
+      entry.seen = true;
+      if (measures && k > 0 && entry.t - e[k - 1]!.t <= gap) this.delay.observe(time - e[k - 1]!.t);
+    }
+    this.unseen = 0;
+  }
+
+  /** Rule 5 on rotations: `out[j] = slerp(1, last[j] * conj(before[j]), k) * out[j]`. */
+  private fadeTurns(last: PoseSample, before: PoseSample, k: number, out: PoseSample): void {
+    const n = out.rotationData.length;
+    if (this.off.length !== n) {
+      this.off = new Float64Array(n);
+      this.rest = new Float64Array(n);
+      for (let j = 3; j < n; j += 4) this.rest[j] = 1;
+    }
+    const a = last.rotationData;
+    const b = before.rotationData;
+    const off = this.off;
+    for (let j = 0; j < n; j += 4) {
+      // a * conj(b): the world turn from b to a
+      const x1 = a[j]!, y1 = a[j + 1]!, z1 = a[j + 2]!, w1 = a[j + 3]!;
+      const x2 = -b[j]!, y2 = -b[j + 1]!, z2 = -b[j + 2]!, w2 = b[j + 3]!;
+      off[j] = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2;
+      off[j + 1] = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2;
+      off[j + 2] = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2;
+      off[j + 3] = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2;
+    }
+    slerpInto(this.rest, off, k, off);
+    const r = out.rotationData;
+    for (let j = 0; j < n; j += 4) {
+      const x1 = off[j]!, y1 = off[j + 1]!, z1 = off[j + 2]!, w1 = off[j + 3]!;
+      const x2 = r[j]!, y2 = r[j + 1]!, z2 = r[j + 2]!, w2 = r[j + 3]!;
+      r[j] = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2;
+      r[j + 1] = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2;
+      r[j + 2] = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2;
+      r[j + 3] = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2;
+    }
   }
 
   /** Whether a correction since the frame at `lastTau` fades (rule 5). */
@@ -293,55 +363,69 @@ export class PoseBuffer {
     return true;
   }
 
-  /** Rules 1 to 4 at `tau` on the poses' timeline. */
-  private raw(tau: number): InterpolatedPose | undefined {
+  /** Rules 1 to 4 at `tau` on the poses' timeline, into `out`; false while empty. */
+  private rawInto(tau: number, out: PoseSample): boolean {
     const first = this.entries[0];
-    if (first === undefined) return undefined;
+    if (first === undefined) return false;
     const i = this.upperBound(tau) - 1; // a = entries[i]: the newest at or before tau
-    if (i < 0) return this.hold(first, tau);
+    if (i < 0) return this.hold(first, tau, out);
     const a = this.entries[i]!;
     const b = this.entries[i + 1];
+    const ap = a.positions;
     if (b !== undefined && !this.snaps(a, b)) {
       const u = (tau - a.t) / (b.t - a.t);
-      const pos = a.positions.map((v, k) => v + (b.positions[k]! - v) * u);
-      const rot =
-        a.rotations && b.rotations ? quatSlerp(a.rotations, b.rotations, u) : undefined;
-      return this.sample(a.seq, tau, pos, "interpolate", rot);
+      const rot = a.rotations !== undefined && b.rotations !== undefined;
+      this.head(out, a, tau, "interpolate", rot);
+      for (let k = 0; k < ap.length; k++) out.positions[k] = ap[k]! + (b.positions[k]! - ap[k]!) * u;
+      if (rot) slerpInto(a.rotations!, b.rotations!, u, out.rotationData);
+      return true;
     }
     // a is the newest pose of its segment: carry it on, then hold.
     const p = i > 0 ? this.entries[i - 1] : undefined;
     const bound = this.options.maxExtrapolateS;
-    if (p === undefined || this.snaps(p, a) || bound === 0) return this.hold(a, tau);
+    if (p === undefined || this.snaps(p, a) || bound === 0) return this.hold(a, tau, out);
     const ahead = tau - a.t;
     const s = Math.min(ahead, bound) / (a.t - p.t);
-    const pos = a.positions.map((v, k) => v + (v - p.positions[k]!) * s);
-    const rot = a.rotations && p.rotations ? quatSlerp(p.rotations, a.rotations, 1 + s) : undefined;
-    return this.sample(a.seq, tau, pos, ahead <= bound ? "extrapolate" : "hold", rot);
+    const rot = a.rotations !== undefined && p.rotations !== undefined;
+    this.head(out, a, tau, ahead <= bound ? "extrapolate" : "hold", rot);
+    for (let k = 0; k < ap.length; k++) out.positions[k] = ap[k]! + (ap[k]! - p.positions[k]!) * s;
+    if (rot) slerpInto(p.rotations!, a.rotations!, 1 + s, out.rotationData);
+    return true;
   }
 
   /** Whether `b` starts a new segment after `a` (rule 2). */
   private snaps(a: Entry, b: Entry): boolean {
     if (b.t - a.t > this.options.gapS) return true;
     if (b.keyframe && seqDelta(b.seq, a.seq) <= 0) return true;
-    const [ax, ay, az] = a.positions; // joint 0, the pelvis
-    const [bx, by, bz] = b.positions;
-    return Math.hypot(bx! - ax!, by! - ay!, bz! - az!) > this.options.teleportM;
+    const ap = a.positions; // joint 0, the pelvis
+    const bp = b.positions;
+    const dx = bp[0]! - ap[0]!;
+    const dy = bp[1]! - ap[1]!;
+    const dz = bp[2]! - ap[2]!;
+    return Math.sqrt(dx * dx + dy * dy + dz * dz) > this.options.teleportM;
   }
 
-  private hold(a: Entry, tau: number): InterpolatedPose {
-    const rot = a.rotations ? unit(a.rotations) : undefined;
-    return this.sample(a.seq, tau, Float64Array.from(a.positions), "hold", rot);
+  private hold(a: Entry, tau: number, out: PoseSample): true {
+    this.head(out, a, tau, "hold", a.rotations !== undefined);
+    out.positions.set(a.positions);
+    const q = a.rotations;
+    if (q !== undefined) {
+      const r = out.rotationData;
+      for (let j = 0; j < q.length; j += 4) {
+        const n = Math.sqrt(q[j]! * q[j]! + q[j + 1]! * q[j + 1]! + q[j + 2]! * q[j + 2]! + q[j + 3]! * q[j + 3]!);
+        for (let k = 0; k < 4; k++) r[j + k] = q[j + k]! / n;
+      }
+    }
+    return true;
   }
 
-  private sample(
-    seq: number,
-    tau: number,
-    positions: Float64Array,
-    mode: SampleMode,
-    rotations: Float64Array | undefined,
-  ): InterpolatedPose {
-    const base = { player: this.player ?? "", t: tau, seq, positions, mode };
-    return rotations === undefined ? base : { ...base, rotations };
+  /** `out` shaped like `a` (with rotations: `rot`), its scalars set. */
+  private head(out: PoseSample, a: Entry, tau: number, mode: SampleMode, rot: boolean): void {
+    out.shape(a.positions.length, rot ? a.rotations!.length : 0);
+    out.player = this.player ?? "";
+    out.t = tau;
+    out.seq = a.seq;
+    out.mode = mode;
   }
 
   /** The first index whose t is >= `t`. */
@@ -375,6 +459,26 @@ export class Interpolator {
   /** Buffers kept at most; past it, the player heard from least recently goes. */
   readonly maxPlayers: number;
   private readonly buffers = new Map<string, PoseBuffer>(); // least recent first
+  // posesAtInto's state, read by its two callbacks (made once: no closure per frame)
+  private frame = 0;
+  private frameTime = 0;
+  private frameOut: Map<string, PoseSample> | undefined;
+  private shown = 0;
+  private readonly fill = (buf: PoseBuffer, player: string): void => {
+    const out = this.frameOut!;
+    let sample = out.get(player);
+    if (sample === undefined) {
+      sample = new PoseSample();
+      out.set(player, sample);
+    }
+    if (buf.poseAtInto(this.frameTime, sample)) {
+      sample.frame = this.frame;
+      this.shown++;
+    }
+  };
+  private readonly prune = (sample: PoseSample, player: string, out: Map<string, PoseSample>): void => {
+    if (sample.frame !== this.frame) out.delete(player);
+  };
 
   constructor(options: InterpOptions = {}, maxPlayers = 512) {
     config(options); // validate once, here
@@ -437,5 +541,22 @@ export class Interpolator {
       if (shown !== undefined) out.set(player, shown);
     }
     return out;
+  }
+
+  /**
+   * {@link posesAt} without allocating once warm: every known player's pose at `time`
+   * written into `out`'s {@link PoseSample} for that player (one is made the first
+   * time a player shows); players no longer shown leave `out`. Keep `out` from frame
+   * to frame. Returns the number of players shown.
+   */
+  posesAtInto(time: number, out: Map<string, PoseSample>): number {
+    this.frame++;
+    this.frameTime = time;
+    this.frameOut = out;
+    this.shown = 0;
+    this.buffers.forEach(this.fill);
+    if (out.size > this.shown) out.forEach(this.prune);
+    this.frameOut = undefined;
+    return this.shown;
   }
 }

@@ -1,9 +1,11 @@
 /** Shared test helpers: where the repository is, hex <-> bytes, wire maps as JSON. */
 
+import assert from "node:assert/strict";
 import { existsSync } from "node:fs";
 import { dirname, join } from "node:path";
 import { fileURLToPath } from "node:url";
 
+import type { InterpOptions } from "../src/interp.js";
 import { Float64, type Wire } from "../src/msgpack.js";
 
 /** The repository root: the first parent of this file that holds `proto/README.md`. */
@@ -48,4 +50,22 @@ export function keyOrder(v: unknown): string[] {
     return Object.entries(v).flatMap(([k, item]) => [k, ...keyOrder(item)]);
   }
   return [];
+}
+
+/** A table's config (Python names) as options; every knob must be known. */
+export function interpOptions(c: Record<string, number | boolean>): InterpOptions {
+  const names: Record<string, keyof InterpOptions> = {
+    adaptive: "adaptive", delay_s: "delayS", min_delay_s: "minDelayS", max_delay_s: "maxDelayS",
+    delay_quantile: "delayQuantile", delay_window: "delayWindow", delay_margin_s: "delayMarginS",
+    delay_slew: "delaySlew", max_extrapolate_s: "maxExtrapolateS", teleport_m: "teleportM",
+    gap_s: "gapS", capacity: "capacity", correction_s: "correctionS",
+  };
+  const out: Record<string, number | boolean> = {};
+  for (const [k, v] of Object.entries(c)) {
+    const name = names[k];
+    assert.ok(name !== undefined, `unknown knob ${k}`);
+    out[name] = v;
+  }
+  assert.equal(Object.keys(out).length, Object.keys(names).length, "every knob is named");
+  return out as InterpOptions;
 }

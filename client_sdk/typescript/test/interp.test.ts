@@ -9,9 +9,9 @@ import { readFileSync } from "node:fs";
 import { join } from "node:path";
 import { describe, test } from "node:test";
 
-import { Interpolator, PoseBuffer, quatSlerp, type InterpOptions } from "../src/interp.js";
+import { Interpolator, PoseBuffer, PoseSample, quatSlerp } from "../src/interp.js";
 import type { Pose } from "../src/messages.js";
-import { repoRoot } from "./helpers.js";
+import { interpOptions, repoRoot } from "./helpers.js";
 
 interface TablePose {
   seq: number;
@@ -30,23 +30,12 @@ interface Expect {
 type Step = { push: TablePose; accepted: boolean } | { query: number; expect: Expect | null };
 interface Case {
   name: string;
-  config: Record<string, number>;
+  config: Record<string, number | boolean>;
   steps: Step[];
 }
 const TABLE = JSON.parse(
   readFileSync(join(repoRoot(), "proto", "vectors", "sdk", "interp.json"), "utf8"),
 ) as { tolerance: { position_m: number; rotation: number }; cases: Case[] };
-
-function options(c: Record<string, number>): InterpOptions {
-  return {
-    delayS: c["delay_s"]!,
-    maxExtrapolateS: c["max_extrapolate_s"]!,
-    teleportM: c["teleport_m"]!,
-    gapS: c["gap_s"]!,
-    capacity: c["capacity"]!,
-    correctionS: c["correction_s"]!,
-  };
-}
 
 function toPose(p: TablePose): Pose {
   const base = { type: "pose", player: "p", seq: p.seq, t: p.t, positions: Float64Array.from(p.positions.flat()) } as const;
@@ -78,7 +67,7 @@ function rotDiff(a: ArrayLike<number>, b: readonly number[]): number {
 describe("proto/vectors/sdk/interp.json", () => {
   for (const c of TABLE.cases) {
     test(c.name, () => {
-      const buf = new PoseBuffer(options(c.config));
+      const buf = new PoseBuffer(interpOptions(c.config));
       c.steps.forEach((step, k) => {
         if ("push" in step) {
           assert.equal(buf.push(toPose(step.push), step.push.keyframe), step.accepted, `step ${k}`);
@@ -139,6 +128,14 @@ test("bad options are refused", () => {
     { capacity: 1 },
     { capacity: 2.5 },
     { correctionS: -0.01 },
+    { minDelayS: 0.3 }, // above maxDelayS
+    { maxDelayS: Number.POSITIVE_INFINITY },
+    { delayQuantile: 0 },
+    { delayQuantile: 1.5 },
+    { delayWindow: 0 },
+    { delayWindow: 2.5 },
+    { delaySlew: -0.05 },
+    { delayMarginS: Number.NaN },
   ]) {
     assert.throws(() => new PoseBuffer(bad), RangeError, JSON.stringify(bad));
   }
@@ -279,7 +276,7 @@ test("a lossy link (20 % dropped, 0-40 ms hold) jumps at most 1.5x the clean one
 
 test("feed: a v2 keyframe with an older seq (a new sequence) snaps; after a forward seq gap it blends", () => {
   const shownX = (keyframe: boolean, seq: number): number => {
-    const buffers = new Interpolator({ delayS: 0 });
+    const buffers = new Interpolator({ delayS: 0, adaptive: false });
     const at = (s: number, t: number, x: number, key: boolean): Pose => ({
       type: "pose", player: "p", seq: s, t, keyframe: key,
       positions: Float64Array.from({ length: 57 }, (_, i) => (i % 3 === 0 ? x : 1)),
@@ -292,4 +289,40 @@ test("feed: a v2 keyframe with an older seq (a new sequence) snaps; after a forw
   assert.ok(Math.abs(shownX(false, 0) - 0.5) < 1e-9, `${shownX(false, 0)}`);
   // seq 104 after 100 (a 15 Hz pose rate, or a skipped pose): the keyframe blends
   assert.ok(Math.abs(shownX(true, 104) - 0.5) < 1e-9, `${shownX(true, 104)}`);
+});
+
+test("poseAtInto / posesAtInto write into the caller's samples and reuse their arrays", () => {
+  const fresh = new Interpolator();
+  const reused = new Interpolator();
+  const out = new Map<string, PoseSample>();
+  const players = Array.from({ length: 16 }, (_, i) => `p${i}`);
+  let arrays: Float64Array[] | undefined;
+  for (let f = 0; f < 600; f++) {
+    const now = 1000 + f / 90;
+    for (let k = Math.floor((now - 1000 - 1 / 90) * 60) + 1; k <= Math.floor((now - 1000) * 60); k++) {
+      for (const p of players) {
+        const pose = walkPose(p, k, 1000 + k / 60);
+        fresh.push(pose);
+        reused.push(pose);
+      }
+    }
+    const want = fresh.posesAt(now);
+    assert.equal(reused.posesAtInto(now, out), want.size);
+    assert.deepEqual([...out.keys()], [...want.keys()]);
+    for (const [p, w] of want) {
+      const got = out.get(p)!;
+      assert.deepEqual([got.t, got.seq, got.mode, got.player], [w.t, w.seq, w.mode, p]);
+      assert.deepEqual(got.positions, w.positions);
+      assert.deepEqual(got.rotations, w.rotations);
+    }
+    if (f === 100) arrays = [...out.values()].flatMap((s) => [s.positions, s.rotationData]);
+    if (f > 100) {
+      const now2 = [...out.values()].flatMap((s) => [s.positions, s.rotationData]);
+      assert.ok(now2.every((a, i) => a === arrays![i]), `frame ${f}: the same arrays`);
+    }
+  }
+  reused.forget("p3");
+  reused.posesAtInto(1000 + 600 / 90, out);
+  assert.equal(out.size, 15);
+  assert.ok(!out.has("p3"));
 });

@@ -4,8 +4,11 @@ caller passes every time, nothing here reads a clock.
 Poses arrive at uneven moments (network jitter, a lost pose, a burst after a stall),
 but each carries the server time ``t`` of the tick that made it. A
 :class:`PoseBuffer` keeps a player's recent poses ordered by ``t`` and shows them a
-fixed ``delay_s`` late, on the server's timeline, so arrival jitter up to the delay
-never shows::
+render delay late, on the server's timeline, so arrival jitter up to the delay never
+shows. The delay adapts (``adaptive``, the default): it follows the jitter the buffer
+measures, the smallest delay at which 99 % of the recent pose intervals interpolate,
+within ``min_delay_s`` to ``max_delay_s``, changing by at most 5 % of real time
+(:mod:`posecast_client.render_delay`); ``adaptive=False`` keeps it at ``delay_s``::
 
     buffers = pc.Interpolator()                       # one PoseBuffer per player
     async for event in client.events():
@@ -19,8 +22,9 @@ The query time is the display clock (:meth:`ClockSync.display_time`), not
 ``to_server``: the clock estimate steps by up to tens of ms when its best ping leaves
 the window, and the display clock slews such steps instead of popping every avatar.
 
-At query time ``time``, the buffer shows ``tau = time - delay_s``. With ``a`` the
-newest pose at or before ``tau`` and ``b`` the one after it:
+At query time ``time``, the buffer shows ``tau = time - delay``
+(:attr:`PoseBuffer.delay_s`). With ``a`` the newest pose at or before ``tau`` and
+``b`` the one after it:
 
 1. **interpolate**: positions lerp and rotations slerp (shortest arc, so ``q`` and
    ``-q`` give the same result) from ``a`` to ``b``.
@@ -64,6 +68,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from posecast_client.protocol import Pose, Presence, Welcome, seq_delta
+from posecast_client.render_delay import RenderDelay
 from posecast_client.rotations import quat_mul
 
 F64 = NDArray[np.float64]
@@ -93,13 +98,26 @@ class InterpConfig:
     """How a :class:`PoseBuffer` smooths; validated once, shared by every buffer.
 
     Args:
-        delay_s: render delay, seconds behind the query time (0.1). Jitter up to
+        adaptive: the render delay follows the measured arrival jitter (True, see
+            :mod:`posecast_client.render_delay`); False: it stays ``delay_s``.
+        delay_s: the fixed render delay, seconds behind the query time (0.1), and the
+            adaptive delay's start (clamped to its bounds). Fixed, jitter up to
             ``delay_s`` minus the pose interval never shows; each lost pose in a row
             costs one pose interval of that margin.
+        min_delay_s: the adaptive delay's lower bound (0.02 s: a bit above one 60 Hz
+            pose interval).
+        max_delay_s: its upper bound (0.25 s); a link worse than that extrapolates.
+        delay_quantile: the share of recent pose intervals the adaptive delay lets
+            interpolate whole (0.99, nearest rank).
+        delay_window: the recent poses it measures (256: about 4 s at 60 Hz).
+        delay_margin_s: added to that quantile (0.002 s).
+        delay_slew: the most the adaptive delay changes per second of query time
+            (0.05: the shown time runs at 0.95 to 1.05 of real speed).
         max_extrapolate_s: the longest time a pose is carried on at its velocity past
             the newest one before it holds (0.1).
         teleport_m: a pelvis jump between consecutive poses beyond this snaps (1.0 m).
-        gap_s: consecutive poses further apart than this snap (0.25 s).
+        gap_s: consecutive poses further apart than this snap (0.25 s); nor do they
+            count toward the adaptive delay.
         capacity: poses kept per player (32: a 0.5 s delay at 60 Hz).
         correction_s: time constant over which a correction fades out (0.05 s):
             when poses that arrived late change what was already shown, the shown
@@ -113,9 +131,24 @@ class InterpConfig:
     gap_s: float = 0.25
     capacity: int = 32
     correction_s: float = 0.05
+    adaptive: bool = True
+    min_delay_s: float = 0.02
+    max_delay_s: float = 0.25
+    delay_quantile: float = 0.99
+    delay_window: int = 256
+    delay_margin_s: float = 0.002
+    delay_slew: float = 0.05
 
     def __post_init__(self) -> None:
-        for name in ("delay_s", "max_extrapolate_s", "correction_s"):
+        for name in (
+            "delay_s",
+            "max_extrapolate_s",
+            "correction_s",
+            "min_delay_s",
+            "max_delay_s",
+            "delay_margin_s",
+            "delay_slew",
+        ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0.0):
                 raise ValueError(f"{name} must be finite and >= 0, got {v}")
@@ -125,6 +158,12 @@ class InterpConfig:
                 raise ValueError(f"{name} must be > 0, got {v}")
         if self.capacity < 2:
             raise ValueError(f"capacity must be >= 2, got {self.capacity}")
+        if self.min_delay_s > self.max_delay_s:
+            raise ValueError(f"min_delay_s {self.min_delay_s} > max_delay_s {self.max_delay_s}")
+        if not 0.0 < self.delay_quantile <= 1.0:
+            raise ValueError(f"delay_quantile must be in (0, 1], got {self.delay_quantile}")
+        if self.delay_window < 1:
+            raise ValueError(f"delay_window must be >= 1, got {self.delay_window}")
 
 
 DEFAULT_INTERP = InterpConfig()
@@ -142,13 +181,14 @@ class InterpolatedPose:
     mode: Mode
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class _Entry:
     t: float
     seq: int
     keyframe: bool
     positions: F64
     rotations: F64 | None
+    seen: bool = False  # a query has run since it was pushed (its need is counted)
 
 
 def quat_slerp(q0: F64, q1: F64, u: float) -> F64:
@@ -184,9 +224,37 @@ class PoseBuffer:
         self._entries: list[_Entry] = []  # sorted by t, no two with the same t
         self._times: list[float] = []  # the entries' t, for bisect
         self._last: InterpolatedPose | None = None  # what pose_at showed last
+        self._unseen = 0  # entries pushed since the last pose_at
+        self._delay = RenderDelay(
+            start_s=config.delay_s,
+            min_s=config.min_delay_s,
+            max_s=config.max_delay_s,
+            quantile=config.delay_quantile,
+            window=config.delay_window,
+            margin_s=config.delay_margin_s,
+            slew=config.delay_slew,
+        )
 
     def __len__(self) -> int:
         return len(self._entries)
+
+    @property
+    def delay_s(self) -> float:
+        """The render delay now, seconds: ``config.delay_s`` when not adaptive."""
+        return self._delay.delay_s if self.config.adaptive else self.config.delay_s
+
+    @property
+    def target_delay_s(self) -> float | None:
+        """The delay the adaptive delay moves toward (``None`` before it measured a
+        pose interval, and when not adaptive)."""
+        return self._delay.target_s if self.config.adaptive else None
+
+    @property
+    def shown_t(self) -> float | None:
+        """The server time the last :meth:`pose_at` showed (its ``tau``), ``None``
+        before it showed a pose. A received pose is first on screen at the first
+        frame whose ``shown_t`` reaches its ``t``."""
+        return None if self._last is None else self._last.t
 
     @property
     def newest_t(self) -> float | None:
@@ -214,7 +282,9 @@ class PoseBuffer:
         self.player = pose.player
         self._entries.insert(i, entry)
         self._times.insert(i, t)
+        self._unseen += 1
         if len(self._entries) > self.config.capacity:
+            self._unseen -= not self._entries[0].seen
             del self._entries[0], self._times[0]
         return True
 
@@ -223,6 +293,8 @@ class PoseBuffer:
         self._entries.clear()
         self._times.clear()
         self._last = None
+        self._unseen = 0
+        self._delay.reset()
 
     def pose_at(self, time: float) -> InterpolatedPose | None:
         """The pose shown at server time ``time`` (``time - delay_s`` on the poses'
@@ -233,8 +305,14 @@ class PoseBuffer:
         replacing an extrapolation), the difference fades out over ``correction_s``
         instead of showing as one step (rule 5). :meth:`sample_at` is the same sample
         without that memory.
+
+        Adaptive, each call first counts the poses pushed since the last one as
+        arrived at ``time`` and moves the delay (:mod:`posecast_client.render_delay`).
         """
-        tau = time - self.config.delay_s
+        if self.config.adaptive:
+            self._observe(time)
+            self._delay.advance(time)
+        tau = time - self.delay_s
         raw = self._raw(tau)
         last, self._last = self._last, None
         if raw is None:
@@ -255,8 +333,26 @@ class PoseBuffer:
 
     def sample_at(self, time: float) -> InterpolatedPose | None:
         """The pose at server time ``time`` from the poses kept now, rules 1 to 4 only
-        (no memory of earlier calls)."""
-        return self._raw(time - self.config.delay_s)
+        (no memory of earlier calls), at the current :attr:`delay_s` (which only
+        :meth:`pose_at` moves)."""
+        return self._raw(time - self.delay_s)
+
+    def _observe(self, time: float) -> None:
+        """Each pose pushed since the last query arrived, for the display, at ``time``:
+        its need is ``time`` minus its predecessor's ``t``. Not counted: a pose
+        without a predecessor or after a gap beyond ``gap_s``, and every pose when the
+        last query is not just before ``time`` (:meth:`RenderDelay.measures`)."""
+        if self._unseen == 0:
+            return
+        gap = self.config.gap_s
+        measures = self._delay.measures(time, gap)
+        for k, e in enumerate(self._entries):
+            if e.seen:
+                continue
+            e.seen = True
+            if measures and k > 0 and e.t - self._times[k - 1] <= gap:
+                self._delay.observe(time - self._times[k - 1])
+        self._unseen = 0
 
     def _blends(self, last_tau: float, tau: float) -> bool:
         """Whether a correction since the frame at ``last_tau`` fades (rule 5): time
