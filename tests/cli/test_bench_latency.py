@@ -63,7 +63,7 @@ def _check_phase(phase: dict[str, Any]) -> None:
 def test_bench_latency_reports_the_budget_clean_and_lossy(capsys, tmp_path: Path) -> None:
     out = tmp_path / "latency.json"
     argv = ["bench", "latency", "--players", "3", "--room-size", "3", "--seconds", "2"]
-    argv += ["--warmup", "1", "--samples", "8", "--lookahead", "3", "--lossy"]
+    argv += ["--warmup", "1", "--samples", "8", "--lookahead", "3", "--delayed-emission", "--lossy"]
     argv += ["--down-jitter-ms", "20"]
     assert main([*argv, "--json", str(out)]) == 0
     printed = capsys.readouterr().out

@@ -3,7 +3,7 @@ relay, the SDK's interpolated stream at 90 Hz has a largest joint jump no more t
 1.5x the clean stream's").
 
 The link is simulated, like the reliability suite's ``LossyRelay``
-(``tests/system/reliability/fault_helpers.py``): each pose is dropped with probability 0.2
+(``server/posecast/testing/relay.py``): each pose is dropped with probability 0.2
 and held a random 0-40 ms (so poses overtake each other), seeded; a clean link
 delivers every pose after the same 5 ms. A 90 Hz display samples an
 :class:`~posecast_client.interp.PoseBuffer` fed with what has arrived by each of its

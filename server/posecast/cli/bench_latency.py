@@ -63,6 +63,7 @@ def cmd_bench_latency(args: argparse.Namespace) -> int:
         procs=args.procs,
         samples=args.samples,
         lookahead=args.lookahead,
+        delayed_emission=args.delayed_emission,
         lossy=args.lossy,
         drop=args.drop,
         jitter_s=args.jitter_ms / 1000.0,
@@ -179,6 +180,11 @@ def add_parser(bench_sub: argparse._SubParsersAction[Any]) -> None:
     )
     bl.add_argument(
         "--lookahead", type=int, help="the server's look-ahead in frames (default: the server's)"
+    )
+    bl.add_argument(
+        "--delayed-emission",
+        action="store_true",
+        help="the server emits frame n - tau at tick n, the paper's setting (with --lookahead 10)",
     )
     bl.add_argument(
         "--lossy",

@@ -68,6 +68,7 @@ class LatencyConfig:
     procs: int = 2
     samples: int | None = None
     lookahead: int | None = None
+    delayed_emission: bool = False  # the paper's emission of frame n - tau (serve's flag)
     lossy: bool = False
     drop: float = 0.2
     jitter_s: float = 0.040
@@ -199,8 +200,9 @@ def _relay(upstream: str, cfg: LatencyConfig) -> Iterator[LossyRelay]:
 def run_latency(cfg: LatencyConfig) -> dict[str, Any]:
     """Run the benchmark; the report (see ``docs/latency-benchmark.md``)."""
     secret = secrets.token_hex(24)
+    delayed = ("--delayed-emission",) if cfg.delayed_emission else ()
     server = ServeProcess(
-        "--conn-per-ip-per-min", "100000", "--sockets-per-ip", "100000",
+        "--conn-per-ip-per-min", "100000", "--sockets-per-ip", "100000", *delayed,
         secret=secret, samples=cfg.samples, lookahead=cfg.lookahead,
     )  # fmt: skip
     try:
