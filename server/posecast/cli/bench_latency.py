@@ -6,6 +6,7 @@ transport and client buffer (:mod:`posecast.offline.evaluation.latency`,
 from __future__ import annotations
 
 import argparse
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
@@ -54,18 +55,11 @@ def cmd_bench_latency(args: argparse.Namespace) -> int:
     check_json_out(args.json)
     from posecast.offline.evaluation.latency.run import LatencyConfig, run_latency
 
+    # The flags named as the config's fields pass as they are; three are converted.
+    same = {f.name for f in fields(LatencyConfig)} & set(vars(args))
     cfg = LatencyConfig(
-        players=args.players,
-        room_size=args.room_size,
-        seconds=args.seconds,
+        **{name: getattr(args, name) for name in same},
         warmup_s=args.warmup,
-        display_hz=args.display_hz,
-        procs=args.procs,
-        samples=args.samples,
-        lookahead=args.lookahead,
-        delayed_emission=args.delayed_emission,
-        lossy=args.lossy,
-        drop=args.drop,
         jitter_s=args.jitter_ms / 1000.0,
         down_jitter_s=args.down_jitter_ms / 1000.0,
     )
