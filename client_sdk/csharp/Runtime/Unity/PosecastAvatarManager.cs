@@ -185,8 +185,16 @@ namespace Posecast.Client.Unity
         public void DriveAvatars(double now)
         {
             foreach (var kv in _avatars)
-                if (kv.Value != null) kv.Value.Apply(Poses.PoseAt(kv.Key, now));
+            {
+                if (kv.Value == null) continue;
+                InterpolatedPose shown;
+                if (!_shown.TryGetValue(kv.Key, out shown)) _shown[kv.Key] = shown = new InterpolatedPose();
+                if (Poses.PoseAt(kv.Key, now, shown)) kv.Value.Apply(shown.Positions, shown.Rotations);
+            }
         }
+
+        // Each avatar's pose as last shown, filled in place every frame (no garbage).
+        private readonly Dictionary<string, InterpolatedPose> _shown = new Dictionary<string, InterpolatedPose>();
 
         /// <summary>One event: the jitter buffer, the avatars, the UnityEvents, then EventReceived.</summary>
         internal void Handle(ClientEvent e)
@@ -256,6 +264,7 @@ namespace Posecast.Client.Unity
             PosecastAvatarDriver driver;
             if (!_avatars.TryGetValue(player, out driver)) return;
             _avatars.Remove(player);
+            _shown.Remove(player);
             if (driver != null) Destroy(driver.gameObject);
             PlayerLeft.Invoke(player);
         }
