@@ -62,7 +62,9 @@ def test_sim_and_record_end_to_end(dev_server: DevServer, tmp_path: Path, uid: s
     for seen in summary["poses_from"].values():  # each player sees both avatars
         assert len(seen) == 2 and min(seen.values()) > 60, summary["poses_from"]
     assert summary["poses_per_s"] > 100, summary
-    assert 50.0 < summary["latency_ms_p50"] <= summary["latency_ms_p99"] < 2000.0
+    # Poses are shown at their own frame by default (no look-ahead): what is left is the
+    # frame queue, the tick and the loopback, more than nothing and far from seconds.
+    assert 0.0 < summary["latency_ms_p50"] <= summary["latency_ms_p99"] < 2000.0
     assert abs(summary["clock_offset_ms"]) < 5.0
 
     assert recorder.returncode == 0, err
