@@ -10,7 +10,7 @@ from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
-from posecast.cli.common import at_least, check_json_out, check_samples, config_error, finite
+from posecast.cli.common import at_least, check_json_out, check_samples, config_error, finite, given
 
 CMD = "bench latency"
 ROWS = (
@@ -56,9 +56,8 @@ def cmd_bench_latency(args: argparse.Namespace) -> int:
     from posecast.offline.evaluation.latency.run import LatencyConfig, run_latency
 
     # The flags named as the config's fields pass as they are; three are converted.
-    same = {f.name for f in fields(LatencyConfig)} & set(vars(args))
     cfg = LatencyConfig(
-        **{name: getattr(args, name) for name in same},
+        **given(args, (f.name for f in fields(LatencyConfig))),
         warmup_s=args.warmup,
         jitter_s=args.jitter_ms / 1000.0,
         down_jitter_s=args.down_jitter_ms / 1000.0,

@@ -5,9 +5,10 @@ values, output paths, optional packages, prepared datasets and checkpoints."""
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -33,6 +34,13 @@ def config_error(message: str, hint: str) -> ConfigError:
 
 
 # --- Validation at the edge ----------------------------------------------------------
+
+
+def given(args: argparse.Namespace, names: Iterable[str]) -> dict[str, Any]:
+    """The options among ``names`` that ``args`` holds and that were given (``None``:
+    the config's own default stands), by name, for a config built from its fields."""
+    out = {n: getattr(args, n, None) for n in names}
+    return {n: v for n, v in out.items() if v is not None}
 
 
 def at_least(option: str, value: float, low: float, command: str) -> None:

@@ -16,6 +16,7 @@ from posecast.cli.common import (
     config_error,
     dataset_manifest,
     finite,
+    given,
     hinted,
     need,
     need_clips,
@@ -114,7 +115,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             root_outputs=ls.root_outputs,
         )
         cfg = CVAETrainConfig(
-            **_given(args, _CVAE_FLAGS),
+            **given(args, _CVAE_FLAGS),
             budget_s=args.budget_min * 60.0,
             device=train_device(args.device),
         )
@@ -125,7 +126,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     else:
         from posecast.offline.train.anomaly_trainer import AnomalyTrainConfig, train_anomaly
 
-        acfg = AnomalyTrainConfig(**_given(args, ("threads", "seed", "steps")))
+        acfg = AnomalyTrainConfig(**given(args, ("threads", "seed", "steps")))
         need_clips(manifest, args.data, ("train", "val"), 1)
         if args.resume and ckpt.exists():
             check_checkpoint("--resume", ckpt, "anomaly", hint=_RESUME_HINT)
@@ -137,12 +138,6 @@ def cmd_train(args: argparse.Namespace) -> int:
 # The training settings that `posecast train` passes on under their own names.
 _CVAE_FLAGS = ("threads", "seed", "steps", "rot_weight", "vel_weight", "lower_weight",
                "kl_weight", "window", "batch", "no_orientation")  # fmt: skip
-
-
-def _given(args: argparse.Namespace, names: tuple[str, ...]) -> dict[str, Any]:
-    """``names`` as ``args`` holds them, leaving out those not given (``None``: the
-    training config's default stands)."""
-    return {n: getattr(args, n) for n in names if getattr(args, n) is not None}
 
 
 def cmd_export(args: argparse.Namespace) -> int:
