@@ -17,14 +17,11 @@ from posecast.online.config import (
     BOUNDS,
     ENGINE_DEFAULTS_ONLY,
     ENGINE_SWITCHES,
-    FLAGS_GIVEN,
     ServerConfig,
-    add_arguments,
     engine_settings,
-    option_help,
     setting_names,
-    unknown_variables,
 )
+from posecast.online.config_cli import FLAGS_GIVEN, add_arguments, option_help
 from posecast.online.engine.config import EngineConfig
 
 SECRET = "s" * 32
@@ -97,19 +94,6 @@ def test_the_secret_never_shows_in_repr() -> None:
 def test_limits_follow_the_config() -> None:
     lim = ServerConfig(token_secret=SECRET, max_rate_hz=90, max_players_per_room=8).limits()
     assert (lim.max_rate_hz, lim.max_players, lim.max_message_bytes) == (90, 8, 8192)
-
-
-def test_every_option_has_a_flag_except_the_secret() -> None:
-    parser = argparse.ArgumentParser()
-    add_arguments(parser)
-    args = vars(parser.parse_args(["--max-rate-hz", "30", "--dev", "--redis", "redis://r"]))
-    assert args["max_rate_hz"] == 30 and args["dev"] is True and args["port"] is None
-    assert "token_secret" not in args and "token_keys" not in args
-    # Each flag typed is recorded as typed (an alias too), for the errors.
-    given = args.pop(FLAGS_GIVEN)
-    assert given == {"max_rate_hz": "--max-rate-hz", "dev": "--dev", "redis_url": "--redis"}
-    assert set(args) == {f.name for f in fields(ServerConfig)} - {"token_secret", "token_keys"}
-    assert FLAGS_GIVEN not in vars(parser.parse_args([]))
 
 
 def _flags(*argv: str) -> tuple[dict[str, object], dict[str, str]]:
@@ -525,20 +509,3 @@ def test_the_node_key_must_outlive_the_slowest_round_trips() -> None:
     with pytest.raises(ConfigError, match=r"redis_node_ttl_s=3 .* = 4\.5 s"):
         ServerConfig(token_secret=SECRET, redis_timeout_s=2.0)
     ServerConfig(token_secret=SECRET, redis_timeout_s=2.0, redis_node_ttl_s=4.6)
-
-
-def test_unknown_variables_are_named_with_what_they_likely_meant() -> None:
-    env = {
-        "POSECAST_REDIS": "redis://redis:6379/0",  # the flag is --redis; the variable _URL
-        "POSECAST_SAMPELS": "10",
-        "POSECAST_SOMETHING": "1",
-        "POSECAST_PORT": "8765",  # a setting
-        "POSECAST_URL": "ws://x/",  # the SDK tools'
-        "HOME": "/root",
-    }
-    assert unknown_variables(env) == {
-        "POSECAST_REDIS": "POSECAST_REDIS_URL",
-        "POSECAST_SAMPELS": "POSECAST_SAMPLES",
-        "POSECAST_SOMETHING": None,
-    }
-    assert unknown_variables({f"POSECAST_{f.name.upper()}": "" for f in fields(ServerConfig)}) == {}

@@ -44,13 +44,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
     import asyncio
     import os
 
-    from posecast.online.config import (
-        FLAGS_GIVEN,
-        MIN_SECRET_CHARS,
-        ServerConfig,
-        setting_names,
-        unknown_variables,
-    )
+    from posecast.online.config import MIN_SECRET_CHARS, ServerConfig, setting_names
+    from posecast.online.config_cli import FLAGS_GIVEN, unknown_variables
     from posecast.online.shell.app import serve_until_signal
     from posecast.online.shell.logging import configure
 
@@ -277,7 +272,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 def add_parsers(sub: argparse._SubParsersAction[Any]) -> None:
     """Add ``posecast serve``, ``token``, ``keygen`` and ``demo`` to ``sub``."""
-    from posecast.online.config import add_arguments
+    from posecast.online.config_cli import add_arguments
 
     serve = sub.add_parser("serve", help="run the pose-streaming server (docs/server.md)")
     add_arguments(serve)

@@ -19,7 +19,6 @@ defaults.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import re
 from collections.abc import Mapping
@@ -45,18 +44,16 @@ __all__ = [  # Bounds, BOUNDS, MAX_SNDBUF_BYTES: config_bounds's, kept importabl
     "ENGINE_DEFAULTS_ONLY",
     "ENGINE_SWITCHES",
     "ENV_PREFIX",
-    "FLAGS_GIVEN",
     "LOG_LEVELS",
     "MAX_SNDBUF_BYTES",
     "MIN_SECRET_CHARS",
-    "OTHER_VARIABLES",
+    "NO_FLAG",
     "Bounds",
     "ServerConfig",
-    "add_arguments",
     "engine_settings",
-    "option_help",
+    "env_variable",
+    "field_flags",
     "setting_names",
-    "unknown_variables",
 ]
 
 
@@ -299,7 +296,7 @@ class ServerConfig:
         if self.token_secret:
             keys.append(secret_key(self.token_secret))
         if self.token_keys:
-            keys += parse_key_set(self.token_keys, _variable("token_keys")).keys.values()
+            keys += parse_key_set(self.token_keys, env_variable("token_keys")).keys.values()
         if self.token_keys_file:
             try:
                 with open(self.token_keys_file, encoding="utf-8") as f:
@@ -325,14 +322,15 @@ class ServerConfig:
         """Defaults, then ``POSECAST_*`` from ``env``, then non-``None`` ``overrides``.
 
         ``flags`` maps each override the user typed to the flag as typed
-        (``{"redis_url": "--redis"}``, what :func:`add_arguments` records), so that an
+        (``{"redis_url": "--redis"}``, what
+        :func:`~posecast.online.config_cli.add_arguments` records), so that an
         error names the setting as it was given (:func:`setting_names`). With ``dev`` on and no
         secret anywhere, a random secret is invented (the caller prints it). Raises
         :class:`ConfigError` for any bad value.
         """
         values: dict[str, Any] = {}
         for f in fields(cls):
-            raw = env.get(_variable(f.name))
+            raw = env.get(env_variable(f.name))
             if raw is not None and raw != "":
                 values[f.name] = _parse(f, raw)
         for name, value in (overrides or {}).items():
@@ -404,16 +402,16 @@ def setting_names(
     check of the models directory)."""
     given: dict[str, str] = {}
     for f in fields(ServerConfig):
-        if env.get(_variable(f.name)):
-            given[f.name] = _variable(f.name)
+        if env.get(env_variable(f.name)):
+            given[f.name] = env_variable(f.name)
     for name, value in (overrides or {}).items():
         if value is not None:
             given[name] = (flags or {}).get(name, name)
     by_variable = bool(given) and all(x.startswith(ENV_PREFIX) for x in given.values())
     for f in fields(ServerConfig):
         if f.name not in given:
-            flag = _flags(f)
-            given[f.name] = _variable(f.name) if by_variable or not flag else flag[0]
+            flag = field_flags(f)
+            given[f.name] = env_variable(f.name) if by_variable or not flag else flag[0]
     return given
 
 
@@ -508,108 +506,25 @@ def _is_number(value: object) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool)
 
 
-# POSECAST_* variables that are read elsewhere, not server settings: the SDK tools'
-# (posecast-sim, posecast-record), the native kernels' ISA override, the tests'.
-OTHER_VARIABLES = frozenset(
-    {"POSECAST_URL", "POSECAST_TOKEN", "POSECAST_BIN", "POSECAST_NATIVE_ISA"}
-)
-
-
-def unknown_variables(env: Mapping[str, str]) -> dict[str, str | None]:
-    """``POSECAST_*`` names in ``env`` that set nothing, each with the setting it most
-    likely meant (or ``None``): a typo, or ``POSECAST_REDIS`` for ``POSECAST_REDIS_URL``,
-    would otherwise leave its default in force without a word."""
-    import difflib
-
-    known = [f.name.upper() for f in fields(ServerConfig)]
-
-    def meant(name: str) -> str | None:  # compared without the prefix they all share
-        close = difflib.get_close_matches(name[len(ENV_PREFIX) :], known, n=1, cutoff=0.7)
-        return ENV_PREFIX + close[0] if close else None
-
-    return {
-        name: meant(name)
-        for name in sorted(env)
-        if name.startswith(ENV_PREFIX)
-        and name[len(ENV_PREFIX) :] not in known
-        and name not in OTHER_VARIABLES
-        and not name.startswith("POSECAST_FUZZ_")
-    }
-
-
-def option_help() -> list[tuple[str, str, str, str]]:
-    """``(field, env var, default, help)`` of every option, for the CLI and the docs."""
-    out = []
-    for f in fields(ServerConfig):
-        if f.name in _NO_FLAG:
-            default = ""
-        else:
-            default = f.default if isinstance(f.default, str) else repr(f.default)
-        out.append((f.name, ENV_PREFIX + f.name.upper(), default, str(f.metadata["help"])))
-    return out
-
-
-# The attribute of the parsed namespace where add_arguments' flags record how they were
-# typed: {field: flag}, for ServerConfig.from_sources's flags (absent if none was).
-FLAGS_GIVEN = "config_flags_given"
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """One ``--flag`` per option (default ``None``: the environment or the default
-    decides). The token secret has no flag: command lines show up in ``ps``. Each
-    flag typed is recorded in ``args.<FLAGS_GIVEN>`` as typed (``--redis`` or
-    ``--redis-url``), for the errors of :meth:`ServerConfig.from_sources`."""
-    for f in fields(ServerConfig):
-        flags = _flags(f)
-        if not flags:
-            continue
-        bounds = BOUNDS.get(f.name)
-        span = f", {bounds.words()}" if bounds else ""
-        text = f"{f.metadata['help']} [{_variable(f.name)}, default {f.default!r}{span}]"
-        if str(f.type) == "bool":
-            parser.add_argument(*flags, action=_Flag, nargs=0, const=True, default=None, help=text)
-        else:
-            kind = {"int": int, "float": float}.get(str(f.type), str)
-            parser.add_argument(
-                *flags, action=_Flag, type=kind, default=None, help=text, metavar="V"
-            )
-
-
-class _Flag(argparse.Action):
-    """``store`` (``store_true`` with ``nargs=0``) that also records the flag as typed."""
-
-    def __call__(
-        self,
-        parser: argparse.ArgumentParser,
-        namespace: argparse.Namespace,
-        values: Any,
-        option_string: str | None = None,
-    ) -> None:
-        setattr(namespace, self.dest, self.const if self.nargs == 0 else values)
-        given = dict(getattr(namespace, FLAGS_GIVEN, None) or {})
-        given[self.dest] = option_string or self.option_strings[0]
-        setattr(namespace, FLAGS_GIVEN, given)
-
-
-def _flags(f: dataclasses.Field[Any]) -> tuple[str, ...]:
+def field_flags(f: dataclasses.Field[Any]) -> tuple[str, ...]:
     """The option's command-line flags, its own first (none for the token secret and
     key set: command lines show up in ``ps``)."""
-    if f.name in _NO_FLAG:
+    if f.name in NO_FLAG:
         return ()
     return ("--" + f.name.replace("_", "-"), *f.metadata["flags"])
 
 
-_NO_FLAG = frozenset({"token_secret", "token_keys"})  # secrets: environment only
+NO_FLAG = frozenset({"token_secret", "token_keys"})  # secrets: environment only
 
 
-def _variable(name: str) -> str:
+def env_variable(name: str) -> str:
     """The option's environment variable, ``POSECAST_TICK_HZ``."""
     return ENV_PREFIX + name.upper()
 
 
 def _parse(f: dataclasses.Field[Any], raw: str) -> Any:
     kind = str(f.type)
-    name = _variable(f.name)
+    name = env_variable(f.name)
     try:
         if kind == "bool":
             if raw.lower() in ("1", "true", "yes", "on"):

@@ -20,7 +20,8 @@ import jsonschema
 import pytest
 
 from posecast.online.auth.keys import generate
-from posecast.online.config import ServerConfig, option_help
+from posecast.online.config import ServerConfig
+from posecast.online.config_cli import option_help
 from tests.system.deploy.conftest import ROOT, compose, interpolate, load_yaml
 
 OPTIONS = {env for _, env, _, _ in option_help()}

@@ -17,7 +17,8 @@ from typing import Any
 
 import pytest
 
-from posecast.online.config import ServerConfig, option_help
+from posecast.online.config import ServerConfig
+from posecast.online.config_cli import option_help
 from tests.system.deploy.conftest import K8S, k8s_documents, load_yaml
 
 K8S_VERSION = "1.30.0"
