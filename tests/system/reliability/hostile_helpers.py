@@ -520,9 +520,10 @@ class Arena:
     Only the attacker runs in the test's process."""
 
     def __init__(self, cfg: ServerConfig) -> None:
-        """The server and the healthy players' process run :func:`defended`: whatever
-        else runs on the machine, outside the test, does not take their CPU, so what
-        the arena measures is the hostile traffic's cost, not the machine's other load."""
+        """The server and the healthy players' process run :func:`defended` (the
+        players above the server): whatever else runs on the machine, outside the
+        test, does not take their CPU, so what the arena measures is the hostile
+        traffic's cost, not the machine's other load."""
         # The tracker passes (head and hands on their trackers, the elbows' hinges) are
         # numpy run per tick, whose cost the engine benchmarks measure; what an arena
         # measures is whether hostile traffic reaches the healthy players, so it runs
@@ -556,7 +557,7 @@ class Arena:
             self._players = subprocess.Popen(
                 [sys.executable, "-m", "tests.system.reliability.healthy_players", str(self.port)],
                 cwd=REPO, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-                preexec_fn=defended,
+                preexec_fn=defended_players,
             )  # fmt: skip
             assert self._players.stdout is not None
             line = self._players.stdout.readline()
@@ -737,31 +738,41 @@ def main(argv: list[str] | None = None) -> None:
 
 
 ATTACKER_NICE = 10
-DEFENDED_RR_PRIORITY = 10
+SERVER_RR_PRIORITY = 10
+PLAYERS_RR_PRIORITY = 20  # above the server's: they stand for machines of their own
 T = TypeVar("T")
 
 
-def defended() -> None:
-    """Give the calling process (a ``preexec_fn``: the server, the healthy players,
-    a probe) the CPU before anything else that runs on the machine: the round-robin
-    real-time class where the test may set it (root, as in CI), else niceness -5,
-    else nothing. Their threads inherit it; attackers stay in the normal class at
-    :data:`ATTACKER_NICE`.
+def defended(priority: int = SERVER_RR_PRIORITY) -> None:
+    """Give the calling process (a ``preexec_fn``: the server; the healthy players and
+    a probe with :func:`defended_players`) the CPU before anything else that runs on
+    the machine: the round-robin real-time class at ``priority`` where the test may
+    set it (root, as in CI), else niceness -5, else nothing. Their threads inherit it;
+    attackers stay in the normal class at :data:`ATTACKER_NICE`.
 
     Why: on these 2-core machines a ``/healthz`` answer of 75 ms was found to be
     28 ms of the server's CPU and 46 ms of waiting for a core that other processes
     (another session's test run) held, at niceness -5 too; in the real-time class the
-    server's slowest pass of its loop over the same flood was under 30 ms. The healthy
-    players' pose rate under the flood, with the machine shared the same way, was
-    0.92-0.93 of baseline with their process at niceness -5 and 0.95-0.96 with it
-    defended. In the field the attacker's CPU and everything else are on other
-    machines; the kernel still keeps 5 % of each core for the normal class
-    (``sched_rt_runtime_us``), so a runaway server cannot lock the machine."""
+    server's slowest pass of its loop over the same flood was under 30 ms. In the field
+    the attacker's CPU and everything else are on other machines; the kernel still
+    keeps 5 % of each core for the normal class (``sched_rt_runtime_us``), so a
+    runaway server cannot lock the machine."""
     try:
-        os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(DEFENDED_RR_PRIORITY))
+        os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(priority))
     except PermissionError:
         with contextlib.suppress(PermissionError):
             os.nice(-5)
+
+
+def defended_players() -> None:
+    """:func:`defended` above the server: the players and probes are clients on
+    machines of their own in the field, so the server's threads (which may run on
+    either core) must not hold them up. At the server's own real-time priority a
+    player process woken while a server thread ran on its core waited for that thread
+    (round-robin does not preempt an equal priority): its frames then left in bursts,
+    and the server superseded 5 % of them (``posecast_frames_dropped_total``), the
+    pose rate at 0.94-0.96 of baseline."""
+    defended(PLAYERS_RR_PRIORITY)
 
 
 def as_attacker(fn: Callable[[], T]) -> T:

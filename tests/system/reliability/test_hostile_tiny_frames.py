@@ -45,7 +45,7 @@ from tests.system.reliability.hostile_helpers import (
     REPO,
     Arena,
     Rates,
-    defended,
+    defended_players,
     scrape,
 )
 
@@ -106,7 +106,7 @@ def _run_flood(
     (defended like the server: its figure is the server's answer time, not the
     queue for the core it shares with the flooder)."""
     with arena.window() as during:
-        probe = _start(str(arena.port), str(FLOOD_S + 1.0), "probe", prepare=defended)
+        probe = _start(str(arena.port), str(FLOOD_S + 1.0), "probe", prepare=defended_players)
         flood = _start(str(arena.port), str(FLOOD_S), str(CONNS), ",".join(ips), mode,
                        prepare=lambda: os.nice(ATTACKER_NICE))  # fmt: skip
         out, _ = flood.communicate(timeout=FLOOD_S + 60)
