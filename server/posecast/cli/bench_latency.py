@@ -173,14 +173,17 @@ def add_parser(bench_sub: argparse._SubParsersAction[Any]) -> None:
         action="store_true",
         help="then run again with every player behind the reliability suite's lossy relay",
     )
-    add_defaulted(bl, "--drop", 0.2, "--lossy: the share of frames the relay loses")
-    add_defaulted(bl, "--jitter-ms", 40.0, "--lossy: each message up held uniform(0, this) ms")
-    add_defaulted(
-        bl,
-        "--down-jitter-ms",
-        0.0,
-        "--lossy: each message down held uniform(0, this) ms, in order",
-        ", as the reliability suite's relay",
+    relay = (  # the lossy relay's settings: flag, default, help, help after the default
+        ("--drop", 0.2, "the share of frames the relay loses", ""),
+        ("--jitter-ms", 40.0, "each message up held uniform(0, this) ms", ""),
+        (
+            "--down-jitter-ms",
+            0.0,
+            "each message down held uniform(0, this) ms, in order",
+            ", as the reliability suite's relay",
+        ),
     )
+    for flag, default, text, more in relay:
+        add_defaulted(bl, flag, default, "--lossy: " + text, more)
     bl.add_argument("--json", type=Path, help="write the report here")
     bl.set_defaults(func=cmd_bench_latency)
