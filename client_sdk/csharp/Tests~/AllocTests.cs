@@ -29,9 +29,9 @@ namespace Posecast.Client.Tests
 
         private void U32(long v) { for (int i = 0; i < 4; i++) _out.Add((byte)(v >> (8 * i))); }
 
-        public void Keyframe(long handle, long seq, long rx, long ry, long rz, Quat[] items, bool reachLimited = false)
+        public void Keyframe(long avatarId, long seq, long rx, long ry, long rz, Quat[] items, bool reachLimited = false)
         {
-            Leb128(handle);
+            Leb128(avatarId);
             _out.Add((byte)(Records.FlagKeyframe | (reachLimited ? Records.FlagReachLimited : 0)));
             U32(seq); U32(rx); U32(ry); U32(rz);
             foreach (var q in items) Smallest3(q);
@@ -55,9 +55,9 @@ namespace Posecast.Client.Tests
         }
 
         /// <summary>A delta: residuals of the root (3) then the 19 rotations (3 each), in steps.</summary>
-        public void Delta(long handle, int seqStep, long[] residuals)
+        public void Delta(long avatarId, int seqStep, long[] residuals)
         {
-            Leb128(handle);
+            Leb128(avatarId);
             _out.Add(0);
             _out.Add((byte)seqStep);
             _bits = 0; _nbits = 0;
@@ -154,7 +154,7 @@ namespace Posecast.Client.Tests
             public void Record(AvatarState a)
             {
                 a.Rebuild();
-                Drivers[a.Handle].Apply(a.Positions, a.World);
+                Drivers[a.AvatarId].Apply(a.Positions, a.World);
                 Records++;
             }
         }
@@ -218,8 +218,8 @@ namespace Posecast.Client.Tests
                 m.AvatarPrefab = ManagerTests.Prefab();
                 var members = new List<Member> { new Member { Player = "me" } };
                 for (int p = 1; p <= Players; p++) members.Add(new Member { Player = "p" + p });
-                var handle = typeof(PosecastAvatarManager).GetMethod("Handle", System.Reflection.BindingFlags.Instance | System.Reflection.BindingFlags.NonPublic);
-                handle.Invoke(m, new object[] { new ClientEvent { Kind = EventKind.Welcome, Welcome = new Welcome { Player = "me", Members = members.ToArray() } } });
+                var onEvent = typeof(PosecastAvatarManager).GetMethod("OnEvent", System.Reflection.BindingFlags.Instance | System.Reflection.BindingFlags.NonPublic);
+                onEvent.Invoke(m, new object[] { new ClientEvent { Kind = EventKind.Welcome, Welcome = new Welcome { Player = "me", Members = members.ToArray() } } });
                 T.Equal(Players, m.Avatars.Count, "avatars");
                 // The session's events, made beforehand (the network thread makes them in a game).
                 var session = new ClientSession();
@@ -230,11 +230,11 @@ namespace Posecast.Client.Tests
                     Version = Protocol.V2, Player = "me", Session = "s", Role = "player", Room = "lobby", RateHz = 60,
                     Members = new Member[Players], PoseRateHz = 60,
                 };
-                for (int p = 1; p <= Players; p++) welcome.Members[p - 1] = new Member { Player = "p" + p, Name = "P" + p, Handle = p, Skeleton = skeleton };
+                for (int p = 1; p <= Players; p++) welcome.Members[p - 1] = new Member { Player = "p" + p, Name = "P" + p, AvatarId = p, Skeleton = skeleton };
                 session.Receive(Codec.Encode(welcome), 0);
                 for (int k = 0; k < Messages; k++)
                     events[k] = session.Receive(Codec.Encode(new Poses { T = 100 + k / 60.0, Data = stream[k] }), 0).Events;
-                var pump = (Action<ClientEvent>)Delegate.CreateDelegate(typeof(Action<ClientEvent>), m, handle);
+                var pump = (Action<ClientEvent>)Delegate.CreateDelegate(typeof(Action<ClientEvent>), m, onEvent);
                 long bytes = 0;
                 for (int k = 0; k < Messages; k++)
                 {

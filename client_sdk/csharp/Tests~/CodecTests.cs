@@ -70,7 +70,7 @@ namespace Posecast.Client.Tests
                 var refs = new System.Collections.Generic.Dictionary<long, Recon> { { 0, null } };
                 T.Equal("data", T.Throws<BadFieldException>(() => Records.Decode(poses.Data, refs), "keyframe short").Field, "records field");
             });
-            T.Run("codec: random record bytes against announced handles: typed errors only", () =>
+            T.Run("codec: random record bytes against announced avatar ids: typed errors only", () =>
             {
                 var rng = new Random(7);
                 int ok = 0, bad = 0;

@@ -61,9 +61,9 @@ namespace Posecast.Client.Tests
             public string Joined(List<string> l) { return string.Join(" ", l); }
         }
 
-        private static void Handle(PosecastAvatarManager m, ClientEvent e)
+        private static void OnEvent(PosecastAvatarManager m, ClientEvent e)
         {
-            typeof(PosecastAvatarManager).GetMethod("Handle", BindingFlags.Instance | BindingFlags.NonPublic).Invoke(m, new object[] { e });
+            typeof(PosecastAvatarManager).GetMethod("OnEvent", BindingFlags.Instance | BindingFlags.NonPublic).Invoke(m, new object[] { e });
         }
 
         private static ClientEvent Welcome(string self, params string[] others)
@@ -102,7 +102,7 @@ namespace Posecast.Client.Tests
                 var prefab = Prefab();
                 var m = Manager(prefab);
                 var rec = new Recorder(m);
-                Handle(m, Welcome("me", "ann", "bob"));
+                OnEvent(m, Welcome("me", "ann", "bob"));
                 T.Equal("Joined(me) PlayerJoined(ann) PlayerJoined(bob)", rec.Joined(rec.Take()), "events");
                 T.Equal("ann,bob", string.Join(",", m.Avatars.Keys.OrderBy(k => k)), "avatars (not mine)");
                 var ann = m.Avatars["ann"];
@@ -113,9 +113,9 @@ namespace Posecast.Client.Tests
                 T.True(ann.Avatar.gameObject == ann.gameObject && hips != prefab.GetComponent<Animator>().GetBoneTransform(HumanBodyBones.Hips),
                        "the copy's own Animator and bones, not the prefab's");
 
-                Handle(m, Presence("join", "cat"));
-                Handle(m, Presence("stale", "bob"));
-                Handle(m, Presence("leave", "ann"));
+                OnEvent(m, Presence("join", "cat"));
+                OnEvent(m, Presence("stale", "bob"));
+                OnEvent(m, Presence("leave", "ann"));
                 T.Equal("PlayerJoined(cat) PlayerLeft(ann)", rec.Joined(rec.Take()), "events");
                 T.True(ann.gameObject == null && ann == null, "ann's avatar destroyed");
                 T.Equal("bob,cat", string.Join(",", m.Avatars.Keys.OrderBy(k => k)), "avatars");
@@ -127,8 +127,8 @@ namespace Posecast.Client.Tests
             {
                 var prefab = Prefab();
                 var m = Manager(prefab);
-                Handle(m, Welcome("me", "bob"));
-                for (int k = 0; k < 30; k++) Handle(m, PoseOf("bob", 100 + k / 60.0, 0.5));
+                OnEvent(m, Welcome("me", "bob"));
+                for (int k = 0; k < 30; k++) OnEvent(m, PoseOf("bob", 100 + k / 60.0, 0.5));
                 m.DriveAvatars(100.4);
                 var hips = m.Avatars["bob"].Avatar.GetBoneTransform(HumanBodyBones.Hips).position;
                 // posecast (0.5, 0.98, 0) is Unity (-0.5, 0.98, 0), from the manager at (10, 0, 0).
@@ -141,12 +141,12 @@ namespace Posecast.Client.Tests
             {
                 var m = Manager(Prefab());
                 var rec = new Recorder(m);
-                Handle(m, Welcome("me", "ann", "bob"));
+                OnEvent(m, Welcome("me", "ann", "bob"));
                 rec.Take();
-                Handle(m, new ClientEvent { Kind = EventKind.Error, Error = new ErrorMessage { Code = "RATE_LIMITED", Text = "slow down" } });
-                Handle(m, new ClientEvent { Kind = EventKind.Reconnecting, Attempt = 1, DelayS = 0.25, Cause = new ConnectionLostException("lost") });
+                OnEvent(m, new ClientEvent { Kind = EventKind.Error, Error = new ErrorMessage { Code = "RATE_LIMITED", Text = "slow down" } });
+                OnEvent(m, new ClientEvent { Kind = EventKind.Reconnecting, Attempt = 1, DelayS = 0.25, Cause = new ConnectionLostException("lost") });
                 T.Equal(0, m.Avatars.Count, "no avatars while away");
-                Handle(m, Welcome("me", "bob"));
+                OnEvent(m, Welcome("me", "bob"));
                 var log = rec.Take();
                 T.Equal("Error(RATE_LIMITED) PlayerLeft(ann) PlayerLeft(bob) Reconnecting(1) Joined(me) PlayerJoined(bob)", rec.Joined(log), "events");
             });
@@ -155,14 +155,14 @@ namespace Posecast.Client.Tests
             {
                 var m = Manager(Prefab());
                 m.ShowLocalAvatar = true;
-                Handle(m, Welcome("me", "ann"));
+                OnEvent(m, Welcome("me", "ann"));
                 T.Equal("ann,me", string.Join(",", m.Avatars.Keys.OrderBy(k => k)), "mine too");
                 var bare = Manager(null);
                 var rec = new Recorder(bare);
-                Handle(bare, Welcome("me", "ann", "bob"));
+                OnEvent(bare, Welcome("me", "ann", "bob"));
                 T.True(bare.Avatars.Count == 2 && bare.Avatars["ann"] == null, "players without avatars");
                 rec.Take();
-                Handle(bare, Welcome("me", "bob", "cat")); // a rejoin without a Reconnecting first
+                OnEvent(bare, Welcome("me", "bob", "cat")); // a rejoin without a Reconnecting first
                 T.Equal("PlayerLeft(ann) Joined(me) PlayerJoined(cat)", rec.Joined(rec.Take()), "events");
             });
 

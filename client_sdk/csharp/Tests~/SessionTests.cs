@@ -24,7 +24,7 @@ namespace Posecast.Client.Tests
             s.Connected(Protocol.V2);
             var members = c["avatars"].Items.Select(a => new Member
             {
-                Player = a["player"].S, Name = a["player"].S, Handle = a["handle"].L, Skeleton = T.Hex(a["skeleton"]["$bin"].S),
+                Player = a["player"].S, Name = a["player"].S, AvatarId = a["handle"].L, Skeleton = T.Hex(a["skeleton"]["$bin"].S),
             }).ToArray();
             var w = new Welcome
             {
@@ -99,16 +99,16 @@ namespace Posecast.Client.Tests
                 var leave = s.Receive(Enc(new Presence { Event = "leave", Room = "r", Player = "p-200", Name = "p-200" }), 1.1);
                 T.True(leave.Events.Single().Kind == EventKind.Presence, "presence event");
                 var r = s.Receive(key, 1.2);
-                T.True(r.Events.Any(e => e.Kind == EventKind.Bad), "a record for a forgotten handle is refused");
+                T.True(r.Events.Any(e => e.Kind == EventKind.Bad), "a record for a forgotten avatar id is refused");
                 var skel = new byte[108]; // every bone 0: every joint at the pelvis
-                s.Receive(Enc(new Presence { Event = "join", Room = "r", Player = "p-200", Name = "x", Handle = 200, Skeleton = T.Hex(c["avatars"][1]["skeleton"]["$bin"].S) }), 1.3);
-                s.Receive(Enc(new SkeletonMessage { Player = "p-3", Handle = 3, Skeleton = skel }), 1.4);
+                s.Receive(Enc(new Presence { Event = "join", Room = "r", Player = "p-200", Name = "x", AvatarId = 200, Skeleton = T.Hex(c["avatars"][1]["skeleton"]["$bin"].S) }), 1.3);
+                s.Receive(Enc(new SkeletonMessage { Player = "p-3", AvatarId = 3, Skeleton = skel }), 1.4);
                 r = s.Receive(key, 1.5);
                 var p3 = r.Events.Where(e => e.Kind == EventKind.Pose && e.Pose.Player == "p-3").Single().Pose;
                 T.Near(p3.Positions[0], p3.Positions[(int)Joint.HEAD], 1e-12, "zero bones: the head is at the pelvis");
-                // p-3 announced again on another handle: its old handle is forgotten, as in the other SDKs.
-                s.Receive(Enc(new Presence { Event = "join", Room = "r", Player = "p-3", Name = "x", Handle = 77, Skeleton = skel }), 1.6);
-                T.True(!s.Handles.ContainsKey(3) && s.Handles[77] == "p-3", "one handle per player: " + string.Join(",", s.Handles.Keys));
+                // p-3 announced again on another avatar id: its old avatar id is forgotten, as in the other SDKs.
+                s.Receive(Enc(new Presence { Event = "join", Room = "r", Player = "p-3", Name = "x", AvatarId = 77, Skeleton = skel }), 1.6);
+                T.True(!s.AvatarIds.ContainsKey(3) && s.AvatarIds[77] == "p-3", "one avatar id per player: " + string.Join(",", s.AvatarIds.Keys));
             });
             T.Run("session v1: poses, pong, non-fatal and fatal errors, bye", () =>
             {

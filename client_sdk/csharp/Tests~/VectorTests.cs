@@ -105,7 +105,7 @@ namespace Posecast.Client.Tests
             public void Record(AvatarState a)
             {
                 a.Rebuild();
-                Taken.Add(Tuple.Create(a.Handle, a.Seq, a.Keyframe, a.ReachLimited, a.Root, (Quat[])a.Items.Clone(), (Vec3[])a.Positions.Clone()));
+                Taken.Add(Tuple.Create(a.AvatarId, a.Seq, a.Keyframe, a.ReachLimited, a.Root, (Quat[])a.Items.Clone(), (Vec3[])a.Positions.Clone()));
             }
         }
 
@@ -146,7 +146,7 @@ namespace Posecast.Client.Tests
                     var w = want[i];
                     var r = got[i];
                     string at = "message " + k + " record " + i;
-                    T.Equal(w["handle"].L, r.Handle, at + " handle");
+                    T.Equal(w["handle"].L, r.AvatarId, at + " avatar id");
                     T.Equal(w["seq"].L, r.Recon.Seq, at + " seq");
                     T.Equal(w["keyframe"].Bool, r.Keyframe, at + " keyframe");
                     T.Equal(w["reach_limited"].Bool, r.ReachLimited, at + " reach_limited");
@@ -159,7 +159,7 @@ namespace Posecast.Client.Tests
                         T.Near(q[0], gq.X, tol, at + " item " + j + ".x"); T.Near(q[1], gq.Y, tol, at + " item " + j + ".y");
                         T.Near(q[2], gq.Z, tol, at + " item " + j + ".z"); T.Near(q[3], gq.W, tol, at + " item " + j + ".w");
                     }
-                    var pos = Records.Positions(r.Recon.Root, Records.ItemsToWorld(r.Recon.Items), bones[r.Handle]);
+                    var pos = Records.Positions(r.Recon.Root, Records.ItemsToWorld(r.Recon.Items), bones[r.AvatarId]);
                     for (int j = 0; j < Protocol.NumJoints; j++)
                     {
                         var p = w["positions"][j].Doubles();
@@ -167,7 +167,7 @@ namespace Posecast.Client.Tests
                     }
                     // In place: the very same numbers (one code path), FK into the state's arrays.
                     var s = seen.Taken[i];
-                    T.Equal(r.Handle + " " + r.Recon.Seq + " " + r.Keyframe + " " + r.ReachLimited + " " + r.Recon.Root,
+                    T.Equal(r.AvatarId + " " + r.Recon.Seq + " " + r.Keyframe + " " + r.ReachLimited + " " + r.Recon.Root,
                             s.Item1 + " " + s.Item2 + " " + s.Item3 + " " + s.Item4 + " " + s.Item5, at + " in place");
                     for (int j = 0; j < Protocol.NumJoints; j++)
                     {

@@ -748,8 +748,8 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
             const known = this.membersNow.get(msg.player);
             this.membersNow.set(
               msg.player,
-              msg.handle !== undefined && msg.skeleton !== undefined
-                ? { player: msg.player, name: msg.name, handle: msg.handle, skeleton: msg.skeleton }
+              msg.avatarId !== undefined && msg.skeleton !== undefined
+                ? { player: msg.player, name: msg.name, avatarId: msg.avatarId, skeleton: msg.skeleton }
                 : { ...known, player: msg.player, name: msg.name },
             );
           }

@@ -12,9 +12,10 @@
  *
  * `version` (in {@link DecodeOptions}) is the connection's protocol, the subprotocol the
  * server selected: v2 knows `poses`, `skeleton`, `pose_rate` and `resync` but no `pose`,
- * wants `version` 2 in `hello`, a `handle` and `skeleton` for every `welcome` member and
- * presence `join`, and lets a server message (and its `poses.data` bin) reach 16384
- * bytes. `poses.data` is opaque here: `records.ts` reads it against the client's state.
+ * wants `version` 2 in `hello`, a `handle` (the avatar id, `avatarId` in the messages)
+ * and `skeleton` for every `welcome` member and presence `join`, and lets a server
+ * message (and its `poses.data` bin) reach 16384 bytes. `poses.data` is opaque here:
+ * `records.ts` reads it against the client's state.
  * {@link encode} writes whatever fields a message has, so it serves both versions.
  */
 
@@ -267,7 +268,7 @@ function decodeWelcome(m: WireMap, lim: Limits, connection: number): Welcome {
     return {
       player,
       name,
-      handle: asInt(item, "handle", 0, UINT32_MAX, at),
+      avatarId: asInt(item, "handle", 0, UINT32_MAX, at), // "handle": the avatar id's wire key
       skeleton: asBin(item, "skeleton", SKELETON_BYTES, at),
     };
   });
@@ -365,7 +366,7 @@ function decodePresence(m: WireMap, lim: Limits, connection: number): Presence {
   if (connection < PROTOCOL_V2 || presence.event !== "join") return presence;
   return {
     ...presence,
-    handle: asInt(m, "handle", 0, UINT32_MAX),
+    avatarId: asInt(m, "handle", 0, UINT32_MAX), // "handle": the avatar id's wire key
     skeleton: asBin(m, "skeleton", SKELETON_BYTES),
   };
 }
@@ -446,7 +447,7 @@ const DECODERS: Readonly<Record<string, Decoder>> = {
   skeleton: (m): SkeletonMessage => ({
     type: "skeleton",
     player: asId(m, "player", MAX_ID_BYTES),
-    handle: asInt(m, "handle", 0, UINT32_MAX),
+    avatarId: asInt(m, "handle", 0, UINT32_MAX), // "handle": the avatar id's wire key
     skeleton: asBin(m, "skeleton", SKELETON_BYTES),
   }),
   pose_rate: (m): PoseRate => ({ type: "pose_rate", rate_hz: asPoseRate(m, "rate_hz") }),
@@ -506,7 +507,7 @@ function toWireOf(msg: Message): Map<string, Wire> {
             wireMap([
               ["player", p.player],
               ["name", p.name],
-              ["handle", p.handle],
+              ["handle", p.avatarId], // the avatar id's wire key
               ["skeleton", p.skeleton],
             ]),
           ),
@@ -555,7 +556,7 @@ function toWireOf(msg: Message): Map<string, Wire> {
         ["room", msg.room],
         ["player", msg.player],
         ["name", msg.name],
-        ["handle", msg.handle],
+        ["handle", msg.avatarId], // the avatar id's wire key
         ["skeleton", msg.skeleton],
       ]);
     case "selector":
@@ -611,7 +612,7 @@ function toWireOf(msg: Message): Map<string, Wire> {
       return wireMap([
         ["type", "skeleton"],
         ["player", msg.player],
-        ["handle", msg.handle],
+        ["handle", msg.avatarId], // the avatar id's wire key
         ["skeleton", msg.skeleton],
       ]);
     case "pose_rate":

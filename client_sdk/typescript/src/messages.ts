@@ -3,10 +3,11 @@
  *
  * One interface per message `type`. Field names are the wire names (`rate_hz`,
  * `ref_seq`, ...), so this file reads side by side with `proto/README.md`, which is
- * the spec; the client API around it (`PosecastClient`) uses camelCase.
+ * the spec; the client API around it (`PosecastClient`) uses camelCase. One field is
+ * not named as on the wire: `avatarId`, the avatar id, whose wire key is `handle`.
  *
- * v2 (`posecast.v2`) adds `poses`, `skeleton`, `pose_rate` and `resync`, a `handle` and
- * `skeleton` on welcome members and presence joins, and `pose_rate_hz` in hello and
+ * v2 (`posecast.v2`) adds `poses`, `skeleton`, `pose_rate` and `resync`, an `avatarId`
+ * and `skeleton` on welcome members and presence joins, and `pose_rate_hz` in hello and
  * welcome; it has no `pose` on the wire (the client rebuilds {@link Pose}s from records).
  *
  * Units everywhere: metres, seconds, a right-handed world with +Y up, a character
@@ -153,8 +154,9 @@ export interface Hello {
 export interface Member {
   readonly player: string;
   readonly name: string;
-  /** v2 (required there): how pose records name this player on this connection. */
-  readonly handle?: number;
+  /** v2 (required there): the avatar id, how pose records name this player on this
+   * connection (`handle` on the wire). */
+  readonly avatarId?: number;
   /** v2 (required there): the player's bone offsets, {@link SKELETON_BYTES} bytes. */
   readonly skeleton?: Uint8Array;
 }
@@ -229,8 +231,8 @@ export interface Presence {
   readonly room: string;
   readonly player: string;
   readonly name: string;
-  /** v2 `join` (required there): the player's handle on this connection. */
-  readonly handle?: number;
+  /** v2 `join` (required there): the player's avatar id on this connection (`handle` on the wire). */
+  readonly avatarId?: number;
   /** v2 `join` (required there): its bone offsets, {@link SKELETON_BYTES} bytes. */
   readonly skeleton?: Uint8Array;
 }
@@ -248,7 +250,8 @@ export interface Poses {
 export interface SkeletonMessage {
   readonly type: "skeleton";
   readonly player: string;
-  readonly handle: number;
+  /** The player's avatar id on this connection (`handle` on the wire). */
+  readonly avatarId: number;
   readonly skeleton: Uint8Array;
 }
 

@@ -6,7 +6,7 @@
  * three in step. A record is:
  *
  * ```text
- * handle (unsigned LEB128) | flags (u8: bit 0 keyframe, bit 1 reach_limited)
+ * avatar id (unsigned LEB128) | flags (u8: bit 0 keyframe, bit 1 reach_limited)
  * keyframe: seq u32 LE | root 3 x i32 LE (0.1 mm) | 19 x 48-bit smallest-three
  * delta:    seq step u8 (1..255) | bitstream (LSB first) of 20 items, root then the
  *           19 rotations: a 2-bit class, then 3 signed components of its width
@@ -45,7 +45,7 @@ export interface AvatarState {
 }
 
 export interface DecodedRecord {
-  readonly handle: number;
+  readonly avatarId: number;
   readonly keyframe: boolean;
   readonly reachLimited: boolean;
   readonly state: AvatarState;
@@ -137,16 +137,16 @@ function bad(message: string): BadFieldError {
 function leb128(data: Uint8Array, pos: number): [number, number] {
   let value = 0;
   for (let k = 0; k < 5; k++) {
-    if (pos + k >= data.length) throw bad("a record is cut short in its handle");
+    if (pos + k >= data.length) throw bad("a record is cut short in its avatar id");
     const b = data[pos + k]!;
     value += (b & 0x7f) * 2 ** (7 * k);
     if (!(b & 0x80)) {
-      if (k > 0 && b === 0) throw bad("a handle that is not minimal LEB128");
-      if (value > 0xffffffff) throw bad("a handle over 2**32 - 1");
+      if (k > 0 && b === 0) throw bad("an avatar id that is not minimal LEB128");
+      if (value > 0xffffffff) throw bad("an avatar id over 2**32 - 1");
       return [value, pos + k + 1];
     }
   }
-  throw bad("a handle of more than 5 bytes");
+  throw bad("an avatar id of more than 5 bytes");
 }
 
 /** One 48-bit smallest-three word (at `data[pos..pos+6]`) into `out[oi..oi+4]`. */
@@ -231,13 +231,13 @@ function applyDelta(data: Uint8Array, pos: number, prev: AvatarState): [AvatarSt
 }
 
 /**
- * Every record of `data`, each applied to `avatars` (handle -> state, `null` for an
+ * Every record of `data`, each applied to `avatars` (avatar id -> state, `null` for an
  * announced avatar without a keyframe yet), which it updates record by record. The
  * decoded records are appended to `out` as they come, so when a record is bad the
  * ones before it are there (and applied), as the spec's "skip the rest" asks.
  *
  * @throws BadFieldError (field `data`) a record is cut short, has reserved bits set,
- *   names a handle not in `avatars`, is a delta with nothing to apply to, or takes the
+ *   names an avatar id not in `avatars`, is a delta with nothing to apply to, or takes the
  *   root beyond 1000 m. The client skips the rest of the message and sends `resync`.
  */
 export function decodeRecords(
@@ -247,10 +247,10 @@ export function decodeRecords(
 ): DecodedRecord[] {
   let pos = 0;
   while (pos < data.length) {
-    let handle: number;
-    [handle, pos] = leb128(data, pos);
-    if (!avatars.has(handle)) throw bad(`handle ${handle} was never announced`);
-    if (pos >= data.length) throw bad("a record ends after its handle");
+    let avatarId: number;
+    [avatarId, pos] = leb128(data, pos);
+    if (!avatars.has(avatarId)) throw bad(`avatar id ${avatarId} was never announced`);
+    if (pos >= data.length) throw bad("a record ends after its avatar id");
     const flags = data[pos++]!;
     if (flags & ~(KEYFRAME | REACH_LIMITED)) throw bad(`reserved record flags 0x${flags.toString(16)}`);
     let state: AvatarState;
@@ -264,12 +264,12 @@ export function decodeRecords(
       state = { seq: view.getUint32(0, true), root, items, steps: new Int32Array(ITEMS * 3) };
       pos += KEYFRAME_BYTES;
     } else {
-      const prev = avatars.get(handle);
-      if (prev === null || prev === undefined) throw bad(`a delta for handle ${handle} before its keyframe`);
+      const prev = avatars.get(avatarId);
+      if (prev === null || prev === undefined) throw bad(`a delta for avatar id ${avatarId} before its keyframe`);
       [state, pos] = applyDelta(data, pos, prev);
     }
-    avatars.set(handle, state);
-    out.push({ handle, keyframe: (flags & KEYFRAME) !== 0, reachLimited: (flags & REACH_LIMITED) !== 0, state });
+    avatars.set(avatarId, state);
+    out.push({ avatarId, keyframe: (flags & KEYFRAME) !== 0, reachLimited: (flags & REACH_LIMITED) !== 0, state });
   }
   return out;
 }

@@ -24,6 +24,7 @@ import { items2world } from "../src/records.js";
 import { fromHex, repoRoot } from "./helpers.js";
 
 interface StreamCase {
+  // The vector file's keys, as in proto/vectors: `handle` is the avatar id.
   name: string;
   avatars: { handle: number; player: string; skeleton: { $bin: string } }[];
   messages: string[];
@@ -112,7 +113,7 @@ async function until(what: string, ok: () => boolean): Promise<void> {
 }
 
 function membersOf(c: StreamCase): Member[] {
-  return c.avatars.map((a) => ({ player: a.player, name: a.player, handle: a.handle, skeleton: fromHex(a.skeleton.$bin) }));
+  return c.avatars.map((a) => ({ player: a.player, name: a.player, avatarId: a.handle, skeleton: fromHex(a.skeleton.$bin) }));
 }
 
 function assertClose(actual: ArrayLike<number>, expected: readonly number[], tol: number, what: string): void {
@@ -173,10 +174,10 @@ test("v2: a record that cannot be applied is an error event and a resync, never 
     assert.equal(ev.error.field, "data");
     await until("resync", () => server.received.some((m) => m.type === "resync"));
     assert.equal(client.badRecords, 1);
-    // A presence join announces a handle; a skeleton for it is kept; leave forgets it.
+    // A presence join announces an avatar id; a skeleton for it is kept; leave forgets it.
     const skel = membersOf(stream)[0]!.skeleton!;
-    server.send({ type: "presence", event: "join", room: "lobby", player: "p-9", name: "Bob", handle: 9, skeleton: skel });
-    await until("join", () => client.members.get("p-9")?.handle === 9);
+    server.send({ type: "presence", event: "join", room: "lobby", player: "p-9", name: "Bob", avatarId: 9, skeleton: skel });
+    await until("join", () => client.members.get("p-9")?.avatarId === 9);
     assert.equal(client.skeletonOf("p-9")?.length, 57);
     server.send({ type: "presence", event: "leave", room: "lobby", player: "p-9", name: "Bob" });
     await until("leave", () => client.skeletonOf("p-9") === undefined);
@@ -203,7 +204,7 @@ test("v2: after a bad record every reference is dropped, so no later delta decod
     const first = fromHex(stream.messages[0]!);
     const msg = decode(first, { version: 2 });
     assert.ok(msg.type === "poses");
-    server.send({ ...msg, data: Uint8Array.from([...msg.data, 0x7f, 0x01]) }); // handle 127: bad
+    server.send({ ...msg, data: Uint8Array.from([...msg.data, 0x7f, 0x01]) }); // avatar id 127: bad
     await until("the bad record", () => client.badRecords === 1);
     const seqs = new Map([...client.poses].map(([p, pose]) => [p, pose.seq]));
     server.sendRaw(fromHex(stream.messages[1]!)); // deltas against the first message's state

@@ -17,6 +17,7 @@ import type { Member } from "../src/messages.js";
 import { fromHex, repoRoot } from "./helpers.js";
 
 interface StreamCase {
+  // The vector file's keys, as in proto/vectors: `handle` is the avatar id.
   name: string;
   avatars: { handle: number; player: string; skeleton: { $bin: string } }[];
   messages: string[];
@@ -27,7 +28,7 @@ const STREAMS = (JSON.parse(readFileSync(join(repoRoot(), "proto", "vectors", "p
   .filter((c) => "messages" in c);
 
 function members(c: StreamCase): Member[] {
-  return c.avatars.map((a) => ({ player: a.player, name: a.player, handle: a.handle, skeleton: fromHex(a.skeleton.$bin) }));
+  return c.avatars.map((a) => ({ player: a.player, name: a.player, avatarId: a.handle, skeleton: fromHex(a.skeleton.$bin) }));
 }
 
 function dataOf(hex: string): Uint8Array {
@@ -112,7 +113,7 @@ test("the records before a bad one are kept, and a keyframe starts afresh after 
   const good = table.poses({ type: "poses", t: 1, data: first! });
   assert.equal(good.error, undefined);
   assert.ok(good.poses.length >= 2 && good.poses.every((p) => p.keyframe));
-  // The first message again, then a record for a handle nobody announced (0x7f).
+  // The first message again, then a record for an avatar id nobody announced (0x7f).
   const bad = table.poses({ type: "poses", t: 2, data: Uint8Array.from([...first!, 0x7f, 0x01]) });
   assert.equal(bad.poses.length, good.poses.length);
   assert.equal(bad.error?.field, "data");
@@ -124,9 +125,9 @@ test("the records before a bad one are kept, and a keyframe starts afresh after 
   assert.deepEqual(again.poses.map((p) => p.positions), good.poses.map((p) => p.positions));
 });
 
-test("a join of a known player on its own handle keeps its reference; another player's does not", () => {
+test("a join of a known player on its own avatar id keeps its reference; another player's does not", () => {
   // Cluster failover: the player moved from another node to this one and is announced
-  // again on the same handle, and the server goes on with deltas against its reference.
+  // again on the same avatar id, and the server goes on with deltas against its reference.
   const c = STREAMS.find((s) => s.name === "poses_stream_two_avatars")!;
   const [first, second] = c.messages.map(dataOf);
   const table = new AvatarTable();
@@ -135,36 +136,36 @@ test("a join of a known player on its own handle keeps its reference; another pl
   assert.equal(table.poses({ type: "poses", t: 1, data: first! }).error, undefined);
   const m = ms[0]!;
   table.presence({ type: "presence", event: "join", room: "r", player: m.player, name: "again",
-    handle: m.handle!, skeleton: m.skeleton! });
+    avatarId: m.avatarId!, skeleton: m.skeleton! });
   const kept = table.poses({ type: "poses", t: 2, data: second! });
   assert.equal(kept.error, undefined);
   table.presence({ type: "presence", event: "join", room: "r", player: "someone-else", name: "x",
-    handle: m.handle!, skeleton: m.skeleton! });
+    avatarId: m.avatarId!, skeleton: m.skeleton! });
   const fresh = table.poses({ type: "poses", t: 3, data: c.messages.map(dataOf)[2]! });
   assert.match(fresh.error?.message ?? "", /before its keyframe/);
 });
 
-test("a skeleton announces a handle not known yet, keeps the same player's reference, not another's", () => {
+test("a skeleton announces an avatar id not known yet, keeps the same player's reference, not another's", () => {
   const c = STREAMS.find((s) => s.name === "poses_stream_two_avatars")!;
   const [first, second, third] = c.messages.map(dataOf);
   const table = new AvatarTable();
   const ms = members(c);
   table.reset([]); // no members announced: their skeletons do it
-  for (const m of ms) table.skeleton({ type: "skeleton", player: m.player, handle: m.handle!, skeleton: m.skeleton! });
+  for (const m of ms) table.skeleton({ type: "skeleton", player: m.player, avatarId: m.avatarId!, skeleton: m.skeleton! });
   const keyed = table.poses({ type: "poses", t: 1, data: first! });
   assert.equal(keyed.error, undefined);
   assert.deepEqual(new Set(keyed.poses.map((p) => p.player)), new Set(ms.map((m) => m.player)));
   const m = ms[0]!;
-  table.skeleton({ type: "skeleton", player: m.player, handle: m.handle!, skeleton: m.skeleton! }); // a calibration
+  table.skeleton({ type: "skeleton", player: m.player, avatarId: m.avatarId!, skeleton: m.skeleton! }); // a calibration
   assert.equal(table.poses({ type: "poses", t: 2, data: second! }).error, undefined);
-  // The handle now another player's (its leave never arrived): wait for its keyframe.
-  table.skeleton({ type: "skeleton", player: "someone-else", handle: m.handle!, skeleton: m.skeleton! });
+  // The avatar id now another player's (its leave never arrived): wait for its keyframe.
+  table.skeleton({ type: "skeleton", player: "someone-else", avatarId: m.avatarId!, skeleton: m.skeleton! });
   assert.match(table.poses({ type: "poses", t: 3, data: third! }).error?.message ?? "", /before its keyframe/);
 });
 
-test("a handle passed to another player is no longer the old player's: its late leave or new handle leaves the new avatar", () => {
-  // The old player's leave never arrived before its handle went to someone else (as
-  // the Python and C# SDKs keep it: the handle names one player, the newest).
+test("an avatar id passed to another player is no longer the old player's: its late leave or new avatar id leaves the new avatar", () => {
+  // The old player's leave never arrived before its avatar id went to someone else (as
+  // the Python and C# SDKs keep it: the avatar id names one player, the newest).
   const c = STREAMS.find((s) => s.name === "poses_stream_two_avatars")!;
   const [first] = c.messages.map(dataOf);
   const ms = members(c);
@@ -172,13 +173,13 @@ test("a handle passed to another player is no longer the old player's: its late 
   for (const late of ["leave", "join elsewhere"]) {
     const table = new AvatarTable();
     table.reset(ms);
-    table.skeleton({ type: "skeleton", player: "someone-else", handle: m.handle!, skeleton: m.skeleton! });
-    assert.equal(table.handleOf(m.player), undefined, late);
+    table.skeleton({ type: "skeleton", player: "someone-else", avatarId: m.avatarId!, skeleton: m.skeleton! });
+    assert.equal(table.avatarIdOf(m.player), undefined, late);
     assert.equal(table.offsetsOf(m.player), undefined, late);
     if (late === "leave") table.presence({ type: "presence", event: "leave", room: "r", player: m.player, name: "" });
     else table.presence({ type: "presence", event: "join", room: "r", player: m.player, name: "again",
-      handle: 999, skeleton: m.skeleton! });
-    assert.equal(table.handleOf("someone-else"), m.handle, late);
+      avatarId: 999, skeleton: m.skeleton! });
+    assert.equal(table.avatarIdOf("someone-else"), m.avatarId, late);
     const keyed = table.poses({ type: "poses", t: 1, data: first! });
     assert.equal(keyed.error, undefined, late);
     assert.ok(keyed.poses.some((p) => p.player === "someone-else"), late);

@@ -38,6 +38,7 @@ interface InvalidCase {
   field?: string;
 }
 interface ExpectedRecord {
+  // The vector file's keys, as in proto/vectors: `handle` is the avatar id.
   handle: number;
   seq: number;
   keyframe: boolean;
@@ -115,14 +116,14 @@ function runStream(c: StreamCase): void {
       const e = expected[i]!;
       const at = `message ${k} record ${i}`;
       assert.deepEqual(
-        [rec.handle, rec.state.seq, rec.keyframe, rec.reachLimited],
+        [rec.avatarId, rec.state.seq, rec.keyframe, rec.reachLimited],
         [e.handle, e.seq, e.keyframe, e.reach_limited],
         at,
       );
       assertClose(rootMetres(rec.state), e.root, c.tolerance, `${at} root`);
       assertClose(rec.state.items, e.items.flat(), c.tolerance, `${at} items`);
       const world = items2world(rec.state.items);
-      const positions = fk(world, rootMetres(rec.state), offsets.get(rec.handle)!);
+      const positions = fk(world, rootMetres(rec.state), offsets.get(rec.avatarId)!);
       assertClose(positions, e.positions.flat(), c.tolerance, `${at} positions`);
     });
   });

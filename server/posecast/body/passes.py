@@ -110,18 +110,7 @@ class NumpyPasses:
         quats: F32 = mat2quat(wm).astype(np.float32)
         return wp, quats
 
-    def upper_body(
-        self,
-        positions: F32,
-        rotations: F32,
-        tracker_pos: F64,
-        tracker_quat: F64,
-        free_root: NDArray[np.bool_] | None,
-        wrist_share: float,
-    ) -> tuple[F32, F32, NDArray[np.bool_]]:
-        return solve_upper_body(
-            positions, rotations, tracker_pos, tracker_quat, free_root, wrist_share
-        )
+    upper_body = staticmethod(solve_upper_body)  # the reference itself
 
     def hinge(self, positions: F32, rotations: F32, limbs: Limbs) -> None:
         hinge_quat(positions, rotations, limbs)

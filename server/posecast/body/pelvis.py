@@ -22,6 +22,8 @@ Pure numpy.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -32,6 +34,16 @@ from posecast.tracking.features import TrackerSlot
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
 WEIGHTS = (0.25, 0.5, 0.25)  # frames e - 1, e, e + 1
+
+
+class PelvisPoses(NamedTuple):
+    """The world pelvis poses of ``R`` decoded rows, ``G`` of them, each shared by
+    ``group = R / G`` consecutive rows: rotations ``mats (G, 3, 3)`` and positions
+    ``places (G, 3)``, float32."""
+
+    mats: F32
+    places: F32
+    group: int
 
 
 def smooth_pelvis(
@@ -70,9 +82,9 @@ def pelvis_poses(
     root_out: F32 | None,
     repeat: int,
     waist: NDArray[np.bool_] | None = None,
-) -> tuple[F32, F32, int]:
-    """World pelvis rotations ``(G, 3, 3)`` and positions ``(G, 3)`` (float32) for
-    ``R = len(pos) * repeat`` decoded rows, and how many rows share each: ``R / G``.
+) -> PelvisPoses:
+    """The world pelvis poses of ``R = len(pos) * repeat`` decoded rows: rotations
+    ``(G, 3, 3)`` and positions ``(G, 3)`` (float32), and how many rows share each, ``R / G``.
 
     ``pos (P, rows, 3)``, ``quat (P, rows, 4)``: the calibrated trackers of ``P``
     players. ``hmd3+waist``: the waist tracker's (``rootm``, its rotation ``(P, 3, 3)``
@@ -83,7 +95,7 @@ def pelvis_poses(
     player) take the waist tracker's pose.
     """
     if root_out is None:
-        return rootm, pos[:, TrackerSlot.WAIST].astype(np.float32), repeat
+        return PelvisPoses(rootm, pos[:, TrackerSlot.WAIST].astype(np.float32), repeat)
     mats, places = pelvis_from_head32(root_out, pos[:, TrackerSlot.HEAD], quat[:, TrackerSlot.HEAD])
     if waist is not None and waist.any():
         rows = np.repeat(waist, repeat)
@@ -91,4 +103,4 @@ def pelvis_poses(
         wm = quat2mat(quat[players, TrackerSlot.WAIST]).astype(np.float32)
         mats[rows] = np.repeat(wm, repeat, axis=0)
         places[rows] = np.repeat(pos[players, TrackerSlot.WAIST].astype(np.float32), repeat, axis=0)
-    return mats, places, 1
+    return PelvisPoses(mats, places, 1)

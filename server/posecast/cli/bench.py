@@ -10,6 +10,7 @@ from typing import Any
 
 from posecast.cli import bench_latency
 from posecast.cli.common import (
+    add_defaulted,
     at_least,
     backend_names,
     check_json_out,
@@ -142,20 +143,11 @@ def add_parsers(sub: argparse._SubParsersAction[Any]) -> None:
         description="The engine's whole per-tick cost at each player count, and how many "
         "players hold 60 Hz (p99 tick under 16.7 ms) as far as the counts tested tell.",
     )
-    be.add_argument(
-        "--players",
-        default="1,10,50,100,200",
-        help="player counts, comma-separated, each measured in turn (default %(default)s)",
+    add_defaulted(
+        be, "--players", "1,10,50,100,200", "player counts, comma-separated, each measured in turn"
     )
-    be.add_argument(
-        "--samples", type=int, default=100, help="latent samples N (default %(default)s)"
-    )
-    be.add_argument(
-        "--threads",
-        type=int,
-        default=2,
-        help="the backend's intra-op threads (default %(default)s)",
-    )
+    add_defaulted(be, "--samples", 100, "latent samples N")
+    add_defaulted(be, "--threads", 2, "the backend's intra-op threads")
     be.add_argument(
         "--backend",
         default="native",
@@ -163,21 +155,14 @@ def add_parsers(sub: argparse._SubParsersAction[Any]) -> None:
         "each (native, onnx, torch; default native, which falls back to onnx where the "
         "extension does not load; --json then writes a list)",
     )
-    be.add_argument(
-        "--ticks", type=int, default=120, help="measured ticks per count (default %(default)s)"
-    )
-    be.add_argument(
-        "--naive-players",
-        type=int,
-        default=10,
-        help="players for the per-player loop it is compared with (default %(default)s)",
-    )
-    be.add_argument(
+    add_defaulted(be, "--ticks", 120, "measured ticks per count")
+    add_defaulted(be, "--naive-players", 10, "players for the per-player loop it is compared with")
+    add_defaulted(
+        be,
         "--hmd3-share",
-        type=float,
-        default=0.5,
-        help="also load the headset-only model and run this share of players on it "
-        "(default 0.5; 0: the 4-point model only)",
+        0.5,
+        "also load the headset-only model and run this share of players on it",
+        "; 0: the 4-point model only",
     )
     be.add_argument(
         "--sets",

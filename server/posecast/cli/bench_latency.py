@@ -10,7 +10,15 @@ from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
-from posecast.cli.common import at_least, check_json_out, check_samples, config_error, finite, given
+from posecast.cli.common import (
+    add_defaulted,
+    at_least,
+    check_json_out,
+    check_samples,
+    config_error,
+    finite,
+    given,
+)
 
 CMD = "bench latency"
 ROWS = (
@@ -143,31 +151,12 @@ def add_parser(bench_sub: argparse._SubParsersAction[Any]) -> None:
         "interpolator at 90 Hz: capture to first display, p50 and p99, split into "
         "look-ahead, server queue and tick, transport and client buffer.",
     )
-    bl.add_argument("--players", type=int, default=16, help="players (default %(default)s)")
-    bl.add_argument(
-        "--room-size", type=int, default=8, help="players per room (default %(default)s)"
-    )
-    bl.add_argument(
-        "--seconds", type=float, default=10.0, help="measured seconds (default %(default)s)"
-    )
-    bl.add_argument(
-        "--warmup",
-        type=float,
-        default=3.0,
-        help="seconds of streaming before the measured window (default %(default)s)",
-    )
-    bl.add_argument(
-        "--display-hz",
-        type=float,
-        default=90.0,
-        help="each receiver's display rate (default %(default)s)",
-    )
-    bl.add_argument(
-        "--procs",
-        type=int,
-        default=2,
-        help="client processes the players are dealt over (default %(default)s)",
-    )
+    add_defaulted(bl, "--players", 16, "players")
+    add_defaulted(bl, "--room-size", 8, "players per room")
+    add_defaulted(bl, "--seconds", 10.0, "measured seconds")
+    add_defaulted(bl, "--warmup", 3.0, "seconds of streaming before the measured window")
+    add_defaulted(bl, "--display-hz", 90.0, "each receiver's display rate")
+    add_defaulted(bl, "--procs", 2, "client processes the players are dealt over")
     bl.add_argument(
         "--samples", type=int, help="the server's latent samples N (default: the server's)"
     )
@@ -184,24 +173,17 @@ def add_parser(bench_sub: argparse._SubParsersAction[Any]) -> None:
         action="store_true",
         help="then run again with every player behind the reliability suite's lossy relay",
     )
-    bl.add_argument(
-        "--drop",
-        type=float,
-        default=0.2,
-        help="--lossy: the share of frames the relay loses (default %(default)s)",
+    relay = (  # the lossy relay's settings: flag, default, help, help after the default
+        ("--drop", 0.2, "the share of frames the relay loses", ""),
+        ("--jitter-ms", 40.0, "each message up held uniform(0, this) ms", ""),
+        (
+            "--down-jitter-ms",
+            0.0,
+            "each message down held uniform(0, this) ms, in order",
+            ", as the reliability suite's relay",
+        ),
     )
-    bl.add_argument(
-        "--jitter-ms",
-        type=float,
-        default=40.0,
-        help="--lossy: each message up held uniform(0, this) ms (default %(default)s)",
-    )
-    bl.add_argument(
-        "--down-jitter-ms",
-        type=float,
-        default=0.0,
-        help="--lossy: each message down held uniform(0, this) ms, in order (default "
-        "%(default)s, as the reliability suite's relay)",
-    )
+    for flag, default, text, more in relay:
+        add_defaulted(bl, flag, default, "--lossy: " + text, more)
     bl.add_argument("--json", type=Path, help="write the report here")
     bl.set_defaults(func=cmd_bench_latency)

@@ -33,6 +33,17 @@ def config_error(message: str, hint: str) -> ConfigError:
     return hinted(ConfigError(message), hint)
 
 
+def add_defaulted(
+    parser: argparse.ArgumentParser, flag: str, default: str | float, text: str, more: str = ""
+) -> None:
+    """Add the option ``flag`` of ``default``'s type (str, int or float) with its help
+    ``text``, which ``--help`` ends with the default and ``more``: ``text (default 3.0)``,
+    or with ``more="; 0: off"``, ``text (default 3.0; 0: off)``."""
+    parser.add_argument(
+        flag, type=type(default), default=default, help=f"{text} (default %(default)s{more})"
+    )
+
+
 # --- Validation at the edge ----------------------------------------------------------
 
 

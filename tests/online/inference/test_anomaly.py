@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from posecast.body.batch_fk import fk32
+from posecast.body.pelvis import PelvisPoses
 from posecast.geometry.rotations import normalize, quat2mat, quat_apply, quat_mul, yaw2quat
 from posecast.online.engine.ports import PoolIK
 from posecast.online.inference.anomaly import AnomalyScorer, rotate_y
@@ -140,7 +141,8 @@ def test_every_backends_pool_scores_like_the_scorer(
     )
     world = np.full((R, NUM_JOINTS, 3), np.nan, np.float32)
     pool = backend().pool
-    got = pool.step(rot, np.zeros((R, 2), np.float32), root_mat, root_pos, group, ik, world)
+    pelvis = PelvisPoses(root_mat, root_pos, group)
+    got = pool.step(rot, np.zeros((R, 2), np.float32), pelvis, ik, world)
     mats, places = np.repeat(root_mat, group, axis=0), np.repeat(root_pos, group, axis=0)
     _, want = fk32(rot, mats, places, want_mats=False)
     np.testing.assert_allclose(world, want, atol=1e-5)

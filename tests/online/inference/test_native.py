@@ -21,6 +21,7 @@ import pytest
 from posecast.body.batch_fk import fk32
 from posecast.body.hinge import ELBOW_LIMBS, FADES, KNEE_LIMBS, hinge_quat, limb_table
 from posecast.body.ik import ContactIK
+from posecast.body.pelvis import PelvisPoses
 from posecast.geometry.fk import fk_mat
 from posecast.geometry.rotations import aa2mat, mat2quat
 from posecast.offline.train.masks import TABLE_SETS
@@ -142,7 +143,8 @@ def test_pool_matches_float64_fk_ik_and_scores(level: str, group: int) -> None:
     R = len(inp["rot"])
     ik = PoolIK(*(inp[k].copy() for k in ("locked", "lock_pos", "release", "suppressed")))
     world = np.zeros((R, 19, 3), np.float32)
-    scores = pool.step(inp["rot"], inp["con"], inp["root_mat"], inp["root_pos"], group, ik, world)
+    pelvis = PelvisPoses(inp["root_mat"], inp["root_pos"], group)
+    scores = pool.step(inp["rot"], inp["con"], pelvis, ik, world)
     ik64 = {k: inp[k].copy() for k in ("locked", "lock_pos", "release", "suppressed")}
     world64, scores64 = ref.pool64(
         inp["rot"].astype(np.float64),
@@ -245,16 +247,18 @@ def test_bad_buffers_raise_value_errors_not_crashes() -> None:
     rm, rp = np.zeros((1, 3, 3), np.float32), np.zeros((1, 3), np.float32)
     with pytest.raises(ValueError, match="multiple of group"):
         pool.step(
-            good["rotations"], good["contacts"], rm, rp, 3, ik, np.zeros((R, 19, 3), np.float32)
+            good["rotations"],
+            good["contacts"],
+            PelvisPoses(rm, rp, 3),
+            ik,
+            np.zeros((R, 19, 3), np.float32),
         )
     bad_ik = PoolIK(ik.locked, ik.lock_pos.astype(np.float32), ik.release, ik.suppressed)
     with pytest.raises(ValueError, match="lock_pos"):
         pool.step(
             good["rotations"],
             good["contacts"],
-            rm,
-            rp,
-            10,
+            PelvisPoses(rm, rp, 10),
             bad_ik,
             np.zeros((R, 19, 3), np.float32),
         )
@@ -463,7 +467,7 @@ class _NumpyPasses:
         self.step, self.emit = pool.step, pool.emit
 
     def upper_body(self, *args: Any) -> Any:
-        return NumpyPool.upper_body(self, *args)  # type: ignore[arg-type]
+        return NumpyPool.upper_body(*args)
 
     def hinge(self, *args: Any) -> None:
         NumpyPool.hinge(self, *args)  # type: ignore[arg-type]

@@ -27,12 +27,12 @@ namespace Posecast.Client
         public double? PoseRateHz;     // v2: poses per second to receive; null: 60
     }
 
-    /// <summary>A player in a room. v2 adds its handle and skeleton (108 bytes).</summary>
+    /// <summary>A player in a room. v2 adds its avatar id and skeleton (108 bytes).</summary>
     public sealed class Member
     {
         public string Player;
         public string Name;
-        public long? Handle;
+        public long? AvatarId;         // v2: how pose records name this player ("handle" on the wire)
         public byte[] Skeleton;
     }
 
@@ -94,7 +94,7 @@ namespace Posecast.Client
         public string Room;
         public string Player;
         public string Name;
-        public long? Handle;           // v2 join
+        public long? AvatarId;         // v2 join ("handle" on the wire)
         public byte[] Skeleton;        // v2 join
     }
 
@@ -111,7 +111,7 @@ namespace Posecast.Client
     {
         public override string Type { get { return "skeleton"; } }
         public string Player;
-        public long Handle;
+        public long AvatarId;           // "handle" on the wire
         public byte[] Skeleton;
     }
 

@@ -14,7 +14,7 @@ namespace Posecast.Client
     /// and (after Rebuild) its world rotations and joint positions. Mutated by every record.</summary>
     public sealed class AvatarState
     {
-        public long Handle { get; internal set; }
+        public long AvatarId { get; internal set; }
         /// <summary>A keyframe was decoded since the announce (or the last DropReferences): deltas apply.</summary>
         public bool HasReference;
         public long Seq;
@@ -64,7 +64,7 @@ namespace Posecast.Client
         void Record(AvatarState avatar);
     }
 
-    /// <summary>Every announced avatar's state, by handle, and the decoder of a poses message's records.</summary>
+    /// <summary>Every announced avatar's state, by avatar id, and the decoder of a poses message's records.</summary>
     public sealed class RecordDecoder
     {
         private readonly Dictionary<long, AvatarState> _avatars = new Dictionary<long, AvatarState>();
@@ -73,26 +73,26 @@ namespace Posecast.Client
 
         public int Count { get { return _avatars.Count; } }
 
-        /// <summary>The avatar of `handle`, or null when it was never announced.</summary>
-        public AvatarState Get(long handle)
+        /// <summary>The avatar of `avatarId`, or null when it was never announced.</summary>
+        public AvatarState Get(long avatarId)
         {
             AvatarState s;
-            return _avatars.TryGetValue(handle, out s) ? s : null;
+            return _avatars.TryGetValue(avatarId, out s) ? s : null;
         }
 
         /// <summary>
         /// An avatar announced (presence join, welcome member) or re-announced (a skeleton
-        /// message) with its 108-byte skeleton. `fresh`: a new avatar on this handle, whose
+        /// message) with its 108-byte skeleton. `fresh`: a new avatar on this avatar id, whose
         /// first record must be a keyframe; otherwise only the skeleton changes.
         /// </summary>
-        public AvatarState Announce(long handle, byte[] skeleton, bool fresh)
+        public AvatarState Announce(long avatarId, byte[] skeleton, bool fresh)
         {
             AvatarState s;
-            if (!_avatars.TryGetValue(handle, out s))
+            if (!_avatars.TryGetValue(avatarId, out s))
             {
                 s = _spare.Count > 0 ? _spare.Pop() : new AvatarState();
-                s.Handle = handle;
-                _avatars[handle] = s;
+                s.AvatarId = avatarId;
+                _avatars[avatarId] = s;
                 fresh = true;
             }
             if (fresh) s.HasReference = false;
@@ -100,10 +100,10 @@ namespace Posecast.Client
             return s;
         }
 
-        public void Forget(long handle)
+        public void Forget(long avatarId)
         {
             AvatarState s;
-            if (_avatars.TryGetValue(handle, out s)) { _avatars.Remove(handle); _spare.Push(s); }
+            if (_avatars.TryGetValue(avatarId, out s)) { _avatars.Remove(avatarId); _spare.Push(s); }
         }
 
         public void Clear()
@@ -121,7 +121,7 @@ namespace Posecast.Client
         /// <summary>
         /// Decode every record of data[offset, offset + count) in place, telling `sink` of each
         /// (null: nobody); returns how many. BAD_FIELD (field "data") for a malformed record, an
-        /// unknown handle or a delta without a reference: the states before it are updated,
+        /// unknown avatar id or a delta without a reference: the states before it are updated,
         /// the rest are not (call DropReferences).
         /// </summary>
         public int Decode(byte[] data, int offset, int count, IRecordSink sink)
@@ -129,9 +129,9 @@ namespace Posecast.Client
             int pos = offset, end = offset + count, n = 0;
             while (pos < end)
             {
-                long handle = Records.ReadLeb128(data, end, ref pos);
+                long avatarId = Records.ReadLeb128(data, end, ref pos);
                 AvatarState s;
-                if (!_avatars.TryGetValue(handle, out s)) throw Records.BadData("a record for handle " + handle + ", never announced");
+                if (!_avatars.TryGetValue(avatarId, out s)) throw Records.BadData("a record for avatar id " + avatarId + ", never announced");
                 Step(data, end, ref pos, s, _residuals);
                 n++;
                 if (sink != null) sink.Record(s);
@@ -139,7 +139,7 @@ namespace Posecast.Client
             return n;
         }
 
-        /// <summary>One record's body (after its handle) applied to `s`.</summary>
+        /// <summary>One record's body (after its avatar id) applied to `s`.</summary>
         internal static void Step(byte[] data, int end, ref int pos, AvatarState s, long[] res)
         {
             if (pos >= end) throw Records.BadData("a record is cut short");
@@ -148,7 +148,7 @@ namespace Posecast.Client
             if ((flags & Records.FlagKeyframe) != 0) ReadKeyframe(data, end, ref pos, s);
             else
             {
-                if (!s.HasReference) throw Records.BadData("a delta for handle " + s.Handle + " without a keyframe");
+                if (!s.HasReference) throw Records.BadData("a delta for avatar id " + s.AvatarId + " without a keyframe");
                 ReadDelta(data, end, ref pos, s, res);
             }
             s.Keyframe = (flags & Records.FlagKeyframe) != 0;

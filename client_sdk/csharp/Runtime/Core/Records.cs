@@ -4,7 +4,7 @@
 // A record describes one avatar by 19 items (the PELVIS world rotation, then the 18
 // local joint rotations in joint order) plus the PELVIS world position (the root):
 //
-//   record   = handle (LEB128) | flags (u8) | keyframe body | delta body
+//   record   = avatar id (LEB128) | flags (u8) | keyframe body | delta body
 //   keyframe = seq (u32 LE) | root (3 x i32 LE, 0.1 mm) | 19 x smallest-three (48 bits)
 //   delta    = seq step (u8, 1..255) | bitstream: the root item, then the 19 rotation
 //              items, each a 2-bit width class and, unless the class is 0, 3 signed
@@ -46,10 +46,10 @@ namespace Posecast.Client
         }
     }
 
-    /// <summary>One decoded record: whose (Handle), which kind, and the new state.</summary>
+    /// <summary>One decoded record: whose (AvatarId), which kind, and the new state.</summary>
     public struct Record
     {
-        public long Handle;
+        public long AvatarId;
         public bool Keyframe;
         public bool ReachLimited;
         public Recon Recon;
@@ -67,8 +67,8 @@ namespace Posecast.Client
         public const int FlagKeyframe = 0x01;
         public const int FlagReachLimited = 0x02;
         public const int FlagsKnown = FlagKeyframe | FlagReachLimited;
-        public const int KeyframeBytes = 1 + 4 + 12 + Protocol.NumJoints * 6; // 131, after the handle
-        public const long MaxHandle = Protocol.UInt32Max;
+        public const int KeyframeBytes = 1 + 4 + 12 + Protocol.NumJoints * 6; // 131, after the avatar id
+        public const long MaxAvatarId = Protocol.UInt32Max;
         internal const long RootMax = 10000000; // 1000 m in 0.1 mm
 
         private static ProtocolException Bad(string m) { return ErrorCodes.BadField("data", m); }
@@ -91,7 +91,7 @@ namespace Posecast.Client
             return into;
         }
 
-        // --- LEB128 handles -----------------------------------------------------------
+        // --- LEB128 avatar ids ---------------------------------------------------------
 
         /// <summary>An unsigned LEB128 at pos (at most 5 bytes, minimal, at most 2^32 - 1).</summary>
         public static long ReadLeb128(byte[] data, int end, ref int pos)
@@ -100,18 +100,18 @@ namespace Posecast.Client
             int shift = 0;
             for (int k = 0; k < 5; k++)
             {
-                if (pos + k >= end) throw Bad("a record is cut short in its handle");
+                if (pos + k >= end) throw Bad("a record is cut short in its avatar id");
                 int b = data[pos + k];
                 value |= (long)(b & 0x7f) << shift;
                 shift += 7;
                 if ((b & 0x80) == 0)
                 {
-                    if (value > MaxHandle || (k > 0 && b == 0)) throw Bad("a handle is too large or not minimal");
+                    if (value > MaxAvatarId || (k > 0 && b == 0)) throw Bad("an avatar id is too large or not minimal");
                     pos += k + 1;
                     return value;
                 }
             }
-            throw Bad("a handle is longer than 5 bytes");
+            throw Bad("an avatar id is longer than 5 bytes");
         }
 
         // --- smallest-three -------------------------------------------------------------
@@ -147,9 +147,9 @@ namespace Posecast.Client
         // --- records --------------------------------------------------------------------
 
         /// <summary>
-        /// Every record of a poses.data blob, against refs (handle to the last state; a null
+        /// Every record of a poses.data blob, against refs (avatar id to the last state; a null
         /// value for an announced avatar without one yet). Updates refs as it goes.
-        /// BAD_FIELD (field "data") for a malformed record, an unknown handle or a delta
+        /// BAD_FIELD (field "data") for a malformed record, an unknown avatar id or a delta
         /// without a reference. (RecordDecoder does the same in place, allocating nothing.)
         /// </summary>
         public static List<Record> Decode(byte[] data, IDictionary<long, Recon> refs)
@@ -160,15 +160,15 @@ namespace Posecast.Client
             int pos = 0, end = data.Length;
             while (pos < end)
             {
-                long handle = ReadLeb128(data, end, ref pos);
+                long avatarId = ReadLeb128(data, end, ref pos);
                 Recon ref_;
-                if (!refs.TryGetValue(handle, out ref_)) throw Bad("a record for handle " + handle + ", never announced");
-                state.Handle = handle;
+                if (!refs.TryGetValue(avatarId, out ref_)) throw Bad("a record for avatar id " + avatarId + ", never announced");
+                state.AvatarId = avatarId;
                 state.SetReference(ref_);
                 RecordDecoder.Step(data, end, ref pos, state, residuals);
                 var recon = state.ToRecon();
-                refs[handle] = recon;
-                out_.Add(new Record { Handle = handle, Keyframe = state.Keyframe, ReachLimited = state.ReachLimited, Recon = recon });
+                refs[avatarId] = recon;
+                out_.Add(new Record { AvatarId = avatarId, Keyframe = state.Keyframe, ReachLimited = state.ReachLimited, Recon = recon });
             }
             return out_;
         }

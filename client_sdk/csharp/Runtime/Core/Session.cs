@@ -5,7 +5,7 @@
 // connection, so a pose's seq always names one frame this client sent), feeds pong
 // into the clock, and turns what the server sends into events: on posecast.v1 each
 // pose message is one PlayerPose; on posecast.v2 it keeps every announced avatar's
-// handle, skeleton and reference, decodes each poses message's records and rebuilds
+// avatar id, skeleton and reference, decodes each poses message's records and rebuilds
 // joint positions by FK. No sockets, no clocks: the caller passes `now`.
 //
 // Bad server input never throws out of Receive: a message the codec refuses is
@@ -241,18 +241,18 @@ namespace Posecast.Client
             _lastResync = double.NegativeInfinity;
         }
 
-        private void Announce(string player, long handle, byte[] skeleton)
+        private void Announce(string player, long avatarId, byte[] skeleton)
         {
             string had;
-            bool fresh = !_playerOf.TryGetValue(handle, out had) || had != player;
-            // Moved to another handle: its old one is gone (as in the Python and TS SDKs).
+            bool fresh = !_playerOf.TryGetValue(avatarId, out had) || had != player;
+            // Moved to another avatar id: its old one is gone (as in the Python and TS SDKs).
             if (fresh) ForgetPlayer(player);
-            _playerOf[handle] = player;
-            _records.Announce(handle, skeleton, fresh); // fresh: a keyframe comes first
+            _playerOf[avatarId] = player;
+            _records.Announce(avatarId, skeleton, fresh); // fresh: a keyframe comes first
         }
 
-        /// <summary>The players this connection knows by handle (v2), for tests and tools.</summary>
-        public IDictionary<long, string> Handles { get { return _playerOf; } }
+        /// <summary>The players this connection knows, by avatar id (v2), for tests and tools.</summary>
+        public IDictionary<long, string> AvatarIds { get { return _playerOf; } }
 
         /// <summary>What one whole server message means. Never throws for bad input.</summary>
         public Received Receive(byte[] data, double now) { return Receive(data, 0, data.Length, now); }
@@ -298,7 +298,7 @@ namespace Posecast.Client
                     var p = (Presence)msg;
                     if (Version >= Protocol.V2)
                     {
-                        if (p.Event == "join") Announce(p.Player, p.Handle.Value, p.Skeleton);
+                        if (p.Event == "join") Announce(p.Player, p.AvatarId.Value, p.Skeleton);
                         else if (p.Event == "leave") ForgetPlayer(p.Player);
                     }
                     r.Events.Add(new ClientEvent { Kind = EventKind.Presence, Presence = p });
@@ -307,7 +307,7 @@ namespace Posecast.Client
                 case "skeleton":
                 {
                     var k = (SkeletonMessage)msg;
-                    Announce(k.Player, k.Handle, k.Skeleton);
+                    Announce(k.Player, k.AvatarId, k.Skeleton);
                     r.Events.Add(new ClientEvent { Kind = EventKind.Skeleton, Skeleton = k });
                     break;
                 }
@@ -317,7 +317,7 @@ namespace Posecast.Client
                     Welcome = w;
                     ForgetAvatars();
                     foreach (var m in w.Members)
-                        if (m.Handle.HasValue && m.Skeleton != null) Announce(m.Player, m.Handle.Value, m.Skeleton);
+                        if (m.AvatarId.HasValue && m.Skeleton != null) Announce(m.Player, m.AvatarId.Value, m.Skeleton);
                     r.Events.Add(new ClientEvent { Kind = EventKind.Welcome, Welcome = w });
                     break;
                 }
@@ -391,7 +391,7 @@ namespace Posecast.Client
                 a.Rebuild();
                 var pose = new PlayerPose
                 {
-                    Player = _session._playerOf[a.Handle], Seq = a.Seq, T = _t,
+                    Player = _session._playerOf[a.AvatarId], Seq = a.Seq, T = _t,
                     Positions = (Vec3[])a.Positions.Clone(), Rotations = (Quat[])a.World.Clone(),
                     Keyframe = a.Keyframe, ReachLimited = a.ReachLimited,
                 };

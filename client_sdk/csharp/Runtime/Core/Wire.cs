@@ -2,10 +2,11 @@
 //
 // v2 (posecast.v2) keeps every v1 type but pose, adds poses, skeleton, pose_rate and
 // resync, and changes hello (version 2, pose_rate_hz), welcome (members with handle
-// and skeleton, pose_rate_hz) and presence (a join carries handle and skeleton). A
-// decoder reads every known field with the Fields validators and ignores the rest;
-// an encoder builds the map in canonical key order (type, then the spec's field
-// order), leaving absent optionals out and writing every float field as float64.
+// and skeleton, pose_rate_hz) and presence (a join carries handle and skeleton). The
+// wire's "handle" is the avatar id (AvatarId in the messages). A decoder reads every
+// known field with the Fields validators and ignores the rest; an encoder builds the
+// map in canonical key order (type, then the spec's field order), leaving absent
+// optionals out and writing every float field as float64.
 
 using System;
 using System.Collections.Generic;
@@ -39,7 +40,7 @@ namespace Posecast.Client
                 case "poses": return new Poses { T = Fields.Float(m, "t", 0.0, TMax), Data = Data(m) };
                 case "skeleton":
                     return new SkeletonMessage { Player = Fields.Id(m, "player", Protocol.MaxIdBytes),
-                                                 Handle = Handle(m, "handle"), Skeleton = SkeletonBin(m, "skeleton") };
+                                                 AvatarId = AvatarId(m, "handle"), Skeleton = SkeletonBin(m, "skeleton") };
                 case "pose_rate": return new PoseRate { RateHz = PoseRateHz(m, "rate_hz") };
                 case "resync": return new Resync();
                 default: throw new InvalidOperationException(type);
@@ -59,7 +60,8 @@ namespace Posecast.Client
             return v;
         }
 
-        private static long Handle(MsgValue m, string key, string at = "")
+        /// <summary>An avatar id, read from its wire key (`key` is "handle").</summary>
+        private static long AvatarId(MsgValue m, string key, string at = "")
         {
             return Fields.Int(m, key, 0, Protocol.UInt32Max, at);
         }
@@ -120,7 +122,7 @@ namespace Posecast.Client
                 };
                 if (v >= Protocol.V2)
                 {
-                    mem.Handle = Handle(item, "handle", at);
+                    mem.AvatarId = AvatarId(item, "handle", at);
                     mem.Skeleton = SkeletonBin(item, "skeleton", at);
                 }
                 members[i] = mem;
@@ -227,7 +229,7 @@ namespace Posecast.Client
             p.Name = Fields.Name(m, "name", lim.MaxNameBytes);
             if (v >= Protocol.V2 && p.Event == "join")
             {
-                p.Handle = Handle(m, "handle");
+                p.AvatarId = AvatarId(m, "handle");
                 p.Skeleton = SkeletonBin(m, "skeleton");
             }
             return p;
@@ -329,7 +331,7 @@ namespace Posecast.Client
                     foreach (var p in w.Members)
                     {
                         var mm = MsgValue.NewMap().Add("player", S(p.Player)).Add("name", S(p.Name));
-                        if (p.Handle.HasValue) mm.Add("handle", I(p.Handle.Value));
+                        if (p.AvatarId.HasValue) mm.Add("handle", I(p.AvatarId.Value)); // the avatar id's wire key
                         if (p.Skeleton != null) mm.Add("skeleton", MsgValue.Of(p.Skeleton));
                         members.Add(mm);
                     }
@@ -368,7 +370,7 @@ namespace Posecast.Client
                 {
                     var p = (Presence)msg;
                     var d = Head("presence").Add("event", S(p.Event)).Add("room", S(p.Room)).Add("player", S(p.Player)).Add("name", S(p.Name));
-                    if (p.Handle.HasValue) d.Add("handle", I(p.Handle.Value));
+                    if (p.AvatarId.HasValue) d.Add("handle", I(p.AvatarId.Value)); // the avatar id's wire key
                     if (p.Skeleton != null) d.Add("skeleton", MsgValue.Of(p.Skeleton));
                     return d;
                 }
@@ -380,7 +382,8 @@ namespace Posecast.Client
                 case "skeleton":
                 {
                     var k = (SkeletonMessage)msg;
-                    return Head("skeleton").Add("player", S(k.Player)).Add("handle", I(k.Handle)).Add("skeleton", MsgValue.Of(k.Skeleton));
+                    // "handle": the avatar id's wire key
+                    return Head("skeleton").Add("player", S(k.Player)).Add("handle", I(k.AvatarId)).Add("skeleton", MsgValue.Of(k.Skeleton));
                 }
                 case "pose_rate": return Head("pose_rate").Add("rate_hz", F(((PoseRate)msg).RateHz));
                 case "resync": return Head("resync");

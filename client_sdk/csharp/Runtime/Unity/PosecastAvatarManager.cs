@@ -177,7 +177,7 @@ namespace Posecast.Client.Unity
                     Disconnected.Invoke();
                     return;
                 }
-                Handle(e);
+                OnEvent(e);
             }
         }
 
@@ -197,7 +197,7 @@ namespace Posecast.Client.Unity
         private readonly Dictionary<string, InterpolatedPose> _shown = new Dictionary<string, InterpolatedPose>();
 
         /// <summary>One event: the jitter buffer, the avatars, the UnityEvents, then EventReceived.</summary>
-        internal void Handle(ClientEvent e)
+        internal void OnEvent(ClientEvent e)
         {
             Poses.Feed(e);
             switch (e.Kind)

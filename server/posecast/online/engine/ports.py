@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 from posecast.body.ik import MAX_DRIFT_M, RELEASE_FRAMES
 from posecast.body.passes import Passes
 from posecast.body.passes import PoolIK as PoolIK  # the pool's contact-IK state, re-exported
+from posecast.body.pelvis import PelvisPoses
 
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
@@ -77,21 +78,14 @@ class Pool(Passes, Protocol):
     threshold_m: float  # the anomaly error above which a pose counts as implausible
 
     def step(
-        self,
-        rotations: F32,
-        contacts: F32,
-        root_mat: F32,
-        root_pos: F32,
-        group: int,
-        ik: PoolIK,
-        world_out: F32,
+        self, rotations: F32, contacts: F32, pelvis: PelvisPoses, ik: PoolIK, world_out: F32
     ) -> F64:
         """Score ``R`` rows; returns the anomaly errors ``(R,)`` in metres.
 
-        ``rotations (R, 108)`` 6D, ``contacts (R, 2)``; the pelvis ``root_mat (G, 3, 3)``
-        and ``root_pos (G, 3)`` float32 with row ``g`` shared by ``group`` rows (``group
-        = N`` with a waist tracker, ``1`` when every sample has its own pelvis). The
-        post-IK world positions go into ``world_out (R, 19, 3)``; ``ik`` steps in place.
+        ``rotations (R, 108)`` 6D, ``contacts (R, 2)``; ``pelvis``: the rows' pelvis poses,
+        each shared by ``pelvis.group`` rows (``N`` with a waist tracker, ``1`` when every
+        sample has its own pelvis). The post-IK world positions go into ``world_out (R,
+        19, 3)``; ``ik`` steps in place.
         """
         ...
 

@@ -327,7 +327,7 @@ class Engine:
             outputs,
         )
         # One pool step: FK, contact IK and anomaly error of every sample.
-        root_mat, root_pos, group = pelvis_poses(
+        pelvis = pelvis_poses(
             pos, quat, s.row("ring_rootm", k), outputs.get("root"), N, self._waist_rows()
         )
         if len(self._world) < R:
@@ -335,7 +335,7 @@ class Engine:
         world = self._world[:R]
         ik = PoolIK(*(s.view(f"ik_{n}").reshape(R, *_IK_SHAPES[n]) for n in _IK_SHAPES))
         scores = self.pool.step(
-            outputs["rotations"], outputs["contacts"], root_mat, root_pos, group, ik, world
+            outputs["rotations"], outputs["contacts"], pelvis, ik, world
         ).reshape(P, N)
         wp = world.reshape(P, N, NUM_JOINTS, 3)
 

@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from posecast.body.hinge import FADES, Limbs, limb_table
+from posecast.body.pelvis import PelvisPoses
 from posecast.body.upper_ik import (
     LEAN_SHARE,
     NECK_SHARE,
@@ -223,22 +224,15 @@ class NativePool:
         )
 
     def step(
-        self,
-        rotations: F32,
-        contacts: F32,
-        root_mat: F32,
-        root_pos: F32,
-        group: int,
-        ik: PoolIK,
-        world_out: F32,
+        self, rotations: F32, contacts: F32, pelvis: PelvisPoses, ik: PoolIK, world_out: F32
     ) -> F64:
         scores = np.empty(len(rotations), np.float64)
         _native.pool(
             self._packed,
             rotations,
             contacts,
-            *_f32(root_mat, root_pos),
-            group,
+            *_f32(pelvis.mats, pelvis.places),
+            pelvis.group,
             *self._ik(ik),
             world_out,
             scores,
@@ -365,7 +359,7 @@ def _probe(dec: NativeDecoder, pool: NativePool, level: str) -> list[F32 | F64]:
         np.zeros((R, 2), np.bool_),
     )
     world = np.zeros((R, 19, 3), np.float32)
-    scores = pool.step(out["rotations"], out["contacts"], eye, root, N, ik, world)
+    scores = pool.step(out["rotations"], out["contacts"], PelvisPoses(eye, root, N), ik, world)
     return [*out.values(), world, scores]
 
 

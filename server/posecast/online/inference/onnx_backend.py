@@ -20,6 +20,7 @@ import numpy as np
 from posecast.body.batch_fk import fk32
 from posecast.body.ik import MAX_DRIFT_M, RELEASE_FRAMES, ContactIK
 from posecast.body.passes import NumpyPasses
+from posecast.body.pelvis import PelvisPoses
 from posecast.online.engine.ports import F32, F64, Models, PoolIK
 from posecast.online.inference.anomaly import AnomalyScorer
 from posecast.online.inference.artifact import Artifact, load_artifact
@@ -63,15 +64,9 @@ class NumpyPool(NumpyPasses):
         self.threshold_m = self.scorer.threshold_m
 
     def step(
-        self,
-        rotations: F32,
-        contacts: F32,
-        root_mat: F32,
-        root_pos: F32,
-        group: int,
-        ik: PoolIK,
-        world_out: F32,
+        self, rotations: F32, contacts: F32, pelvis: PelvisPoses, ik: PoolIK, world_out: F32
     ) -> F64:
+        root_mat, root_pos, group = pelvis
         if group > 1:  # FK wants one pelvis per row: (G, ...) -> (G * group, ...)
             mats, places = np.repeat(root_mat, group, axis=0), np.repeat(root_pos, group, axis=0)
         else:

@@ -24,6 +24,41 @@ from posecast.tracking.layouts import PlayerLayout
 
 F64 = NDArray[np.float64]
 
+__all__ = [  # the public names, which the package re-exports (posecast.online.protocol)
+    "DEFAULT_LIMITS",
+    "MESSAGE_TYPES",
+    "PROTOCOL_V2",
+    "PROTOCOL_VERSION",
+    "ROLE_MAY_SEND",
+    "ROLE_MAY_SEND_V2",
+    "SERVER_SENDS",
+    "SERVER_SENDS_V2",
+    "SUBPROTOCOL",
+    "SUBPROTOCOLS",
+    "SUBPROTOCOL_V2",
+    "Bye",
+    "Calibrate",
+    "Error",
+    "Frame",
+    "Hello",
+    "Kick",
+    "Limits",
+    "Member",
+    "Message",
+    "Ping",
+    "Pong",
+    "Pose",
+    "PoseRate",
+    "Poses",
+    "Presence",
+    "Resync",
+    "Selector",
+    "Skeleton",
+    "Welcome",
+    "seq_delta",
+    "seq_next",
+]
+
 PROTOCOL_VERSION = 1
 SUBPROTOCOL = "posecast.v1"
 PROTOCOL_V2 = 2

@@ -31,6 +31,8 @@ from posecast.online.protocol.record_state import (
     smallest3_unpack,
 )
 
+__all__ = ["Record", "decode_records", "read_leb128", "write_leb128"]
+
 
 @dataclass(frozen=True)
 class Record:

@@ -24,6 +24,33 @@ from posecast.skeleton import NUM_JOINTS, PARENTS, reference_offsets
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 
+__all__ = [  # the record layout's public names (posecast.online.protocol.records re-exports them)
+    "FLAGS_KNOWN",
+    "FLAG_KEYFRAME",
+    "FLAG_REACH_LIMITED",
+    "KEYFRAME_BYTES",
+    "MAX_AVATAR_ID",
+    "MAX_DELTA_BYTES",
+    "NUM_ITEMS",
+    "ROOT_UNIT_M",
+    "ROOT_WIDTHS",
+    "ROT_STEP_RAD",
+    "ROT_WIDTHS",
+    "SKELETON_BYTES",
+    "SKELETON_UNIT_M",
+    "SMALLEST3_SCALE",
+    "Recon",
+    "bytes2skeleton",
+    "items2world",
+    "quat2rotvec",
+    "rotvec2quat",
+    "skeleton2bytes",
+    "skeleton_offsets",
+    "smallest3_pack",
+    "smallest3_unpack",
+    "world2items",
+]
+
 NUM_ITEMS = NUM_JOINTS  # 19 rotation items: PELVIS world, then 18 local rotations
 ROOT_UNIT_M = 1e-4  # one step of the root position (0.1 mm)
 SKELETON_UNIT_M = 1e-4  # one step of a skeleton bone offset (0.1 mm)

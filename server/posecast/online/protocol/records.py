@@ -43,20 +43,14 @@ from numpy.typing import NDArray
 
 from posecast.errors import OutOfRangeError
 from posecast.geometry.rotations import quat_conj, quat_mul
+from posecast.online.protocol import record_decode, record_state
 from posecast.online.protocol.messages import UINT32_MAX
-from posecast.online.protocol.record_decode import (
-    Record,
-    decode_records,
-    read_leb128,
-    write_leb128,
-)
+from posecast.online.protocol.record_decode import *  # noqa: F403 (re-exported, as __all__ says)
+from posecast.online.protocol.record_state import *  # noqa: F403 (re-exported, as __all__ says)
 from posecast.online.protocol.record_state import (
     F64,
     FLAG_KEYFRAME,
     FLAG_REACH_LIMITED,
-    FLAGS_KNOWN,
-    KEYFRAME_BYTES,
-    MAX_AVATAR_ID,
     MAX_DELTA_BYTES,
     NUM_ITEMS,
     ROOT_MAX,
@@ -64,17 +58,10 @@ from posecast.online.protocol.record_state import (
     ROOT_WIDTHS,
     ROT_STEP_RAD,
     ROT_WIDTHS,
-    SKELETON_BYTES,
-    SKELETON_UNIT_M,
-    SMALLEST3_SCALE,
     Recon,
-    bytes2skeleton,
-    items2world,
     normalise,
     quat2rotvec,
     rotvec2quat,
-    skeleton2bytes,
-    skeleton_offsets,
     smallest3_pack,
     smallest3_unpack,
     world2items,
@@ -87,42 +74,16 @@ try:  # the C encoder of deltas (optional, as the native engine backend is)
 except ImportError:  # pragma: no cover - an install without a C compiler
     _native = None
 
-__all__ = [  # the encoder's own names, and the record names kept importable from here
+__all__ = [  # the encoder's own names; the record names stay importable from here
     "DELTA_ENCODER",
     "DELTA_ENCODERS",
-    "FLAGS_KNOWN",
-    "FLAG_KEYFRAME",
-    "FLAG_REACH_LIMITED",
-    "KEYFRAME_BYTES",
-    "MAX_AVATAR_ID",
-    "MAX_DELTA_BYTES",
-    "NUM_ITEMS",
-    "ROOT_UNIT_M",
-    "ROOT_WIDTHS",
-    "ROT_STEP_RAD",
-    "ROT_WIDTHS",
-    "SKELETON_BYTES",
-    "SKELETON_UNIT_M",
-    "SMALLEST3_SCALE",
     "PoseState",
-    "Recon",
-    "Record",
-    "bytes2skeleton",
-    "decode_records",
     "encode_delta",
     "encode_deltas",
     "encode_many",
-    "items2world",
-    "quat2rotvec",
-    "read_leb128",
-    "rotvec2quat",
-    "skeleton2bytes",
-    "skeleton_offsets",
-    "smallest3_pack",
-    "smallest3_unpack",
-    "world2items",
-    "write_leb128",
 ]
+__all__ += record_state.__all__
+__all__ += record_decode.__all__
 
 _PARENTS = np.array(PARENTS[1:])
 
