@@ -4,7 +4,8 @@
  *   PC_VW      floats per vector (16 AVX-512, 8 AVX2, 4 portable)
  *   PC_MR      rows per register block, PC_NB vectors per register block
  *   PC_NAME    the level's name, PC_TABLE the PcKernels symbol to define
- *   PC_BF16    1 to build the bf16 dot-product path (AVX-512-BF16 only)
+ *   PC_BF16    1: the bf16 gates on the AVX-512-BF16 instructions; 0: the same
+ *              arithmetic in plain vector code (precision bf16 on any other level)
  *   PC_SPLAT   broadcast of one float to a vector
  *   PC_RCP     (optional) the level's reciprocal estimate
  * and then includes this file. Vectors are GCC vector extensions, so one source
@@ -146,6 +147,62 @@ static void to_bf16(const float *A, int R, int K, uint32_t *out) {
             _mm512_storeu_si512((void *)(out + ((size_t)r * K + k) / 2), (__m512i)v);
         }
 }
+#else
+/* The bf16 arithmetic on a level without the instructions (precision bf16 on a CPU
+ * without avx512_bf16): the same pairs, the same order of accumulation as the
+ * instruction's definition (Intel SDM, VDPBF16PS: per lane, acc += odd product, then
+ * acc += even product, each rounded to nearest even). A bf16 product is exact in fp32
+ * (8 x 8 significant bits), so a multiply and an add, fused or not, round as the
+ * instruction's FMA does. What it does not copy: the instruction's flush of a
+ * denormal sum to zero (a gate input under 1.2e-38). */
+typedef uint32_t vu __attribute__((vector_size(PC_VW * 4)));
+
+static inline float bf16_hi(uint32_t pair) {
+    float f;
+    pair &= 0xffff0000u;
+    memcpy(&f, &pair, 4);
+    return f;
+}
+static inline float bf16_lo(uint32_t pair) { return bf16_hi(pair << 16); }
+
+static void gemm_bf16(const uint32_t *A, int lda2, int R, int K2, const uint32_t *W, int N,
+                      const float *bias, float *C, int ldc) {
+    for (int r0 = 0; r0 < R; r0 += PC_MR) {
+        for (int c0 = 0; c0 < N; c0 += PC_NB * PC_VW) {
+            vf acc[PC_MR][PC_NB];
+            for (int j = 0; j < PC_NB; j++) {
+                vf b = LOADA(bias + c0 + j * PC_VW);
+                for (int i = 0; i < PC_MR; i++) acc[i][j] = b;
+            }
+            const uint32_t *a0 = A + (size_t)r0 * lda2;
+            for (int k = 0; k < K2; k++) {
+                const uint32_t *w = W + (size_t)k * N + c0;
+                vf lo[PC_NB], hi[PC_NB];
+                for (int j = 0; j < PC_NB; j++) {
+                    vu p = *(const vu *)(w + j * PC_VW);
+                    lo[j] = (vf)(p << 16);
+                    hi[j] = (vf)(p & 0xffff0000u);
+                }
+                for (int i = 0; i < PC_MR; i++) {
+                    const uint32_t ap = a0[(size_t)i * lda2 + k];
+                    vf ahi = splat(bf16_hi(ap)), alo = splat(bf16_lo(ap));
+                    for (int j = 0; j < PC_NB; j++) {
+                        acc[i][j] += ahi * hi[j];
+                        acc[i][j] += alo * lo[j];
+                    }
+                }
+            }
+            for (int i = 0; i < PC_MR; i++)
+                for (int j = 0; j < PC_NB; j++)
+                    STOREA(C + (size_t)(r0 + i) * ldc + c0 + j * PC_VW, acc[i][j]);
+        }
+    }
+}
+
+/* float32 rows (R x K) -> bf16 pairs (R x K/2) as vcvtne2ps2bf16 makes them. */
+static void to_bf16(const float *A, int R, int K, uint32_t *out) {
+    for (size_t i = 0; i < (size_t)R * K; i += 2) out[i / 2] = pc_bf16_bits(A[i]) | pc_bf16_bits(A[i + 1]) << 16;
+}
 #endif
 
 static inline int round_up(int n, int m) { return (n + m - 1) / m * m; }
@@ -173,17 +230,14 @@ static void decode_tile(const PcDecoder *d, const PcDecodeArgs *a, int64_t r0, i
             STOREA(fr + c, vmax(LOADU(xp + c) + LOADU(zr + c), splat(0.0f)));
         memcpy(hr, a->h + (size_t)row * H, sizeof(float) * H);
     }
-#if PC_BF16
-    if (d->bf16) {
+    if (a->bf16 && d->bf16) {
         uint32_t *fb = (uint32_t *)(head + (size_t)PC_TILE * PC_HEADW);
         uint32_t *hbb = fb + (size_t)PC_TILE * H / 2;
         to_bf16(f, R, H, fb);
         to_bf16(hb, R, H, hbb);
         gemm_bf16(fb, H / 2, R, H / 2, d->wih_bf, H3, d->bih, gi, H3);
         gemm_bf16(hbb, H / 2, R, H / 2, d->whh_bf, H3, d->bhh, gh, H3);
-    } else
-#endif
-    {
+    } else {
         gemm(f, H, R, H, d->wih, H3, d->bih, gi, H3);
         gemm(hb, H, R, H, d->whh, H3, d->bhh, gh, H3);
     }

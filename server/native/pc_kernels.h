@@ -17,6 +17,7 @@
 #define PC_KERNELS_H
 
 #include <stdint.h>
+#include <string.h>
 
 #define PC_J 19           /* joints */
 #define PC_NROT 18        /* rotated joints (all but the pelvis) */
@@ -35,7 +36,7 @@ typedef struct {
     float *bih, *bhh;       /* (3H) */
     float *whead, *bhead;   /* (H, PC_HEADW), (PC_HEADW): rot | root | contact | 0 */
     uint32_t *wih_bf, *whh_bf; /* (H/2, 3H) bf16 pairs (k even low, k odd high) */
-    int bf16;               /* 1: the gates use the bf16 weights (where the level has them) */
+    int bf16;               /* 1: the bf16 pairs are packed (the precision is the call's) */
 } PcDecoder;
 
 typedef struct {
@@ -55,6 +56,7 @@ typedef struct {
     const float *zc;        /* (R, H): the latent part of the first layer */
     const float *h;         /* (R, H) */
     float *rot, *root, *con, *h_out; /* (R, n_rot), (R, n_root) or NULL, (R, 2), (R, H) */
+    int bf16;               /* 1: the GRU gates in bf16 arithmetic (see pc_bf16_bits) */
 } PcDecodeArgs;
 
 typedef struct {
@@ -77,6 +79,18 @@ typedef struct {
     void (*pool)(const PcPool *, const PcPoolArgs *, int64_t r0, int64_t r1, float *scratch);
     void (*emit)(const PcPool *, const PcPoolArgs *, int64_t r0, int64_t r1, float *scratch);
 } PcKernels;
+
+/* float32 -> bf16 bits as vcvtne2ps2bf16 converts: round to nearest even, zero and
+ * denormals to a zero of their sign, inf as is, NaN quiet. The bf16 weights are packed
+ * with it and the levels without the instruction convert the gates' inputs with it. */
+static inline uint32_t pc_bf16_bits(float x) {
+    uint32_t u;
+    memcpy(&u, &x, 4);
+    if ((u & 0x7f800000u) == 0) return (u >> 16) & 0x8000u;                       /* 0, denormal */
+    if ((u & 0x7f800000u) == 0x7f800000u) return (u >> 16) | ((u & 0x7fffffu) ? 0x40u : 0u); /* inf, NaN */
+    u += 0x7fffu + ((u >> 16) & 1u);                                            /* nearest even */
+    return u >> 16;
+}
 
 /* Bytes of scratch one thread needs for either kernel (H <= 256, checked at pack time). */
 #define PC_SCRATCH_BYTES (1u << 20)

@@ -6,9 +6,10 @@
  * atomic counter: one thread pool for the whole tick, nothing else spins.
  *
  * Instruction-set dispatch happens once at import (and on set_isa): the best level
- * this CPU supports among avx512f, avx2, generic, capped by the environment variable
- * POSECAST_NATIVE_ISA; avx512bf16 runs only when that variable names it. See
- * docs/engine.md.
+ * this CPU supports among avx512bf16, avx512f, avx2, generic, capped by the
+ * environment variable POSECAST_NATIVE_ISA. The GRU gates' precision is a setting of
+ * its own (set_precision, POSECAST_NATIVE_PRECISION): bf16 by default on the
+ * avx512bf16 level, fp32 on the others. See docs/engine.md.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -60,6 +61,10 @@ static const Level LEVELS[] = {
 #define N_LEVELS ((int)(sizeof(LEVELS) / sizeof(LEVELS[0])))
 
 static int g_level = N_LEVELS - 1;
+/* The GRU gates' arithmetic, separate from the level: 1 bf16 (on the level's
+ * instructions where it has them, avx512bf16, else the same arithmetic in plain vector
+ * code), 0 fp32. */
+static int g_bf16 = 0;
 
 static int level_index(const char *name) {
     for (int i = 0; i < N_LEVELS; i++)
@@ -274,20 +279,12 @@ static float *take(Arena *a, size_t floats) {
     return p;
 }
 
-static uint32_t bf16_bits(float x) {
-    uint32_t u;
-    memcpy(&u, &x, 4);
-    if ((u & 0x7f800000u) == 0x7f800000u) return u >> 16; /* inf / nan as is */
-    u += 0x7fffu + ((u >> 16) & 1u);                       /* round to nearest even */
-    return u >> 16;
-}
-
 /* (K, N) float32 -> (K/2, N) pairs: low half row 2k, high half row 2k + 1. */
 static void pack_pairs(const float *w, int K, int N, uint32_t *out) {
     for (int k = 0; k < K / 2; k++)
         for (int n = 0; n < N; n++)
             out[(size_t)k * N + n] =
-                bf16_bits(w[(size_t)(2 * k) * N + n]) | (bf16_bits(w[(size_t)(2 * k + 1) * N + n]) << 16);
+                pc_bf16_bits(w[(size_t)(2 * k) * N + n]) | (pc_bf16_bits(w[(size_t)(2 * k + 1) * N + n]) << 16);
 }
 
 static PyObject *py_pack_decoder(PyObject *self, PyObject *args) {
@@ -456,7 +453,8 @@ static PyObject *py_decode(PyObject *self, PyObject *args) {
         goto fail;
     }
     DecodeCtx c = {LEVELS[g_level].k, d, {xproj, group, b[1].view.buf, b[2].view.buf, b[3].view.buf,
-                                          d->n_root ? b[4].view.buf : NULL, b[5].view.buf, b[6].view.buf}};
+                                          d->n_root ? b[4].view.buf : NULL, b[5].view.buf, b[6].view.buf,
+                                          g_bf16}};
     const float *x = b[0].view.buf;
     Py_BEGIN_ALLOW_THREADS;
     for (Py_ssize_t g = 0; g < G; g++) { /* the tracker part, once per group */
@@ -707,6 +705,19 @@ static PyObject *py_set_isa(PyObject *self, PyObject *arg) {
     Py_RETURN_NONE;
 }
 
+static PyObject *py_precision(PyObject *self, PyObject *noargs) {
+    return PyUnicode_FromString(g_bf16 ? "bf16" : "fp32");
+}
+
+static PyObject *py_set_precision(PyObject *self, PyObject *arg) {
+    const char *name = PyUnicode_AsUTF8(arg);
+    if (!name) return NULL;
+    if (strcmp(name, "bf16") != 0 && strcmp(name, "fp32") != 0)
+        return PyErr_Format(PyExc_ValueError, "unknown precision %s (bf16 or fp32)", name);
+    g_bf16 = strcmp(name, "bf16") == 0;
+    Py_RETURN_NONE;
+}
+
 static PyObject *py_set_threads(PyObject *self, PyObject *arg) {
     long n = PyLong_AsLong(arg);
     if (n == -1 && PyErr_Occurred()) return NULL;
@@ -787,6 +798,8 @@ static PyMethodDef METHODS[] = {
     {"isa", py_isa, METH_NOARGS, "The instruction-set level in use."},
     {"isas", py_isas, METH_NOARGS, "Levels this CPU runs, best first."},
     {"set_isa", py_set_isa, METH_O, "Use this level (one from isas())."},
+    {"precision", py_precision, METH_NOARGS, "The GRU gates' arithmetic: bf16 or fp32."},
+    {"set_precision", py_set_precision, METH_O, "bf16 or fp32 gates, on any level."},
     {"set_threads", py_set_threads, METH_O, "Threads for the kernels (the caller is one)."},
     {"threads", py_threads, METH_NOARGS, "Threads the kernels use."},
     {"pool_stats", py_pool_stats, METH_NOARGS, "Tiles each pool thread has run (the caller first)."},
@@ -805,10 +818,11 @@ static struct PyModuleDef MODULE = {PyModuleDef_HEAD_INIT, "_native", "posecast'
                                     METHODS};
 
 PyMODINIT_FUNC PyInit__native(void) {
-    /* bf16 gates are opt-in: their effect on the evaluation figures has not been
-     * measured on a machine that runs them (docs/engine.md). */
-    int cap = level_index("avx512f");
-    if (cap < 0) cap = 0; /* not x86-64: generic only */
+    /* The best level the CPU runs, capped by POSECAST_NATIVE_ISA; bf16 gates where that
+     * level has the bf16 instructions, fp32 elsewhere, unless POSECAST_NATIVE_PRECISION
+     * names one (bf16 on a level without the instructions: the same arithmetic in plain
+     * vector code). The bf16 figures on the validation split: docs/engine.md. */
+    int cap = 0;
     const char *forced = getenv("POSECAST_NATIVE_ISA");
     if (forced && *forced) {
         cap = level_index(forced);
@@ -819,6 +833,15 @@ PyMODINIT_FUNC PyInit__native(void) {
         }
     }
     g_level = best_level(cap);
+    g_bf16 = strcmp(LEVELS[g_level].name, "avx512bf16") == 0;
+    const char *prec = getenv("POSECAST_NATIVE_PRECISION");
+    if (prec && *prec) {
+        if (strcmp(prec, "bf16") != 0 && strcmp(prec, "fp32") != 0) {
+            PyErr_Format(PyExc_ImportError, "POSECAST_NATIVE_PRECISION=%s is not one of bf16, fp32", prec);
+            return NULL;
+        }
+        g_bf16 = strcmp(prec, "bf16") == 0;
+    }
     if (ensure_threads(1) != 0) return PyErr_NoMemory();
     pthread_atfork(NULL, NULL, after_fork_child);
     return PyModule_Create(&MODULE);

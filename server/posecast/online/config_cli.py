@@ -22,9 +22,16 @@ from posecast.online.config import (
 )
 
 # POSECAST_* variables that are read elsewhere, not server settings: the SDK tools'
-# (posecast-sim, posecast-record), the native kernels' ISA override, the tests'.
+# (posecast-sim, posecast-record), the native kernels' ISA and precision overrides,
+# the tests'.
 OTHER_VARIABLES = frozenset(
-    {"POSECAST_URL", "POSECAST_TOKEN", "POSECAST_BIN", "POSECAST_NATIVE_ISA"}
+    {
+        "POSECAST_URL",
+        "POSECAST_TOKEN",
+        "POSECAST_BIN",
+        "POSECAST_NATIVE_ISA",
+        "POSECAST_NATIVE_PRECISION",
+    }
 )
 
 

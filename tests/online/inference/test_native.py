@@ -39,15 +39,18 @@ native = pytest.importorskip("posecast.online.inference.native")
 from posecast import _native  # noqa: E402  (built, since the import above did not skip)
 
 LEVELS = native.native_isas()
-FP32_LEVELS = [lv for lv in LEVELS if lv != "avx512bf16"]
 
 
 @pytest.fixture(params=LEVELS)
 def level(request: pytest.FixtureRequest) -> object:
-    before = native.native_isa()
+    """Each level in its default precision: bf16 gates on ``avx512bf16``, fp32 on the
+    others (bf16 on every level: test_native_bf16.py)."""
+    before, before_p = native.native_isa(), _native.precision()
     native.set_native_isa(request.param)
+    native.set_native_precision("bf16" if request.param == "avx512bf16" else "fp32")
     yield request.param
     native.set_native_isa(before)
+    native.set_native_precision(before_p)
 
 
 def test_the_extension_is_built_where_a_compiler_is() -> None:
