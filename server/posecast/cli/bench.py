@@ -110,7 +110,7 @@ def _print_bench(report: dict[str, Any], samples: int) -> None:
     fit = realtime_summary(report["players"], report["tick_p99_ms"])
     print(f"max players at 60 Hz (p99 < 16.7 ms), N={samples}: {fit}")
     if report["native_isa"]:
-        print(f"native kernels: {report['native_isa']}")
+        print(f"native kernels: {report['native_isa']}, precision {report['precision']}")
     print(f"naive loop: {report['naive_loop']}")
     both = report.get("both_models")
     if both:

@@ -42,6 +42,13 @@ class Metrics:
             registry=r,
         )
         self.ticks = Counter("posecast_ticks", "Engine ticks delivered", registry=r)
+        self.engine_info = Gauge(
+            "posecast_engine_info",
+            "1 for each layout's engine: its backend and, on native, the kernels' "
+            "instruction-set level and GRU precision (fp32, bf16, bf16-emulated)",
+            ["layout", "backend", "isa", "precision"],
+            registry=r,
+        )
         self.poses = Counter(
             "posecast_poses", "Poses the engine produced and routed to their rooms", registry=r
         )

@@ -73,6 +73,12 @@ def test_the_console_table_is_a_metric_per_row_in_aligned_columns() -> None:
     a name longer than its 22-character column) and left out six metrics."""
     lines = format_table(_made_up_report()).splitlines()
     assert lines[0] == "layout hmd3, SSI on backend onnx"
+    native = _made_up_report() | {
+        "backend": "native",
+        "kernels": {"isa": "avx2", "precision": "bf16-emulated"},
+    }
+    title = format_table(native).splitlines()[0]  # type: ignore[arg-type]
+    assert title == "layout hmd3, SSI on backend native (avx2, bf16-emulated)"
     head, rows = lines[1], lines[2:]
     assert head.split() == ["metric", "cvae_ik", "baseline_mean_lower_body", "ground_truth"]
     assert [r.split()[0] for r in rows] == [*METRIC_KEYS, "seconds"]

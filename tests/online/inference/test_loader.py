@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import pytest
+
 from posecast.online.engine.config import EngineConfig
-from posecast.online.inference.loader import load_engine, load_multi_engine
+from posecast.online.inference.loader import kernels, load_engine, load_multi_engine
 from posecast.tracking.layouts import Layout, spec
 from posecast.tracking.sites import TrackerSet
 
@@ -18,6 +20,20 @@ def test_load_engine_says_which_backend_runs() -> None:
     cfg = EngineConfig(samples=4, lookahead=1)
     assert load_engine(cfg, backend="onnx").backend_name == "onnx"
     assert load_engine(cfg).backend_name in ("native", "onnx")  # native, or its fallback
+
+
+def test_kernels_names_the_native_level_and_precision() -> None:
+    assert kernels("onnx") == kernels("torch") == {"isa": "", "precision": "fp32"}
+    native = pytest.importorskip("posecast.online.inference.native")
+    before = native.native_precision().removesuffix("-emulated")
+    try:
+        native.set_native_precision("fp32")
+        assert kernels("native") == {"isa": native.native_isa(), "precision": "fp32"}
+        native.set_native_precision("bf16")
+        want = "bf16" if native.native_isa() == "avx512bf16" else "bf16-emulated"
+        assert kernels("native") == {"isa": native.native_isa(), "precision": want}
+    finally:
+        native.set_native_precision(before)
 
 
 def test_load_multi_engine_builds_one_engine_per_layout_and_batches_each() -> None:

@@ -310,6 +310,10 @@ def test_http_endpoints_and_connection_limits(engine_factory: Factory) -> None:
             status, text = await asyncio.to_thread(get, base + "/metrics")
             assert status == 200 and 'posecast_errors_total{code="MALFORMED"} 1.0' in text
             assert "posecast_tick_seconds_bucket" in text
+            # what the engine runs on: the ONNX engine here, fp32
+            info = [ln for ln in text.splitlines() if ln.startswith("posecast_engine_info{")]
+            assert len(info) == 1 and info[0].endswith(" 1.0"), info
+            assert 'backend="onnx",isa="",layout="hmd3+waist",precision="fp32"' in info[0]
             await Client.open(server.port)
             with pytest.raises(InvalidStatus) as e:
                 await Client.open(server.port)  # the third attempt this minute

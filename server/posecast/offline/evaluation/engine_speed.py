@@ -361,6 +361,16 @@ def _isa(backend: str) -> str | None:
     return native_isa()
 
 
+def _precision(backend: str) -> str:
+    """The GRU gates' arithmetic: the native kernels' (``fp32``, ``bf16``,
+    ``bf16-emulated``), fp32 on the other backends."""
+    if "native" not in backend:
+        return "fp32"
+    from posecast.online.inference.native import native_precision
+
+    return native_precision()
+
+
 def _report(
     asked: str,
     backend: str,
@@ -386,6 +396,7 @@ def _report(
         "backend": backend,
         "backend_asked": asked,
         "native_isa": _isa(backend),
+        "precision": _precision(backend),
         "players": [r.players for r in results],
         "samples": samples,
         "tick_p50_ms": [r.tick_p50_ms for r in results],

@@ -30,6 +30,7 @@ from posecast.online.engine.types import TrackerFrame
 from posecast.online.inference.anomaly import AnomalyScorer
 from posecast.online.inference.artifact import Artifact, load_artifact
 from posecast.online.inference.auto import Backend, load_backend
+from posecast.online.inference.loader import kernels
 from posecast.skeleton import LOWER_BODY, NUM_ROTATIONS
 from posecast.tracking.features import TrackerSlot
 from posecast.tracking.layouts import Layout, PlayerLayout, model_layout, pelvis_from_head, spec
@@ -265,6 +266,8 @@ def evaluate(
     return {
         "layout": str(player_layout),
         "backend": shown_by.name if shown_by is not None else None,
+        # the native kernels' level and GRU precision (fp32, bf16, bf16-emulated)
+        "kernels": kernels(shown_by.name) if shown_by is not None else None,
         "variants": results,
         "clips": len(clips),
         "frames": int(sum(len(c["features"]) for c in clips)),
@@ -471,6 +474,9 @@ def format_table(report: dict[str, Any]) -> str:
     title = f"layout {report.get('layout', Layout.HMD3_WAIST)}"
     if report.get("backend"):
         title += f", SSI on backend {report['backend']}"
+        k = report.get("kernels") or {}
+        if k.get("isa"):
+            title += f" ({k['isa']}, {k['precision']})"
     lines = [title, line("metric", [name for name, _ in columns])]
     lines += [line(k, row) for k, row in cells]
     return "\n".join(lines)

@@ -18,6 +18,18 @@ from posecast.online.inference.auto import load_backend
 from posecast.tracking.layouts import Layout
 
 
+def kernels(backend: str) -> dict[str, str]:
+    """What the engine's arithmetic runs on, for logs, ``/metrics`` and reports: the
+    native kernels' instruction-set level and GRU precision (``fp32``, ``bf16``,
+    ``bf16-emulated``) where ``backend`` is ``native``; the other backends run fp32
+    on their own kernels (``isa`` empty)."""
+    if backend != "native":
+        return {"isa": "", "precision": "fp32"}
+    from posecast.online.inference.native import native_isa, native_precision
+
+    return {"isa": native_isa(), "precision": native_precision()}
+
+
 def load_engine(
     cfg: EngineConfig | None = None,
     models_dir: str | None = None,

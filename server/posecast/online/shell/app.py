@@ -46,7 +46,7 @@ from posecast.online.core.hub import Hub
 from posecast.online.core.ratelimit import SocketCount
 from posecast.online.engine.multi import MultiEngine
 from posecast.online.engine.ssi import Engine
-from posecast.online.inference.loader import load_multi_engine
+from posecast.online.inference.loader import kernels, load_multi_engine
 from posecast.online.metrics import Metrics
 from posecast.online.protocol.messages import SUBPROTOCOLS
 from posecast.online.shell.http import HttpRoutes, peer_ip
@@ -125,7 +125,14 @@ class PosecastServer:
         engine = await loop.run_in_executor(self.executor, self._engine_factory)
         if isinstance(engine, Engine):  # one model: its layout's batch only
             engine = MultiEngine({engine.layout.layout: engine})
-        log.info("engine", extra={"backends": engine.backends, "asked": self.cfg.backend})
+        info = {layout: kernels(backend) for layout, backend in engine.backends.items()}
+        for layout, backend in engine.backends.items():
+            k = info[layout]
+            self.metrics.engine_info.labels(layout, backend, k["isa"], k["precision"]).set(1)
+        log.info(
+            "engine",
+            extra={"backends": engine.backends, "asked": self.cfg.backend, "kernels": info},
+        )
         worker = EngineWorker(engine)
         self._ticks = asyncio.create_task(
             run_ticks(
