@@ -38,7 +38,7 @@ NATIVE_STAMP := $(VENV)/.native-built
 
 $(NATIVE_STAMP): $(RUN_STAMP) $(NATIVE_SRC)
 	$(PY) -m pip install --quiet --no-deps -e .
-	$(PY) -c "from posecast import _native; print('posecast native kernels:', _native.isa())" \
+	$(PY) -c "from posecast import _native; print('posecast native kernels:', _native.isa() + ', precision', _native.precision())" \
 	  || echo "posecast: the native kernels did not build; the engine serves with the onnx backend"
 	touch $@
 
