@@ -305,6 +305,32 @@ def test_a_level_that_disagrees_with_generic_is_dropped(
         native.set_native_isa(before)
 
 
+def test_a_bf16_level_that_disagrees_drops_to_the_next_in_fp32(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Not to the emulation of bf16 on the next level, which is slower than fp32."""
+    if "avx512bf16" not in native.native_isas():
+        pytest.skip("needs avx512_bf16: this CPU's levels are " + ", ".join(LEVELS))
+    before, precision = native.native_isa(), _native.precision()
+    real = native._probe
+
+    def probe(dec: object, pool: object, level: str) -> list[np.ndarray]:
+        out = real(dec, pool, level)
+        return [a + 1.0 for a in out] if level == "avx512bf16" else out
+
+    monkeypatch.setattr(native, "_probe", probe)
+    monkeypatch.setattr(native, "_checked", set())
+    native.set_native_isa("avx512bf16")
+    native.set_native_precision("bf16")
+    try:
+        with caplog.at_level("WARNING", logger="posecast.engine"):
+            native.load_native(Models("cvae_decoder", "anomaly", None, 1, 10, 0.2))
+        assert native.native_isa() == "avx512f" and native.native_precision() == "fp32"
+    finally:
+        native.set_native_isa(before)
+        native.set_native_precision(precision)
+
+
 def test_a_forked_child_runs_the_kernels_on_new_workers() -> None:
     """After fork the child has only the forking thread: the pool must start workers
     again instead of waiting for the parent's (which would hang the child)."""

@@ -329,7 +329,8 @@ def _f32(a: F32, b: F32) -> tuple[F32, F32]:
 def _self_check(dec: NativeDecoder, pool: NativePool) -> None:
     """Before the first use of a level above ``generic``: run one small batch on it
     and on ``generic`` and drop to the next level if they disagree (a level this
-    project's machine cannot run is checked on the machine that runs it)."""
+    project's machine cannot run is checked on the machine that runs it). A bf16
+    level that disagrees drops to the next level in fp32, not to the emulation."""
     import logging
 
     log = logging.getLogger("posecast.engine")
@@ -350,9 +351,14 @@ def _self_check(dec: NativeDecoder, pool: NativePool) -> None:
             set_native_isa(level)
             return
         lower = levels[levels.index(level) + 1]
+        if level == "avx512bf16" and _native.precision() == "bf16":
+            # bf16 came with the level; below it, it would run emulated (slower than
+            # fp32): the next level in its own precision instead
+            set_native_precision("fp32")
         log.warning(
-            "native kernels: level %s disagrees with generic by %.3g; using %s", level, worst, lower
-        )
+            "native kernels: level %s disagrees with generic by %.3g; using %s, precision %s",
+            level, worst, lower, _native.precision(),
+        )  # fmt: skip
         set_native_isa(lower)
 
 
