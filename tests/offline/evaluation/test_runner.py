@@ -219,4 +219,7 @@ def test_the_forecast_beats_holding_the_last_pose_on_a_walk(report: dict[str, ob
     res = variants["cvae_ik_ssi"]
     for ms in (33, 67, 100):
         assert res[f"forecast_{ms}ms_mpjpe_cm"] < res[f"hold_{ms}ms_mpjpe_cm"], ms
+        # A perfect forecast of the stream is its own pose there: under any forecast.
+        assert res[f"bound_{ms}ms_mpjpe_cm"] < res[f"forecast_{ms}ms_mpjpe_cm"], ms
+        assert res[f"bound_{ms}ms_mpjpe_cm"] == pytest.approx(res["mpjpe_cm"], abs=0.5), ms
     assert res["hold_33ms_mpjpe_cm"] < res["hold_100ms_mpjpe_cm"]

@@ -54,12 +54,13 @@ PRESENT_KEYS = (
     "present_root_pe_cm",
 )
 # A variant's stream forecast h frames ahead (body.forecast) against holding its last
-# pose, both against the truth h frames after the tick (33, 67, 100 ms at 60 fps).
+# pose, both against the truth h frames after the tick (33, 67, 100 ms at 60 fps), and
+# the bound of any forecast of that stream: its own pose at n + h (a perfect forecast).
 FORECAST_FRAMES = (2, 4, 6)
 FORECAST_KEYS = tuple(
     f"{kind}_{round(h * 1000 / 60)}ms_mpjpe_cm"
     for h in FORECAST_FRAMES
-    for kind in ("hold", "forecast")
+    for kind in ("hold", "forecast", "bound")
 )
 VARIANTS = ("cvae_1sample", "cvae_ik", "cvae_ik_ssi", "ae_ik", "baseline_mean_lower_body")
 FLAG_KEYS = ("flagged_rate", *(f"flagged_{c}_rate" for c in pl.CATEGORIES))
@@ -283,7 +284,9 @@ def _forecast_errors(
     """The stream emitted at tick ``n`` (frame ``n - lag`` of ``wm (T, 19, 3, 3)``,
     ``wp (T, 19, 3)``), forecast ``h`` frames ahead from its last poses
     (:func:`posecast.body.forecast.forecast`) and held, against the truth at ``n + h``,
-    for each ``h`` of :data:`FORECAST_FRAMES` (ticks with a full history)."""
+    for each ``h`` of :data:`FORECAST_FRAMES` (ticks with a full history); and the
+    stream's own pose at ``n + h`` there, the error of a perfect forecast of the stream
+    (``bound_...``: no forecast of it gets under that)."""
     out: dict[str, m.Acc] = {}
     T = len(wp)
     quat = mat2quat(wm)
@@ -299,6 +302,7 @@ def _forecast_errors(
         now = gt[e + lag + h]
         out[f"forecast_{ms}ms_mpjpe_cm"] = m.mpjpe(fp, now)
         out[f"hold_{ms}ms_mpjpe_cm"] = m.mpjpe(wp[e], now)
+        out[f"bound_{ms}ms_mpjpe_cm"] = m.mpjpe(wp[e + h], now)
     return out
 
 
