@@ -36,6 +36,9 @@ DAMPING = 1.0
 # A pelvis faster than this moved as a whole (a gap, a recalibration): held, not
 # extrapolated (the swing clearance's bound for the same jumps).
 MAX_SPEED_M_S = 6.0
+# The joints below the pelvis and their parents, in joint order (a parent before its child).
+_CHILD = np.array([j for j, p in enumerate(PARENTS) if p >= 0])
+_PARENT = np.array([p for p in PARENTS if p >= 0])
 
 
 def steps_ahead(frames: F64, damping: float) -> F64:
@@ -72,12 +75,12 @@ def forecast(
     turn = quat2aa(quat_mul(q_now, quat_conj(rot[:, -1 - span]))) / span  # (E, 19, 3)
     q_new = quat_mul(aa2quat(turn * g[:, None, None]), q_now)
     q_new /= np.linalg.norm(q_new, axis=-1, keepdims=True)
+    # Each bone in its parent's frame, as shown now, carried by the parent's new rotation
+    # (all bones in one pass), then chained from the pelvis (parents come first).
+    bone = quat_apply(quat_conj(q_now[:, _PARENT]), p_now[:, _CHILD] - p_now[:, _PARENT])
+    step = quat_apply(q_new[:, _PARENT], bone)  # (E, 18, 3)
     p_new = np.empty_like(p_now)
     p_new[:, 0] = p_now[:, 0] + root_step * g[:, None]
-    for j, parent in enumerate(PARENTS):
-        if parent < 0:
-            continue
-        # The bone in its parent's frame, as shown now, carried by the parent's new rotation.
-        bone = quat_apply(quat_conj(q_now[:, parent]), p_now[:, j] - p_now[:, parent])
-        p_new[:, j] = p_new[:, parent] + quat_apply(q_new[:, parent], bone)
+    for k, (j, parent) in enumerate(zip(_CHILD, _PARENT, strict=True)):
+        p_new[:, j] = p_new[:, parent] + step[:, k]
     return p_new, q_new
