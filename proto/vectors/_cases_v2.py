@@ -1,5 +1,6 @@
 """Vectors of what protocol v2 adds: hello, welcome and presence v2, poses (as messages
-and as streams of records), skeleton, pose_rate, resync, and the v2 envelope bounds.
+and as streams of records), skeleton, pose_rate, forecast, resync, and the v2 envelope
+bounds.
 
 A *stream* case (in ``poses.json``) is a sequence of ``poses`` messages decoded by one
 client in order: ``avatars`` are announced first (handle, player, skeleton), each
@@ -46,6 +47,25 @@ def hello_cases() -> list[dict[str, Any]]:
             m.Hello(2, "tok.en", "arena-7", "Ada", pose_rate_hz=20.0),
             "a phone asks for 20 poses a second",
         ),
+        _v2(
+            "hello_v2_forecast",
+            m.Hello(2, "tok.en", "arena-7", "Ada", forecast_ms=67.0),
+            "a client whose network and render delay is about 67 ms asks for poses that far ahead",
+        ),
+        _bad(
+            "hello_v2_forecast_over_100",
+            {**base, "forecast_ms": 150.0},
+            "OUT_OF_RANGE",
+            "150 ms is past the furthest forecast, 100 ms",
+            "forecast_ms",
+        ),
+        _bad(
+            "hello_v2_forecast_negative",
+            {**base, "forecast_ms": -1},
+            "OUT_OF_RANGE",
+            "a negative forecast",
+            "forecast_ms",
+        ),
         _bad(
             "hello_v2_version_1",
             {**base, "version": 1},
@@ -87,6 +107,31 @@ def welcome_cases() -> list[dict[str, Any]]:
     no_avatar_id = {k: v for k, v in first.items() if k != "handle"}
     return [
         _v2("welcome_v2", w, "members carry a handle and a skeleton; this client gets 30 Hz"),
+        _v2(
+            "welcome_v2_forecast",
+            m.Welcome(
+                2,
+                "p-4",
+                "s-9f",
+                "player",
+                "arena-7",
+                100.25,
+                60.0,
+                0,
+                members,
+                m.Limits(),
+                60.0,
+                200.0 / 3.0,
+            ),
+            "this client asked for 67 ms: its poses are forecast 4 ticks (66.67 ms) ahead",
+        ),
+        _bad(
+            "welcome_v2_forecast_over_100",
+            {**base, "forecast_ms": 116.7},
+            "OUT_OF_RANGE",
+            "a forecast past 100 ms",
+            "forecast_ms",
+        ),
         _bad(
             "welcome_v2_no_handle",
             {**base, "members": [no_avatar_id]},
@@ -202,6 +247,32 @@ def pose_rate_cases() -> list[dict[str, Any]]:
         invalid(
             "pose_rate_v1",
             {"type": "pose_rate", "rate_hz": 30.0},
+            "UNKNOWN_TYPE",
+            "not a v1 message",
+            "type",
+        ),
+    ]
+
+
+def forecast_cases() -> list[dict[str, Any]]:
+    return [
+        _v2("forecast_67", m.Forecast(67.0), "poses forecast 67 ms ahead (4 ticks at 60 Hz)"),
+        _v2("forecast_off", m.Forecast(0.0), "0 turns the forecast off"),
+        _v2("forecast_100", m.Forecast(100.0), "the furthest a client may ask"),
+        _bad(
+            "forecast_over_100",
+            {"type": "forecast", "ms": 100.5},
+            "OUT_OF_RANGE",
+            "past 100 ms",
+            "ms",
+        ),
+        _bad("forecast_negative", {"type": "forecast", "ms": -5}, "OUT_OF_RANGE", "-5 ms", "ms"),
+        _bad("forecast_nan", {"type": "forecast", "ms": float("nan")}, "OUT_OF_RANGE", "NaN", "ms"),
+        _bad("forecast_missing", {"type": "forecast"}, "BAD_FIELD", "no ms", "ms"),
+        _bad("forecast_string", {"type": "forecast", "ms": "67"}, "BAD_FIELD", "a str", "ms"),
+        invalid(
+            "forecast_v1",
+            {"type": "forecast", "ms": 67.0},
             "UNKNOWN_TYPE",
             "not a v1 message",
             "type",

@@ -52,6 +52,7 @@ FILES = {
     "poses": v2.poses_cases,
     "skeleton": v2.skeleton_cases,
     "pose_rate": v2.pose_rate_cases,
+    "forecast": v2.forecast_cases,
     "resync": v2.resync_cases,
 }
 

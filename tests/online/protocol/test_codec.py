@@ -17,6 +17,7 @@ from posecast.online.protocol import (
     Bye,
     Calibrate,
     Error,
+    Forecast,
     Frame,
     Hello,
     Kick,
@@ -88,6 +89,7 @@ def _samples_v2(rng: np.random.Generator) -> list[Message]:
     bones = rng.integers(-3000, 3000, size=(18, 3)).astype("<i2").tobytes()
     return [
         Hello(2, "tok", "lobby", "Ada", pose_rate_hz=30.0),
+        Hello(2, "tok", "lobby", "Ada", forecast_ms=67.0),
         Welcome(
             2,
             "p-1",
@@ -106,6 +108,7 @@ def _samples_v2(rng: np.random.Generator) -> list[Message]:
         Poses(7.5, bytes(range(256)) * 40),
         Skeleton("p-2", 300, bones),
         PoseRate(15.0),
+        Forecast(67.0),
         Resync(),
     ]
 

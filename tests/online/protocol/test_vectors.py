@@ -21,6 +21,7 @@ import msgpack
 import numpy as np
 import pytest
 
+from posecast.body import forecast as body_forecast
 from posecast.errors import ProtocolError
 from posecast.online.protocol import decode, encode, records, to_wire
 from posecast.online.protocol import messages as m
@@ -209,6 +210,7 @@ def test_schema_roles_limits_and_constants_match() -> None:
     assert tuple(c2["rot_widths"]) == records.ROT_WIDTHS
     assert tuple(c2["root_widths"]) == records.ROOT_WIDTHS
     assert tuple(c2["pose_rates_hz"]) == m.POSE_RATES_HZ
+    assert c2["max_forecast_ms"] == m.MAX_FORECAST_MS == body_forecast.MAX_FORECAST_MS
     assert s2 == {"max_server_message_bytes": m.MAX_SERVER_MESSAGE_BYTES_V2,
                   "max_bin_bytes": m.MAX_BIN_BYTES_V2}  # fmt: skip
     limits = {k: (v["min"], v["max"]) for k, v in SCHEMA["limits"].items()}

@@ -274,3 +274,29 @@ def test_poses_at_the_edges_of_the_tracking_space_stay_on_the_wire(
             shown += 1
     assert worker.unencodable == 0
     assert shown >= len(players) * 8
+
+
+def test_the_worker_forecasts_the_horizons_asked_and_only_those(
+    engine_factory: Callable[[ServerConfig], Callable[[], Engine]],
+) -> None:
+    """Poses forecast 2 and 4 ticks ahead for ``a`` (its room's clients asked), stamped
+    that far past the tick, same ``seq``; none for ``b``; none at all once nobody asks."""
+    worker = EngineWorker(MultiEngine({"hmd3+waist": engine_factory(make_cfg())()}), 60.0)
+    ops = [EngineOp(EngineOpKind.ADD, p, seed=i) for i, p in enumerate("ab")]
+    asked = {"a": frozenset({2, 4})}
+    outs = []
+    for seq in range(8):
+        inp = TickInput(ops if seq == 0 else [], {p: _frame(seq) for p in "ab"}, asked)
+        outs.append(worker.step(inp, 10.0 + seq / 60))
+    last = outs[-1]
+    assert sorted(last.ahead) == [2, 4] and all(set(v) == {"a"} for v in last.ahead.values())
+    base = {p.player: p for p in last.poses}["a"]
+    for h, poses in last.ahead.items():
+        fc = poses["a"]
+        assert fc.seq == base.seq and fc.t == pytest.approx(base.t + h / 60)
+        assert fc.v1() != base.v1()  # a walk moves: the forecast is not the pose held
+    # the first poses, before a history of HISTORY frames, are held (stamped ahead)
+    first = outs[0].ahead[4]["a"]
+    assert first.offsets == outs[0].poses[0].offsets and first.t == pytest.approx(10 + 4 / 60)
+    off = worker.step(TickInput([], {p: _frame(8) for p in "ab"}), 11.0)
+    assert off.ahead == {} and not worker.history

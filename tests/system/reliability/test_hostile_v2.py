@@ -4,11 +4,12 @@ and out of range, against a real server with healthy players streaming.
 Two joined v2 attackers (a player in the healthy players' room, a backend in a room
 of its own) send every single-message vector that holds in v2 (the invalid ones and
 the valid ones: a server-to-client type from a client is FORBIDDEN), then what
-hypothesis builds from the v2 client messages: ``hello.pose_rate_hz``, ``pose_rate``
-and ``resync`` with boundary, wrong-kind and random values, truncated and oversized
-v2 encodings, ``poses``/``skeleton`` from a client. Each answer is checked against
-the spec (:func:`~tests.system.reliability.hostile_helpers.verdict`, v2), ``/metrics``
-counted every error by its code, nobody else heard a thing and the server answers
+hypothesis builds from the v2 client messages: ``hello.pose_rate_hz`` and
+``forecast_ms``, ``pose_rate``, ``forecast`` and ``resync`` with boundary, wrong-kind
+and random values, truncated and oversized v2 encodings, ``poses``/``skeleton`` from
+a client. Each answer is checked against the spec
+(:func:`~tests.system.reliability.hostile_helpers.verdict`, v2), ``/metrics`` counted
+every error by its code, nobody else heard a thing and the server answers
 ``/healthz``. (The healthy players' pose rate is held to its floor by
 ``test_hostile_fuzz``; on a saturated machine that floor fails with or without v2.)
 """
@@ -44,18 +45,23 @@ INVALID = [bytes.fromhex(v["hex"]) for v in V2 if "hex" in v]
 VALID = [bytes.fromhex(v["canonical_hex"]) for v in V2 if "canonical_hex" in v]
 NUMBERS = st.sampled_from(
     [60.0, 30.0, 20.0, 15.0, 45.0, 0.0, -15.0, 1e308, math.nan, math.inf, 60, 15, 2**64 - 1,
+     67.0, 100.0, 100.5, -0.0,
      True, None, "30", b"\x00", [30.0], {"hz": 30}]
 )  # fmt: skip
 
 
 @st.composite
 def v2_client_message(draw: st.DrawFn) -> bytes:
-    kind = draw(st.sampled_from(["pose_rate", "resync", "hello", "poses", "skeleton"]))
+    kinds = ["pose_rate", "forecast", "resync", "hello", "poses", "skeleton"]
+    kind = draw(st.sampled_from(kinds))
     m: dict[str, Any] = {"type": kind}
     if kind == "pose_rate":
         m["rate_hz"] = draw(NUMBERS | st.floats())
+    elif kind == "forecast":
+        m["ms"] = draw(NUMBERS | st.floats())
     elif kind == "hello":  # a second hello: its fields are checked first, then ALREADY_JOINED
-        m.update(version=2, token="t", room="r1", name="M", pose_rate_hz=draw(NUMBERS))
+        m.update(version=2, token="t", room="r1", name="M", pose_rate_hz=draw(NUMBERS),
+                 forecast_ms=draw(NUMBERS))  # fmt: skip
     elif kind == "poses":
         m.update(t=draw(st.floats()), data=draw(st.binary(max_size=600)))
     elif kind == "skeleton":

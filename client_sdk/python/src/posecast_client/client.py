@@ -31,7 +31,10 @@ before. On v2 the server sends each tick's poses in one message, rotations first
 (keyframes and deltas against what this client holds); the session rebuilds each
 avatar (positions by FK with its announced skeleton, world and local rotations) and
 hands out the same :class:`~posecast_client.protocol.Pose` events, one per avatar.
-``pose_rate_hz`` (60, 30, 20, 15) lowers how many a second it gets.
+``pose_rate_hz`` (60, 30, 20, 15) lowers how many a second it gets, and
+``forecast_ms`` (0-100) asks for poses predicted that far ahead, to cancel this
+client's network and render delay: each pose's ``t`` then stands that far past its
+tick (whole ticks: 67 ms is 4 at 60 Hz), so the interpolator shows it that much sooner.
 """
 
 from __future__ import annotations
@@ -84,10 +87,12 @@ from posecast_client.errors import (
 )
 from posecast_client.protocol import (
     ALL_VALID,
+    MAX_FORECAST_MS,
     PROTOCOL_V2,
     SUBPROTOCOLS,
     Bye,
     Calibrate,
+    Forecast,
     Layout,
     Message,
     Ping,
@@ -447,6 +452,7 @@ class Client:
         rate_hz: float | None = None,
         watch: tuple[str, ...] = (),
         pose_rate_hz: float | None = None,
+        forecast_ms: float | None = None,
     ) -> Welcome:
         """Join ``room`` as ``name`` (shown to others) and start receiving.
 
@@ -463,19 +469,25 @@ class Client:
             watch: further rooms to watch (backend tokens only).
             pose_rate_hz: v2: poses per second to receive, 60 (absent), 30, 20 or 15
                 (a phone, a spectator); ignored by a v1 server.
+            forecast_ms: v2: poses predicted this many milliseconds ahead, 0 (absent)
+                to 100, rounded by the server to whole ticks (``welcome.forecast_ms``
+                says how far); ignored by a v1 server.
 
         Raises:
             ProtocolError: the typed refusal (``UnauthenticatedError``,
                 ``ForbiddenError``, ``RoomFullError``...).
-            ValueError: ``layout`` names no layout or tracker set (nothing is sent).
+            ValueError: ``layout`` names no layout or tracker set, or ``forecast_ms``
+                is outside 0-100 (nothing is sent).
         """
         tracker = tracker_set(layout)
+        _check_forecast(forecast_ms or 0.0)
         if self._closing:
             raise ClientClosedError("the client is closed")
         if self._ws is None or self._hello_args is not None:
             raise RuntimeError("join() once per client, after `await connect(...)`")
         self._hello_args = {"room": room, "name": name, "layout": layout, "rate_hz": rate_hz,
-                            "watch": watch, "pose_rate_hz": pose_rate_hz}  # fmt: skip
+                            "watch": watch, "pose_rate_hz": pose_rate_hz,
+                            "forecast_ms": forecast_ms}  # fmt: skip
         if layout == Layout.HMD3_WAIST:
             self._hello_args["layout"] = None  # the default: canonical hellos leave it out
         self.session.tracker_set = tracker
@@ -695,6 +707,20 @@ class Client:
             self._hello_args["pose_rate_hz"] = rate_hz  # and after a reconnect
         return await self.send(PoseRate(float(rate_hz)))
 
+    async def set_forecast(self, ms: float) -> bool:
+        """v2: receive poses predicted ``ms`` (0-100) milliseconds ahead from now on
+        (0: none); the server rounds it to whole ticks.
+
+        Raises:
+            ValueError: ``ms`` outside 0-100, or the server speaks only v1.
+        """
+        _check_forecast(ms)
+        if self.session.version < PROTOCOL_V2:
+            raise ValueError("the server speaks posecast.v1: no forecast")
+        if self._hello_args is not None:
+            self._hello_args["forecast_ms"] = ms  # and after a reconnect
+        return await self.send(Forecast(float(ms)))
+
     async def resync(self) -> bool:
         """v2: ask for a keyframe of every avatar with the next poses (no-op on v1)."""
         if self.session.version < PROTOCOL_V2:
@@ -849,3 +875,8 @@ def connect(url: str | Iterable[str], token: Token, **options: Any) -> Connectin
         VersionUnsupportedError: the server speaks neither protocol offered.
     """
     return Connecting(Client(url, token, **options))
+
+
+def _check_forecast(ms: float) -> None:
+    if not 0.0 <= ms <= MAX_FORECAST_MS:  # NaN fails too
+        raise ValueError(f"forecast_ms must be within 0-{MAX_FORECAST_MS:g} ms, not {ms}")

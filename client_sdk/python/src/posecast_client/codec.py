@@ -14,11 +14,11 @@ spec's order: size (TOO_LARGE), one msgpack value within the structural bounds
 (BAD_FIELD / UNKNOWN_TYPE), then the fields of that type.
 
 ``version`` is the connection's protocol (the subprotocol the server selected): v2
-knows ``poses``, ``skeleton``, ``pose_rate`` and ``resync`` but no ``pose``, wants
-``version`` 2 in ``hello``, a ``handle`` (the avatar id, ``avatar_id`` in the message
-classes) and ``skeleton`` for every ``welcome``
-member and ``presence`` join, and lets a server message and its bins reach 16384
-bytes. ``poses.data`` is opaque here: :mod:`posecast_client.records` reads it.
+knows ``poses``, ``skeleton``, ``pose_rate``, ``forecast`` and ``resync`` but no
+``pose``, wants ``version`` 2 in ``hello``, a ``handle`` (the avatar id,
+``avatar_id`` in the message classes) and ``skeleton`` for every ``welcome`` member
+and ``presence`` join, and lets a server message and its bins reach 16384 bytes.
+``poses.data`` is opaque here: :mod:`posecast_client.records` reads it.
 """
 
 from __future__ import annotations
@@ -52,6 +52,7 @@ from posecast_client.protocol import (
     MAX_BIN_BYTES,
     MAX_COORD_M,
     MAX_DEPTH,
+    MAX_FORECAST_MS,
     MAX_HEIGHT_M,
     MAX_ID_BYTES,
     MAX_LAYOUT_BYTES,
@@ -74,6 +75,7 @@ from posecast_client.protocol import (
     Bye,
     Calibrate,
     Error,
+    Forecast,
     Frame,
     Hello,
     Kick,
@@ -99,9 +101,10 @@ T = TypeVar("T")
 
 # Canonical key order of every message (after "type"): the spec's field tables.
 FIELDS: dict[str, tuple[str, ...]] = {
-    "hello": ("version", "token", "room", "name", "layout", "rate_hz", "watch", "pose_rate_hz"),
+    "hello": ("version", "token", "room", "name", "layout", "rate_hz", "watch", "pose_rate_hz",
+              "forecast_ms"),
     "welcome": ("version", "player", "session", "role", "room", "t", "rate_hz",
-                "lookahead_frames", "members", "limits", "pose_rate_hz"),
+                "lookahead_frames", "members", "limits", "pose_rate_hz", "forecast_ms"),
     "calibrate": ("height_m", "tpose", "trackers", "sites"),
     "frame": ("seq", "t", "trackers", "sites", "valid"),
     "pose": ("player", "seq", "t", "root", "pos_mm", "rot"),
@@ -116,8 +119,9 @@ FIELDS: dict[str, tuple[str, ...]] = {
     "skeleton": ("player", "handle", "skeleton"),
     "pose_rate": ("rate_hz",),
     "resync": (),
+    "forecast": ("ms",),
 }  # fmt: skip
-V1_TYPES = frozenset(FIELDS) - {"poses", "skeleton", "pose_rate", "resync"}
+V1_TYPES = frozenset(FIELDS) - {"poses", "skeleton", "pose_rate", "resync", "forecast"}
 V2_TYPES = frozenset(FIELDS) - {"pose"}
 _V2_CLIENT_TYPES = frozenset().union(*ROLE_MAY_SEND_V2.values())
 _SELECTOR_APPLIES = {
@@ -392,6 +396,10 @@ def _pose_rate(v: Any, path: str) -> float:
     return rate
 
 
+def _forecast(v: Any, path: str) -> float:
+    return _float(v, path, 0.0, MAX_FORECAST_MS)
+
+
 def _limits(v: Any, path: str) -> Limits:
     if type(v) is not dict:
         raise _bad(path, "a map")
@@ -415,6 +423,7 @@ def _hello(f: _Fields, lim: Limits) -> Hello:
         rate_hz=f.opt("rate_hz", _float, 1.0, lim.max_rate_hz),
         watch=tuple(_id(r, f"watch[{i}]", lim.max_room_bytes) for i, r in enumerate(watch)),
         pose_rate_hz=f.opt("pose_rate_hz", _pose_rate) if f.version >= PROTOCOL_V2 else None,
+        forecast_ms=f.opt("forecast_ms", _forecast) if f.version >= PROTOCOL_V2 else None,
     )
 
 
@@ -431,6 +440,7 @@ def _welcome(f: _Fields, lim: Limits) -> Welcome:
         members=f.req("members", _members, lim, f.version),
         limits=f.req("limits", _limits),
         pose_rate_hz=f.req("pose_rate_hz", _pose_rate) if f.version >= PROTOCOL_V2 else None,
+        forecast_ms=f.opt("forecast_ms", _forecast) if f.version >= PROTOCOL_V2 else None,
     )
 
 
@@ -562,6 +572,7 @@ _DECODERS: dict[str, Callable[[_Fields, Limits], Message]] = {
     ),
     "pose_rate": lambda f, lim: PoseRate(f.req("rate_hz", _pose_rate)),
     "resync": lambda f, lim: Resync(),
+    "forecast": lambda f, lim: Forecast(f.req("ms", _forecast)),
 }
 
 
@@ -627,7 +638,7 @@ _ENCODERS: dict[str, Callable[[Any], Map]] = {
     "hello": lambda h: {
         "version": h.version, "token": h.token, "room": h.room, "name": h.name,
         "layout": h.layout, "rate_hz": _fl(h.rate_hz), "watch": list(h.watch) or None,
-        "pose_rate_hz": _fl(h.pose_rate_hz),
+        "pose_rate_hz": _fl(h.pose_rate_hz), "forecast_ms": _fl(h.forecast_ms),
     },
     "welcome": lambda w: {
         "version": w.version, "player": w.player, "session": w.session, "role": w.role,
@@ -635,7 +646,7 @@ _ENCODERS: dict[str, Callable[[Any], Map]] = {
         "lookahead_frames": w.lookahead_frames,
         "members": [_member(m) for m in w.members],
         "limits": {k: getattr(w.limits, k) for k in LIMIT_RANGES},
-        "pose_rate_hz": _fl(w.pose_rate_hz),
+        "pose_rate_hz": _fl(w.pose_rate_hz), "forecast_ms": _fl(w.forecast_ms),
     },
     "calibrate": lambda c: (
         {"height_m": float(c.height_m)} if c.positions is None
@@ -665,6 +676,7 @@ _ENCODERS: dict[str, Callable[[Any], Map]] = {
     "skeleton": lambda k: {"player": k.player, "handle": k.avatar_id, "skeleton": k.skeleton},
     "pose_rate": lambda p: {"rate_hz": float(p.rate_hz)},
     "resync": lambda r: {},
+    "forecast": lambda f: {"ms": float(f.ms)},
 }  # fmt: skip
 
 

@@ -69,7 +69,8 @@ ROLE_MAY_SEND: dict[str, frozenset[str]] = {
     "spectator": frozenset({"hello", "ping", "bye"}),
     "backend": frozenset({"hello", "selector", "kick", "ping", "bye"}),
 }
-ROLE_MAY_SEND_V2 = {r: t | {"pose_rate", "resync"} for r, t in ROLE_MAY_SEND.items()}
+ROLE_MAY_SEND_V2 = {r: t | {"pose_rate", "resync", "forecast"} for r, t in ROLE_MAY_SEND.items()}
+MAX_FORECAST_MS = 100.0  # v2: the furthest ahead a client may ask its poses to be
 
 # (floor, v1 maximum) of each limit, in canonical order; the defaults are the maxima.
 LIMIT_RANGES: dict[str, tuple[int, int]] = {
@@ -135,6 +136,7 @@ class Hello:
     watch: tuple[str, ...] = ()
     version: int = PROTOCOL_VERSION
     pose_rate_hz: float | None = None  # v2: poses per second to receive (absent: 60)
+    forecast_ms: float | None = None  # v2: poses predicted this far ahead, 0-100 (absent: 0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -165,6 +167,7 @@ class Welcome:
     members: tuple[Member, ...]
     limits: Limits
     pose_rate_hz: float | None = None  # v2: the poses per second this client gets
+    forecast_ms: float | None = None  # v2: how far ahead its poses are (whole ticks)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -254,6 +257,15 @@ class PoseRate:
 
 
 @dataclass(frozen=True, slots=True)
+class Forecast:
+    """v2 client -> server: receive poses predicted ``ms`` (0-100) milliseconds ahead;
+    0 turns it off. Each pose's ``t`` then stands that far past its tick."""
+
+    TYPE: ClassVar[str] = "forecast"
+    ms: float
+
+
+@dataclass(frozen=True, slots=True)
 class Resync:
     """v2 client -> server: send keyframes of every avatar with the next poses."""
 
@@ -338,4 +350,5 @@ Message = (
     | Skeleton
     | PoseRate
     | Resync
+    | Forecast
 )

@@ -209,10 +209,15 @@ class ClientSession:
         rate_hz: float | None = None,
         watch: tuple[str, ...] = (),
         pose_rate_hz: float | None = None,
+        forecast_ms: float | None = None,
     ) -> Hello:
-        """The ``hello`` for this connection's version (v1 drops ``pose_rate_hz``)."""
-        rate = pose_rate_hz if self.version >= 2 else None
-        return Hello(token, room, name, layout, rate_hz, tuple(watch), self.version, rate)
+        """The ``hello`` for this connection's version (v1 drops ``pose_rate_hz`` and
+        ``forecast_ms``)."""
+        v2 = self.version >= 2
+        return Hello(
+            token, room, name, layout, rate_hz, tuple(watch), self.version,
+            pose_rate_hz if v2 else None, forecast_ms or None if v2 else None,
+        )  # fmt: skip
 
     def frame(
         self,

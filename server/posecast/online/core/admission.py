@@ -53,6 +53,7 @@ from posecast.online.core.routing import Router
 from posecast.online.core.session import (
     Action,
     CalibrateIn,
+    ForecastIn,
     FrameIn,
     Join,
     KickIn,
@@ -246,11 +247,13 @@ class Admission:
             self.inbox.setting(
                 EngineOp(EngineOpKind.SELECTOR, action.player, selector=action.selector)
             )
-        elif isinstance(action, PoseRateIn | ResyncIn):
+        elif isinstance(action, PoseRateIn | ResyncIn | ForecastIn):
             stream = c.outbox.stream
             assert stream is not None  # only v2 sessions decode these
             if isinstance(action, PoseRateIn):
                 stream.set_rate(action.rate_hz)
+            elif isinstance(action, ForecastIn):
+                self._forecast(c, action.ms)
             else:
                 stream.request_resync()
         elif isinstance(action, KickIn):
@@ -300,6 +303,7 @@ class Admission:
         c.session.joined(join)
         if c.outbox.stream is not None and join.hello.pose_rate_hz is not None:
             c.outbox.stream.set_rate(join.hello.pose_rate_hz)
+        self._forecast(c, join.hello.forecast_ms or 0.0)  # a takeover's old one ends here
         self.conns.by_player[claims.player] = c.session.conn
         self.metrics.connections.labels("pending").dec()
         self.metrics.connections.labels(claims.role).inc()
@@ -330,6 +334,15 @@ class Admission:
     def _fast(self, rate_hz: float | None) -> bool:
         """A player sending faster than the tick keeps only its newest frame (core/tick.py)."""
         return (rate_hz or 60.0) > self.cfg.tick_hz
+
+    def _forecast(self, c: Conn, ms: float) -> None:
+        """``c`` (v2) gets poses forecast ``ms`` ahead, in whole ticks, from the next
+        tick on: the router asks the engine thread for that horizon of its rooms."""
+        stream = c.outbox.stream
+        if stream is not None:  # v1 has no forecast
+            stream.set_forecast(ms, self.cfg.tick_hz)
+        ahead = 0 if stream is None else stream.ahead
+        self.router.listen_ahead(c.session.player, c.session.rooms, ahead)
 
     def _welcome(self, s: Session, room: str, now: float) -> Welcome:
         return Welcome(  # the router adds the v2 fields for a v2 client
@@ -403,6 +416,7 @@ class Admission:
         if c.replaced or self.conns.by_player.get(s.player) != s.conn:
             return
         del self.conns.by_player[s.player]
+        self.router.listen_ahead(s.player, s.rooms, 0)
         played = self.rooms.remove(s.player)
         if played is not None:
             self.inbox.left(s.player)

@@ -129,7 +129,9 @@ class Hub:
     # --- the tick ------------------------------------------------------------------------
 
     def take_tick_input(self) -> TickInput:
-        return self.inbox.take()
+        inp = self.inbox.take()
+        inp.horizons = self.router.horizons()
+        return inp
 
     def deliver(self, out: TickOutput, now: float) -> None:
         self.router.deliver(out, now)

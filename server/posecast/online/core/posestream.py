@@ -151,11 +151,18 @@ class PoseStream:
     records: int = 0
     keyframes: int = 0
     every: int = 1  # ticks between this client's poses: 60 / pose_rate_hz
+    ahead: int = 0  # the forecast this client asked for, in ticks (0: none)
+    ahead_ms: float = 0.0  # the same in milliseconds: ``ahead`` ticks of the server's
 
     def set_rate(self, rate_hz: float) -> None:
         assert rate_hz in POSE_RATES_HZ
         self.pose_rate_hz = rate_hz
         self.every = round(_TICK_HZ / rate_hz)
+
+    def set_forecast(self, ms: float, tick_hz: float) -> None:
+        """Poses predicted ``ms`` (0-100) ahead from now on, to the nearest whole tick."""
+        self.ahead = round(ms * tick_hz / 1000.0)
+        self.ahead_ms = self.ahead * 1000.0 / tick_hz
 
     def request_resync(self) -> None:
         """The client dropped its references: every avatar's next record is a keyframe,

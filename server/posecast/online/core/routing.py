@@ -44,6 +44,34 @@ class Router:
     metrics: Metrics
     avatars: Avatars = field(default_factory=Avatars)
     tick: int = 0  # ticks delivered: a v2 client at 60/k Hz takes every k-th
+    # The clients that asked for a forecast: listener -> (the rooms it hears, ticks).
+    ahead: dict[str, tuple[tuple[str, ...], int]] = field(default_factory=dict)
+
+    def listen_ahead(self, listener: str, rooms: tuple[str, ...], ticks: int) -> None:
+        """``listener`` (hearing ``rooms``) wants poses ``ticks`` ahead (0: none)."""
+        if ticks > 0:
+            self.ahead[listener] = (rooms, ticks)
+        else:
+            self.ahead.pop(listener, None)
+
+    def horizons(self) -> dict[str, frozenset[int]]:
+        """Per local player, the forecasts (ticks) its rooms' clients asked for: what
+        the engine thread computes next tick (a few distinct horizons per room at
+        most: 1-6 ticks at 60 Hz). Empty, and free, when nobody asked."""
+        if not self.ahead:
+            return {}
+        by_room: dict[str, set[int]] = {}
+        for rooms, ticks in self.ahead.values():
+            for room in rooms:
+                by_room.setdefault(room, set()).add(ticks)
+        out: dict[str, frozenset[int]] = {}
+        for room, asked in by_room.items():
+            r = self.rooms.rooms.get(room)
+            if r is not None:
+                hs = frozenset(asked)
+                for player in r.players:
+                    out[player] = hs
+        return out
 
     def send(self, c: Conn, msg: Message, now: float) -> None:
         stream = c.outbox.stream
@@ -60,7 +88,7 @@ class Router:
                 stream.announce(m.player, m.avatar_id)
             return Welcome(msg.version, msg.player, msg.session, msg.role, msg.room, msg.t,
                            msg.rate_hz, msg.lookahead_frames, members, msg.limits,
-                           stream.pose_rate_hz)  # fmt: skip
+                           stream.pose_rate_hz, stream.ahead_ms or None)  # fmt: skip
         if isinstance(msg, Presence):
             if msg.event == "join":
                 msg = self.avatars.presence(msg)
@@ -125,7 +153,10 @@ class Router:
         poses: list[PoseOut],
         now: float,
         requests: list[tuple[Conn, PoseStream, PoseState]],
+        ahead: dict[int, dict[str, PoseOut]] | None = None,
     ) -> int:
+        """``ahead``: per horizon (ticks), the forecast poses, for v2 clients that asked
+        (a pose without one, another node's, goes as it is)."""
         superseded = 0
         v1: list[Conn] = []
         v2: list[tuple[Conn, PoseStream]] = []  # the v2 clients whose tick this is
@@ -144,7 +175,14 @@ class Router:
                 data = pose.v1()
                 for c in v1:
                     superseded += self.conns.pose_to_conn(c, pose.player, data, now)
-            requests.extend((c, s, pose.state) for c, s in v2 if pose.player in s.known)
+            if ahead:
+                requests.extend(
+                    (c, s, ahead.get(s.ahead, {}).get(pose.player, pose).state)
+                    for c, s in v2
+                    if pose.player in s.known
+                )
+            else:
+                requests.extend((c, s, pose.state) for c, s in v2 if pose.player in s.known)
         return superseded
 
     def _put_v2(self, requests: list[tuple[Conn, PoseStream, PoseState]], now: float) -> int:
@@ -187,7 +225,7 @@ class Router:
                 continue  # left while the tick ran
             batches.setdefault(room, ([], []))[0].append(pose)
         for room, (room_poses, _) in batches.items():
-            superseded += self._route(room, room_poses, now, requests)
+            superseded += self._route(room, room_poses, now, requests, out.ahead)
         superseded += self._put_v2(requests, now)
         for ev in out.events:
             room = self.rooms.room_of(ev.player)

@@ -53,6 +53,7 @@ from posecast.online.protocol.messages import (
     ROLE_MAY_SEND_V2,
     Bye,
     Calibrate,
+    Forecast,
     Frame,
     Hello,
     Kick,
@@ -132,11 +133,21 @@ class PoseRateIn:
 
 
 @dataclass(frozen=True)
+class ForecastIn:
+    """v2: the client wants poses forecast ``ms`` milliseconds ahead from now on."""
+
+    ms: float
+
+
+@dataclass(frozen=True)
 class ResyncIn:
     """v2: the client wants a keyframe of every avatar with its next poses."""
 
 
-Action = Join | FrameIn | CalibrateIn | SelectorIn | KickIn | Reply | Leave | PoseRateIn | ResyncIn
+Action = (
+    Join | FrameIn | CalibrateIn | SelectorIn | KickIn | Reply | Leave | PoseRateIn | ResyncIn
+    | ForecastIn
+)  # fmt: skip
 
 
 @dataclass
@@ -211,6 +222,8 @@ class Session:
             return PoseRateIn(msg.rate_hz)
         if isinstance(msg, Resync):
             return ResyncIn()
+        if isinstance(msg, Forecast):
+            return ForecastIn(msg.ms)
         raise ForbiddenError(f"{msg.TYPE} is not for a server", field="type")  # pragma: no cover
 
     def _hello(self, hello: Hello, now: float) -> Join:

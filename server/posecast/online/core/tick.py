@@ -70,6 +70,8 @@ class EngineOp:
 class TickInput:
     ops: list[EngineOp]
     frames: dict[str, TrackerFrame]  # each player's oldest waiting frame
+    # The forecasts its room's clients asked for, per player: frames ahead (none: {}).
+    horizons: dict[str, frozenset[int]] = field(default_factory=dict)
 
 
 @dataclass
@@ -80,6 +82,9 @@ class TickOutput:
     batch: int = 0  # players in the step
     seconds: float = 0.0  # wall time of the step in the engine thread
     reach_limited: int = 0  # poses sent whose head or a hand could not reach its tracker
+    # Per horizon (frames) some client asked for, each player's pose forecast that far
+    # ahead of its shown pose, stamped as far past the tick (v2 clients only).
+    ahead: dict[int, dict[str, PoseOut]] = field(default_factory=dict)
 
 
 class EngineInbox:

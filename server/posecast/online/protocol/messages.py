@@ -39,6 +39,7 @@ __all__ = [  # the public names, which the package re-exports (posecast.online.p
     "Bye",
     "Calibrate",
     "Error",
+    "Forecast",
     "Frame",
     "Hello",
     "Kick",
@@ -66,6 +67,7 @@ SUBPROTOCOL_V2 = "posecast.v2"
 VERSIONS = (1, 2)  # the versions this peer speaks
 SUBPROTOCOLS = {1: SUBPROTOCOL, 2: SUBPROTOCOL_V2}
 POSE_RATES_HZ = (60.0, 30.0, 20.0, 15.0)  # v2 per-client pose rates: divisors of the tick
+MAX_FORECAST_MS = 100.0  # v2: the furthest ahead a client may ask its poses to be
 
 ROLES = ("player", "spectator", "backend")
 PRESENCE_EVENTS = ("join", "leave", "stale", "active")
@@ -100,10 +102,10 @@ ROLE_MAY_SEND: dict[str, frozenset[str]] = {
     "backend": frozenset({"hello", "selector", "kick", "ping", "bye"}),
 }
 SERVER_SENDS = frozenset({"welcome", "pose", "presence", "pong", "error", "bye"})
-# v2: every role may also ask for a pose rate and for keyframes; the server sends
+# v2: every role may also ask for a pose rate, a forecast and keyframes; the server sends
 # poses (one message per tick) and skeletons instead of pose.
 ROLE_MAY_SEND_V2: dict[str, frozenset[str]] = {
-    role: types | {"pose_rate", "resync"} for role, types in ROLE_MAY_SEND.items()
+    role: types | {"pose_rate", "resync", "forecast"} for role, types in ROLE_MAY_SEND.items()
 }
 SERVER_SENDS_V2 = (SERVER_SENDS - {"pose"}) | {"poses", "skeleton"}
 
@@ -183,6 +185,7 @@ class Hello:
     rate_hz: float | None = None  # frames per second the client will send; absent: 60
     watch: tuple[str, ...] = ()  # further rooms a backend watches
     pose_rate_hz: float | None = None  # v2: poses per second to receive; absent: 60
+    forecast_ms: float | None = None  # v2: poses predicted this far ahead; absent: 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -214,6 +217,7 @@ class Welcome:
     members: tuple[Member, ...]
     limits: Limits
     pose_rate_hz: float | None = None  # v2: the poses per second this client gets
+    forecast_ms: float | None = None  # v2: how far ahead its poses are (whole ticks)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -297,6 +301,15 @@ class PoseRate:
 
     TYPE: ClassVar[str] = "pose_rate"
     rate_hz: float
+
+
+@dataclass(frozen=True, slots=True)
+class Forecast:
+    """v2 client -> server: receive poses predicted ``ms`` milliseconds ahead (0 to
+    100; 0 turns the forecast off)."""
+
+    TYPE: ClassVar[str] = "forecast"
+    ms: float
 
 
 @dataclass(frozen=True, slots=True)
@@ -395,6 +408,7 @@ Message = (
     | Skeleton
     | PoseRate
     | Resync
+    | Forecast
 )
 MESSAGE_TYPES: tuple[type[Message], ...] = (
     Hello,
@@ -413,6 +427,7 @@ MESSAGE_TYPES: tuple[type[Message], ...] = (
     Skeleton,
     PoseRate,
     Resync,
+    Forecast,
 )
 V1_TYPES = frozenset(t.TYPE for t in MESSAGE_TYPES[:12])
-V2_TYPES = (V1_TYPES - {"pose"}) | {"poses", "skeleton", "pose_rate", "resync"}
+V2_TYPES = (V1_TYPES - {"pose"}) | {"poses", "skeleton", "pose_rate", "resync", "forecast"}

@@ -2,8 +2,9 @@
 
 ``DECODERS[version][type] = (known keys, decode)`` and ``ENCODERS[type] = encode``.
 v2 (``posecast.v2``) keeps every v1 type but ``pose``, adds ``poses``, ``skeleton``,
-``pose_rate`` and ``resync``, and changes ``hello`` (``version`` 2, ``pose_rate_hz``),
-``welcome`` (members with ``handle`` and ``skeleton``, ``pose_rate_hz``) and
+``pose_rate``, ``forecast`` and ``resync``, and changes ``hello`` (``version`` 2,
+``pose_rate_hz``, ``forecast_ms``), ``welcome`` (members with ``handle`` and
+``skeleton``, ``pose_rate_hz``, ``forecast_ms``) and
 ``presence`` (a ``join`` carries ``handle`` and ``skeleton``); the wire's ``handle``
 is the avatar id, ``avatar_id`` in the message classes. A decoder
 sees a map already held to the structural bounds, reads every known field with the
@@ -47,6 +48,7 @@ from posecast.online.protocol.messages import (
     ALL_TRACKERS_VALID,
     LIMIT_RANGES,
     MAX_BIN_BYTES_V2,
+    MAX_FORECAST_MS,
     MAX_HEIGHT_M,
     MAX_ID_BYTES,
     MAX_LAYOUT_BYTES,
@@ -65,6 +67,7 @@ from posecast.online.protocol.messages import (
     Bye,
     Calibrate,
     Error,
+    Forecast,
     Frame,
     Hello,
     Kick,
@@ -120,6 +123,11 @@ def _pose_rate(m: Map, key: str) -> float:
     return v
 
 
+def _forecast(m: Map, key: str) -> float:
+    """A v2 forecast horizon: milliseconds in [0, 100] (else OUT_OF_RANGE)."""
+    return as_float(m, key, 0.0, MAX_FORECAST_MS)
+
+
 def _avatar_id(m: Map, key: str, at: str = "") -> int:
     return as_int(m, key, 0, records.MAX_AVATAR_ID, at=at)
 
@@ -138,6 +146,7 @@ def _hello(m: Map, lim: Limits, v: int = PROTOCOL_VERSION) -> Hello:
             field="version",
         )
     rate = _pose_rate(m, "pose_rate_hz") if v >= PROTOCOL_V2 and _has(m, "pose_rate_hz") else None
+    ahead = _forecast(m, "forecast_ms") if v >= PROTOCOL_V2 and _has(m, "forecast_ms") else None
     return Hello(
         version=version,
         token=as_str(m, "token", lim.max_token_bytes, min_bytes=0),
@@ -147,6 +156,7 @@ def _hello(m: Map, lim: Limits, v: int = PROTOCOL_VERSION) -> Hello:
         rate_hz=as_float(m, "rate_hz", 1.0, lim.max_rate_hz) if _has(m, "rate_hz") else None,
         watch=_ids(m, "watch", lim.max_watch_rooms, lim.max_room_bytes),
         pose_rate_hz=rate,
+        forecast_ms=ahead,
     )
 
 
@@ -191,6 +201,9 @@ def _welcome(m: Map, lim: Limits, v: int = PROTOCOL_VERSION) -> Welcome:
         members=tuple(members),
         limits=limits,
         pose_rate_hz=_pose_rate(m, "pose_rate_hz") if v >= PROTOCOL_V2 else None,
+        forecast_ms=(
+            _forecast(m, "forecast_ms") if v >= PROTOCOL_V2 and _has(m, "forecast_ms") else None
+        ),
     )
 
 
@@ -317,6 +330,7 @@ def _enc_welcome(w: Welcome) -> Map:
         "members": [_member(p) for p in w.members],
         "limits": {k: getattr(w.limits, k) for k in LIMIT_RANGES},
         **({} if w.pose_rate_hz is None else {"pose_rate_hz": float(w.pose_rate_hz)}),
+        **({} if w.forecast_ms is None else {"forecast_ms": float(w.forecast_ms)}),
     }
 
 
@@ -348,6 +362,7 @@ _ENC: dict[type[Any], Callable[[Any], Map]] = {
         rate_hz=_fl(h.rate_hz),
         watch=list(h.watch) or None,
         pose_rate_hz=_fl(h.pose_rate_hz),
+        forecast_ms=_fl(h.forecast_ms),
     ),
     Welcome: _enc_welcome,
     Calibrate: lambda c: (
@@ -383,6 +398,7 @@ _ENC: dict[type[Any], Callable[[Any], Map]] = {
     },
     PoseRate: lambda p: {"type": "pose_rate", "rate_hz": float(p.rate_hz)},
     Resync: lambda r: {"type": "resync"},
+    Forecast: lambda f: {"type": "forecast", "ms": float(f.ms)},
     Selector: lambda s: _opt(
         {"type": "selector", "player": s.player, "kind": s.kind},
         joint=s.joint,
@@ -406,7 +422,17 @@ ENCODERS: dict[str, Callable[[Any], Map]] = {cls.TYPE: fn for cls, fn in _ENC.it
 _Dec = Callable[[Map, Limits, int], Message]
 _DEC: dict[type[Message], tuple[tuple[str, ...], _Dec]] = {
     Hello: (
-        ("version", "token", "room", "name", "layout", "rate_hz", "watch", "pose_rate_hz"),
+        (
+            "version",
+            "token",
+            "room",
+            "name",
+            "layout",
+            "rate_hz",
+            "watch",
+            "pose_rate_hz",
+            "forecast_ms",
+        ),
         _hello,
     ),
     Welcome: (
@@ -422,6 +448,7 @@ _DEC: dict[type[Message], tuple[tuple[str, ...], _Dec]] = {
             "members",
             "limits",
             "pose_rate_hz",
+            "forecast_ms",
         ),
         _welcome,
     ),
@@ -458,6 +485,7 @@ _DEC: dict[type[Message], tuple[tuple[str, ...], _Dec]] = {
     ),
     PoseRate: (("rate_hz",), lambda m, lim, v: PoseRate(_pose_rate(m, "rate_hz"))),
     Resync: ((), lambda m, lim, v: Resync()),
+    Forecast: (("ms",), lambda m, lim, v: Forecast(_forecast(m, "ms"))),
 }
 
 
@@ -476,7 +504,7 @@ _ALL: dict[str, tuple[frozenset[str], _Dec]] = {
     cls.TYPE: (frozenset(("type", *keys)), fn) for cls, (keys, fn) in _DEC.items()
 }
 # The fields each version knows (v1 never learns the v2 fields: they are unknown there).
-_V1_FIELDS = {"hello": ("pose_rate_hz",), "welcome": ("pose_rate_hz",),
+_V1_FIELDS = {"hello": ("pose_rate_hz", "forecast_ms"), "welcome": ("pose_rate_hz", "forecast_ms"),
               "presence": ("handle", "skeleton")}  # fmt: skip
 DECODERS: dict[int, dict[str, tuple[frozenset[str], _Dec]]] = {
     PROTOCOL_VERSION: {

@@ -133,7 +133,7 @@ class PosecastServer:
             "engine",
             extra={"backends": engine.backends, "asked": self.cfg.backend, "kernels": info},
         )
-        worker = EngineWorker(engine)
+        worker = EngineWorker(engine, self.cfg.tick_hz)
         self._ticks = asyncio.create_task(
             run_ticks(
                 period_s=1.0 / self.cfg.tick_hz,

@@ -26,7 +26,9 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from posecast.online.core.tick import EngineOp, EngineOpKind, TickInput, TickOutput
+from posecast.online.engine.forecasting import ShownHistory
 from posecast.online.engine.multi import MultiEngine
+from posecast.online.engine.types import PoseOut as Shown
 from posecast.online.protocol.pose_out import PoseOut
 from posecast.online.protocol.quantize import roots_on_wire
 from posecast.online.protocol.records import PoseState
@@ -38,9 +40,11 @@ class EngineWorker:
     """Owns the :class:`~posecast.online.engine.multi.MultiEngine`; only ever called
     from the engine thread."""
 
-    def __init__(self, engine: MultiEngine) -> None:
+    def __init__(self, engine: MultiEngine, tick_hz: float = 60.0) -> None:
         self.engine = engine
+        self.tick_hz = tick_hz
         self.unencodable = 0  # poses dropped because quantising refused them
+        self.history = ShownHistory()  # the shown poses of players some client forecasts
 
     def step(self, inp: TickInput, server_t: float) -> TickOutput:
         t0 = time.perf_counter()
@@ -55,6 +59,7 @@ class EngineWorker:
                 e.push(player, frame)
         result = e.tick()
         poses: list[PoseOut] = []
+        ahead: dict[int, dict[str, PoseOut]] = {}
         # one pose per source frame: nothing new over a gap or when stale
         shown = [p for p in result.poses if not p.held and p.seq >= 0]
         if shown:
@@ -73,6 +78,8 @@ class EngineWorker:
             self.unencodable += refused  # a joint 32 m from the pelvis
             for p in poses:
                 p.v1()  # the v1 bytes too, here in the engine thread, once
+            if inp.horizons or self.history:  # only when a client asked for a forecast
+                ahead = self._ahead(shown, positions, rotations, inp.horizons, server_t)
         limited = sum(p.state.reach_limited for p in poses)
         return TickOutput(
             poses,
@@ -81,11 +88,44 @@ class EngineWorker:
             e.player_count,
             time.perf_counter() - t0,
             limited,
+            ahead,
         )
+
+    def _ahead(
+        self,
+        shown: list[Shown],
+        positions: np.ndarray,
+        rotations: np.ndarray,
+        horizons: dict[str, frozenset[int]],
+        server_t: float,
+    ) -> dict[int, dict[str, PoseOut]]:
+        """The poses forecast for each horizon (frames) clients asked for, stamped that
+        far ahead of the tick (v2 only: no v1 bytes)."""
+        players = [p.player for p in shown]
+        got = self.history.step(
+            players, [p.seq for p in shown], positions, rotations, horizons, self.tick_hz
+        )
+        out: dict[int, dict[str, PoseOut]] = {}
+        for h, (at, fp, fr) in got.items():
+            fp = roots_on_wire(fp)
+            states = PoseState.batch(
+                [players[i] for i in at],
+                [shown[i].seq for i in at],
+                server_t + h / self.tick_hz,
+                fp,
+                fr,
+                [shown[i].scale for i in at],
+                [shown[i].reach_limited for i in at],
+            )
+            made, refused = PoseOut.batch(states, fp, fr)
+            self.unencodable += refused
+            out[h] = {p.player: p for p in made}
+        return out
 
     def _apply(self, op: EngineOp) -> None:
         e = self.engine
         present = op.player in e.players
+        self.history.forget(op.player)  # any op starts the forecast's history again
         if op.kind is EngineOpKind.ADD:
             if present:  # rejoined before its removal was applied: start afresh
                 e.remove_player(op.player)
