@@ -74,6 +74,7 @@ namespace Posecast.Client.Tests
                 T.Equal(string.Join(",", Records.RotWidths), string.Join(",", Array.ConvertAll(c2["rot_widths"].Doubles(), d => ((int)d).ToString())), "rot_widths");
                 T.Equal(string.Join(",", Records.RootWidths), string.Join(",", Array.ConvertAll(c2["root_widths"].Doubles(), d => ((int)d).ToString())), "root_widths");
                 T.Equal(string.Join(",", Protocol.PoseRatesHz), string.Join(",", c2["pose_rates_hz"].Doubles()), "pose_rates_hz");
+                T.Equal(Protocol.MaxForecastMs, c2["max_forecast_ms"].D, "max_forecast_ms");
                 var s2 = s["structure_v2"];
                 T.Equal(Protocol.MaxServerMessageBytesV2, (int)s2["max_server_message_bytes"].L, "max_server_message_bytes");
                 T.Equal(Protocol.MaxBinBytesV2, (int)s2["max_bin_bytes"].L, "v2 max_bin_bytes");

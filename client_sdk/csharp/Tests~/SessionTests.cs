@@ -185,6 +185,15 @@ namespace Posecast.Client.Tests
                 h = s.BuildHello("tok", "r", "n", "hmd3", 90.0, null, 30.0);
                 T.True(h.Version == 2 && h.Layout == "hmd3" && h.PoseRateHz == 30.0, "v2 hello");
                 T.True(Codec.Decode(Codec.Encode(h), Protocol.V2) is Hello, "the server accepts it");
+                h = s.BuildHello("tok", "r", "n", null, null, null, null, 67.0);
+                T.True(h.ForecastMs == 67.0 && ((Hello)Codec.Decode(Codec.Encode(h), Protocol.V2)).ForecastMs == 67.0, "v2 forecast");
+                T.True(s.BuildHello("tok", "r", "n", null, null, null, null, 0.0).ForecastMs == null, "0: none, left out");
+                foreach (var bad in new[] { -1.0, 100.5, double.NaN })
+                    T.Throws<ArgumentOutOfRangeException>(() => ClientSession.CheckForecast(bad), "forecast " + bad);
+                ClientSession.CheckForecast(100.0);
+                s.Connected(Protocol.V1);
+                T.True(s.BuildHello("tok", "r", "n", null, null, null, null, 67.0).ForecastMs == null, "v1: no forecast");
+                s.Connected(Protocol.V2);
                 var rng = new Random(1);
                 for (int a = 1; a <= 10; a++)
                 {

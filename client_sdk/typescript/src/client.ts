@@ -54,6 +54,7 @@ import {
   type Message,
   type Pose,
   POSE_RATES_HZ,
+  MAX_FORECAST_MS,
   PROTOCOL_V1,
   PROTOCOL_V2,
   type Role,
@@ -125,6 +126,12 @@ export interface JoinOptions {
   readonly watch?: readonly string[];
   /** v2: poses per second wanted, 60, 30, 20 or 15 (ignored by a v1 server). Absent: 60. */
   readonly poseRateHz?: number;
+  /**
+   * v2: poses forecast this many ms ahead, 0 to 100, to cancel this client's network and
+   * render delay (ignored by a v1 server). The server rounds it to whole ticks
+   * (`welcome.forecast_ms`) and stamps each pose's `t` that far past its tick. Absent: 0.
+   */
+  readonly forecastMs?: number;
 }
 
 export type ClientState = "open" | "joining" | "joined" | "reconnecting" | "closed";
@@ -315,6 +322,7 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
   private readonly avatars = new AvatarTable();
   private versionNow: number = PROTOCOL_V2;
   private poseRateHz: number | undefined;
+  private forecastMs: number | undefined;
   private lastResyncT = -Infinity;
   private badRecordsNow = 0;
   private seq = 0;
@@ -437,6 +445,7 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
    * @throws TokenProviderError the token function threw (`cause`)
    * @throws ConfigInvalidError the token function returned no token
    * @throws RangeError `layout` names no layout or tracker set (nothing is sent)
+   * @throws OutOfRangeError `options.forecastMs` outside 0-100 (nothing is sent)
    */
   async join(
     room: string,
@@ -446,6 +455,7 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
   ): Promise<Welcome> {
     if (this.joinArgs !== undefined) throw new Error("join() was already called on this client");
     if (this.stateNow !== "open") throw new ConnectionClosedError("the client is closed");
+    if (options.forecastMs !== undefined) checkForecast(options.forecastMs);
     this.trackerSet = trackerSetOf(layout);
     // hmd3+waist is what an absent layout means: leave it out, as the Python SDK does.
     this.joinArgs =
@@ -526,6 +536,19 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
     this.poseRateHz = rateHz;
     if (this.versionNow < PROTOCOL_V2 || this.stateNow !== "joined") return false;
     return this.send({ type: "pose_rate", rate_hz: rateHz });
+  }
+
+  /**
+   * v2: receive poses forecast `ms` (0 to 100) ahead from now on, 0 for none, and after a
+   * reconnect too. False when not connected, or when the server speaks only v1.
+   *
+   * @throws OutOfRangeError `ms` outside 0-100; nothing is sent.
+   */
+  setForecast(ms: number): boolean {
+    checkForecast(ms);
+    this.forecastMs = ms;
+    if (this.versionNow < PROTOCOL_V2 || this.stateNow !== "joined") return false;
+    return this.send({ type: "forecast", ms });
   }
 
   /** v2: ask for a keyframe of every avatar with the next poses. False on v1 or when not connected. */
@@ -670,6 +693,7 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
       }, this.options.timeoutS ?? 10);
       this.pending = { resolve, reject, timer };
       const poseRate = args.options.poseRateHz ?? this.poseRateHz;
+      const forecast = this.forecastMs ?? args.options.forecastMs;
       const hello = {
         type: "hello",
         version: this.versionNow,
@@ -680,6 +704,7 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
         ...(args.options.rateHz === undefined ? {} : { rate_hz: args.options.rateHz }),
         ...(args.options.watch === undefined ? {} : { watch: args.options.watch }),
         ...(poseRate === undefined || this.versionNow < PROTOCOL_V2 ? {} : { pose_rate_hz: poseRate }),
+        ...(!forecast || this.versionNow < PROTOCOL_V2 ? {} : { forecast_ms: forecast }),
       } as const;
       if (!this.send(hello)) {
         clearTimer(timer);
@@ -886,5 +911,11 @@ export class PosecastClient implements AsyncIterable<ClientEvent> {
     clearTimer(this.pingTimer);
     this.generation++; // late events from the last socket are ignored from here on
     this.queue.end(error);
+  }
+}
+
+function checkForecast(ms: number): void {
+  if (!(ms >= 0 && ms <= MAX_FORECAST_MS)) {
+    throw new OutOfRangeError(`forecast ${ms} ms: not within 0-${MAX_FORECAST_MS}`, { field: "ms" });
   }
 }

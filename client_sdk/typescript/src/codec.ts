@@ -11,11 +11,11 @@
  * the fields of that type. The per-type code mirrors `posecast/online/protocol/wire.py`.
  *
  * `version` (in {@link DecodeOptions}) is the connection's protocol, the subprotocol the
- * server selected: v2 knows `poses`, `skeleton`, `pose_rate` and `resync` but no `pose`,
- * wants `version` 2 in `hello`, a `handle` (the avatar id, `avatarId` in the messages)
- * and `skeleton` for every `welcome` member and presence `join`, and lets a server
- * message (and its `poses.data` bin) reach 16384 bytes. `poses.data` is opaque here:
- * `records.ts` reads it against the client's state.
+ * server selected: v2 knows `poses`, `skeleton`, `pose_rate`, `resync` and `forecast` but
+ * no `pose`, wants `version` 2 in `hello`, a `handle` (the avatar id, `avatarId` in the
+ * messages) and `skeleton` for every `welcome` member and presence `join`, and lets a
+ * server message (and its `poses.data` bin) reach 16384 bytes. `poses.data` is opaque
+ * here: `records.ts` reads it against the client's state.
  * {@link encode} writes whatever fields a message has, so it serves both versions.
  */
 
@@ -70,6 +70,8 @@ import {
   MAX_SERVER_MESSAGE_BYTES_V2,
   type Pose,
   type PoseRate,
+  type Forecast,
+  MAX_FORECAST_MS,
   POSE_RATES_HZ,
   type Poses,
   PRESENCE_EVENTS,
@@ -109,8 +111,9 @@ const CLIENT_TYPES: ReadonlySet<string> = new Set([
   "bye",
   "pose_rate",
   "resync",
+  "forecast",
 ]);
-const V2_ONLY_TYPES: ReadonlySet<string> = new Set(["poses", "skeleton", "pose_rate", "resync"]);
+const V2_ONLY_TYPES: ReadonlySet<string> = new Set(["poses", "skeleton", "pose_rate", "resync", "forecast"]);
 
 /** The canonical bytes of `msg`. */
 export function encode(msg: Message): Uint8Array {
@@ -199,6 +202,11 @@ function asPoseRate(m: WireMap, key: string): number {
   return rate;
 }
 
+/** v2: a forecast horizon, 0 to 100 ms (else OUT_OF_RANGE). */
+function asForecast(m: WireMap, key: string): number {
+  return asFloat(m, key, 0, MAX_FORECAST_MS);
+}
+
 function withRefSeq(err: unknown, seq: number): unknown {
   if (!(err instanceof ProtocolError)) return err;
   const cls = err.constructor as typeof ProtocolError;
@@ -236,6 +244,8 @@ function decodeHello(m: WireMap, lim: Limits, connection: number): Hello {
       watch: watch !== undefined && watch.length > 0 ? watch : undefined,
       pose_rate_hz:
         connection >= PROTOCOL_V2 && has(m, "pose_rate_hz") ? asPoseRate(m, "pose_rate_hz") : undefined,
+      forecast_ms:
+        connection >= PROTOCOL_V2 && has(m, "forecast_ms") ? asForecast(m, "forecast_ms") : undefined,
     },
   );
 }
@@ -291,7 +301,10 @@ function decodeWelcome(m: WireMap, lim: Limits, connection: number): Welcome {
     limits: limits as Limits,
   };
   if (connection < PROTOCOL_V2) return welcome;
-  return { ...welcome, pose_rate_hz: asPoseRate(m, "pose_rate_hz") };
+  return withOptional<Welcome>(
+    { ...welcome, pose_rate_hz: asPoseRate(m, "pose_rate_hz") },
+    { forecast_ms: has(m, "forecast_ms") ? asForecast(m, "forecast_ms") : undefined },
+  );
 }
 
 function decodeCalibrate(m: WireMap): Calibrate {
@@ -452,6 +465,7 @@ const DECODERS: Readonly<Record<string, Decoder>> = {
   }),
   pose_rate: (m): PoseRate => ({ type: "pose_rate", rate_hz: asPoseRate(m, "rate_hz") }),
   resync: () => ({ type: "resync" }),
+  forecast: (m): Forecast => ({ type: "forecast", ms: asForecast(m, "ms") }),
 };
 
 /** Every message type of v1 and v2, in spec order. */
@@ -489,6 +503,7 @@ function toWireOf(msg: Message): Map<string, Wire> {
         ["rate_hz", msg.rate_hz === undefined ? undefined : f(msg.rate_hz)],
         ["watch", msg.watch !== undefined && msg.watch.length > 0 ? [...msg.watch] : undefined],
         ["pose_rate_hz", msg.pose_rate_hz === undefined ? undefined : f(msg.pose_rate_hz)],
+        ["forecast_ms", msg.forecast_ms === undefined ? undefined : f(msg.forecast_ms)],
       ]);
     case "welcome":
       return wireMap([
@@ -514,6 +529,7 @@ function toWireOf(msg: Message): Map<string, Wire> {
         ],
         ["limits", wireMap(Object.keys(LIMIT_RANGES).map((k) => [k, msg.limits[k as keyof Limits]]))],
         ["pose_rate_hz", msg.pose_rate_hz === undefined ? undefined : f(msg.pose_rate_hz)],
+        ["forecast_ms", msg.forecast_ms === undefined ? undefined : f(msg.forecast_ms)],
       ]);
     case "calibrate":
       return "height_m" in msg
@@ -622,6 +638,11 @@ function toWireOf(msg: Message): Map<string, Wire> {
       ]);
     case "resync":
       return wireMap([["type", "resync"]]);
+    case "forecast":
+      return wireMap([
+        ["type", "forecast"],
+        ["ms", f(msg.ms)],
+      ]);
   }
 }
 

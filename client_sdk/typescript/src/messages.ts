@@ -6,9 +6,9 @@
  * the spec; the client API around it (`PosecastClient`) uses camelCase. One field is
  * not named as on the wire: `avatarId`, the avatar id, whose wire key is `handle`.
  *
- * v2 (`posecast.v2`) adds `poses`, `skeleton`, `pose_rate` and `resync`, an `avatarId`
- * and `skeleton` on welcome members and presence joins, and `pose_rate_hz` in hello and
- * welcome; it has no `pose` on the wire (the client rebuilds {@link Pose}s from records).
+ * v2 (`posecast.v2`) adds `poses`, `skeleton`, `pose_rate`, `resync` and `forecast`, an
+ * `avatarId` and `skeleton` on welcome members and presence joins, and `pose_rate_hz` and
+ * `forecast_ms` in hello and welcome; it has no `pose` on the wire (the client rebuilds {@link Pose}s from records).
  *
  * Units everywhere: metres, seconds, a right-handed world with +Y up, a character
  * facing +Z, quaternions xyzw (scalar last).
@@ -25,6 +25,8 @@ export const SUBPROTOCOL_V2 = "posecast.v2";
 export const SUBPROTOCOLS: Readonly<Record<number, string>> = { 1: SUBPROTOCOL, 2: SUBPROTOCOL_V2 };
 /** v2: the pose rates a client may ask for (divisors of the 60 Hz tick), Hz. */
 export const POSE_RATES_HZ = [60, 30, 20, 15] as const;
+/** v2: the furthest ahead a client may ask its poses to be forecast, ms. */
+export const MAX_FORECAST_MS = 100;
 /** v2: a server message (and so `poses.data`) may be up to this many bytes. */
 export const MAX_SERVER_MESSAGE_BYTES_V2 = 16384;
 /** v2: a skeleton bin, 18 x 3 int16 LE in 0.1 mm (bone offsets SPINE ... RIGHT_TOE). */
@@ -149,6 +151,8 @@ export interface Hello {
   readonly watch?: readonly string[];
   /** v2: poses per second wanted (60, 30, 20 or 15); absent: 60. */
   readonly pose_rate_hz?: number;
+  /** v2: poses forecast this many ms ahead, 0 to 100; absent: 0 (none). */
+  readonly forecast_ms?: number;
 }
 
 export interface Member {
@@ -179,6 +183,8 @@ export interface Welcome {
   readonly limits: Limits;
   /** v2 (required there): the poses per second this client gets. */
   readonly pose_rate_hz?: number;
+  /** v2: present when this client asked for a forecast: how far ahead its poses are (whole ticks). */
+  readonly forecast_ms?: number;
 }
 
 export type Calibrate =
@@ -261,6 +267,15 @@ export interface PoseRate {
   readonly rate_hz: number;
 }
 
+/**
+ * v2, client to server: poses forecast `ms` (0 to 100) ahead from now on, 0 for none; the
+ * server rounds it to whole ticks and stamps each `poses.t` that far past its tick.
+ */
+export interface Forecast {
+  readonly type: "forecast";
+  readonly ms: number;
+}
+
 /** v2, client to server: a keyframe of every avatar with the next `poses`. */
 export interface Resync {
   readonly type: "resync";
@@ -327,7 +342,8 @@ export type Message =
   | Poses
   | SkeletonMessage
   | PoseRate
-  | Resync;
+  | Resync
+  | Forecast;
 
 export type MessageType = Message["type"];
 

@@ -193,6 +193,29 @@ test("v2: a record that cannot be applied is an error event and a resync, never 
   }
 });
 
+test("v2: a forecast asked at join and changed later; out of range is refused before sending", async () => {
+  const server = await new ScriptedServer(SUBPROTOCOL_V2, []).ready();
+  try {
+    const client = await connect(server.url, "tok", OPTIONS);
+    await assert.rejects(client.join("lobby", "Ada", undefined, { forecastMs: 150 }), OutOfRangeError);
+    assert.equal(server.received.filter((m) => m.type === "hello").length, 0);
+    await client.close();
+    const again = await connect(server.url, "tok", OPTIONS);
+    await again.join("lobby", "Ada", undefined, { forecastMs: 67 });
+    const hello = server.received.find((m) => m.type === "hello");
+    assert.ok(hello?.type === "hello" && hello.forecast_ms === 67);
+    for (const bad of [-1, 100.5, Number.NaN]) assert.throws(() => again.setForecast(bad), OutOfRangeError);
+    assert.equal(again.setForecast(33), true);
+    assert.equal(again.setForecast(0), true);
+    await until("forecast", () => server.received.filter((m) => m.type === "forecast").length === 2);
+    const sent = server.received.filter((m) => m.type === "forecast").map((m) => (m.type === "forecast" ? m.ms : -1));
+    assert.deepEqual(sent, [33, 0]);
+    await again.close();
+  } finally {
+    await server.close();
+  }
+});
+
 test("v2: after a bad record every reference is dropped, so no later delta decodes against a stale one", async () => {
   // The records the client skipped moved the server's references on: a delta after them
   // is refused (BAD_FIELD) until the resync's keyframes, never shown as a wrong pose.

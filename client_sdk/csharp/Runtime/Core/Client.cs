@@ -83,6 +83,7 @@ namespace Posecast.Client
         private ClientWebSocket _ws;
         private int _urlIndex;
         private Func<Hello> _hello;
+        private double? _forecastMs;  // v2: the forecast asked for (kept for a reconnect's hello)
         private Exception _failure;
         private volatile bool _joined;
         private Task _runTask, _pingTask;
@@ -342,16 +343,23 @@ namespace Posecast.Client
         /// takes one row per site of the set (ArgumentException for a bad set).
         /// rateHz: frames per second this client sends (null: 60).
         /// poseRateHz (v2): poses per second to receive, 60, 30, 20 or 15 (null: 60).
+        /// forecastMs (v2): poses forecast this many ms ahead, 0-100, to cancel this client's
+        /// network and render delay (null: none; ArgumentOutOfRangeException outside, nothing
+        /// sent). The server rounds it to whole ticks (Welcome.ForecastMs) and stamps each
+        /// pose's T that far past its tick.
         /// Throws the typed refusal (UnauthenticatedException, RoomFullException...).
         /// </summary>
         public async Task<Welcome> JoinAsync(string room, string name, string layout = null, double? rateHz = null,
-                                             string[] watch = null, double? poseRateHz = null)
+                                             string[] watch = null, double? poseRateHz = null,
+                                             double? forecastMs = null)
         {
+            if (forecastMs.HasValue) ClientSession.CheckForecast(forecastMs.Value);
             if (_closing.IsCancellationRequested) throw new ClientClosedException("the client is closed");
             if (_ws == null || _hello != null) throw new InvalidOperationException("JoinAsync once per client, after ConnectAsync");
             var set = TrackerSet.Of(layout);
             lock (_lock) Session.Set = set;
-            _hello = () => Session.BuildHello("", room, name, layout, rateHz, watch, poseRateHz);
+            _forecastMs = forecastMs;
+            _hello = () => Session.BuildHello("", room, name, layout, rateHz, watch, poseRateHz, _forecastMs);
             Welcome w;
             try { w = await HandshakeAsync(_ws).ConfigureAwait(false); }
             catch { _hello = null; throw; }
@@ -599,6 +607,15 @@ namespace Posecast.Client
 
         /// <summary>v2: receive poses at 60, 30, 20 or 15 Hz from now on.</summary>
         public Task<bool> SetPoseRateAsync(double rateHz) { return SendAsync(new PoseRate { RateHz = rateHz }); }
+
+        /// <summary>v2: receive poses forecast ms (0-100) ahead from now on, 0 for none, and
+        /// after a reconnect too (ArgumentOutOfRangeException outside, nothing sent).</summary>
+        public Task<bool> SetForecastAsync(double ms)
+        {
+            ClientSession.CheckForecast(ms);
+            _forecastMs = ms;
+            return SendAsync(new Forecast { Ms = ms });
+        }
 
         /// <summary>The next event if one is waiting (for a game loop). Throws the error that ended the session.</summary>
         public bool TryGetEvent(out ClientEvent e)

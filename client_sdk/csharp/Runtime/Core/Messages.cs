@@ -25,6 +25,7 @@ namespace Posecast.Client
         public double? RateHz;         // frames per second the client will send; null: 60
         public string[] Watch = new string[0];
         public double? PoseRateHz;     // v2: poses per second to receive; null: 60
+        public double? ForecastMs;     // v2: poses forecast this many ms ahead, 0-100; null: none
     }
 
     /// <summary>A player in a room. v2 adds its avatar id and skeleton (108 bytes).</summary>
@@ -51,6 +52,7 @@ namespace Posecast.Client
         public Member[] Members = new Member[0];
         public Limits Limits = Limits.Default;
         public double? PoseRateHz;     // v2: the poses per second this client gets
+        public double? ForecastMs;     // v2: when asked: how far ahead its poses are (whole ticks)
     }
 
     /// <summary>Player to server: by standing height, or by a T-pose frame.</summary>
@@ -120,6 +122,14 @@ namespace Posecast.Client
     {
         public override string Type { get { return "pose_rate"; } }
         public double RateHz;
+    }
+
+    /// <summary>v2 client to server: receive poses forecast Ms (0-100) milliseconds ahead, 0 for
+    /// none; the server rounds it to whole ticks and stamps each poses.t that far past its tick.</summary>
+    public sealed class Forecast : Message
+    {
+        public override string Type { get { return "forecast"; } }
+        public double Ms;
     }
 
     /// <summary>v2 client to server: send a keyframe of every avatar with the next poses.</summary>

@@ -50,6 +50,8 @@ namespace Posecast.Client
         public const int MaxBinBytesV2 = 16384;
 
         public static readonly double[] PoseRatesHz = { 60.0, 30.0, 20.0, 15.0 };
+        /// <summary>v2: the furthest ahead a client may ask its poses to be forecast, ms.</summary>
+        public const double MaxForecastMs = 100.0;
         public static readonly string[] Roles = { "player", "spectator", "backend" };
         public static readonly string[] PresenceEvents = { "join", "leave", "stale", "active" };
         public static readonly string[] SelectorKinds = { "anomaly", "target", "obstacle" };
@@ -66,10 +68,10 @@ namespace Posecast.Client
         { "hello", "welcome", "calibrate", "frame", "pose", "presence", "selector", "kick", "ping", "pong", "error", "bye" };
         public static readonly HashSet<string> TypesV2 = new HashSet<string>
         { "hello", "welcome", "calibrate", "frame", "presence", "selector", "kick", "ping", "pong", "error", "bye",
-          "poses", "skeleton", "pose_rate", "resync" };
+          "poses", "skeleton", "pose_rate", "resync", "forecast" };
         /// <summary>What clients send in v2 (held to max_message_bytes even on a v2 connection).</summary>
         public static readonly HashSet<string> ClientTypesV2 = new HashSet<string>
-        { "hello", "calibrate", "frame", "ping", "bye", "selector", "kick", "pose_rate", "resync" };
+        { "hello", "calibrate", "frame", "ping", "bye", "selector", "kick", "pose_rate", "resync", "forecast" };
 
         public static string Subprotocol(int version) { return version >= V2 ? SubprotocolV2 : SubprotocolV1; }
 

@@ -121,16 +121,26 @@ namespace Posecast.Client
         /// sites' rows), else null (the four slots).</summary>
         public TrackerSet Set;
 
-        /// <summary>The hello of this connection's version (pose_rate_hz is sent on v2 only).</summary>
+        /// <summary>The hello of this connection's version (pose_rate_hz and forecast_ms are
+        /// sent on v2 only; a forecast of 0 is left out).</summary>
         public Hello BuildHello(string token, string room, string name, string layout = null, double? rateHz = null,
-                                string[] watch = null, double? poseRateHz = null)
+                                string[] watch = null, double? poseRateHz = null, double? forecastMs = null)
         {
+            bool v2 = Version >= Protocol.V2;
             return new Hello
             {
                 Version = Version, Token = token, Room = room, Name = name,
                 Layout = layout == "hmd3+waist" ? null : layout, RateHz = rateHz,
-                Watch = watch ?? new string[0], PoseRateHz = Version >= Protocol.V2 ? poseRateHz : null,
+                Watch = watch ?? new string[0], PoseRateHz = v2 ? poseRateHz : null,
+                ForecastMs = v2 && forecastMs.HasValue && forecastMs.Value != 0.0 ? forecastMs : null,
             };
+        }
+
+        /// <summary>Throws ArgumentOutOfRangeException unless 0 &lt;= ms &lt;= 100 (NaN too).</summary>
+        public static void CheckForecast(double ms)
+        {
+            if (!(ms >= 0.0 && ms <= Protocol.MaxForecastMs))
+                throw new ArgumentOutOfRangeException("ms", ms, "a forecast is 0 to 100 ms");
         }
 
         /// <summary>

@@ -1,12 +1,13 @@
 // Per message type: the wire map -> message check, and the message -> canonical map.
 //
-// v2 (posecast.v2) keeps every v1 type but pose, adds poses, skeleton, pose_rate and
-// resync, and changes hello (version 2, pose_rate_hz), welcome (members with handle
-// and skeleton, pose_rate_hz) and presence (a join carries handle and skeleton). The
-// wire's "handle" is the avatar id (AvatarId in the messages). A decoder reads every
-// known field with the Fields validators and ignores the rest; an encoder builds the
-// map in canonical key order (type, then the spec's field order), leaving absent
-// optionals out and writing every float field as float64.
+// v2 (posecast.v2) keeps every v1 type but pose, adds poses, skeleton, pose_rate,
+// resync and forecast, and changes hello (version 2, pose_rate_hz, forecast_ms),
+// welcome (members with handle and skeleton, pose_rate_hz, forecast_ms) and presence
+// (a join carries handle and skeleton). The wire's "handle" is the avatar id (AvatarId
+// in the messages). A decoder reads every known field with the Fields validators and
+// ignores the rest; an encoder builds the map in canonical key order (type, then the
+// spec's field order), leaving absent optionals out and writing every float field as
+// float64.
 
 using System;
 using System.Collections.Generic;
@@ -43,6 +44,7 @@ namespace Posecast.Client
                                                  AvatarId = AvatarId(m, "handle"), Skeleton = SkeletonBin(m, "skeleton") };
                 case "pose_rate": return new PoseRate { RateHz = PoseRateHz(m, "rate_hz") };
                 case "resync": return new Resync();
+                case "forecast": return new Forecast { Ms = ForecastMs(m, "ms") };
                 default: throw new InvalidOperationException(type);
             }
         }
@@ -50,6 +52,11 @@ namespace Posecast.Client
         private static string Text(MsgValue m, string key, Limits lim)
         {
             return Fields.Has(m, key) ? Fields.Str(m, key, lim.MaxTextBytes, 0) : null;
+        }
+
+        private static double ForecastMs(MsgValue m, string key)
+        {
+            return Fields.Float(m, key, 0.0, Protocol.MaxForecastMs);
         }
 
         private static double PoseRateHz(MsgValue m, string key)
@@ -87,6 +94,7 @@ namespace Posecast.Client
                 throw new VersionUnsupportedException("version " + version + " is not supported on posecast.v" + v).At("version");
             var h = new Hello { Version = version.Int };
             if (v >= Protocol.V2 && Fields.Has(m, "pose_rate_hz")) h.PoseRateHz = PoseRateHz(m, "pose_rate_hz");
+            if (v >= Protocol.V2 && Fields.Has(m, "forecast_ms")) h.ForecastMs = ForecastMs(m, "forecast_ms");
             h.Token = Fields.Str(m, "token", lim.MaxTokenBytes, 0);
             h.Room = Fields.Id(m, "room", lim.MaxRoomBytes);
             h.Name = Fields.Name(m, "name", lim.MaxNameBytes);
@@ -145,6 +153,7 @@ namespace Posecast.Client
                 Limits = new Limits(values),
             };
             if (v >= Protocol.V2) w.PoseRateHz = PoseRateHz(m, "pose_rate_hz");
+            if (v >= Protocol.V2 && Fields.Has(m, "forecast_ms")) w.ForecastMs = ForecastMs(m, "forecast_ms");
             return w;
         }
 
@@ -322,6 +331,7 @@ namespace Posecast.Client
                         d.Add("watch", MsgValue.Array(w));
                     }
                     if (h.PoseRateHz.HasValue) d.Add("pose_rate_hz", F(h.PoseRateHz.Value));
+                    if (h.ForecastMs.HasValue) d.Add("forecast_ms", F(h.ForecastMs.Value));
                     return d;
                 }
                 case "welcome":
@@ -341,6 +351,7 @@ namespace Posecast.Client
                         .Add("role", S(w.Role)).Add("room", S(w.Room)).Add("t", F(w.T)).Add("rate_hz", F(w.RateHz))
                         .Add("lookahead_frames", I(w.LookaheadFrames)).Add("members", MsgValue.Array(members)).Add("limits", limits);
                     if (w.PoseRateHz.HasValue) d.Add("pose_rate_hz", F(w.PoseRateHz.Value));
+                    if (w.ForecastMs.HasValue) d.Add("forecast_ms", F(w.ForecastMs.Value));
                     return d;
                 }
                 case "calibrate":
@@ -387,6 +398,7 @@ namespace Posecast.Client
                 }
                 case "pose_rate": return Head("pose_rate").Add("rate_hz", F(((PoseRate)msg).RateHz));
                 case "resync": return Head("resync");
+                case "forecast": return Head("forecast").Add("ms", F(((Forecast)msg).Ms));
                 case "selector":
                 {
                     var s = (Selector)msg;
