@@ -55,14 +55,15 @@ def forecast(
     positions: F64,
     rotations: F64,
     frames: F64,
-    fps: float,
+    fps: float | F64,
     span: int = SPAN,
     damping: float = DAMPING,
 ) -> tuple[F64, F64]:
     """The poses ``frames`` ahead of the newest of ``positions (E, K, 19, 3)`` and world
     ``rotations (E, K, 19, 4)`` (xyzw; ``K > span`` frames per row, the newest last;
-    ``frames (E,)``, 0 for none). Returns positions ``(E, 19, 3)`` and rotations
-    ``(E, 19, 4)``, float64."""
+    ``frames (E,)``, 0 for none; ``fps`` the frame rate, or ``(E,)`` one per row:
+    what the speed bound reads the pelvis's step against). Returns positions
+    ``(E, 19, 3)`` and rotations ``(E, 19, 4)``, float64."""
     pos = np.asarray(positions, np.float64)
     rot = np.asarray(rotations, np.float64)
     if pos.shape[1] <= span:
