@@ -10,7 +10,9 @@ The audience may mix protocol versions. Each pose is a
 carries it quantised, with its calibration scale): a v1 client's slot gets its pose
 message, encoded once for all of them; a v2 client's gets a record prepared against its own
 reference (:mod:`posecast.online.core.posestream`), on the ticks its pose rate
-takes, all the tick's records in one batched encoding. ``welcome`` and ``presence``
+takes, all the tick's records in one batched encoding; a v2 client that asked for a
+forecast gets the pose of its horizon instead (made in the engine thread for the
+horizons :meth:`Router.horizons` lists, ``docs/latency.md``). ``welcome`` and ``presence``
 are specialised per client: v2 ones carry each avatar's id and skeleton, and a
 ``skeleton`` message follows a player's calibration to its room's v2 clients.
 """
