@@ -42,6 +42,9 @@ from posecast.online.core.ratelimit import SocketCount, TokenBucket
 
 FLOOD_CUTOFF_S = 2.0  # held back this long without a break: cut off (RATE_LIMITED) ...
 FLOOD_CUTOFF_SPREAD = 0.5  # ... or up to this share longer, at random per connection
+# The draws' own generator: the module-level one is the process's (a test framework
+# that seeds or watches it, Hypothesis, must not see the server draw from it).
+_CUTOFF_DRAW = random.Random()
 RESUME_S = 0.05  # a held-back connection is read again once this much budget is back
 PRE_HELLO_FRAMES_HZ = 4.0  # before hello: a client owes one message (hello)
 PRE_HELLO_FRAMES_BURST = 8.0
@@ -237,7 +240,7 @@ class PacedConnection(ServerConnection):
         self.held_back_since: float | None = None
         # Flooders that connected together are cut off over a second, not in one
         # instant: their reconnections (a handshake each) then come spread out too.
-        self.cutoff_s = FLOOD_CUTOFF_S * (1.0 + FLOOD_CUTOFF_SPREAD * random.random())
+        self.cutoff_s = FLOOD_CUTOFF_S * (1.0 + FLOOD_CUTOFF_SPREAD * _CUTOFF_DRAW.random())
         self.request_head: bytes | None = b""  # the HTTP request read so far (None: passed)
         self.oversized = False  # a request head past MAX_HEAD_BYTES: websockets' to refuse
         self.read_again: asyncio.TimerHandle | None = None
