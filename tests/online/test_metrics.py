@@ -1,17 +1,10 @@
-"""Metrics (posecast.online.metrics) and JSON logs (posecast.online.shell.logging)."""
+"""Metrics (posecast.online.metrics)."""
 
 from __future__ import annotations
 
 import asyncio
-import io
-import json
-import logging
-from collections.abc import Iterator
-
-import pytest
 
 from posecast.online.metrics import Metrics
-from posecast.online.shell.logging import JsonFormatter, configure
 
 
 def test_each_instance_owns_its_registry() -> None:
@@ -52,37 +45,3 @@ def test_render_counts_the_event_loops_tasks() -> None:
     busy, idle = asyncio.run(main())
     assert (busy, idle) == (6, 1)  # the five waiters and main itself, then main alone
     assert "posecast_asyncio_tasks 1.0" in m.render().decode()
-
-
-@pytest.fixture
-def restore_logging() -> Iterator[None]:
-    saved = {}
-    for name in ("posecast", "websockets"):
-        lg = logging.getLogger(name)
-        saved[name] = (lg.handlers[:], lg.level, lg.propagate)
-    yield
-    for name, (handlers, level, propagate) in saved.items():
-        lg = logging.getLogger(name)
-        lg.handlers[:], lg.propagate = handlers, propagate
-        lg.setLevel(level)
-
-
-def test_json_lines_carry_the_extras(restore_logging: None) -> None:
-    stream = io.StringIO()
-    configure("INFO", stream)
-    logging.getLogger("posecast.test").info("join", extra={"player": "p1", "room": "r"})
-    logging.getLogger("posecast.test").debug("hidden")
-    (line,) = stream.getvalue().splitlines()
-    rec = json.loads(line)
-    assert rec["event"] == "join" and rec["player"] == "p1" and rec["level"] == "INFO"
-
-
-def test_exceptions_are_one_json_line() -> None:
-    try:
-        raise ValueError("boom")
-    except ValueError:
-        import sys
-
-        rec = logging.LogRecord("x", logging.ERROR, "f", 1, "failed", None, sys.exc_info())
-    out = json.loads(JsonFormatter().format(rec))
-    assert out["event"] == "failed" and "ValueError: boom" in out["exc"]

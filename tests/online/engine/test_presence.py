@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from posecast.body.forecast import forecast
-from posecast.online.engine.config import PAPER_LOOKAHEAD, EngineConfig
 from posecast.online.engine.forecasting import HISTORY
 from posecast.online.engine.ssi import Engine
 from posecast.online.engine.types import PoseOut, TrackerFrame
@@ -18,14 +17,6 @@ from tests.online.engine.test_ssi import Forced, Never, run
 
 MakeEngine = Callable[..., Engine]
 WalkFrames = Callable[..., list[TrackerFrame]]
-
-
-def test_the_default_is_present_and_the_papers_setting_one_option_away() -> None:
-    cfg = EngineConfig()
-    assert (cfg.lookahead, cfg.delayed_emission, cfg.delay) == (0, False, 0)
-    paper = EngineConfig(lookahead=PAPER_LOOKAHEAD, delayed_emission=True)
-    assert paper.delay == 10
-    assert EngineConfig(lookahead=10).delay == 0  # the look-ahead alone delays nothing
 
 
 def test_every_tick_emits_the_newest_frame_with_head_and_hands_on_it(

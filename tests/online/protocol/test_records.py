@@ -7,7 +7,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from posecast.errors import BadFieldError
 from posecast.online.protocol import records
 from posecast.online.protocol.records import PoseState, Recon
 
@@ -150,42 +149,6 @@ def test_an_install_without_the_extension_names_only_numpy(monkeypatch: pytest.M
     monkeypatch.setattr(records, "_native", None)
     with pytest.raises(ValueError, match="no delta encoder 'native': one of numpy"):
         records.encode_deltas([], [], [], np.zeros((0, 19, 4)), [], encoder="native")
-
-
-def _pack_word_by_word(q: np.ndarray) -> bytes:
-    """The smallest-three layout read off proto/README.md, one word at a time."""
-    out = bytearray()
-    for row in q:
-        k = max(range(4), key=lambda c: (abs(row[c]), -c))  # the first largest
-        sign = -1.0 if row[k] < 0 else 1.0
-        word = k << 45
-        for n, c in enumerate(c for c in range(4) if c != k):
-            word |= (round(row[c] * sign * records.SMALLEST3_SCALE) & 0x7FFF) << (15 * n)
-        out += word.to_bytes(6, "little")
-    return bytes(out)
-
-
-def test_smallest_three_packs_and_unpacks_as_the_spec_reads() -> None:
-    rng = np.random.default_rng(3)
-    q = _unit(rng, (500,))
-    h = 0.5**0.5
-    q = np.concatenate(
-        [q, [[0.5, -0.5, 0.5, -0.5], [h, -h, 0, 0], [0, 0, 0, -1], [-1, 0, 0, 0]]]
-    )  # ties: the first largest is dropped
-    blob = records.smallest3_pack(q)
-    assert blob == _pack_word_by_word(q)
-    back = records.smallest3_unpack(blob)
-    sign = np.where(np.sum(back * q, axis=1) < 0, -1.0, 1.0)[:, None]
-    np.testing.assert_allclose(back * sign, q, atol=1e-4)
-    for i in range(len(q)):  # each component as one word's fields give it
-        word = int.from_bytes(blob[6 * i : 6 * i + 6], "little")
-        fields = [(word >> 15 * n & 0x7FFF) for n in range(3)]
-        comps = [(f - 0x8000 if f & 0x4000 else f) / records.SMALLEST3_SCALE for f in fields]
-        assert [x for c, x in enumerate(back[i]) if c != word >> 45 & 3] == comps
-    bad = bytearray(blob[:6])
-    bad[5] |= 0x80
-    with pytest.raises(BadFieldError, match="reserved bit"):
-        records.smallest3_unpack(bytes(bad))
 
 
 @needs_native
