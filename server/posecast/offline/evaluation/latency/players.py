@@ -91,10 +91,14 @@ class _Receiver:
         self.displayed: list[Displayed] = []
 
     def feed(self, event: pc.Event, now: float) -> None:
-        self.interp.feed(event)
-        if isinstance(event, pc.Pose) and event.player != self.me:
+        if isinstance(event, pc.Pose):
+            if event.player == self.me:
+                return  # its own avatar: a game draws that from its own trackers
+            self.interp.feed(event)
             self.watch.received(event.player, event.seq, event.t, now)
-        elif isinstance(event, pc.Presence) and event.event == "leave":
+            return
+        self.interp.feed(event)
+        if isinstance(event, pc.Presence) and event.event == "leave":
             self.watch.forget(event.player)
             self.jumps.forget(event.player)
 
@@ -102,7 +106,6 @@ class _Receiver:
         """One display frame, now."""
         now = time.monotonic()
         shown = self.interp.poses_at(self.client.clock.display_time(now))
-        shown.pop(self.me, None)
         self.displayed.extend(self.watch.frame(now, {p: s.t for p, s in shown.items()}))
         self.jumps.frame(now, {p: s.positions for p, s in shown.items()}, record=record)
 
