@@ -95,13 +95,15 @@ def print_report(report: dict[str, Any]) -> None:
     for label, key in ROWS:
         print(f"{label:20s}" + "".join(_cells(phase, key) for _, phase in phases))
     for name, phase in phases:
+        late = 100 * (phase["display_frames_late_share"] or 0)
         print(
             f"{name}: {phase['poses_displayed']} poses displayed of {phase['poses_expected']} "
             f"expected; max joint jump at {cfg['display_hz']:g} Hz {phase['max_joint_jump_cm']} cm "
             f"(p99 {phase['p99_joint_jump_cm']} cm); tick {phase['tick_ms_mean']} ms mean, "
-            f"{phase['tick_overruns']:g} overruns; server {phase['server_cpu_cores']} cores, "
-            f"clients {phase['clients_cpu_cores']} cores of {report['machine_cores']}; display "
-            f"frames late {100 * (phase['display_frames_late_share'] or 0):.1f} %"
+            f"{phase['tick_overruns']:g} overruns; frames held a tick in their queue "
+            f"{100 * (phase['queue_held_share'] or 0):.1f} %; server "
+            f"{phase['server_cpu_cores']} cores, clients {phase['clients_cpu_cores']} cores of "
+            f"{report['machine_cores']}; display frames late {late:.1f} %"
         )
         if phase["failures"] or phase["errors"]:
             print(f"{name}: errors {phase['errors']}, failures {phase['failures']}")

@@ -147,6 +147,10 @@ def _report(
         for p, seqs in captures.items()
     )
     never = sum(1 for sender, seq, _, _ in waiting if in_window(sender, seq))
+    # pose.t - capture - look-ahead: from capture to the start of the step that took the
+    # frame; over a tick period, the frame waited behind another in its player's queue.
+    waited = b.parts["server_queue_tick"] - tick_s
+    held = float(np.mean(waited > 1.0 / welcome["rate_hz"])) if b.count else None
     frames = sum(r.display_frames for r in results)
     jumps_cm = np.array(jumps) * 100.0
     return {
@@ -158,6 +162,7 @@ def _report(
         "rate_hz": welcome["rate_hz"],
         "protocol": welcome["version"],
         "tick_ms_mean": round(1000.0 * tick_s, 3),
+        "queue_held_share": None if held is None else round(held, 4),
         "tick_overruns": _delta(m0, m1, "posecast_tick_overruns_total"),
         "frames_superseded": _delta(m0, m1, 'posecast_frames_dropped_total{reason="superseded"}'),
         "poses_superseded": _delta(m0, m1, "posecast_poses_superseded_total"),
