@@ -106,3 +106,31 @@ def test_batched_frames_match_the_reference(config: InterpConfig) -> None:
     assert frames > 1500
     if config.correction_s > 0:  # the stream makes the corrections this test is for
         assert corrected > 50, corrected
+
+
+def test_advance_moves_the_delay_as_sampling_does() -> None:
+    """A frame that draws nobody (``advance``) shows the same time and moves the
+    adaptive delay exactly as a sampled one; the next sample starts afresh."""
+    arrivals = _stream(7, "p", 240, rotated=True)
+    sampled, advanced = Interpolator(), Interpolator()
+    i, now, frames = 0, T0, 0
+    while now < T0 + 4.0:
+        while i < len(arrivals) and arrivals[i][0] <= now:
+            _, pose, kf = arrivals[i]
+            sampled.push(pose, keyframe=kf)
+            advanced.push(pose, keyframe=kf)
+            i += 1
+        shown = sampled.poses_at(now)
+        taus = advanced.advance(now)
+        assert set(taus) == set(shown)
+        for player, pose in shown.items():
+            assert taus[player] == pose.t
+            buf = advanced.buffer(player)
+            assert buf is not None and buf.shown_t is None  # nothing was drawn
+            frames += 1
+        now += 1.0 / DISPLAY_HZ
+    assert frames > 300
+    one = advanced.buffer("p")
+    assert one is not None
+    again = one.pose_at(now)
+    assert again is not None and again.t == one.shown_t

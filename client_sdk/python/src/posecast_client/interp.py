@@ -62,7 +62,7 @@ import bisect
 import math
 from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Literal, Protocol
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -70,12 +70,19 @@ from numpy.typing import NDArray
 from posecast_client.protocol import Pose, Presence, Welcome, seq_delta
 from posecast_client.render_delay import RenderDelay
 from posecast_client.rotations import quat_mul
+from posecast_client.sampling import (
+    ROOT,
+    Correction,
+    Entry,
+    Mode,
+    SamplePlan,
+    fade,
+    make_samples,
+)
+from posecast_client.sampling import quat_slerp as quat_slerp  # part of this module's API
 
 F64 = NDArray[np.float64]
-_IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 _CONJ = np.array([-1.0, -1.0, -1.0, 1.0])  # q * _CONJ is q's inverse, for unit q
-Mode = Literal["interpolate", "extrapolate", "hold"]
-ROOT = 0  # PELVIS: the joint whose jump is a teleport
 
 
 class PoseLike(Protocol):
@@ -181,118 +188,6 @@ class InterpolatedPose:
     mode: Mode
 
 
-@dataclass(slots=True, eq=False)
-class _Entry:
-    t: float
-    seq: int
-    keyframe: bool
-    positions: F64
-    rotations: F64 | None
-    root: tuple[float, ...] = ()  # positions[ROOT], for the teleport rule
-    seen: bool = False  # a query has run since it was pushed (its need is counted)
-    snaps: bool = False  # it starts a segment after the entry before it (rule 2)
-
-
-@dataclass(slots=True, eq=False)
-class _Plan:
-    """A sample at ``tau`` as the rules decide it, before any array is touched:
-    positions ``base + (x1 - x0) * s``, rotations ``slerp(q0, q1, u)`` (``None``: no
-    rotations), each operand a kept entry's. Two plans with the same operands and
-    weights give the same sample, bit for bit."""
-
-    tau: float
-    base: _Entry  # the pose whose seq is shown
-    x1: _Entry
-    x0: _Entry
-    s: float
-    q0: _Entry | None
-    q1: _Entry | None
-    u: float
-    mode: Mode
-
-    def same(self, other: _Plan) -> bool:
-        return (
-            self.base is other.base
-            and self.x1 is other.x1
-            and self.x0 is other.x0
-            and self.q0 is other.q0
-            and self.q1 is other.q1
-            and self.s == other.s
-            and self.u == other.u
-            and self.mode == other.mode
-        )
-
-
-@dataclass(slots=True)
-class _Offset:
-    """A correction fading out (rule 5): added to a raw sample's positions ``(J, 3)``,
-    and a world rotation ``(J, 4)`` turning its rotations (``None``: none)."""
-
-    dpos: F64
-    turn: F64 | None
-
-
-def quat_slerp(q0: F64, q1: F64, u: float | F64) -> F64:
-    """Spherical interpolation ``(..., 4)`` xyzw on the shorter arc; ``u`` outside
-    ``[0, 1]`` extrapolates along the same great circle. Inputs need not be unit.
-    ``u`` is a float, or an array that broadcasts against ``(..., 1)`` (a weight per
-    pose of a batch ``(n, J, 4)``: ``u`` of shape ``(n, 1, 1)``)."""
-    a = q0 / np.sqrt((q0 * q0).sum(-1, keepdims=True))
-    b = q1 / np.sqrt((q1 * q1).sum(-1, keepdims=True))
-    dot = (a * b).sum(-1, keepdims=True)
-    b = b * np.where(dot < 0.0, -1.0, 1.0)  # the same rotation, on a's hemisphere
-    cos = np.minimum(np.abs(dot), 1.0)
-    omega = np.arccos(cos)  # (..., 1) half the angle between them
-    sin = np.sin(omega)
-    small = sin < 1e-6  # nearly equal: the sines cancel badly, lerp is exact enough
-    safe = np.where(small, 1.0, sin)
-    w0 = np.where(small, 1.0 - u, np.sin((1.0 - u) * omega) / safe)
-    w1 = np.where(small, u, np.sin(u * omega) / safe)
-    out: F64 = w0 * a + w1 * b
-    out /= np.sqrt((out * out).sum(-1, keepdims=True))
-    return out
-
-
-def _rotations(e: _Entry | None) -> F64:
-    assert e is not None and e.rotations is not None  # a plan with rotations has them
-    return e.rotations
-
-
-def _compute(plans: list[_Plan]) -> list[tuple[F64, F64 | None]]:
-    """The samples of ``plans``: the plans of poses of one shape (and all with or all
-    without rotations) in one batch of array operations, whatever their count: a
-    display frame of many players costs about what one player's does."""
-    out: list[tuple[F64, F64 | None]] = [None] * len(plans)  # type: ignore[list-item]
-    groups: dict[tuple[tuple[int, ...], bool], list[int]] = {}
-    for k, p in enumerate(plans):
-        groups.setdefault((p.base.positions.shape, p.q0 is not None), []).append(k)
-    for (_, rotated), ks in groups.items():
-        if len(ks) == 1:
-            p = plans[ks[0]]
-            pos = p.base.positions + (p.x1.positions - p.x0.positions) * p.s
-            rot = quat_slerp(_rotations(p.q0), _rotations(p.q1), p.u) if rotated else None
-            out[ks[0]] = (pos, rot)
-            continue
-        g = [plans[k] for k in ks]
-        s = np.array([p.s for p in g])[:, None, None]  # (n, 1, 1)
-        base = np.stack([p.base.positions for p in g])  # (n, J, 3)
-        x1 = np.stack([p.x1.positions for p in g])
-        x0 = np.stack([p.x0.positions for p in g])
-        positions = base + (x1 - x0) * s
-        rots: list[F64 | None] = [None] * len(g)
-        if rotated:
-            q0 = np.stack([_rotations(p.q0) for p in g])  # (n, J, 4)
-            q1 = np.stack([_rotations(p.q1) for p in g])
-            u = np.array([p.u for p in g])[:, None, None]
-            rots = list(quat_slerp(q0, q1, u))
-        for j, k in enumerate(ks):
-            out[k] = (positions[j], rots[j])
-    return out
-
-
-_NEGLIGIBLE = 1e-12  # a correction smaller than this (metres, quaternion parts) is over
-
-
 class PoseBuffer:
     """The jitter buffer of one player (see the module docstring for the rules).
 
@@ -304,11 +199,11 @@ class PoseBuffer:
     def __init__(self, config: InterpConfig = DEFAULT_INTERP) -> None:
         self.config = config
         self.player: str | None = None
-        self._entries: list[_Entry] = []  # sorted by t, no two with the same t
+        self._entries: list[Entry] = []  # sorted by t, no two with the same t
         self._times: list[float] = []  # the entries' t, for bisect
         self._last: InterpolatedPose | None = None  # what pose_at showed last
-        self._last_plan: _Plan | None = None  # the plan of its raw sample
-        self._offset: _Offset | None = None  # the correction it added to that sample
+        self._last_plan: SamplePlan | None = None  # the plan of its raw sample
+        self._offset: Correction | None = None  # the correction it added to that sample
         self._unseen = 0  # entries pushed since the last pose_at
         self._delay = RenderDelay(
             start_s=config.delay_s,
@@ -364,7 +259,7 @@ class PoseBuffer:
             return False
         rot = None if pose.rotations is None else np.array(pose.rotations, dtype=np.float64)
         pos = np.array(pose.positions, dtype=np.float64)
-        entry = _Entry(t, int(pose.seq), keyframe, pos, rot, root=tuple(pos[ROOT].tolist()))
+        entry = Entry(t, int(pose.seq), keyframe, pos, rot, root=tuple(pos[ROOT].tolist()))
         self.player = pose.player
         self._entries.insert(i, entry)
         self._times.insert(i, t)
@@ -406,8 +301,19 @@ class PoseBuffer:
         plan = self._begin(time)
         if plan is None:
             return None
-        pos, rot = _compute([plan])[0]
+        pos, rot = make_samples([plan])[0]
         return self._finish(plan, pos, rot)
+
+    def advance(self, time: float) -> float | None:
+        """A display frame at ``time`` that does not draw this player (off screen,
+        culled): the adaptive delay moves exactly as :meth:`pose_at` would move it,
+        and nothing is sampled. Returns the server time that frame would show
+        (``time - delay_s``, what :attr:`shown_t` would be), ``None`` while empty.
+        The next :meth:`pose_at` starts afresh: no correction carries over a frame
+        that was not drawn."""
+        plan = self._begin(time)
+        self._last = self._last_plan = self._offset = None
+        return None if plan is None else plan.tau
 
     def sample_at(self, time: float) -> InterpolatedPose | None:
         """The pose at server time ``time`` from the poses kept now, rules 1 to 4 only
@@ -416,7 +322,7 @@ class PoseBuffer:
         plan = self._plan(time - self.delay_s)
         return None if plan is None else self._raw(plan)
 
-    def _begin(self, time: float) -> _Plan | None:
+    def _begin(self, time: float) -> SamplePlan | None:
         """A display frame at ``time``, up to the arrays: the adaptive delay's step and
         the plan of the raw sample (rules 1 to 4); ``None`` while empty."""
         if self.config.adaptive:
@@ -427,16 +333,16 @@ class PoseBuffer:
             self._last = self._last_plan = self._offset = None
         return plan
 
-    def _finish(self, plan: _Plan, pos: F64, rot: F64 | None) -> InterpolatedPose:
+    def _finish(self, plan: SamplePlan, pos: F64, rot: F64 | None) -> InterpolatedPose:
         """The frame's shown pose from its raw sample (``plan``'s ``pos``, ``rot``):
         rule 5's correction, and the memory of what was shown (one buffer's
         :func:`_finish_all`)."""
         return _finish_all([(self, plan, pos, rot)])[0]
 
-    def _raw_pose(self, plan: _Plan, pos: F64, rot: F64 | None) -> InterpolatedPose:
+    def _raw_pose(self, plan: SamplePlan, pos: F64, rot: F64 | None) -> InterpolatedPose:
         return InterpolatedPose(self.player or "", plan.tau, plan.base.seq, pos, rot, plan.mode)
 
-    def _fading(self, plan: _Plan) -> tuple[_Offset, float] | None:
+    def _fading(self, plan: SamplePlan) -> tuple[Correction, float] | None:
         """Rule 5 for a frame at ``plan.tau``: what the last frame showed beyond what it
         would show with today's poses (an offset), and the share of it left now, ``k``;
         ``None`` when nothing is to be corrected.
@@ -459,7 +365,7 @@ class PoseBuffer:
             turn = None
             if last.rotations is not None and before.rotations is not None:
                 turn = quat_mul(last.rotations, before.rotations * _CONJ)  # (J, 4) world delta
-            prev = _Offset(last.positions - before.positions, turn)
+            prev = Correction(last.positions - before.positions, turn)
         return prev, math.exp(-(plan.tau - last.t) / self.config.correction_s)
 
     def _observe(self, time: float) -> None:
@@ -488,7 +394,7 @@ class PoseBuffer:
         hi = bisect.bisect_right(self._times, tau)
         return not any(self._entries[k].snaps for k in range(max(lo, 1), hi))
 
-    def _plan(self, tau: float) -> _Plan | None:
+    def _plan(self, tau: float) -> SamplePlan | None:
         """Rules 1 to 4 at ``tau`` on the poses' timeline, as a plan (no arrays)."""
         if not self._entries:
             return None
@@ -500,9 +406,9 @@ class PoseBuffer:
             b = self._entries[i + 1]
             if not b.snaps:
                 u = (tau - a.t) / (b.t - a.t)
-                rotated = a.rotations is not None and b.rotations is not None
-                return _Plan(tau, a, b, a, u, a if rotated else None, b if rotated else None, u,
-                             "interpolate")  # fmt: skip
+                rot = a.rotations is not None and b.rotations is not None
+                q0, q1 = (a, b) if rot else (None, None)
+                return SamplePlan(tau, a, b, a, u, q0, q1, u, "interpolate")
         # a is the newest pose of its segment: carry it on, then hold.
         p = self._entries[i - 1] if i > 0 else None
         if p is None or a.snaps or self.config.max_extrapolate_s == 0.0:
@@ -511,9 +417,11 @@ class PoseBuffer:
         mode: Mode = "extrapolate" if ahead <= self.config.max_extrapolate_s else "hold"
         s = min(ahead, self.config.max_extrapolate_s) / (a.t - p.t)
         rotated = a.rotations is not None and p.rotations is not None
-        return _Plan(tau, a, a, p, s, p if rotated else None, a if rotated else None, 1.0 + s, mode)
+        return SamplePlan(
+            tau, a, a, p, s, p if rotated else None, a if rotated else None, 1.0 + s, mode
+        )
 
-    def _snap_rule(self, a: _Entry, b: _Entry) -> bool:
+    def _snap_rule(self, a: Entry, b: Entry) -> bool:
         """Whether ``b`` starts a new segment after ``a`` (rule 2)."""
         cfg = self.config
         if b.t - a.t > cfg.gap_s:
@@ -522,50 +430,37 @@ class PoseBuffer:
             return True
         return math.dist(b.root, a.root) > cfg.teleport_m
 
-    def _hold(self, a: _Entry, tau: float) -> _Plan:
+    def _hold(self, a: Entry, tau: float) -> SamplePlan:
         q = a if a.rotations is not None else None
-        return _Plan(tau, a, a, a, 0.0, q, q, 0.0, "hold")
+        return SamplePlan(tau, a, a, a, 0.0, q, q, 0.0, "hold")
 
-    def _raw(self, plan: _Plan) -> InterpolatedPose:
-        pos, rot = _compute([plan])[0]
+    def _raw(self, plan: SamplePlan) -> InterpolatedPose:
+        pos, rot = make_samples([plan])[0]
         return self._raw_pose(plan, pos, rot)
 
 
 def _finish_all(
-    frames: list[tuple[PoseBuffer, _Plan, F64, F64 | None]],
+    frames: list[tuple[PoseBuffer, SamplePlan, F64, F64 | None]],
 ) -> list[InterpolatedPose]:
     """Each buffer's shown pose from its raw sample: rule 5's fading corrections of
-    every buffer that has one in one batch per pose shape, and each buffer's memory of
+    every buffer that has one (in batches, :func:`fade`), and each buffer's memory of
     what it showed."""
     shown = [buf._raw_pose(plan, pos, rot) for buf, plan, pos, rot in frames]
-    fades: dict[tuple[tuple[int, ...], bool], list[tuple[int, _Offset, float]]] = {}
+    pending = []
     for n, (buf, plan, _, rot) in enumerate(frames):
         got = buf._fading(plan)
         if got is not None:
-            off, k = got
-            turned = off.turn is not None and rot is not None
-            fades.setdefault((off.dpos.shape, turned), []).append((n, off, k))
-    offsets: list[_Offset | None] = [None] * len(frames)
-    for (_, turned), group in fades.items():
-        ks = np.array([k for _, _, k in group])  # (n,)
-        dpos = np.stack([off.dpos for _, off, _ in group]) * ks[:, None, None]  # (n, J, 3)
-        size = np.abs(dpos).max(axis=(1, 2)) if dpos.size else np.zeros(len(group))
-        turns: F64 | None = None
-        if turned:
-            prev = np.stack([off.turn for _, off, _ in group])  # type: ignore[misc]  # (n, J, 4)
-            turns = quat_slerp(np.broadcast_to(_IDENTITY, prev.shape), prev, ks[:, None, None])
-            size = np.maximum(size, np.abs(turns[..., :3]).max(axis=(1, 2)))
-            rots = quat_mul(turns, np.stack([frames[n][3] for n, _, _ in group]))  # type: ignore[misc]
-        for j, (n, _, _) in enumerate(group):
-            if size[j] < _NEGLIGIBLE:  # faded out: show (and remember) the raw sample
-                continue
-            raw = shown[n]
-            rot = rots[j] if turns is not None else raw.rotations
-            offsets[n] = _Offset(dpos[j], None if turns is None else turns[j])
-            shown[n] = InterpolatedPose(raw.player, raw.t, raw.seq, raw.positions + dpos[j], rot,
-                                        raw.mode)  # fmt: skip
+            pending.append((n, *got, rot))
+    corrections: list[Correction | None] = [None] * len(frames)
+    for (n, _, _, _), faded in zip(pending, fade([p[1:] for p in pending]), strict=True):
+        if faded is None:  # faded out: show (and remember) the raw sample
+            continue
+        corrections[n], rot = faded
+        raw = shown[n]
+        shown[n] = InterpolatedPose(raw.player, raw.t, raw.seq, raw.positions + faded[0].dpos,
+                                    raw.rotations if rot is None else rot, raw.mode)  # fmt: skip
     for n, (buf, plan, _, _) in enumerate(frames):
-        buf._last, buf._last_plan, buf._offset = shown[n], plan, offsets[n]
+        buf._last, buf._last_plan, buf._offset = shown[n], plan, corrections[n]
     return shown
 
 
@@ -624,6 +519,16 @@ class Interpolator:
         buf = self._buffers.get(player)
         return None if buf is None else buf.pose_at(time)
 
+    def advance(self, time: float) -> dict[str, float]:
+        """A display frame at ``time`` that draws none of the players: each buffer's
+        :meth:`PoseBuffer.advance`; the server time each would show."""
+        out = {}
+        for player, buf in self._buffers.items():
+            tau = buf.advance(time)
+            if tau is not None:
+                out[player] = tau
+        return out
+
     def poses_at(self, time: float) -> dict[str, InterpolatedPose]:
         """Every known player's pose shown at server time ``time``: each buffer's
         :meth:`PoseBuffer.pose_at`, their samples made in one batch."""
@@ -632,7 +537,7 @@ class Interpolator:
             plan = buf._begin(time)
             if plan is not None:
                 begun.append((player, buf, plan))
-        samples = _compute([plan for _, _, plan in begun])
+        samples = make_samples([plan for _, _, plan in begun])
         frames = [
             (buf, plan, pos, rot) for (_, buf, plan), (pos, rot) in zip(begun, samples, strict=True)
         ]
