@@ -25,6 +25,7 @@ from tests.cli.conftest import user_error
         ["--display-hz", "nan"],
         ["--procs", "0"],
         ["--samples", "0"],
+        ["--frame-queue", "0"],
         ["--lookahead", "-1"],
         ["--lookahead", "256"],
         ["--drop", "1"],

@@ -38,6 +38,8 @@ def cmd_bench_latency(args: argparse.Namespace) -> int:
     finite("--down-jitter-ms", args.down_jitter_ms, CMD)
     if args.samples is not None:
         check_samples("--samples", [args.samples], CMD)
+    if args.frame_queue is not None:
+        at_least("--frame-queue", args.frame_queue, 1, CMD)
     if args.lookahead is not None and not 0 <= args.lookahead <= MAX_LOOKAHEAD_FRAMES:
         raise config_error(
             f"--lookahead {args.lookahead} outside [0, {MAX_LOOKAHEAD_FRAMES}]",
@@ -171,10 +173,22 @@ def add_parser(bench_sub: argparse._SubParsersAction[Any]) -> None:
         help="client processes the players are dealt over (default %(default)s)",
     )
     bl.add_argument(
+        "--draw-all",
+        action="store_true",
+        help="every player samples its room-mates' poses each display frame (default: one "
+        "per room in each client process; the others follow the times their "
+        "interpolators would show)",
+    )
+    bl.add_argument(
         "--samples", type=int, help="the server's latent samples N (default: the server's)"
     )
     bl.add_argument(
         "--lookahead", type=int, help="the server's look-ahead in frames (default: the server's)"
+    )
+    bl.add_argument(
+        "--frame-queue",
+        type=int,
+        help="the server's frames kept per player between ticks (default: the server's)",
     )
     bl.add_argument(
         "--delayed-emission",

@@ -59,6 +59,7 @@ class WorkerPlan:
     display_hz: float = 90.0
     frame_hz: float = 60.0
     protocol: int = 2
+    draw_all: bool = False  # every player samples its room-mates (else one per room here)
 
 
 @dataclass
@@ -82,9 +83,10 @@ class WorkerResult:
 class _Receiver:
     """One player's receiving side: its interpolator and what it showed."""
 
-    def __init__(self, client: pc.Client, me: str, display_hz: float) -> None:
+    def __init__(self, client: pc.Client, me: str, display_hz: float, draws: bool) -> None:
         self.client = client
         self.me = me
+        self.draws = draws  # samples its room-mates' poses each frame (else: their times)
         self.interp = pc.Interpolator()
         self.watch = DisplayWatch()
         self.jumps = JumpMeter(display_hz)
@@ -103,9 +105,15 @@ class _Receiver:
             self.jumps.forget(event.player)
 
     def show(self, record: bool) -> None:
-        """One display frame, now."""
+        """One display frame, now: every room-mate sampled (a drawing receiver), or
+        only the time each would show (``Interpolator.advance``: the same render
+        delay and shown times, no sample)."""
         now = time.monotonic()
-        shown = self.interp.poses_at(self.client.clock.display_time(now))
+        at = self.client.clock.display_time(now)
+        if not self.draws:
+            self.displayed.extend(self.watch.frame(now, self.interp.advance(at)))
+            return
+        shown = self.interp.poses_at(at)
         self.displayed.extend(self.watch.frame(now, {p: s.t for p, s in shown.items()}))
         self.jumps.frame(now, {p: s.positions for p, s in shown.items()}, record=record)
 
@@ -187,6 +195,7 @@ async def _main(plan: WorkerPlan) -> WorkerResult:
     clients: list[pc.Client] = []
     receivers: list[_Receiver] = []
     tasks: list[asyncio.Task[None]] = []
+    drawn: set[str] = set()  # rooms with a drawing receiver in this process
     try:
         joined = await asyncio.gather(*(_join(plan, p, clients) for p in plan.players))
         for p, (client, welcome) in zip(plan.players, joined, strict=True):
@@ -194,7 +203,9 @@ async def _main(plan: WorkerPlan) -> WorkerResult:
             out.welcome = {"lookahead_frames": welcome.lookahead_frames,
                            "rate_hz": welcome.rate_hz, "version": client.version}  # fmt: skip
             out.members[me] = p.room
-            receiver = _Receiver(client, me, plan.display_hz)
+            draws = plan.draw_all or p.room not in drawn  # the first of its room here
+            drawn.add(p.room)
+            receiver = _Receiver(client, me, plan.display_hz, draws)
             receivers.append(receiver)
             captures = out.captures.setdefault(me, {})
             tasks.append(asyncio.create_task(_read(client, receiver, out)))

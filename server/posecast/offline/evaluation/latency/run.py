@@ -51,12 +51,16 @@ class LatencyConfig:
         seconds: the measured window; ``warmup_s`` of streaming comes before it.
         display_hz: each receiver's display rate, sampling its interpolator.
         procs: client processes the players are dealt over (round robin).
-        samples, lookahead: the server's ``--samples`` and ``--lookahead`` (``None``:
-            its defaults, what ``posecast serve`` runs).
+        samples, lookahead, frame_queue: the server's ``--samples``, ``--lookahead``
+            and ``--frame-queue`` (``None``: its defaults, what ``posecast serve`` runs).
         lossy: also run the phase behind the lossy relay, ``drop`` of the frames lost
             and ``jitter_s`` of uplink jitter (the reliability suite's 0.2 and 40 ms),
             and ``down_jitter_s`` of in-order downlink jitter (0, as the suite).
         seed: seeds the relay's faults.
+        draw_all: every player samples its room-mates' poses each display frame; by
+            default one player per room in each client process does (the joint jumps
+            are theirs) and the others ask their interpolators only for the times
+            they would show (``Interpolator.advance``: the same render delay).
         protocol: the newest protocol the SDK offers (2: ``posecast.v2``).
     """
 
@@ -68,6 +72,7 @@ class LatencyConfig:
     procs: int = 2
     samples: int | None = None
     lookahead: int | None = None
+    frame_queue: int | None = None
     delayed_emission: bool = False  # the paper's emission of frame n - tau (serve's flag)
     lossy: bool = False
     drop: float = 0.2
@@ -75,6 +80,7 @@ class LatencyConfig:
     down_jitter_s: float = 0.0
     seed: int = 7
     protocol: int = 2
+    draw_all: bool = False
 
 
 def _plans(cfg: LatencyConfig, url: str, secret: str, prefix: str) -> list[WorkerPlan]:
@@ -87,7 +93,8 @@ def _plans(cfg: LatencyConfig, url: str, secret: str, prefix: str) -> list[Worke
     measure_from = start_at + cfg.warmup_s
     return [
         WorkerPlan(url, secret, tuple(players[k::procs]), start_at, measure_from,
-                   measure_from + cfg.seconds, cfg.display_hz, protocol=cfg.protocol)
+                   measure_from + cfg.seconds, cfg.display_hz, protocol=cfg.protocol,
+                   draw_all=cfg.draw_all)
         for k in range(procs)
     ]  # fmt: skip
 
@@ -205,9 +212,11 @@ def _relay(upstream: str, cfg: LatencyConfig) -> Iterator[LossyRelay]:
 def run_latency(cfg: LatencyConfig) -> dict[str, Any]:
     """Run the benchmark; the report (see ``docs/latency-benchmark.md``)."""
     secret = secrets.token_hex(24)
-    delayed = ("--delayed-emission",) if cfg.delayed_emission else ()
+    flags = ["--delayed-emission"] if cfg.delayed_emission else []
+    if cfg.frame_queue is not None:
+        flags += ["--frame-queue", str(cfg.frame_queue)]
     server = ServeProcess(
-        "--conn-per-ip-per-min", "100000", "--sockets-per-ip", "100000", *delayed,
+        "--conn-per-ip-per-min", "100000", "--sockets-per-ip", "100000", *flags,
         secret=secret, samples=cfg.samples, lookahead=cfg.lookahead,
     )  # fmt: skip
     try:
