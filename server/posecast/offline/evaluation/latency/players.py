@@ -131,7 +131,10 @@ async def _stream(
     rng = random.Random(p.seed)
     await _sleep_until(plan.start_at + rng.random() / plan.frame_hz)
     offset = ((p.slot % 4) * 1.2, 0.0, (p.slot // 4) * 1.2)  # side by side, as posecast-sim
-    source = pc.WalkSource(seconds=10.0, seed=p.seed, loop=True, offset_m=offset,
+    # Long enough not to loop within the run: a loop jumps the walker back to its
+    # start, a teleport every room-mate would show as the largest joint jump.
+    seconds = max(10.0, plan.stop_at - plan.start_at + 2.0)
+    source = pc.WalkSource(seconds=seconds, seed=p.seed, loop=True, offset_m=offset,
                            rate_hz=plan.frame_hz)  # fmt: skip
     async for s in source:
         assert s.t is not None
