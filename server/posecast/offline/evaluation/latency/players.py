@@ -68,6 +68,7 @@ class WorkerResult:
 
     captures: dict[str, dict[int, float]] = field(default_factory=dict)  # id -> seq -> capture
     displayed: list[tuple[str, int, float, float, float]] = field(default_factory=list)
+    drawn: int = 0  # how many of ``displayed`` (the first) drawing players displayed
     waiting: list[tuple[str, int, float, float]] = field(default_factory=list)  # never shown
     jumps_m: list[float] = field(default_factory=list)
     members: dict[str, str] = field(default_factory=dict)  # player id -> room
@@ -227,8 +228,9 @@ async def _main(plan: WorkerPlan) -> WorkerResult:
             with contextlib.suppress(Exception):
                 await c.close()
         await asyncio.gather(*tasks, return_exceptions=True)
-    for r in receivers:
+    for r in sorted(receivers, key=lambda r: not r.draws):  # the drawing players first
         out.displayed.extend((d.sender, d.seq, d.t, d.received, d.shown) for d in r.displayed)
+        out.drawn += len(r.displayed) if r.draws else 0
         out.waiting.extend(r.watch.waiting())
         out.jumps_m.extend(r.jumps.jumps_m)
     return out

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from posecast.offline.evaluation.latency.budget import budget, summary
+from posecast.offline.evaluation.latency.budget import budget, stats_ms, summary
 from posecast.offline.evaluation.latency.display import Displayed
 from posecast.offline.evaluation.latency.players import (
     TAIL_S,
@@ -130,11 +130,13 @@ def _report(
     captures: dict[str, dict[int, float]] = {}
     rooms: dict[str, str] = {}
     displayed: list[Displayed] = []
+    drawn: list[Displayed] = []  # those of the players that sampled every frame
     waiting, jumps, failures = [], [], []
     for r in results:
         captures.update(r.captures)
         rooms.update(r.members)
         displayed.extend(Displayed(*row) for row in r.displayed)
+        drawn.extend(Displayed(*row) for row in r.displayed[: r.drawn])
         waiting.extend(r.waiting)
         jumps.extend(r.jumps_m)
         failures.extend(r.failures)
@@ -143,6 +145,8 @@ def _report(
     ticks = _delta(m0, m1, "posecast_tick_seconds_count")
     tick_s = _delta(m0, m1, "posecast_tick_seconds_sum") / ticks if ticks else 0.0
     b = budget(displayed, captures, lookahead_s=lookahead_s, tick_s=tick_s, window=window)
+    d = stats_ms(budget(drawn, captures, lookahead_s=lookahead_s, tick_s=tick_s,
+                        window=window).total)  # fmt: skip
 
     def in_window(sender: str, seq: int) -> bool:
         capture = captures.get(sender, {}).get(seq)
@@ -164,6 +168,7 @@ def _report(
         **summary(b),
         "poses_expected": expected,
         "poses_received_not_displayed": never,
+        "drawn_capture_to_display_ms": {"p50": d["p50"], "p99": d["p99"], "poses": len(drawn)},
         "delivery": round(b.count / expected, 4) if expected else None,
         "lookahead_frames": welcome["lookahead_frames"],
         "rate_hz": welcome["rate_hz"],
