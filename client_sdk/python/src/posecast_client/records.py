@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -71,7 +70,7 @@ def _mul(a: F64, b: F64) -> F64:
     return out
 
 
-def _exp(v: NDArray[np.floating[Any]]) -> F64:
+def _exp(v: F64) -> F64:
     """Rotation vectors ``(..., 3)`` -> quaternions: ``(v sin(t/2) / t, cos(t/2))``."""
     t = np.sqrt((v * v).sum(axis=-1))
     moving = t > 0.0
@@ -219,29 +218,29 @@ def decode_records(data: bytes, avatars: dict[int, AvatarState | None]) -> list[
     """Every record of ``data``, each applied to ``avatars`` (avatar id -> state, ``None``
     for an announced avatar without a keyframe yet), which it updates.
 
-    One pass: the records are walked in order in Python (ids, flags, each delta's 20
-    classes, which give where its components lie); the deltas' components are then
-    read out of the message's bits and applied all together with numpy (a batch is
-    cut where an avatar comes a second time: its records apply in order).
-
     Raises:
         BadFieldError: (field ``data``) a record is cut short, has reserved bits set,
             names an avatar id not in ``avatars``, or is a delta with nothing to apply to.
     """
     out: list[DecodedRecord] = []
-    pending: list[_Delta] = []
-    ids: set[int] = set()
-    bits: NDArray[np.uint8] | None = None
+    pending: list[tuple[int, int, AvatarState, NDArray[np.int64], list[list[int]], int]] = []
 
     def flush() -> None:
-        nonlocal bits
+        # Every delta waiting, its rotations in one batch: (n, 19, 4).
         if not pending:
             return
-        if bits is None:  # the message's bits, LSB first, unpacked once
-            bits = np.unpackbits(np.frombuffer(data, np.uint8), bitorder="little")
-        _apply(pending, bits, avatars, out)
+        prev = np.stack([p[2].items for p in pending])
+        v = np.stack([p[2].steps[1:] for p in pending]).astype(np.float64) * ROT_STEP_RAD
+        r = np.array([p[4][1:] for p in pending], dtype=np.float64) * ROT_STEP_RAD
+        q = _mul(_mul(prev, _exp(v)), _exp(r))
+        q /= np.sqrt((q * q).sum(axis=-1))[..., None]
+        for k, (i, avatar_id, last, steps, _, seq) in enumerate(pending):
+            root = [last.root[c] + int(steps[0, c]) for c in range(3)]
+            state = AvatarState(seq, root, q[k], steps)
+            avatars[avatar_id] = state
+            rec = out[i]
+            out[i] = DecodedRecord(rec.avatar_id, rec.keyframe, rec.reach_limited, state)
         pending.clear()
-        ids.clear()
 
     pos = 0
     while pos < len(data):
@@ -254,109 +253,65 @@ def decode_records(data: bytes, avatars: dict[int, AvatarState | None]) -> list[
         pos += 1
         if flags & ~(KEYFRAME | REACH_LIMITED):
             raise BadFieldError(f"reserved record flags {flags:#04x}", field="data")
-        if avatar_id in ids:
-            flush()  # the same avatar twice in one message: apply the first one first
-        limited = bool(flags & REACH_LIMITED)
         if flags & KEYFRAME:
-            state, pos = _keyframe(data, pos)
-            avatars[avatar_id] = state
-            out.append(DecodedRecord(avatar_id, True, limited, state))
+            if pos + 130 > len(data):
+                raise BadFieldError("a keyframe record is cut short", field="data")
+            seq = int.from_bytes(data[pos : pos + 4], "little")
+            root = [int.from_bytes(data[pos + 4 + 4 * i : pos + 8 + 4 * i], "little", signed=True)
+                    for i in range(3)]  # fmt: skip
+            if max(abs(v) for v in root) > _ROOT_MAX:
+                raise BadFieldError("a keyframe root beyond 1000 m", field="data")
+            rot = [_smallest3(int.from_bytes(data[pos + 16 + 6 * i : pos + 22 + 6 * i], "little"))
+                   for i in range(NUM_JOINTS)]  # fmt: skip
+            state = AvatarState(seq, root, np.array(rot))
+            pos += 130
+        else:
+            if any(p[1] == avatar_id for p in pending):
+                flush()  # the same avatar twice in one message: apply the first one first
+            prev = avatars[avatar_id]
+            if prev is None:
+                raise BadFieldError(f"a delta for avatar id {avatar_id} before its keyframe",
+                                    field="data")  # fmt: skip
+            seq, steps, residuals, pos = _delta(data, pos, prev)
+            pending.append((len(out), avatar_id, prev, steps, residuals, seq))
+            out.append(DecodedRecord(avatar_id, False, bool(flags & REACH_LIMITED), prev))
             continue
-        prev = avatars[avatar_id]
-        if prev is None:
-            raise BadFieldError(f"a delta for avatar id {avatar_id} before its keyframe",
-                                field="data")  # fmt: skip
-        delta, pos = _scan_delta(data, pos, prev, avatar_id, len(out))
-        pending.append(delta)
-        ids.add(avatar_id)
-        out.append(DecodedRecord(avatar_id, False, limited, prev))  # its state: at flush
+        avatars[avatar_id] = state
+        out.append(DecodedRecord(avatar_id, bool(flags & KEYFRAME), bool(flags & REACH_LIMITED),
+                                 state))  # fmt: skip
     flush()
     return out
 
 
-def _keyframe(data: bytes, pos: int) -> tuple[AvatarState, int]:
-    """A keyframe's state (from its seq on) and its end."""
-    if pos + 130 > len(data):
-        raise BadFieldError("a keyframe record is cut short", field="data")
-    seq = int.from_bytes(data[pos : pos + 4], "little")
-    root = [int.from_bytes(data[pos + 4 + 4 * i : pos + 8 + 4 * i], "little", signed=True)
-            for i in range(3)]  # fmt: skip
-    if max(abs(v) for v in root) > _ROOT_MAX:
-        raise BadFieldError("a keyframe root beyond 1000 m", field="data")
-    rot = [_smallest3(int.from_bytes(data[pos + 16 + 6 * i : pos + 22 + 6 * i], "little"))
-           for i in range(NUM_JOINTS)]  # fmt: skip
-    return AvatarState(seq, root, np.array(rot)), pos + 130
-
-
 _CLASS_WIDTHS = [ROOT_WIDTHS] + [ROT_WIDTHS] * NUM_JOINTS  # per item, by class
-_COMPONENT = np.arange(3)[:, None]  # (3, 1)
-_BIT = np.arange(ROOT_WIDTHS[-1])  # (14,) bit positions of the widest component
-_BIT_VALUE = (1 << _BIT).astype(np.int64)
 
 
-@dataclass(frozen=True, slots=True)
-class _Delta:
-    """A delta record walked but not applied: where each item's components start in
-    the message (bit index) and their width."""
-
-    index: int  # in the output
-    avatar_id: int
-    prev: AvatarState
-    seq: int
-    starts: list[int]  # (20,)
-    widths: list[int]  # (20,)
-
-
-def _scan_delta(
-    data: bytes, pos: int, prev: AvatarState, avatar_id: int, index: int
-) -> tuple[_Delta, int]:
-    """Walk one delta (from its seq step on): its items' classes; the delta and its end."""
+def _delta(
+    data: bytes, pos: int, prev: AvatarState
+) -> tuple[int, NDArray[np.int64], list[list[int]], int]:
+    """One delta's seq, new steps ``(20, 3)``, residuals (20 x 3 ints) and its end."""
     if pos >= len(data) or data[pos] == 0:
         raise BadFieldError("a delta's seq step is missing or zero", field="data")
     seq = (prev.seq + data[pos]) & 0xFFFFFFFF
     start = pos + 1
     chunk = data[start : start + _MAX_DELTA_BYTES]
-    acc, avail, bit, base = int.from_bytes(chunk, "little"), 8 * len(chunk), 0, 8 * start
-    starts, widths = [], []
-    for table in _CLASS_WIDTHS:
-        w = table[acc >> bit & 3]
+    acc, avail, bit = int.from_bytes(chunk, "little"), 8 * len(chunk), 0
+    residuals = []
+    for widths in _CLASS_WIDTHS:
+        w = widths[acc >> bit & 3]
         bit += 2
-        starts.append(base + bit)
-        widths.append(w)
+        if not w:
+            residuals.append([0, 0, 0])
+            continue
+        mask, half = (1 << w) - 1, 1 << (w - 1)
+        v = acc >> bit
+        c0, c1, c2 = v & mask, v >> w & mask, v >> 2 * w & mask
+        residuals.append([c0 - (c0 & half) * 2, c1 - (c1 & half) * 2, c2 - (c2 & half) * 2])
         bit += 3 * w
     if bit > avail:
         raise BadFieldError("a delta record is cut short", field="data")
-    return _Delta(index, avatar_id, prev, seq, starts, widths), start + ((bit + 7) >> 3)
-
-
-def _apply(
-    deltas: list[_Delta],
-    bits: NDArray[np.uint8],
-    avatars: dict[int, AvatarState | None],
-    out: list[DecodedRecord],
-) -> None:
-    """Read the components of ``deltas`` (each a different avatar) out of ``bits`` and
-    apply them: ``root += v + r``, ``q = normalise((q * exp(v STEP)) * exp(r STEP))``."""
-    starts = np.array([d.starts for d in deltas])  # (R, 20)
-    widths = np.array([d.widths for d in deltas])  # (R, 20)
-    w = widths[..., None, None]  # (R, 20, 1, 1)
-    at = starts[..., None, None] + w * _COMPONENT + _BIT  # (R, 20, 3, 14) bit indices
-    got = np.where(w > _BIT, bits[np.minimum(at, len(bits) - 1)], 0)
-    raw = got @ _BIT_VALUE  # (R, 20, 3) unsigned
-    half = np.where(widths > 0, 1 << np.maximum(widths - 1, 0), 0)[..., None]
-    residuals = raw - 2 * (raw & half)  # two's complement of each width
-    prev_steps = np.stack([d.prev.steps for d in deltas])  # (R, 20, 3)
-    steps = prev_steps + residuals
-    roots = np.array([d.prev.root for d in deltas], dtype=np.int64) + steps[:, 0]  # (R, 3)
-    if np.abs(roots).max() > _ROOT_MAX:
+    steps = prev.steps + np.array(residuals, dtype=np.int64)  # (20, 3)
+    root = [prev.root[i] + int(steps[0, i]) for i in range(3)]
+    if max(abs(v) for v in root) > _ROOT_MAX:
         raise BadFieldError("a delta takes the root beyond 1000 m", field="data")
-    prev = np.stack([d.prev.items for d in deltas])  # (R, 19, 4)
-    v = _exp(prev_steps[:, 1:] * ROT_STEP_RAD)  # (R, 19, 4) each item's last step
-    r = _exp(residuals[:, 1:] * ROT_STEP_RAD)  # and this record's residual
-    q = _mul(_mul(prev, v), r)
-    q /= np.sqrt((q * q).sum(axis=-1))[..., None]
-    for k, (d, root) in enumerate(zip(deltas, roots.tolist(), strict=True)):
-        state = AvatarState(d.seq, root, q[k], steps[k])
-        avatars[d.avatar_id] = state
-        rec = out[d.index]
-        out[d.index] = DecodedRecord(rec.avatar_id, False, rec.reach_limited, state)
+    return seq, steps, residuals, start + ((bit + 7) >> 3)
