@@ -11,12 +11,13 @@ passes ``now``.
 
 from __future__ import annotations
 
+import math
 import random
 from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from posecast_client.clock import ClockSync
 from posecast_client.errors import (
@@ -249,18 +250,16 @@ class ClientSession:
             )
         if not 0 <= valid <= full:
             raise ValueError(f"valid must be in 0..{full}, not {valid}")
-        # Every row at once; the first unusable tracked row is the one reported.
-        tracked = (valid >> np.arange(rows)) & 1 == 1  # (rows,)
-        pos[~tracked], quat[~tracked] = 0.0, (0.0, 0.0, 0.0, 1.0)
-        in_range: NDArray[np.bool_] = np.all(np.abs(pos) <= MAX_COORD_M, axis=1)  # NaN fails
-        norm = np.sqrt((quat * quat).sum(axis=1))
-        usable = in_range & np.isfinite(norm) & (norm > 1e-6)
-        if not usable.all():
-            i = int(np.argmin(usable))
-            if not in_range[i]:
+        for i in range(rows):
+            if not valid >> i & 1:
+                pos[i], quat[i] = 0.0, (0.0, 0.0, 0.0, 1.0)
+                continue
+            if not (np.abs(pos[i]) <= MAX_COORD_M).all():  # NaN fails too
                 raise OutOfRangeError(f"{key}[{i}] value {pos[i]}", field=f"{key}[{i}]")
-            raise NotNormalisedError(f"{key}[{i}] orientation {quat[i]}", field=f"{key}[{i}]")
-        quat /= np.where(tracked, norm, 1.0)[:, None]
+            n = math.sqrt(float(quat[i] @ quat[i]))
+            if not (math.isfinite(n) and n > 1e-6):
+                raise NotNormalisedError(f"{key}[{i}] orientation {quat[i]}", field=f"{key}[{i}]")
+            quat[i] /= n
         if seq is None:
             seq = self.seq0 if self.last_seq is None else seq_next(self.last_seq)
         elif not 0 <= seq <= UINT32_MAX:
