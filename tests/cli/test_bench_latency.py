@@ -25,6 +25,7 @@ from tests.cli.conftest import user_error
         ["--display-hz", "nan"],
         ["--procs", "0"],
         ["--samples", "0"],
+        ["--frame-queue", "0"],
         ["--lookahead", "-1"],
         ["--lookahead", "256"],
         ["--drop", "1"],
@@ -53,6 +54,9 @@ def _check_phase(phase: dict[str, Any]) -> None:
     assert total == pytest.approx(phase["capture_to_display_ms_mean"], abs=0.05)
     assert parts["client_buffer"]["p50"] >= 0.0  # displayed after it arrived
     assert phase["display_frames"] > 0
+    assert 0.0 <= phase["queue_held_share"] <= 1.0
+    drawn = phase["drawn_capture_to_display_ms"]  # the drawing players' poses, a part
+    assert 0 < drawn["poses"] <= phase["poses_displayed"]
     # Jumps are read on the window's display frames: on a machine so busy that no pose
     # reached a screen before the window closed (all shown in the tail), there are none.
     jump = phase["max_joint_jump_cm"]

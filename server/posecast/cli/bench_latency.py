@@ -46,6 +46,8 @@ def cmd_bench_latency(args: argparse.Namespace) -> int:
     finite("--down-jitter-ms", args.down_jitter_ms, CMD)
     if args.samples is not None:
         check_samples("--samples", [args.samples], CMD)
+    if args.frame_queue is not None:
+        at_least("--frame-queue", args.frame_queue, 1, CMD)
     if args.lookahead is not None and not 0 <= args.lookahead <= MAX_LOOKAHEAD_FRAMES:
         raise config_error(
             f"--lookahead {args.lookahead} outside [0, {MAX_LOOKAHEAD_FRAMES}]",
@@ -103,13 +105,15 @@ def print_report(report: dict[str, Any]) -> None:
     for label, key in ROWS:
         print(f"{label:20s}" + "".join(_cells(phase, key) for _, phase in phases))
     for name, phase in phases:
+        late = 100 * (phase["display_frames_late_share"] or 0)
         print(
             f"{name}: {phase['poses_displayed']} poses displayed of {phase['poses_expected']} "
             f"expected; max joint jump at {cfg['display_hz']:g} Hz {phase['max_joint_jump_cm']} cm "
             f"(p99 {phase['p99_joint_jump_cm']} cm); tick {phase['tick_ms_mean']} ms mean, "
-            f"{phase['tick_overruns']:g} overruns; server {phase['server_cpu_cores']} cores, "
-            f"clients {phase['clients_cpu_cores']} cores of {report['machine_cores']}; display "
-            f"frames late {100 * (phase['display_frames_late_share'] or 0):.1f} %"
+            f"{phase['tick_overruns']:g} overruns; frames held a tick in their queue "
+            f"{100 * (phase['queue_held_share'] or 0):.1f} %; server "
+            f"{phase['server_cpu_cores']} cores, clients {phase['clients_cpu_cores']} cores of "
+            f"{report['machine_cores']}; display frames late {late:.1f} %"
         )
         if phase["failures"] or phase["errors"]:
             print(f"{name}: errors {phase['errors']}, failures {phase['failures']}")
@@ -158,10 +162,22 @@ def add_parser(bench_sub: argparse._SubParsersAction[Any]) -> None:
     add_defaulted(bl, "--display-hz", 90.0, "each receiver's display rate")
     add_defaulted(bl, "--procs", 2, "client processes the players are dealt over")
     bl.add_argument(
+        "--draw-all",
+        action="store_true",
+        help="every player samples its room-mates' poses each display frame (default: one "
+        "per room in each client process; the others follow the times their "
+        "interpolators would show)",
+    )
+    bl.add_argument(
         "--samples", type=int, help="the server's latent samples N (default: the server's)"
     )
     bl.add_argument(
         "--lookahead", type=int, help="the server's look-ahead in frames (default: the server's)"
+    )
+    bl.add_argument(
+        "--frame-queue",
+        type=int,
+        help="the server's frames kept per player between ticks (default: the server's)",
     )
     bl.add_argument(
         "--delayed-emission",

@@ -62,7 +62,7 @@ import bisect
 import math
 from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Literal, Protocol
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -70,12 +70,19 @@ from numpy.typing import NDArray
 from posecast_client.protocol import Pose, Presence, Welcome, seq_delta
 from posecast_client.render_delay import RenderDelay
 from posecast_client.rotations import quat_mul
+from posecast_client.sampling import (
+    ROOT,
+    Correction,
+    Entry,
+    Mode,
+    SamplePlan,
+    fade,
+    make_samples,
+)
+from posecast_client.sampling import quat_slerp as quat_slerp  # part of this module's API
 
 F64 = NDArray[np.float64]
-_IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 _CONJ = np.array([-1.0, -1.0, -1.0, 1.0])  # q * _CONJ is q's inverse, for unit q
-Mode = Literal["interpolate", "extrapolate", "hold"]
-ROOT = 0  # PELVIS: the joint whose jump is a teleport
 
 
 class PoseLike(Protocol):
@@ -181,35 +188,6 @@ class InterpolatedPose:
     mode: Mode
 
 
-@dataclass(slots=True)
-class _Entry:
-    t: float
-    seq: int
-    keyframe: bool
-    positions: F64
-    rotations: F64 | None
-    seen: bool = False  # a query has run since it was pushed (its need is counted)
-
-
-def quat_slerp(q0: F64, q1: F64, u: float) -> F64:
-    """Spherical interpolation ``(..., 4)`` xyzw on the shorter arc; ``u`` outside
-    ``[0, 1]`` extrapolates along the same great circle. Inputs need not be unit."""
-    a = q0 / np.linalg.norm(q0, axis=-1, keepdims=True)
-    b = q1 / np.linalg.norm(q1, axis=-1, keepdims=True)
-    dot = (a * b).sum(-1, keepdims=True)
-    b = np.where(dot < 0.0, -b, b)  # the same rotation, on a's hemisphere
-    cos = np.minimum(np.abs(dot), 1.0)
-    omega = np.arccos(cos)  # (..., 1) half the angle between them
-    sin = np.sin(omega)
-    small = sin < 1e-6  # nearly equal: the sines cancel badly, lerp is exact enough
-    safe = np.where(small, 1.0, sin)
-    w0 = np.where(small, 1.0 - u, np.sin((1.0 - u) * omega) / safe)
-    w1 = np.where(small, u, np.sin(u * omega) / safe)
-    out = w0 * a + w1 * b
-    res: F64 = out / np.linalg.norm(out, axis=-1, keepdims=True)
-    return res
-
-
 class PoseBuffer:
     """The jitter buffer of one player (see the module docstring for the rules).
 
@@ -221,9 +199,11 @@ class PoseBuffer:
     def __init__(self, config: InterpConfig = DEFAULT_INTERP) -> None:
         self.config = config
         self.player: str | None = None
-        self._entries: list[_Entry] = []  # sorted by t, no two with the same t
+        self._entries: list[Entry] = []  # sorted by t, no two with the same t
         self._times: list[float] = []  # the entries' t, for bisect
         self._last: InterpolatedPose | None = None  # what pose_at showed last
+        self._last_plan: SamplePlan | None = None  # the plan of its raw sample
+        self._offset: Correction | None = None  # the correction it added to that sample
         self._unseen = 0  # entries pushed since the last pose_at
         self._delay = RenderDelay(
             start_s=config.delay_s,
@@ -278,10 +258,18 @@ class PoseBuffer:
         if i == 0 and len(self._entries) >= self.config.capacity:
             return False
         rot = None if pose.rotations is None else np.array(pose.rotations, dtype=np.float64)
-        entry = _Entry(t, int(pose.seq), keyframe, np.array(pose.positions, dtype=np.float64), rot)
+        pos = np.array(pose.positions, dtype=np.float64)
+        entry = Entry(t, int(pose.seq), keyframe, pos, rot, root=tuple(pos[ROOT].tolist()))
         self.player = pose.player
         self._entries.insert(i, entry)
         self._times.insert(i, t)
+        # Rule 2 depends only on an entry and the one before it: decided once here,
+        # for the new entry and for the one after it (whose predecessor it now is).
+        if i > 0:
+            entry.snaps = self._snap_rule(self._entries[i - 1], entry)
+        if i + 1 < len(self._entries):
+            after = self._entries[i + 1]
+            after.snaps = self._snap_rule(entry, after)
         self._unseen += 1
         if len(self._entries) > self.config.capacity:
             self._unseen -= not self._entries[0].seen
@@ -292,7 +280,7 @@ class PoseBuffer:
         """Forget every pose (after a reconnect: the server's clock may have changed)."""
         self._entries.clear()
         self._times.clear()
-        self._last = None
+        self._last = self._last_plan = self._offset = None
         self._unseen = 0
         self._delay.reset()
 
@@ -308,34 +296,77 @@ class PoseBuffer:
 
         Adaptive, each call first counts the poses pushed since the last one as
         arrived at ``time`` and moves the delay (:mod:`posecast_client.render_delay`).
+        :meth:`Interpolator.poses_at` does the same for every player in one batch.
         """
-        if self.config.adaptive:
-            self._observe(time)
-            self._delay.advance(time)
-        tau = time - self.delay_s
-        raw = self._raw(tau)
-        last, self._last = self._last, None
-        if raw is None:
+        plan = self._begin(time)
+        if plan is None:
             return None
-        shown = raw
-        if last is not None and self._blends(last.t, tau):
-            before = self._raw(last.t)  # what the last frame would show with today's poses
-            assert before is not None
-            k = math.exp(-(tau - last.t) / self.config.correction_s)
-            pos = raw.positions + (last.positions - before.positions) * k
-            rot = raw.rotations
-            if rot is not None and last.rotations is not None and before.rotations is not None:
-                off = quat_mul(last.rotations, before.rotations * _CONJ)  # (J, 4) world delta
-                rot = quat_mul(quat_slerp(_IDENTITY, off, k), rot)
-            shown = InterpolatedPose(raw.player, tau, raw.seq, pos, rot, raw.mode)
-        self._last = shown
-        return shown
+        pos, rot = make_samples([plan])[0]
+        return self._finish(plan, pos, rot)
+
+    def advance(self, time: float) -> float | None:
+        """A display frame at ``time`` that does not draw this player (off screen,
+        culled): the adaptive delay moves exactly as :meth:`pose_at` would move it,
+        and nothing is sampled. Returns the server time that frame would show
+        (``time - delay_s``, what :attr:`shown_t` would be), ``None`` while empty.
+        The next :meth:`pose_at` starts afresh: no correction carries over a frame
+        that was not drawn."""
+        plan = self._begin(time)
+        self._last = self._last_plan = self._offset = None
+        return None if plan is None else plan.tau
 
     def sample_at(self, time: float) -> InterpolatedPose | None:
         """The pose at server time ``time`` from the poses kept now, rules 1 to 4 only
         (no memory of earlier calls), at the current :attr:`delay_s` (which only
         :meth:`pose_at` moves)."""
-        return self._raw(time - self.delay_s)
+        plan = self._plan(time - self.delay_s)
+        return None if plan is None else self._raw(plan)
+
+    def _begin(self, time: float) -> SamplePlan | None:
+        """A display frame at ``time``, up to the arrays: the adaptive delay's step and
+        the plan of the raw sample (rules 1 to 4); ``None`` while empty."""
+        if self.config.adaptive:
+            self._observe(time)
+            self._delay.advance(time)
+        plan = self._plan(time - self.delay_s)
+        if plan is None:
+            self._last = self._last_plan = self._offset = None
+        return plan
+
+    def _finish(self, plan: SamplePlan, pos: F64, rot: F64 | None) -> InterpolatedPose:
+        """The frame's shown pose from its raw sample (``plan``'s ``pos``, ``rot``):
+        rule 5's correction, and the memory of what was shown (one buffer's
+        :func:`_finish_all`)."""
+        return _finish_all([(self, plan, pos, rot)])[0]
+
+    def _raw_pose(self, plan: SamplePlan, pos: F64, rot: F64 | None) -> InterpolatedPose:
+        return InterpolatedPose(self.player or "", plan.tau, plan.base.seq, pos, rot, plan.mode)
+
+    def _fading(self, plan: SamplePlan) -> tuple[Correction, float] | None:
+        """Rule 5 for a frame at ``plan.tau``: what the last frame showed beyond what it
+        would show with today's poses (an offset), and the share of it left now, ``k``;
+        ``None`` when nothing is to be corrected.
+
+        The last frame's plan unchanged (no pose arrived that changes its sample), that
+        offset is the one the last frame added (none when it showed its sample as it
+        was); otherwise it is made afresh from what the last frame showed."""
+        last, last_plan = self._last, self._last_plan
+        if last is None or last_plan is None or not self._blends(last.t, plan.tau):
+            self._offset = None
+            return None
+        before_plan = self._plan(last.t)
+        assert before_plan is not None
+        if before_plan.same(last_plan):
+            prev = self._offset
+            if prev is None:
+                return None
+        else:
+            before = self._raw(before_plan)
+            turn = None
+            if last.rotations is not None and before.rotations is not None:
+                turn = quat_mul(last.rotations, before.rotations * _CONJ)  # (J, 4) world delta
+            prev = Correction(last.positions - before.positions, turn)
+        return prev, math.exp(-(plan.tau - last.t) / self.config.correction_s)
 
     def _observe(self, time: float) -> None:
         """Each pose pushed since the last query arrived, for the display, at ``time``:
@@ -361,13 +392,10 @@ class PoseBuffer:
             return False
         lo = bisect.bisect_right(self._times, last_tau)
         hi = bisect.bisect_right(self._times, tau)
-        return not any(
-            k > 0 and self._snaps(self._entries[k - 1], self._entries[k])
-            for k in range(max(lo, 1), hi)
-        )
+        return not any(self._entries[k].snaps for k in range(max(lo, 1), hi))
 
-    def _raw(self, tau: float) -> InterpolatedPose | None:
-        """Rules 1 to 4 at ``tau`` on the poses' timeline."""
+    def _plan(self, tau: float) -> SamplePlan | None:
+        """Rules 1 to 4 at ``tau`` on the poses' timeline, as a plan (no arrays)."""
         if not self._entries:
             return None
         i = bisect.bisect_right(self._times, tau) - 1  # a = entries[i]: newest at or before tau
@@ -376,46 +404,64 @@ class PoseBuffer:
         a = self._entries[i]
         if i + 1 < len(self._entries):
             b = self._entries[i + 1]
-            if not self._snaps(a, b):
+            if not b.snaps:
                 u = (tau - a.t) / (b.t - a.t)
-                pos = a.positions + (b.positions - a.positions) * u
-                rot = None
-                if a.rotations is not None and b.rotations is not None:
-                    rot = quat_slerp(a.rotations, b.rotations, u)
-                return self._sample(a, tau, pos, "interpolate", rot)
+                rot = a.rotations is not None and b.rotations is not None
+                q0, q1 = (a, b) if rot else (None, None)
+                return SamplePlan(tau, a, b, a, u, q0, q1, u, "interpolate")
         # a is the newest pose of its segment: carry it on, then hold.
         p = self._entries[i - 1] if i > 0 else None
-        if p is None or self._snaps(p, a) or self.config.max_extrapolate_s == 0.0:
+        if p is None or a.snaps or self.config.max_extrapolate_s == 0.0:
             return self._hold(a, tau)
         ahead = tau - a.t
         mode: Mode = "extrapolate" if ahead <= self.config.max_extrapolate_s else "hold"
         s = min(ahead, self.config.max_extrapolate_s) / (a.t - p.t)
-        pos = a.positions + (a.positions - p.positions) * s
-        rot = None
-        if a.rotations is not None and p.rotations is not None:
-            rot = quat_slerp(p.rotations, a.rotations, 1.0 + s)
-        return self._sample(a, tau, pos, mode, rot)
+        rotated = a.rotations is not None and p.rotations is not None
+        return SamplePlan(
+            tau, a, a, p, s, p if rotated else None, a if rotated else None, 1.0 + s, mode
+        )
 
-    def _snaps(self, a: _Entry, b: _Entry) -> bool:
+    def _snap_rule(self, a: Entry, b: Entry) -> bool:
         """Whether ``b`` starts a new segment after ``a`` (rule 2)."""
         cfg = self.config
         if b.t - a.t > cfg.gap_s:
             return True
         if b.keyframe and seq_delta(b.seq, a.seq) <= 0:
             return True
-        jump = float(np.linalg.norm(b.positions[ROOT] - a.positions[ROOT]))
-        return jump > cfg.teleport_m
+        return math.dist(b.root, a.root) > cfg.teleport_m
 
-    def _hold(self, a: _Entry, tau: float) -> InterpolatedPose:
-        rot = None
-        if a.rotations is not None:
-            rot = a.rotations / np.linalg.norm(a.rotations, axis=-1, keepdims=True)
-        return self._sample(a, tau, a.positions.copy(), "hold", rot)
+    def _hold(self, a: Entry, tau: float) -> SamplePlan:
+        q = a if a.rotations is not None else None
+        return SamplePlan(tau, a, a, a, 0.0, q, q, 0.0, "hold")
 
-    def _sample(
-        self, a: _Entry, tau: float, pos: F64, mode: Mode, rot: F64 | None = None
-    ) -> InterpolatedPose:
-        return InterpolatedPose(self.player or "", tau, a.seq, pos, rot, mode)
+    def _raw(self, plan: SamplePlan) -> InterpolatedPose:
+        pos, rot = make_samples([plan])[0]
+        return self._raw_pose(plan, pos, rot)
+
+
+def _finish_all(
+    frames: list[tuple[PoseBuffer, SamplePlan, F64, F64 | None]],
+) -> list[InterpolatedPose]:
+    """Each buffer's shown pose from its raw sample: rule 5's fading corrections of
+    every buffer that has one (in batches, :func:`fade`), and each buffer's memory of
+    what it showed."""
+    shown = [buf._raw_pose(plan, pos, rot) for buf, plan, pos, rot in frames]
+    pending = []
+    for n, (buf, plan, _, rot) in enumerate(frames):
+        got = buf._fading(plan)
+        if got is not None:
+            pending.append((n, *got, rot))
+    corrections: list[Correction | None] = [None] * len(frames)
+    for (n, _, _, _), faded in zip(pending, fade([p[1:] for p in pending]), strict=True):
+        if faded is None:  # faded out: show (and remember) the raw sample
+            continue
+        corrections[n], rot = faded
+        raw = shown[n]
+        shown[n] = InterpolatedPose(raw.player, raw.t, raw.seq, raw.positions + faded[0].dpos,
+                                    raw.rotations if rot is None else rot, raw.mode)  # fmt: skip
+    for n, (buf, plan, _, _) in enumerate(frames):
+        buf._last, buf._last_plan, buf._offset = shown[n], plan, corrections[n]
+    return shown
 
 
 class Interpolator:
@@ -473,11 +519,27 @@ class Interpolator:
         buf = self._buffers.get(player)
         return None if buf is None else buf.pose_at(time)
 
-    def poses_at(self, time: float) -> dict[str, InterpolatedPose]:
-        """Every known player's pose shown at server time ``time``."""
+    def advance(self, time: float) -> dict[str, float]:
+        """A display frame at ``time`` that draws none of the players: each buffer's
+        :meth:`PoseBuffer.advance`; the server time each would show."""
         out = {}
         for player, buf in self._buffers.items():
-            shown = buf.pose_at(time)
-            if shown is not None:
-                out[player] = shown
+            tau = buf.advance(time)
+            if tau is not None:
+                out[player] = tau
         return out
+
+    def poses_at(self, time: float) -> dict[str, InterpolatedPose]:
+        """Every known player's pose shown at server time ``time``: each buffer's
+        :meth:`PoseBuffer.pose_at`, their samples made in one batch."""
+        begun = []
+        for player, buf in self._buffers.items():
+            plan = buf._begin(time)
+            if plan is not None:
+                begun.append((player, buf, plan))
+        samples = make_samples([plan for _, _, plan in begun])
+        frames = [
+            (buf, plan, pos, rot) for (_, buf, plan), (pos, rot) in zip(begun, samples, strict=True)
+        ]
+        shown = _finish_all(frames)
+        return {player: pose for (player, _, _), pose in zip(begun, shown, strict=True)}

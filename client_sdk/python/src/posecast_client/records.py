@@ -115,16 +115,31 @@ _MAT = _mat_table()
 
 def fk(world: F64, root_m: F64, offsets: F64) -> F64:
     """Joint positions ``(..., 19, 3)`` metres from world rotations ``(..., 19, 4)``, the
-    root ``(..., 3)`` and bone offsets ``(..., 19, 3)``, down the tree a level at a time."""
+    root ``(..., 3)`` and bone offsets ``(..., 19, 3)``: every bone turned by its
+    parent's world rotation at once, then each joint the root plus the bones from the
+    root down to it (one product with the tree's ancestor table)."""
     outer = world[..., :, None] * world[..., None, :]  # (..., 19, 4, 4)
     mats = (outer.reshape(*world.shape[:-1], 16) @ _MAT).reshape(*world.shape[:-1], 3, 3)
-    off = np.broadcast_to(offsets, (*world.shape[:-1], 3))[..., None]  # (..., 19, 3, 1)
-    pos = np.empty((*world.shape[:-1], 3))
-    pos[..., 0, :] = root_m
-    for joints, parents in _LEVELS:
-        bones = (mats[..., parents, :, :] @ off[..., joints, :, :])[..., 0]
-        pos[..., joints, :] = pos[..., parents, :] + bones
+    off = np.broadcast_to(offsets, (*world.shape[:-1], 3))[..., 1:, :, None]  # (..., 18, 3, 1)
+    bones = (mats[..., _CHILD_PARENTS, :, :] @ off)[..., 0]  # (..., 18, 3)
+    pos: F64 = (_ANCESTORS @ bones) + np.asarray(root_m)[..., None, :]  # (..., 19, 3)
     return pos
+
+
+def _ancestors() -> F64:
+    """``A (19, 18)``: ``A[j, b - 1]`` is 1 when bone ``b`` (joint ``b``'s, from its
+    parent) lies on the path from the root to joint ``j``."""
+    a = np.zeros((NUM_JOINTS, NUM_JOINTS - 1))
+    for j in range(1, NUM_JOINTS):
+        k = j
+        while k > 0:
+            a[j, k - 1] = 1.0
+            k = PARENTS[k]
+    return a
+
+
+_ANCESTORS = _ancestors()
+_CHILD_PARENTS = np.array(PARENTS[1:])
 
 
 def _levels() -> list[tuple[list[int], list[int]]]:

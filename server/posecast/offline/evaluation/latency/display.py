@@ -99,18 +99,21 @@ class JumpMeter:
     def frame(self, now: float, positions: Mapping[str, F64], *, record: bool = True) -> None:
         """The frame at client time ``now`` showed each sender's joints at
         ``positions[sender]`` ``(J, 3)`` metres; ``record=False`` updates the last
-        frame without keeping the jumps (outside the measured window)."""
+        frame without keeping the jumps (outside the measured window). The senders
+        seen before are measured together, one array operation per shape."""
         period = 1.0 / self.display_hz
+        groups: dict[tuple[int, ...], list[tuple[float, F64, F64]]] = {}
         for sender, pos in positions.items():
             last = self._last.get(sender)
             self._last[sender] = (now, pos)
-            if last is None or not record:
+            if last is None or not record or now - last[0] <= 0.0:
                 continue
-            dt = now - last[0]
-            if dt <= 0.0:
-                continue
-            d = float(np.linalg.norm(pos - last[1], axis=-1).max())
-            self.jumps_m.append(d * min(1.0, period / dt))
+            groups.setdefault(pos.shape, []).append((now - last[0], pos, last[1]))
+        for group in groups.values():
+            dt = np.array([g[0] for g in group])  # (S,)
+            moved = np.stack([g[1] for g in group]) - np.stack([g[2] for g in group])  # (S, J, 3)
+            d = np.sqrt((moved * moved).sum(-1)).max(-1)  # (S,) the largest joint's move
+            self.jumps_m.extend((d * np.minimum(1.0, period / dt)).tolist())
 
     def forget(self, sender: str) -> None:
         self._last.pop(sender, None)

@@ -59,6 +59,7 @@ class WorkerPlan:
     display_hz: float = 90.0
     frame_hz: float = 60.0
     protocol: int = 2
+    draw_all: bool = False  # every player samples its room-mates (else one per room here)
 
 
 @dataclass
@@ -67,6 +68,7 @@ class WorkerResult:
 
     captures: dict[str, dict[int, float]] = field(default_factory=dict)  # id -> seq -> capture
     displayed: list[tuple[str, int, float, float, float]] = field(default_factory=list)
+    drawn: int = 0  # how many of ``displayed`` (the first) drawing players displayed
     waiting: list[tuple[str, int, float, float]] = field(default_factory=list)  # never shown
     jumps_m: list[float] = field(default_factory=list)
     members: dict[str, str] = field(default_factory=dict)  # player id -> room
@@ -82,27 +84,37 @@ class WorkerResult:
 class _Receiver:
     """One player's receiving side: its interpolator and what it showed."""
 
-    def __init__(self, client: pc.Client, me: str, display_hz: float) -> None:
+    def __init__(self, client: pc.Client, me: str, display_hz: float, draws: bool) -> None:
         self.client = client
         self.me = me
+        self.draws = draws  # samples its room-mates' poses each frame (else: their times)
         self.interp = pc.Interpolator()
         self.watch = DisplayWatch()
         self.jumps = JumpMeter(display_hz)
         self.displayed: list[Displayed] = []
 
     def feed(self, event: pc.Event, now: float) -> None:
-        self.interp.feed(event)
-        if isinstance(event, pc.Pose) and event.player != self.me:
+        if isinstance(event, pc.Pose):
+            if event.player == self.me:
+                return  # its own avatar: a game draws that from its own trackers
+            self.interp.feed(event)
             self.watch.received(event.player, event.seq, event.t, now)
-        elif isinstance(event, pc.Presence) and event.event == "leave":
+            return
+        self.interp.feed(event)
+        if isinstance(event, pc.Presence) and event.event == "leave":
             self.watch.forget(event.player)
             self.jumps.forget(event.player)
 
     def show(self, record: bool) -> None:
-        """One display frame, now."""
+        """One display frame, now: every room-mate sampled (a drawing receiver), or
+        only the time each would show (``Interpolator.advance``: the same render
+        delay and shown times, no sample)."""
         now = time.monotonic()
-        shown = self.interp.poses_at(self.client.clock.display_time(now))
-        shown.pop(self.me, None)
+        at = self.client.clock.display_time(now)
+        if not self.draws:
+            self.displayed.extend(self.watch.frame(now, self.interp.advance(at)))
+            return
+        shown = self.interp.poses_at(at)
         self.displayed.extend(self.watch.frame(now, {p: s.t for p, s in shown.items()}))
         self.jumps.frame(now, {p: s.positions for p, s in shown.items()}, record=record)
 
@@ -120,7 +132,10 @@ async def _stream(
     rng = random.Random(p.seed)
     await _sleep_until(plan.start_at + rng.random() / plan.frame_hz)
     offset = ((p.slot % 4) * 1.2, 0.0, (p.slot // 4) * 1.2)  # side by side, as posecast-sim
-    source = pc.WalkSource(seconds=10.0, seed=p.seed, loop=True, offset_m=offset,
+    # Long enough not to loop within the run: a loop jumps the walker back to its
+    # start, a teleport every room-mate would show as the largest joint jump.
+    seconds = max(10.0, plan.stop_at - plan.start_at + 2.0)
+    source = pc.WalkSource(seconds=seconds, seed=p.seed, loop=True, offset_m=offset,
                            rate_hz=plan.frame_hz)  # fmt: skip
     async for s in source:
         assert s.t is not None
@@ -184,6 +199,7 @@ async def _main(plan: WorkerPlan) -> WorkerResult:
     clients: list[pc.Client] = []
     receivers: list[_Receiver] = []
     tasks: list[asyncio.Task[None]] = []
+    drawn: set[str] = set()  # rooms with a drawing receiver in this process
     try:
         joined = await asyncio.gather(*(_join(plan, p, clients) for p in plan.players))
         for p, (client, welcome) in zip(plan.players, joined, strict=True):
@@ -191,7 +207,9 @@ async def _main(plan: WorkerPlan) -> WorkerResult:
             out.welcome = {"lookahead_frames": welcome.lookahead_frames,
                            "rate_hz": welcome.rate_hz, "version": client.version}  # fmt: skip
             out.members[me] = p.room
-            receiver = _Receiver(client, me, plan.display_hz)
+            draws = plan.draw_all or p.room not in drawn  # the first of its room here
+            drawn.add(p.room)
+            receiver = _Receiver(client, me, plan.display_hz, draws)
             receivers.append(receiver)
             captures = out.captures.setdefault(me, {})
             tasks.append(asyncio.create_task(_read(client, receiver, out)))
@@ -210,8 +228,9 @@ async def _main(plan: WorkerPlan) -> WorkerResult:
             with contextlib.suppress(Exception):
                 await c.close()
         await asyncio.gather(*tasks, return_exceptions=True)
-    for r in receivers:
+    for r in sorted(receivers, key=lambda r: not r.draws):  # the drawing players first
         out.displayed.extend((d.sender, d.seq, d.t, d.received, d.shown) for d in r.displayed)
+        out.drawn += len(r.displayed) if r.draws else 0
         out.waiting.extend(r.watch.waiting())
         out.jumps_m.extend(r.jumps.jumps_m)
     return out

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from posecast.offline.evaluation.latency.budget import budget, summary
+from posecast.offline.evaluation.latency.budget import budget, stats_ms, summary
 from posecast.offline.evaluation.latency.display import Displayed
 from posecast.offline.evaluation.latency.players import (
     TAIL_S,
@@ -51,12 +51,16 @@ class LatencyConfig:
         seconds: the measured window; ``warmup_s`` of streaming comes before it.
         display_hz: each receiver's display rate, sampling its interpolator.
         procs: client processes the players are dealt over (round robin).
-        samples, lookahead: the server's ``--samples`` and ``--lookahead`` (``None``:
-            its defaults, what ``posecast serve`` runs).
+        samples, lookahead, frame_queue: the server's ``--samples``, ``--lookahead``
+            and ``--frame-queue`` (``None``: its defaults, what ``posecast serve`` runs).
         lossy: also run the phase behind the lossy relay, ``drop`` of the frames lost
             and ``jitter_s`` of uplink jitter (the reliability suite's 0.2 and 40 ms),
             and ``down_jitter_s`` of in-order downlink jitter (0, as the suite).
         seed: seeds the relay's faults.
+        draw_all: every player samples its room-mates' poses each display frame; by
+            default one player per room in each client process does (the joint jumps
+            are theirs) and the others ask their interpolators only for the times
+            they would show (``Interpolator.advance``: the same render delay).
         protocol: the newest protocol the SDK offers (2: ``posecast.v2``).
     """
 
@@ -68,6 +72,7 @@ class LatencyConfig:
     procs: int = 2
     samples: int | None = None
     lookahead: int | None = None
+    frame_queue: int | None = None
     delayed_emission: bool = False  # the paper's emission of frame n - tau (serve's flag)
     lossy: bool = False
     drop: float = 0.2
@@ -75,6 +80,7 @@ class LatencyConfig:
     down_jitter_s: float = 0.0
     seed: int = 7
     protocol: int = 2
+    draw_all: bool = False
 
 
 def _plans(cfg: LatencyConfig, url: str, secret: str, prefix: str) -> list[WorkerPlan]:
@@ -87,7 +93,8 @@ def _plans(cfg: LatencyConfig, url: str, secret: str, prefix: str) -> list[Worke
     measure_from = start_at + cfg.warmup_s
     return [
         WorkerPlan(url, secret, tuple(players[k::procs]), start_at, measure_from,
-                   measure_from + cfg.seconds, cfg.display_hz, protocol=cfg.protocol)
+                   measure_from + cfg.seconds, cfg.display_hz, protocol=cfg.protocol,
+                   draw_all=cfg.draw_all)
         for k in range(procs)
     ]  # fmt: skip
 
@@ -123,11 +130,13 @@ def _report(
     captures: dict[str, dict[int, float]] = {}
     rooms: dict[str, str] = {}
     displayed: list[Displayed] = []
+    drawn: list[Displayed] = []  # those of the players that sampled every frame
     waiting, jumps, failures = [], [], []
     for r in results:
         captures.update(r.captures)
         rooms.update(r.members)
         displayed.extend(Displayed(*row) for row in r.displayed)
+        drawn.extend(Displayed(*row) for row in r.displayed[: r.drawn])
         waiting.extend(r.waiting)
         jumps.extend(r.jumps_m)
         failures.extend(r.failures)
@@ -136,6 +145,8 @@ def _report(
     ticks = _delta(m0, m1, "posecast_tick_seconds_count")
     tick_s = _delta(m0, m1, "posecast_tick_seconds_sum") / ticks if ticks else 0.0
     b = budget(displayed, captures, lookahead_s=lookahead_s, tick_s=tick_s, window=window)
+    d = stats_ms(budget(drawn, captures, lookahead_s=lookahead_s, tick_s=tick_s,
+                        window=window).total)  # fmt: skip
 
     def in_window(sender: str, seq: int) -> bool:
         capture = captures.get(sender, {}).get(seq)
@@ -147,17 +158,23 @@ def _report(
         for p, seqs in captures.items()
     )
     never = sum(1 for sender, seq, _, _ in waiting if in_window(sender, seq))
+    # pose.t - capture - look-ahead: from capture to the start of the step that took the
+    # frame; over a tick period, the frame waited behind another in its player's queue.
+    waited = b.parts["server_queue_tick"] - tick_s
+    held = float(np.mean(waited > 1.0 / welcome["rate_hz"])) if b.count else None
     frames = sum(r.display_frames for r in results)
     jumps_cm = np.array(jumps) * 100.0
     return {
         **summary(b),
         "poses_expected": expected,
         "poses_received_not_displayed": never,
+        "drawn_capture_to_display_ms": {"p50": d["p50"], "p99": d["p99"], "poses": len(drawn)},
         "delivery": round(b.count / expected, 4) if expected else None,
         "lookahead_frames": welcome["lookahead_frames"],
         "rate_hz": welcome["rate_hz"],
         "protocol": welcome["version"],
         "tick_ms_mean": round(1000.0 * tick_s, 3),
+        "queue_held_share": None if held is None else round(held, 4),
         "tick_overruns": _delta(m0, m1, "posecast_tick_overruns_total"),
         "frames_superseded": _delta(m0, m1, 'posecast_frames_dropped_total{reason="superseded"}'),
         "poses_superseded": _delta(m0, m1, "posecast_poses_superseded_total"),
@@ -200,9 +217,11 @@ def _relay(upstream: str, cfg: LatencyConfig) -> Iterator[LossyRelay]:
 def run_latency(cfg: LatencyConfig) -> dict[str, Any]:
     """Run the benchmark; the report (see ``docs/latency-benchmark.md``)."""
     secret = secrets.token_hex(24)
-    delayed = ("--delayed-emission",) if cfg.delayed_emission else ()
+    flags = ["--delayed-emission"] if cfg.delayed_emission else []
+    if cfg.frame_queue is not None:
+        flags += ["--frame-queue", str(cfg.frame_queue)]
     server = ServeProcess(
-        "--conn-per-ip-per-min", "100000", "--sockets-per-ip", "100000", *delayed,
+        "--conn-per-ip-per-min", "100000", "--sockets-per-ip", "100000", *flags,
         secret=secret, samples=cfg.samples, lookahead=cfg.lookahead,
     )  # fmt: skip
     try:
