@@ -156,10 +156,8 @@ class PosecastServer:
         loop = asyncio.get_running_loop()
         if self.link is not None:
             await self.link.connect()
-        self._server = await self._listen(self.cfg.port)
-        if self.cfg.port == 0 and self.role is None:
-            self._server = await self._one_port(self._server)
-        self.port = self._server.sockets[0].getsockname()[1]
+        else:
+            await self._bind()
         engine = await loop.run_in_executor(self.executor, self._engine_factory)
         if isinstance(engine, Engine):  # one model: its layout's batch only
             engine = MultiEngine({engine.layout.layout: engine})
@@ -186,10 +184,21 @@ class PosecastServer:
         # (the tiny-frames test, joined; docs/reliability.md "Collector pauses").
         gc.collect()
         gc.freeze()
+        if self.link is not None:
+            # A worker joins the port's listeners once it can serve: while it loads, the
+            # kernel hands new connections (a dead worker's players reconnecting) to the
+            # workers already serving, never to one that would answer 503.
+            await self._bind()
         self.ready = True
         log.info(
             "listening", extra={"host": self.cfg.host, "port": self.port, "node": self.bus.node}
         )
+
+    async def _bind(self) -> None:
+        self._server = await self._listen(self.cfg.port)
+        if self.cfg.port == 0 and self.role is None:
+            self._server = await self._one_port(self._server)
+        self.port = self._server.sockets[0].getsockname()[1]
 
     async def _listen(self, port: int) -> Server:
         return await serve(
