@@ -31,7 +31,7 @@ import secrets
 import socket
 from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol, cast
+from typing import Any, Protocol
 
 import msgpack
 
@@ -128,13 +128,12 @@ def decode_message(data: bytes) -> BusMessage | None:
             rows, events = body["p"], body.get("e", [])
             if not isinstance(rows, list) or not isinstance(events, list):
                 return None
-            poses = tuple(PoseOut.from_bus_row(r) for r in rows)
             if not all(isinstance(e, bytes) for e in events):
                 return None
-            if any(p is None for p in poses):
+            poses = PoseOut.from_bus_rows(rows)
+            if poses is None:
                 return None
-            checked = cast(tuple[PoseOut, ...], poses)
-            return BusMessage(kind, node, poses=checked, events=tuple(events))
+            return BusMessage(kind, node, poses=poses, events=tuple(events))
         if kind in ("join", "leave"):
             return BusMessage(kind, node, str(body["p"]), str(body.get("m", "")))
         if kind == "burn":
