@@ -104,8 +104,8 @@ class PoseOut:
         if not rows:
             return ()
         blob = b"".join(r[5] for r in rows)
-        q = np.frombuffer(blob, dtype=np.dtype("<i2")).reshape(len(rows), NUM_JOINTS, 4)
-        q = q / quantize.ROT_SCALE  # (E, 19, 4)
+        snorm = np.frombuffer(blob, dtype=np.dtype("<i2")).reshape(len(rows), NUM_JOINTS, 4)
+        q = snorm / quantize.ROT_SCALE  # (E, 19, 4)
         norms = np.sqrt(np.einsum("eij,eij->ei", q, q))  # (E, 19)
         if not (np.abs(norms - 1.0) <= QUAT_TOLERANCE).all():
             return None
