@@ -4,7 +4,8 @@
 * players the kernel placed on different workers meet in one room, and one scrape
   of ``/metrics`` on either worker covers both and the supervisor;
 * a worker SIGKILLed while SDK players stream is restarted and counted, and every
-  player sees every room-mate again within 1 s (the SDK reconnects on its own);
+  player gets every room-mate's poses (its own too) made within 1 s of the kill (the
+  SDK reconnects on its own; times are the ticks', on this machine's monotonic clock);
 * SIGTERM drains every worker's players, then the supervisor exits; SIGHUP reaches
   every worker (the key set is re-read by each).
 """
