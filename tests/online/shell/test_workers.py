@@ -11,7 +11,7 @@ import socket
 import pytest
 
 from posecast.online.config import ServerConfig
-from posecast.online.shell.workers import reserve_port, worker_spec
+from posecast.online.shell.workers import reserve_port, worker_cpus, worker_spec
 from tests.online.conftest import SECRET, make_cfg
 
 
@@ -75,7 +75,14 @@ def test_every_interface_gets_one_port_on_both_families() -> None:
 
 def test_a_worker_rebuilds_the_very_config_it_was_handed() -> None:
     cfg = make_cfg(workers="2", samples=12, no_upper_ik=True, layouts="hmd3", dev=True)
-    spec = json.loads(worker_spec(cfg, 1, "/tmp/x/relay.sock"))
-    assert spec["index"] == 1 and spec["relay"] == "/tmp/x/relay.sock"
+    spec = json.loads(worker_spec(cfg, 1, "/tmp/x/relay.sock", cpu=3))
+    assert spec["index"] == 1 and spec["relay"] == "/tmp/x/relay.sock" and spec["cpu"] == 3
     assert ServerConfig(**spec["config"]) == cfg
     assert spec["config"]["token_secret"] == SECRET  # on stdin: never on a command line
+
+
+def test_auto_gives_each_worker_a_cpu_of_its_own_and_a_number_pins_none() -> None:
+    import os
+
+    assert worker_cpus(make_cfg(workers="auto")) == sorted(os.sched_getaffinity(0))
+    assert worker_cpus(make_cfg(workers="2")) == []

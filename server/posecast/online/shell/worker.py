@@ -3,8 +3,8 @@ posecast.online.shell.worker INDEX``, started by the supervisor
 (:mod:`posecast.online.shell.workers`), never by hand.
 
 It reads one JSON line on stdin (the supervisor's
-:func:`~posecast.online.shell.workers.worker_spec`: the config, field by field, and the
-relay's path), runs one
+:func:`~posecast.online.shell.workers.worker_spec`: the config, field by field, the
+relay's path and, with ``--workers auto``, the CPU it keeps to), runs one
 :class:`~posecast.online.shell.app.PosecastServer` as worker ``INDEX`` until SIGTERM
 or SIGINT (the drain is one process's), writes ``ready`` on stdout once it serves,
 and stops as well when its link to the relay ends (the supervisor is gone).
@@ -55,6 +55,8 @@ def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
     index = int(args[0])
     spec = json.loads(sys.stdin.readline())
+    if spec.get("cpu") is not None:  # before any thread starts: they all inherit it
+        os.sched_setaffinity(0, {int(spec["cpu"])})
     try:
         cfg = ServerConfig(**spec["config"])
         configure(cfg.log_level)

@@ -14,7 +14,8 @@ touches no WebSocket frame. It:
 3. starts N workers (``python -m posecast.online.shell.worker I``), each handed the
    same :class:`~posecast.online.config.ServerConfig`, serialised on its stdin (never
    re-parsed from flags or the environment; secrets never on a command line), its
-   node id (``NODE-wI``), and the relay's path. Each runs today's
+   node id (``NODE-wI``), and the relay's path; with ``--workers auto`` also a CPU of
+   its own (:func:`worker_cpus`; its engine then runs one thread). Each runs today's
    :class:`~posecast.online.shell.app.PosecastServer` on the shared port, and the
    kernel spreads new connections over the listening workers;
 4. reports the port once every worker is ready, and restarts a worker that exits
@@ -84,11 +85,19 @@ def reserve_port(host: str, port: int, tries: int = 5) -> tuple[list[socket.sock
     raise OSError(errno.EADDRINUSE, f"no one free port on every address of {host!r}")
 
 
-def worker_spec(cfg: ServerConfig, index: int, relay: str) -> bytes:
-    """What worker ``index`` reads on its stdin: the config, field by field, and the
-    relay's path."""
+def worker_spec(cfg: ServerConfig, index: int, relay: str, cpu: int | None = None) -> bytes:
+    """What worker ``index`` reads on its stdin: the config, field by field, the relay's
+    path, and the CPU it keeps to (``None``: any the supervisor may use)."""
     config = {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cfg)}
-    return json.dumps({"config": config, "index": index, "relay": relay}).encode() + b"\n"
+    spec = {"config": config, "index": index, "relay": relay, "cpu": cpu}
+    return json.dumps(spec).encode() + b"\n"
+
+
+def worker_cpus(cfg: ServerConfig) -> list[int]:
+    """With ``--workers auto`` (a worker per CPU this process may use), worker ``i``
+    keeps to the ``i``-th of those CPUs, its threads with it, so the workers' ticks do
+    not take each other's cores; with a number of workers, none is pinned (``[]``)."""
+    return sorted(os.sched_getaffinity(0)) if cfg.workers == "auto" else []
 
 
 @dataclass
@@ -107,6 +116,7 @@ class Supervisor:
         self.cfg, self.relay, self.metrics = cfg, relay, metrics
         self.node = (cfg.node_id or default_node_id())[:_MAX_NODE_CHARS]
         self.slots = [_Slot(i) for i in range(cfg.worker_count)]
+        self.cpus = worker_cpus(cfg)
         self.stopping = False
         self._watchers: list[asyncio.Task[None]] = []
 
@@ -126,6 +136,9 @@ class Supervisor:
         exits first)."""
         gen = f".{slot.generation}" if slot.generation else ""
         cfg = self.cfg.replace(node_id=f"{self.node}-w{slot.index}{gen}")
+        cpu = self.cpus[slot.index] if slot.index < len(self.cpus) else None
+        if cpu is not None:  # one CPU: a pool of more threads would only take turns on it
+            cfg = cfg.replace(engine_threads=1)
         slot.generation += 1
         slot.started_at = time.monotonic()
         proc = slot.proc = await asyncio.create_subprocess_exec(
@@ -133,7 +146,7 @@ class Supervisor:
             stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
         )  # fmt: skip
         assert proc.stdin is not None and proc.stdout is not None
-        proc.stdin.write(worker_spec(cfg, slot.index, self.relay.path))
+        proc.stdin.write(worker_spec(cfg, slot.index, self.relay.path, cpu))
         with contextlib.suppress(ConnectionError):
             await proc.stdin.drain()
         proc.stdin.close()
