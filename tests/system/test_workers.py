@@ -211,3 +211,17 @@ def test_sighup_reaches_every_worker(tmp_path: Path) -> None:
                 break
             assert time.monotonic() < deadline, m
             time.sleep(0.1)
+
+
+def test_auto_runs_a_worker_per_cpu_each_kept_to_its_own() -> None:
+    cpus = sorted(os.sched_getaffinity(0))
+    if len(cpus) < 2:
+        pytest.skip("one CPU: auto runs the single process")
+    srv = ServeProcess(secret=SECRET, workers="auto")
+    try:
+        srv.wait_ready()
+        pinned = {i: os.sched_getaffinity(pid) for i, pid in worker_pids(srv).items()}
+        assert pinned == {i: {cpu} for i, cpu in enumerate(cpus)}
+        assert srv.metrics()['posecast_workers{worker="supervisor"}'] == len(cpus)
+    finally:
+        srv.stop()
