@@ -109,6 +109,7 @@ from load_rig import (
     wait_players,
     window,
 )
+from posecast.testing.serve import metric_sum
 
 # --- ramp ----------------------------------------------------------------------------------
 
@@ -190,6 +191,11 @@ def ramp(args: argparse.Namespace, workdir: Path) -> dict[str, Any]:
                 )
                 rows.append(row)
                 _print_ramp_row(row, header=len(rows) == 1)
+                if row.get("workers"):
+                    print("        workers: " + "; ".join(
+                        f"{w}: {t['players']} players, tick p99 {t['tick_ms_p99']:.1f} ms, "
+                        f"{t['ticks_over_16_7ms']:.1%} over"
+                        for w, t in row["workers"].items()), flush=True)  # fmt: skip
                 if row.get("generator_late_ticks"):
                     print(
                         f"        the lean generator sent {row['generator_late_ticks']} of its "
@@ -291,7 +297,7 @@ def _sample(server: Server, t0: float) -> Sample:
         t_s=round(time.monotonic() - t0, 1),
         rss_mb=round(server.rss_bytes() / 2**20, 2),
         fds=server.fds(),
-        tasks=int(m.get("posecast_asyncio_tasks", -1)),
+        tasks=int(metric_sum(m, "posecast_asyncio_tasks")),
         players=players_in(m),
         connections=int(conns),
     )

@@ -16,6 +16,7 @@ import contextlib
 import json
 import math
 import os
+import re
 import select
 import signal
 import subprocess
@@ -27,7 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from posecast.testing.serve import Metrics, ServeProcess, cpu_seconds
+from posecast.testing.serve import Metrics, ServeProcess, cpu_seconds, metric_sum, series_name
 
 SECRET = "load-secret-" + "x" * 24
 TICK_HZ = 60.0
@@ -36,6 +37,14 @@ LIMIT_SHARE = 0.01  # ticks over the deadline, and overruns, per window
 MIN_TICK_HZ = 59.0
 MIN_DELIVERY = 0.99  # lean clients: poses received / expected, per window
 REPO = Path(__file__).resolve().parents[1]
+_LABEL = re.compile(r'(\w+)="((?:[^"\\]|\\.)*)"')
+_UNESCAPE = re.compile(r"\\(.)")
+
+
+def _unescaped(m: re.Match[str]) -> str:
+    return "\n" if m[1] == "n" else m[1]
+
+
 LEAN_CLIENTS = Path(__file__).resolve().with_name("lean_clients.py")
 
 
@@ -303,7 +312,7 @@ class Snapshot:
     @classmethod
     def take(cls, server: Server, sims: list[Sim], lean: LeanClients | None = None) -> Snapshot:
         busy, total = _machine_busy_s()
-        t, metrics, server_cpu = time.monotonic(), server.metrics(), cpu_seconds(server.pid)
+        t, metrics, server_cpu = time.monotonic(), server.metrics(), server.cpu_seconds()
         if lean is not None:
             stats = lean.stats()
             client_cpu, poses = lean.cpu_s(), sum(int(row[2]) for row in stats["players"])
@@ -335,28 +344,36 @@ def hist_quantile(q: float, buckets: list[tuple[float, float]]) -> float:
     return lower  # pragma: no cover - the +Inf bucket always holds n
 
 
-def window(a: Snapshot, b: Snapshot, full_rooms_poses_per_s: float) -> dict[str, Any]:
-    """What happened between two snapshots: tick figures, CPU, poses."""
-    seconds = b.t - a.t
-    ta = _bucket_counts(a.metrics, "posecast_tick_seconds")
-    tb = _bucket_counts(b.metrics, "posecast_tick_seconds")
+def by_worker(m: Metrics) -> dict[str, Metrics]:
+    """A scrape split by its ``worker`` label (``posecast serve --workers N``), each
+    part's series keyed without it; one part, ``""``, for a single process."""
+    out: dict[str, Metrics] = {}
+    for key, value in m.items():
+        name, _, inner = key.partition("{")
+        labels = dict(_LABEL.findall(inner))
+        worker = labels.pop("worker", "")
+        if worker != "supervisor":
+            plain = {k: _UNESCAPE.sub(_unescaped, v) for k, v in labels.items()}
+            out.setdefault(worker, {})[series_name(name, plain)] = value
+    return out
+
+
+def _ticks(a: Metrics, b: Metrics, seconds: float) -> dict[str, Any]:
+    """One process's tick figures between two scrapes."""
+    ta = _bucket_counts(a, "posecast_tick_seconds")
+    tb = _bucket_counts(b, "posecast_tick_seconds")
+    if len(ta) != len(tb):  # a worker (re)started within the window: from zero
+        ta = [(le, 0.0) for le, _ in tb]
     diff = [(le, cb - ca) for (le, ca), (_, cb) in zip(ta, tb, strict=True)]
     ticks = diff[-1][1]
     in_time = dict(zip((f"{le:g}" for le, _ in diff), (c for _, c in diff), strict=True))[
         f"{float(DEADLINE_LE):g}"
     ]
-
-    def d(series: str) -> float:
-        return b.metrics.get(series, 0.0) - a.metrics.get(series, 0.0)
-
-    tick_sum = d("posecast_tick_seconds_sum")
-    overruns = d("posecast_tick_overruns_total")
-    machine = (b.machine_busy_s - a.machine_busy_s) / seconds
-    server_cpu = (b.server_cpu_s - a.server_cpu_s) / seconds
-    client_cpu = (b.client_cpu_s - a.client_cpu_s) / seconds
-    poses_per_s = (b.poses - a.poses) / seconds
+    tick_sum = b.get("posecast_tick_seconds_sum", 0.0) - a.get("posecast_tick_seconds_sum", 0.0)
+    overruns = b.get("posecast_tick_overruns_total", 0.0) - a.get(
+        "posecast_tick_overruns_total", 0.0
+    )
     return {
-        "seconds": round(seconds, 2),
         "ticks": int(ticks),
         "tick_hz": round(ticks / seconds, 2),
         "tick_ms_mean": round(1000 * tick_sum / ticks, 2) if ticks else None,
@@ -365,6 +382,36 @@ def window(a: Snapshot, b: Snapshot, full_rooms_poses_per_s: float) -> dict[str,
         "ticks_over_16_7ms": round(1 - in_time / ticks, 4) if ticks else None,
         "overruns": int(overruns),
         "overrun_share": round(overruns / ticks, 4) if ticks else None,
+    }
+
+
+def window(a: Snapshot, b: Snapshot, full_rooms_poses_per_s: float) -> dict[str, Any]:
+    """What happened between two snapshots: tick figures, CPU, poses. With several
+    workers the tick figures are the worst worker's (highest p99, largest shares,
+    lowest rate), and ``workers`` holds each one's."""
+    seconds = b.t - a.t
+    wa, wb = by_worker(a.metrics), by_worker(b.metrics)
+    each = {w: _ticks(wa.get(w, {}), m, seconds) for w, m in sorted(wb.items())}
+    worst = max(each.values(), key=lambda t: (t["ticks_over_16_7ms"] or 0, t["tick_ms_p99"]))
+    ticks_fig = dict(worst)
+    if len(each) > 1:
+        ticks_fig["tick_hz"] = min(t["tick_hz"] for t in each.values())
+        ticks_fig["overrun_share"] = max(t["overrun_share"] or 0 for t in each.values())
+        ticks_fig["tick_ms_p99"] = max(t["tick_ms_p99"] for t in each.values())
+
+    def d(series: str) -> float:
+        return metric_sum(b.metrics, series) - metric_sum(a.metrics, series)
+
+    machine = (b.machine_busy_s - a.machine_busy_s) / seconds
+    server_cpu = (b.server_cpu_s - a.server_cpu_s) / seconds
+    client_cpu = (b.client_cpu_s - a.client_cpu_s) / seconds
+    poses_per_s = (b.poses - a.poses) / seconds
+    return {
+        "seconds": round(seconds, 2),
+        **ticks_fig,
+        "workers": {w: {**t, "players": players_in(wb[w])} for w, t in each.items()}
+        if len(each) > 1
+        else None,
         "server_cpu_cores": round(server_cpu, 3),
         "client_cpu_cores": round(client_cpu, 3),
         "other_cpu_cores": round(max(0.0, machine - server_cpu - client_cpu), 3),
@@ -440,7 +487,7 @@ def expected_poses_per_s(sims: list[Sim]) -> float:
 
 
 def players_in(m: Metrics) -> int:
-    return int(m.get("posecast_players", 0))
+    return int(metric_sum(m, "posecast_players"))
 
 
 def wait_players(server: Server, n: int, timeout_s: float) -> bool:

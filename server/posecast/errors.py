@@ -8,6 +8,7 @@ tools (data preparation, training) use codes of their own so logs stay greppable
     PosecastError                     code
     ├── ConfigError                   CONFIG_INVALID
     ├── ModelError                    MODEL_INVALID    (path)
+    ├── WorkerError                   WORKER_FAILED    (worker, status)
     ├── DataError                     DATA_INVALID
     │   ├── BvhError                  BVH_INVALID      (file, line)
     │   ├── AcclaimError              ACCLAIM_INVALID  (file, line)
@@ -80,6 +81,17 @@ class ModelError(PosecastError):
     def __init__(self, message: str, *, path: str | Path | None = None):
         self.path = str(path) if path is not None else None
         super().__init__((self.path + ": " if self.path else "") + message)
+
+
+class WorkerError(PosecastError):
+    """A serving worker process of ``posecast serve --workers N`` exited before it was
+    ready (its own log says why); ``status`` is its exit status."""
+
+    code = "WORKER_FAILED"
+
+    def __init__(self, message: str, *, worker: int, status: int | None):
+        self.worker, self.status = worker, status
+        super().__init__(message)
 
 
 class DataError(PosecastError):

@@ -361,3 +361,19 @@ def test_demo_on_a_port_in_use_is_a_config_error(capsys) -> None:
         rc = main(["demo", "--port", str(port), "--seconds", "1", "--samples", "8"])
     err = user_error(capsys, rc, "CONFIG_INVALID")
     assert f"127.0.0.1:{port}" in err
+
+
+@pytest.mark.parametrize("workers", ["1", "2"])
+def test_serve_on_a_port_in_use_is_a_config_error_with_any_workers(
+    capsys, monkeypatch, workers: str
+) -> None:
+    """The supervisor of --workers 2 binds the port itself first: a port in use fails
+    as the single process's does, before any worker starts."""
+    monkeypatch.setenv("POSECAST_TOKEN_SECRET", "k" * 32)
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        rc = main(["serve", "--port", str(port), "--workers", workers, "--samples", "8"])
+    err = user_error(capsys, rc, "CONFIG_INVALID")
+    assert f"127.0.0.1:{port}" in err

@@ -80,11 +80,28 @@ def test_env_values_are_typed() -> None:
         {"redis_node_ttl_s": float("nan")},
         {"redis_node_ttl_s": float("inf")},
         {"redis_url": "redis://127.0.0.1:notaport/0"},
+        {"workers": "0"},
+        {"workers": "257"},
+        {"workers": "-1"},
+        {"workers": "two"},
+        {"workers": "\u0663"},  # an Arabic-Indic 3: isdigit(), but not a number to int()
     ],
 )
 def test_bad_values_are_refused_once_at_the_edge(change: dict[str, object]) -> None:
     with pytest.raises(ConfigError):
         ServerConfig(token_secret=SECRET, **change)  # type: ignore[arg-type]
+
+
+def test_workers_is_a_number_or_auto_the_cpus_this_process_may_use() -> None:
+    import os
+
+    assert ServerConfig(token_secret=SECRET).worker_count == len(os.sched_getaffinity(0))
+    assert ServerConfig(token_secret=SECRET, workers="3").worker_count == 3
+    cfg = ServerConfig.from_sources({"POSECAST_TOKEN_SECRET": SECRET, "POSECAST_WORKERS": "1"})
+    assert cfg.worker_count == 1
+    with pytest.raises(ConfigError, match="--workers 'many' must be auto or a number, 1 to 256"):
+        ServerConfig.from_sources({}, {"workers": "many", "token_secret": SECRET},
+                                  {"workers": "--workers"})  # fmt: skip
 
 
 def test_the_secret_never_shows_in_repr() -> None:

@@ -20,6 +20,7 @@ defaults.
 from __future__ import annotations
 
 import dataclasses
+import os
 import re
 from collections.abc import Mapping
 from dataclasses import InitVar, dataclass, field, fields
@@ -39,6 +40,7 @@ ENV_PREFIX = "POSECAST_"
 _ID = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 MIN_SECRET_CHARS = MIN_SECRET_BYTES  # 32: chars of text, so at least as many bytes
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
+MAX_WORKERS = 256
 __all__ = [  # Bounds, BOUNDS, MAX_SNDBUF_BYTES: config_bounds's, kept importable here
     "BOUNDS",
     "ENGINE_DEFAULTS_ONLY",
@@ -46,6 +48,7 @@ __all__ = [  # Bounds, BOUNDS, MAX_SNDBUF_BYTES: config_bounds's, kept importabl
     "ENV_PREFIX",
     "LOG_LEVELS",
     "MAX_SNDBUF_BYTES",
+    "MAX_WORKERS",
     "MIN_SECRET_CHARS",
     "NO_FLAG",
     "Bounds",
@@ -79,6 +82,12 @@ class ServerConfig:
 
     host: str = _opt("127.0.0.1", "interface to bind (0.0.0.0 for all)")
     port: int = _opt(8765, "TCP port for WebSocket and HTTP (0: pick a free one)")
+    workers: str = _opt(
+        "auto",
+        "serving processes on the port: a number (1: one process, as before multi-core "
+        "serving) or auto, the CPUs this process may run on; rooms span them "
+        "(docs/scale-out.md, Workers)",
+    )
     token_secret: str = _opt(
         "", "HS256 key shared with the game backend (kid 'secret' in the key set)", repr=False
     )
@@ -251,6 +260,15 @@ class ServerConfig:
 
     def __post_init__(self, sources: Mapping[str, str] | None) -> None:
         _check(self, _Named(self, sources or {}))
+
+    @property
+    def worker_count(self) -> int:
+        """How many serving processes: ``workers``, ``auto`` resolved to the CPUs this
+        process may run on (its affinity, e.g. a container's cpuset); validated in
+        ``__post_init__``."""
+        if self.workers == "auto":
+            return max(1, len(os.sched_getaffinity(0)))
+        return int(self.workers)
 
     @property
     def served_layouts(self) -> tuple[Layout, ...]:
@@ -453,6 +471,10 @@ def _check(cfg: ServerConfig, n: _Named) -> None:
         value = getattr(cfg, f.name)
         if bounds is not None and not (_is_number(value) and bounds.holds(value)):
             raise ConfigError(f"{n.value(f.name)} must be in {bounds.interval()}")
+    if cfg.workers != "auto" and not (
+        cfg.workers.isascii() and cfg.workers.isdigit() and 1 <= int(cfg.workers) <= MAX_WORKERS
+    ):
+        raise ConfigError(f"{n.value('workers')} must be auto or a number, 1 to {MAX_WORKERS}")
     if cfg.backend not in BACKENDS:
         raise ConfigError(f"{n.value('backend')} unknown: one of {', '.join(BACKENDS)}")
     if cfg.log_level.upper() not in LOG_LEVELS:

@@ -2,16 +2,22 @@
 
 Not the process-global default registry: two servers in one process (the tests run
 many) each count their own, and nothing leaks between them. ``/metrics`` serves
-:meth:`Metrics.render`.
+:meth:`Metrics.render`; with ``--workers N`` (N > 1) it serves the whole node's,
+every worker's and the supervisor's (:class:`SupervisorMetrics`) joined by
+:func:`merge_expositions`, each sample labelled with its ``worker``.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
+from collections.abc import Iterator, Sequence
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
 from prometheus_client.exposition import CONTENT_TYPE_LATEST
+from prometheus_client.metrics_core import Metric
+from prometheus_client.parser import text_string_to_metric_families
 
 from posecast.online.auth.tokens import REASONS
 
@@ -20,6 +26,9 @@ _TICK_BUCKETS = (0.001, 0.002, 0.004, 0.008, 0.012, 0.0167, 0.025, 0.05, 0.1, 0.
 _BATCH_BUCKETS = (0, 1, 2, 4, 8, 16, 32, 64, 128, 256, 512)
 _DRIFT_BUCKETS = (1, 10, 50, 100, 200, 500, 1000, 10_000)
 _BUS_BUCKETS = (0.0005, 0.001, 0.002, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 1.0)
+
+
+log = logging.getLogger("posecast.metrics")
 
 
 class Metrics:
@@ -182,3 +191,74 @@ class Metrics:
         """One sample's current value (0 when absent); for tests and logs."""
         v = self.registry.get_sample_value(name, labels or {})
         return 0.0 if v is None else float(v)
+
+
+class SupervisorMetrics:
+    """The supervisor's own metrics (``posecast serve --workers N``), in the node's
+    scrape under ``worker="supervisor"``."""
+
+    def __init__(self) -> None:
+        r = self.registry = CollectorRegistry(auto_describe=True)
+        self.workers = Gauge(
+            "posecast_workers", "Serving worker processes running (ready or starting)",
+            registry=r,
+        )  # fmt: skip
+        self.worker_restarts = Counter(
+            "posecast_worker_restarts",
+            "Worker processes restarted after they exited unasked (crashed, killed)",
+            registry=r,
+        )
+        self.relay_forwarded = Counter(
+            "posecast_relay_forwarded", "Frames the node's relay wrote to a worker", registry=r
+        )
+        self.relay_dropped = Counter(
+            "posecast_relay_dropped",
+            "Pose batches the relay did not forward: the receiving worker was far behind",
+            registry=r,
+        )
+        self._relay_seen = (0, 0)
+
+    def relay_counts(self, forwarded: int, dropped: int) -> None:
+        """Bring the relay's counters up to its running totals."""
+        f0, d0 = self._relay_seen
+        self.relay_forwarded.inc(forwarded - f0)
+        self.relay_dropped.inc(dropped - d0)
+        self._relay_seen = (forwarded, dropped)
+
+    def render(self) -> bytes:
+        out: bytes = generate_latest(self.registry)
+        return out
+
+
+class _Families:
+    """A collector that yields families already built (for :func:`merge_expositions`)."""
+
+    def __init__(self, families: Sequence[Metric]) -> None:
+        self.families = families
+
+    def collect(self) -> Iterator[Metric]:
+        yield from self.families
+
+
+def merge_expositions(parts: Sequence[tuple[str, bytes]]) -> bytes:
+    """One exposition of several processes' (``(worker label, text)``): each family
+    once, every sample with a ``worker`` label added. A part that does not parse is
+    left out (and logged): one broken worker does not break the node's scrape."""
+    merged: dict[str, Metric] = {}
+    for label, text in parts:
+        try:
+            families = list(text_string_to_metric_families(text.decode()))
+        except (ValueError, UnicodeDecodeError) as exc:
+            log.warning("metrics of a worker left out", extra={"worker": label, "why": str(exc)})
+            continue
+        for fam in families:
+            into = merged.get(fam.name)
+            if into is None:
+                into = merged[fam.name] = Metric(fam.name, fam.documentation, fam.type, fam.unit)
+            for s in fam.samples:
+                labels = {**s.labels, "worker": label}
+                into.add_sample(s.name, labels, s.value, s.timestamp, s.exemplar)
+    registry = CollectorRegistry(auto_describe=False)
+    registry.register(_Families(list(merged.values())))
+    out: bytes = generate_latest(registry)
+    return out

@@ -106,6 +106,28 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def process_tree(pid: int) -> list[int]:
+    """``pid`` and every live process below it (``posecast serve --workers N``: the
+    supervisor and its workers)."""
+    out, todo = [], [pid]
+    while todo:
+        p = todo.pop()
+        out.append(p)
+        with contextlib.suppress(OSError):
+            for task in os.listdir(f"/proc/{p}/task"):
+                text = Path(f"/proc/{p}/task/{task}/children").read_text()
+                todo += [int(c) for c in text.split()]
+    return out
+
+
+def _tree_sum(pid: int, of: Callable[[int], float]) -> float:
+    total = 0.0
+    for p in process_tree(pid):
+        with contextlib.suppress(OSError, RuntimeError):  # one that exited meanwhile
+            total += of(p)
+    return total
+
+
 class ServeProcess:
     """``python -m posecast serve --port 0`` with ``flags``; the port is read from its
     first line. The environment is this process's minus every ``POSECAST_*``, plus
@@ -114,6 +136,8 @@ class ServeProcess:
     ``samples``, ``lookahead``: None leaves the server's default.
     ``log``: a file that receives the server's JSON log lines (stderr), else dropped.
     ``preexec_fn``: run in the child before it starts (CPU affinity, niceness).
+    ``workers``: ``POSECAST_WORKERS`` (1, the single process, unless a test asks for
+    the supervisor and its workers: then RSS, CPU and FDs are the whole tree's).
     """
 
     def __init__(
@@ -126,9 +150,11 @@ class ServeProcess:
         log_level: str = "WARNING",
         env: Mapping[str, str] | None = None,
         preexec_fn: Callable[[], None] | None = None,
+        workers: int | str = 1,
     ) -> None:
         full_env = {k: v for k, v in os.environ.items() if not k.startswith("POSECAST_")}
         full_env.update(POSECAST_TOKEN_SECRET=secret, POSECAST_LOG_LEVEL=log_level)
+        full_env.update(POSECAST_WORKERS=str(workers))
         full_env.update(env or {})
         self.cmd = [sys.executable, "-m", "posecast", "serve", "--port", "0"]
         if samples is not None:
@@ -215,13 +241,13 @@ class ServeProcess:
         return metric_sum(self.metrics(), name, **labels)
 
     def rss_bytes(self) -> int:
-        return rss_bytes(self.pid)
+        return int(_tree_sum(self.pid, rss_bytes))
 
     def cpu_seconds(self) -> float:
-        return cpu_seconds(self.pid)
+        return _tree_sum(self.pid, cpu_seconds)
 
     def fds(self) -> int:
-        return len(os.listdir(f"/proc/{self.pid}/fd"))
+        return int(_tree_sum(self.pid, lambda p: len(os.listdir(f"/proc/{p}/fd"))))
 
     # --- stopping ------------------------------------------------------------------------
 

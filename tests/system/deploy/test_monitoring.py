@@ -5,16 +5,17 @@ from __future__ import annotations
 import json
 import re
 
-from posecast.online.metrics import Metrics
+from posecast.online.metrics import Metrics, SupervisorMetrics
 from tests.system.deploy.conftest import ROOT, load_yaml
 
 _SUFFIXES = {"counter": ("_total",), "histogram": ("_bucket", "_sum", "_count"), "gauge": ("",)}
 
 
 def exported() -> set[str]:
-    """Every sample name a node's /metrics can carry (labelled ones before first use too)."""
+    """Every sample name a node's /metrics can carry (labelled ones before first use too;
+    with --workers N, the supervisor's too)."""
     names = set()
-    for family in Metrics().registry.collect():
+    for family in [*Metrics().registry.collect(), *SupervisorMetrics().registry.collect()]:
         for suffix in _SUFFIXES.get(family.type, ("",)):
             names.add(family.name + suffix)
     return names
@@ -51,6 +52,6 @@ def test_alert_rules_use_exported_metrics_and_are_documented() -> None:
 
 def test_operations_doc_lists_every_metric() -> None:
     operations = (ROOT / "docs/operations.md").read_text("utf-8")
-    for family in Metrics().registry.collect():
+    for family in [*Metrics().registry.collect(), *SupervisorMetrics().registry.collect()]:
         name = family.name + ("_total" if family.type == "counter" else "")
         assert f"`{name}`" in operations, f"docs/operations.md lacks {name}"

@@ -8,6 +8,10 @@ from the config by :func:`posecast.online.cluster.auto.create_bus`:
   ``posecast serve`` gives it a broker of its own, so it is one embedded node with
   nothing to talk to; tests hand several hubs one broker to run many nodes in one
   process, without sockets.
+* ``local`` (``--workers N``, N > 1, no ``redis_url``):
+  :class:`~posecast.online.cluster.local.LocalBus`, the node's worker processes
+  through the supervisor's :class:`~posecast.online.cluster.relay.Relay` (a
+  Unix-domain socket).
 * ``redis`` (``--redis URL``): :class:`~posecast.online.cluster.redis_bus.RedisBus`, Redis
   pub/sub for announcements and pose batches, Redis hashes with heartbeats for the
   authoritative member lists. ``docs/scale-out.md`` has the design.
@@ -21,12 +25,13 @@ once by :func:`encode_message` (msgpack).
 
 from __future__ import annotations
 
+import heapq
 import os
 import secrets
 import socket
 from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol, cast
+from typing import Any, Protocol
 
 import msgpack
 
@@ -123,13 +128,12 @@ def decode_message(data: bytes) -> BusMessage | None:
             rows, events = body["p"], body.get("e", [])
             if not isinstance(rows, list) or not isinstance(events, list):
                 return None
-            poses = tuple(PoseOut.from_bus_row(r) for r in rows)
             if not all(isinstance(e, bytes) for e in events):
                 return None
-            if any(p is None for p in poses):
+            poses = PoseOut.from_bus_rows(rows)
+            if poses is None:
                 return None
-            checked = cast(tuple[PoseOut, ...], poses)
-            return BusMessage(kind, node, poses=checked, events=tuple(events))
+            return BusMessage(kind, node, poses=poses, events=tuple(events))
         if kind in ("join", "leave"):
             return BusMessage(kind, node, str(body["p"]), str(body.get("m", "")))
         if kind == "burn":
@@ -159,8 +163,40 @@ def default_node_id() -> str:
     return f"{host[:40] or 'node'}-{os.getpid()}-{secrets.token_hex(3)}"
 
 
+class Burns:
+    """Burned token ids and their expiry (Unix s), bounded like the replay guard: the
+    expired are forgotten (``leeway_s`` after their ``exp``, as tokens are verified),
+    and past ``capacity`` the one expiring soonest."""
+
+    def __init__(self, capacity: int, leeway_s: float = 0.0) -> None:
+        self.capacity = capacity
+        self.leeway_s = leeway_s
+        self._exp: dict[str, int] = {}
+        self._heap: list[tuple[int, str]] = []
+
+    def add(self, jti: str, exp: int, wall: float) -> None:
+        self._purge(wall)
+        if jti in self._exp or exp + self.leeway_s <= wall:
+            return
+        while len(self._exp) >= max(self.capacity, 1):
+            self._exp.pop(heapq.heappop(self._heap)[1], None)
+        self._exp[jti] = exp
+        heapq.heappush(self._heap, (exp, jti))
+
+    def live(self, wall: float) -> dict[str, int]:
+        self._purge(wall)
+        return dict(self._exp)
+
+    def _purge(self, wall: float) -> None:
+        while self._heap and self._heap[0][0] + self.leeway_s <= wall:
+            self._exp.pop(heapq.heappop(self._heap)[1], None)
+
+
 class Bus:
     """The interface every backend implements; also the no-op base."""
+
+    # What /readyz says while the bus is down (never the cause: it may name hosts).
+    unavailable = "bus unavailable"
 
     def __init__(self, node: str) -> None:
         self.node = node

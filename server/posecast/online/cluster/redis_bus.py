@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import heapq
 import logging
 import random
 import time
@@ -44,7 +43,7 @@ from redis.asyncio.client import PubSub
 from redis.asyncio.retry import Retry
 from redis.backoff import NoBackoff
 
-from posecast.online.cluster.bus import Bus, BusMessage, decode_message, deliver
+from posecast.online.cluster.bus import Burns, Bus, BusMessage, decode_message, deliver
 from posecast.online.cluster.redis_store import RedisStore
 from posecast.online.config import ServerConfig
 from posecast.online.metrics import Metrics
@@ -61,36 +60,9 @@ class _Batch:
     events: list[bytes] = field(default_factory=list)
 
 
-class _Burns:
-    """Burned token ids and their expiry (Unix s), bounded like the replay guard: the
-    expired are forgotten (``leeway_s`` after their ``exp``, as tokens are verified),
-    and past ``capacity`` the one expiring soonest."""
-
-    def __init__(self, capacity: int, leeway_s: float = 0.0) -> None:
-        self.capacity = capacity
-        self.leeway_s = leeway_s
-        self._exp: dict[str, int] = {}
-        self._heap: list[tuple[int, str]] = []
-
-    def add(self, jti: str, exp: int, wall: float) -> None:
-        self._purge(wall)
-        if jti in self._exp or exp + self.leeway_s <= wall:
-            return
-        while len(self._exp) >= max(self.capacity, 1):
-            self._exp.pop(heapq.heappop(self._heap)[1], None)
-        self._exp[jti] = exp
-        heapq.heappush(self._heap, (exp, jti))
-
-    def live(self, wall: float) -> dict[str, int]:
-        self._purge(wall)
-        return dict(self._exp)
-
-    def _purge(self, wall: float) -> None:
-        while self._heap and self._heap[0][0] + self.leeway_s <= wall:
-            self._exp.pop(heapq.heappop(self._heap)[1], None)
-
-
 class RedisBus(Bus):
+    unavailable = "redis unavailable"
+
     def __init__(self, cfg: ServerConfig, metrics: Metrics, node: str) -> None:
         super().__init__(node)
         self.cfg, self.metrics = cfg, metrics
@@ -117,8 +89,8 @@ class RedisBus(Bus):
         self._ctl = self.store.ctl_channel.encode()
         # Every burn this node knows (its own, heard, loaded), and its own: a Redis
         # restarted empty has lost the first, those burned while disconnected never went out.
-        self._burns = _Burns(cfg.replay_cache, cfg.token_leeway_s)
-        self._own = _Burns(cfg.replay_cache, cfg.token_leeway_s)
+        self._burns = Burns(cfg.replay_cache, cfg.token_leeway_s)
+        self._own = Burns(cfg.replay_cache, cfg.token_leeway_s)
         # Local players, (room, player) -> the number of the bus.joined() call that made
         # them (one counter, so "joined before that moment" is a comparison).
         self._seq = 0

@@ -16,6 +16,12 @@ still accepts connections and serves its local rooms (``docs/scale-out.md``).
 Lifecycle: :meth:`PosecastServer.start` binds, loads the engine in the engine thread
 and starts ticking; :meth:`PosecastServer.stop` stops accepting, says ``bye`` to
 everyone, waits up to ``drain_timeout_s`` for the writers to flush, then closes.
+
+With ``--workers N`` (N > 1) ``posecast serve`` is a supervisor
+(:mod:`posecast.online.shell.workers`) and each of its N worker processes runs one
+:class:`PosecastServer` given a :class:`WorkerRole`: it listens on the supervisor's
+port beside the others (``SO_REUSEPORT``), its bus is the node's relay (or Redis),
+and its ``/metrics`` answers for the whole node.
 """
 
 from __future__ import annotations
@@ -36,11 +42,14 @@ from dataclasses import dataclass
 from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.exceptions import ConnectionClosed
 from websockets.frames import CloseCode
+from websockets.http11 import Request, Response
 from websockets.protocol import State
 from websockets.typing import Subprotocol
 
 from posecast.errors import ConfigError, MalformedError, ProtocolError, TooLargeError
 from posecast.online.cluster.auto import create_bus
+from posecast.online.cluster.bus import default_node_id
+from posecast.online.cluster.local import RelayLink
 from posecast.online.config import ServerConfig
 from posecast.online.core.hub import Hub
 from posecast.online.core.ratelimit import SocketCount
@@ -63,6 +72,19 @@ _REFUSED_BY_CLOSE: dict[int, type[ProtocolError]] = {
 }
 
 
+@dataclass(frozen=True)
+class WorkerRole:
+    """A server that is worker ``index`` of ``posecast serve --workers N``: it shares
+    the port (``SO_REUSEPORT``) and reaches the other workers through the node's relay,
+    the Unix-domain socket ``relay``."""
+
+    index: int
+    relay: str
+
+
+WORKER_HEADER = "X-Posecast-Worker"  # which worker answered (only with --workers N > 1)
+
+
 @dataclass
 class _Client:
     ws: ServerConnection
@@ -79,10 +101,19 @@ class PosecastServer:
         cfg: ServerConfig,
         *,
         engine_factory: Callable[[], Engine | MultiEngine] | None = None,
+        role: WorkerRole | None = None,
     ) -> None:
-        self.cfg = cfg
+        self.cfg, self.role = cfg, role
         self.metrics = Metrics()
-        self.bus = create_bus(cfg, self.metrics, clock=time.monotonic)
+        self.link: RelayLink | None = None
+        if role is not None:
+            node = cfg.node_id or default_node_id()
+            self.link = RelayLink(
+                role.relay, node, str(role.index), render=self.metrics.render,
+                lost=lambda: self.relay_lost(),
+            )  # fmt: skip
+        self.relay_lost: Callable[[], None] = lambda: None  # the supervisor is gone
+        self.bus = create_bus(cfg, self.metrics, clock=time.monotonic, link=self.link)
         keys = cfg.key_set()
         self.metrics.token_keys.set(len(keys))
         self.hub = Hub(
@@ -92,9 +123,10 @@ class PosecastServer:
         self.bus.after = self._flush  # what other nodes sent lands in outboxes: wake writers
         self.http = HttpRoutes(
             cfg, self.metrics, self.hub, self.bus,
-            ready=lambda: self.ready,
+            ready=self._is_ready,
             open_connections=lambda: len(self._clients),
             clock=time.monotonic,
+            scrape=None if self.link is None else self.link.scrape,
         )  # fmt: skip
         self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="posecast-engine")
         self._engine_factory = engine_factory or self._default_engine
@@ -114,14 +146,18 @@ class PosecastServer:
         layouts, threads = self.cfg.served_layouts, self.cfg.engine_threads
         return load_multi_engine(ecfg, layouts, self.cfg.models_dir, threads, self.cfg.backend)
 
+    def _is_ready(self) -> bool:
+        """Serving; a worker also needs its link to the node's relay."""
+        return self.ready and (self.link is None or self.link.connected)
+
     # --- lifecycle ----------------------------------------------------------------------
 
     async def start(self) -> None:
         loop = asyncio.get_running_loop()
-        self._server = await self._listen(self.cfg.port)
-        if self.cfg.port == 0:
-            self._server = await self._one_port(self._server)
-        self.port = self._server.sockets[0].getsockname()[1]
+        if self.link is not None:
+            await self.link.connect()
+        else:
+            await self._bind()
         engine = await loop.run_in_executor(self.executor, self._engine_factory)
         if isinstance(engine, Engine):  # one model: its layout's batch only
             engine = MultiEngine({engine.layout.layout: engine})
@@ -155,10 +191,21 @@ class PosecastServer:
         # (the tiny-frames test, joined; docs/reliability.md "Collector pauses").
         gc.collect()
         gc.freeze()
+        if self.link is not None:
+            # A worker joins the port's listeners once it can serve: while it loads, the
+            # kernel hands new connections (a dead worker's players reconnecting) to the
+            # workers already serving, never to one that would answer 503.
+            await self._bind()
         self.ready = True
         log.info(
             "listening", extra={"host": self.cfg.host, "port": self.port, "node": self.bus.node}
         )
+
+    async def _bind(self) -> None:
+        self._server = await self._listen(self.cfg.port)
+        if self.cfg.port == 0 and self.role is None:
+            self._server = await self._one_port(self._server)
+        self.port = self._server.sockets[0].getsockname()[1]
 
     async def _listen(self, port: int) -> Server:
         return await serve(
@@ -181,7 +228,18 @@ class PosecastServer:
             max_queue=64,
             open_timeout=self.cfg.hello_timeout_s,
             close_timeout=self.cfg.close_timeout_s,
+            # A worker of --workers N shares the port with the others: the kernel spreads
+            # the connections over them (the supervisor holds the port bound meanwhile).
+            reuse_port=self.role is not None or None,
+            process_response=None if self.role is None else self._name_worker,
         )
+
+    def _name_worker(
+        self, connection: ServerConnection, request: Request, response: Response
+    ) -> None:
+        """Say which worker answered (the tests place players on two workers by it)."""
+        assert self.role is not None
+        response.headers[WORKER_HEADER] = str(self.role.index)
 
     async def _one_port(self, server: Server, tries: int = 5) -> Server:
         """With ``--port 0`` a host of several addresses (``""``: every IPv4 and IPv6
@@ -427,7 +485,13 @@ def binary_frames(batch: list[bytes]) -> bytes:
 
 
 async def serve_until_signal(cfg: ServerConfig, on_ready: Callable[[int], None]) -> None:
-    """``posecast serve``: run until SIGTERM or SIGINT, then shut down gracefully."""
+    """``posecast serve``: run until SIGTERM or SIGINT, then shut down gracefully. With
+    more than one worker, the supervisor of :mod:`posecast.online.shell.workers`."""
+    if cfg.worker_count > 1:
+        from posecast.online.shell.workers import supervise
+
+        await supervise(cfg, on_ready)
+        return
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):

@@ -8,8 +8,10 @@ passes, cheapest check first, so that a refused connection costs almost nothing
 ==========================  ============================================================
 ``/healthz``                200 while the process is up
 ``/readyz``                 200 once the engine is loaded and, with ``--redis``, the bus
-                            is up; 503 while starting, shutting down or cut off
-``/metrics``                Prometheus text (:mod:`posecast.online.metrics`)
+                            is up (a worker of ``--workers N``: and its link to the
+                            node's relay); 503 while starting, shutting down or cut off
+``/metrics``                Prometheus text (:mod:`posecast.online.metrics`); a worker
+                            of ``--workers N`` answers with the whole node's
 any other path              the WebSocket upgrade: 503 until ready; 429 past the
                             per-IP attempt rate (``conn_per_ip_per_min``) or once the
                             IP's fatal-error budget is spent (``fatal_per_ip_per_min``);
@@ -54,7 +56,7 @@ import json
 import logging
 import secrets
 import time
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from functools import cache
 from http import HTTPStatus
 from importlib import resources
@@ -111,28 +113,36 @@ class HttpRoutes:
         ready: Callable[[], bool],
         open_connections: Callable[[], int],
         clock: Callable[[], float],
+        scrape: Callable[[], Awaitable[bytes | None]] | None = None,
     ) -> None:
         self.cfg, self.metrics, self.hub, self.bus = cfg, metrics, hub, bus
         self._ready, self._open, self._clock = ready, open_connections, clock
+        self._scrape = scrape  # the whole node's metrics (a worker of --workers N)
         self.per_ip = IpLimiter(cfg.conn_per_ip_per_min)
         self.accepts = TokenBucket(cfg.accepts_per_s, cfg.accepts_per_s)
 
-    def __call__(self, connection: Peer, request: Request) -> Response | None:
+    def __call__(self, connection: Peer, request: Request) -> Response | Awaitable[Response] | None:
         path = request.path.split("?", 1)[0]
         if path == "/healthz":
             return connection.respond(200, "ok\n")
         if path == "/readyz":
             if self._ready() and not self.bus.healthy:
                 # The reason stays in the logs: its text may name internal hosts.
-                return connection.respond(503, "not ready: redis unavailable\n")
+                return connection.respond(503, f"not ready: {self.bus.unavailable}\n")
             return connection.respond(200, "ready\n") if self._ready() else _unavailable(connection)
         if path == "/metrics":
-            body = self.metrics.render()
-            headers = Headers([("Content-Type", CONTENT_TYPE), ("Content-Length", str(len(body)))])
-            return Response(200, "OK", headers, body)
+            if self._scrape is not None:
+                return self._node_metrics(self._scrape)
+            return _metrics_response(self.metrics.render())
         if handles(path):
             return respond(connection, request, self.cfg, self.hub.rooms)
         return self._upgrade(connection)
+
+    async def _node_metrics(self, scrape: Callable[[], Awaitable[bytes | None]]) -> Response:
+        """The node's scrape through the relay; this worker's own when the relay is
+        down or slow (its samples then carry no ``worker`` label)."""
+        body = await scrape()
+        return _metrics_response(body if body is not None else self.metrics.render())
 
     def _upgrade(self, connection: Peer) -> Response | None:
         refused = self.metrics.connects
@@ -155,6 +165,11 @@ class HttpRoutes:
             return _unavailable(connection)
         refused.labels("accepted").inc()
         return None  # go on with the WebSocket handshake
+
+
+def _metrics_response(body: bytes) -> Response:
+    headers = Headers([("Content-Type", CONTENT_TYPE), ("Content-Length", str(len(body)))])
+    return Response(200, "OK", headers, body)
 
 
 def peer_ip(connection: Peer) -> str:
