@@ -95,7 +95,9 @@ def test_bad_values_are_refused_once_at_the_edge(change: dict[str, object]) -> N
 def test_workers_is_a_number_or_auto_the_cpus_this_process_may_use() -> None:
     import os
 
-    assert ServerConfig(token_secret=SECRET).worker_count == len(os.sched_getaffinity(0))
+    assert ServerConfig(token_secret=SECRET).worker_count == 1  # the default: one process
+    auto = ServerConfig(token_secret=SECRET, workers="auto")
+    assert auto.worker_count == len(os.sched_getaffinity(0))
     assert ServerConfig(token_secret=SECRET, workers="3").worker_count == 3
     cfg = ServerConfig.from_sources({"POSECAST_TOKEN_SECRET": SECRET, "POSECAST_WORKERS": "1"})
     assert cfg.worker_count == 1

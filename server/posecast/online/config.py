@@ -83,10 +83,10 @@ class ServerConfig:
     host: str = _opt("127.0.0.1", "interface to bind (0.0.0.0 for all)")
     port: int = _opt(8765, "TCP port for WebSocket and HTTP (0: pick a free one)")
     workers: str = _opt(
-        "auto",
-        "serving processes on the port: a number (1: one process, as before multi-core "
-        "serving) or auto, the CPUs this process may run on; rooms span them "
-        "(docs/scale-out.md, Workers)",
+        "1",
+        "serving processes on the port: a number (1, the default: one process) or auto, "
+        "the CPUs this process may run on; rooms span them (docs/scale-out.md, Workers; "
+        "docs/engine.md, Capacity of a node: on 2-core AVX2 machines 1 holds more)",
     )
     token_secret: str = _opt(
         "", "HS256 key shared with the game backend (kid 'secret' in the key set)", repr=False
