@@ -44,12 +44,14 @@ def test_each_version_decodes_its_types_and_every_type_encodes() -> None:
 def test_v1_never_learns_the_v2_fields() -> None:
     v1 = {name: known for name, (known, _) in DECODERS[PROTOCOL_VERSION].items()}
     v2 = {name: known for name, (known, _) in DECODERS[PROTOCOL_V2].items()}
-    assert v2["hello"] - v1["hello"] == {"pose_rate_hz"}
-    assert v2["welcome"] - v1["welcome"] == {"pose_rate_hz"}
+    assert v2["hello"] - v1["hello"] == {"pose_rate_hz", "forecast_ms"}
+    assert v2["welcome"] - v1["welcome"] == {"pose_rate_hz", "forecast_ms"}
     assert v2["presence"] - v1["presence"] == {"handle", "skeleton"}
-    assert "pose" in v1 and "pose" not in v2 and {"poses", "skeleton", "resync"} <= set(v2)
+    assert "pose" in v1 and "pose" not in v2
+    assert {"poses", "skeleton", "resync", "forecast"} <= set(v2) and "forecast" not in v1
     assert FIELD_ORDER_V1["presence"] == ("event", "room", "player", "name")
     assert "pose_rate_hz" not in FIELD_ORDER_V1["hello"]
+    assert "forecast_ms" not in FIELD_ORDER_V1["hello"]
 
 
 @pytest.mark.parametrize(
