@@ -519,11 +519,12 @@ class Arena:
     to it from a process of their own (``tests/system/reliability/healthy_players.py``).
     Only the attacker runs in the test's process."""
 
-    def __init__(self, cfg: ServerConfig) -> None:
-        """The server and the healthy players' process run :func:`defended` (the
-        players above the server): whatever else runs on the machine, outside the
-        test, does not take their CPU, so what the arena measures is the hostile
-        traffic's cost, not the machine's other load."""
+    def __init__(self, cfg: ServerConfig, *, nice: int = 0) -> None:
+        """``nice``: the niceness of the server and the healthy players' process. A
+        negative one (where the test may set it: root, as in CI) keeps whatever else
+        runs on the machine, outside the test, from taking their CPU: what the arena
+        measures is the hostile traffic's cost, not the machine's other load."""
+        self._nice = nice
         # The tracker passes (head and hands on their trackers, the elbows' hinges) are
         # numpy run per tick, whose cost the engine benchmarks measure; what an arena
         # measures is whether hostile traffic reaches the healthy players, so it runs
@@ -547,7 +548,7 @@ class Arena:
                 "POSECAST_LAYOUTS": Layout.HMD3_WAIST.value,  # one model: a faster start
                 **({"POSECAST_TOKEN_KEYS": self.cfg.token_keys} if self.cfg.token_keys else {}),
             },
-            preexec_fn=defended,
+            preexec_fn=self._renice,
         )
         if split:  # this process, the attackers it starts and the healthy players
             os.sched_setaffinity(0, split[1])
@@ -557,7 +558,7 @@ class Arena:
             self._players = subprocess.Popen(
                 [sys.executable, "-m", "tests.system.reliability.healthy_players", str(self.port)],
                 cwd=REPO, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-                preexec_fn=defended_players,
+                preexec_fn=self._renice,
             )  # fmt: skip
             assert self._players.stdout is not None
             line = self._players.stdout.readline()
@@ -568,6 +569,11 @@ class Arena:
             self.__exit__()
             raise
         return self
+
+    def _renice(self) -> None:
+        if self._nice:
+            with contextlib.suppress(PermissionError):
+                os.nice(self._nice)
 
     def __exit__(self, *exc: object) -> None:
         os.sched_setaffinity(0, self._affinity)
@@ -738,41 +744,7 @@ def main(argv: list[str] | None = None) -> None:
 
 
 ATTACKER_NICE = 10
-SERVER_RR_PRIORITY = 10
-PLAYERS_RR_PRIORITY = 20  # above the server's: they stand for machines of their own
 T = TypeVar("T")
-
-
-def defended(priority: int = SERVER_RR_PRIORITY) -> None:
-    """Give the calling process (a ``preexec_fn``: the server; the healthy players and
-    a probe with :func:`defended_players`) the CPU before anything else that runs on
-    the machine: the round-robin real-time class at ``priority`` where the test may
-    set it (root, as in CI), else niceness -5, else nothing. Their threads inherit it;
-    attackers stay in the normal class at :data:`ATTACKER_NICE`.
-
-    Why: on these 2-core machines a ``/healthz`` answer of 75 ms was found to be
-    28 ms of the server's CPU and 46 ms of waiting for a core that other processes
-    (another session's test run) held, at niceness -5 too; in the real-time class the
-    server's slowest pass of its loop over the same flood was under 30 ms. In the field
-    the attacker's CPU and everything else are on other machines; the kernel still
-    keeps 5 % of each core for the normal class (``sched_rt_runtime_us``), so a
-    runaway server cannot lock the machine."""
-    try:
-        os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(priority))
-    except PermissionError:
-        with contextlib.suppress(PermissionError):
-            os.nice(-5)
-
-
-def defended_players() -> None:
-    """:func:`defended` above the server: the players and probes are clients on
-    machines of their own in the field, so the server's threads (which may run on
-    either core) must not hold them up. At the server's own real-time priority a
-    player process woken while a server thread ran on its core waited for that thread
-    (round-robin does not preempt an equal priority): its frames then left in bursts,
-    and the server superseded 5 % of them (``posecast_frames_dropped_total``), the
-    pose rate at 0.94-0.96 of baseline."""
-    defended(PLAYERS_RR_PRIORITY)
 
 
 def as_attacker(fn: Callable[[], T]) -> T:
