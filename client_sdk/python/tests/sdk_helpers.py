@@ -16,15 +16,17 @@ import signal
 import subprocess
 import sys
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import AsyncIterable, AsyncIterator, Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import pytest
 
 import posecast_client as pc
 from posecast_client import mint_token
+
+T = TypeVar("T")
 
 REPO = Path(__file__).resolve().parents[3]
 DATA = Path(__file__).resolve().parent / "data"
@@ -159,3 +161,12 @@ class EventLog:
 
     def stop(self) -> None:
         self._task.cancel()
+
+
+async def for_seconds(source: AsyncIterable[T], seconds: float) -> AsyncIterator[T]:
+    """``source``'s items for ``seconds`` of the running loop's time, then stop."""
+    end = asyncio.get_running_loop().time() + seconds
+    async for s in source:
+        if asyncio.get_running_loop().time() >= end:
+            return
+        yield s

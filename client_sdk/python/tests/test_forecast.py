@@ -14,21 +14,13 @@ import numpy as np
 import pytest
 
 import posecast_client as pc
-from sdk_helpers import DevServer, EventLog
+from sdk_helpers import DevServer, EventLog, for_seconds
 
 TICK = 1 / 60
 
 
 def run(coro: Coroutine[Any, Any, None], timeout_s: float = 60.0) -> None:
     asyncio.run(asyncio.wait_for(coro, timeout_s))
-
-
-async def _for(source: pc.ReplaySource, seconds: float) -> Any:
-    end = asyncio.get_running_loop().time() + seconds
-    async for s in source:
-        if asyncio.get_running_loop().time() >= end:
-            return
-        yield s
 
 
 def _poses(events: list[pc.Event], player: str) -> dict[int, pc.Pose]:
@@ -58,13 +50,13 @@ def test_a_forecast_client_gets_poses_predicted_4_ticks_ahead(
             assert w.forecast_ms == pytest.approx(4000 / 60)
             logs = EventLog(now), EventLog(ahead)
             source = pc.WalkSource(seconds=10.0, seed=3)
-            await ada.stream(_for(source, 3.0))
+            await ada.stream(for_seconds(source, 3.0))
             await asyncio.sleep(0.3)
             on_until = len(logs[1].events)
             await ahead.set_forecast(0.0)  # off: the poses of their own tick again
             await asyncio.sleep(0.3)
             off_from = len(logs[1].events)
-            await ada.stream(_for(source, 1.0))
+            await ada.stream(for_seconds(source, 1.0))
             await asyncio.sleep(0.3)
             for log in logs:
                 log.stop()

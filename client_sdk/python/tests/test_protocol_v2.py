@@ -23,7 +23,7 @@ from websockets.typing import Subprotocol
 import posecast_client as pc
 from posecast_client.cli import sim
 from posecast_client.codec import decode, encode
-from sdk_helpers import DevServer, EventLog
+from sdk_helpers import DevServer, EventLog, for_seconds
 
 DATA = Path(__file__).parent / "data"
 
@@ -58,7 +58,7 @@ def test_v2_poses_match_the_v1_ones_within_the_bounds(dev_server: DevServer, uid
             assert all(m.avatar_id is not None and m.skeleton is not None for m in w_new.members)
             logs = EventLog(new), EventLog(old)
             source = pc.BvhReplaySource(DATA / "walk_cmu_mb.bvh", loop=True)
-            streaming = asyncio.create_task(ada.stream(_for(source, 3.0)))
+            streaming = asyncio.create_task(ada.stream(for_seconds(source, 3.0)))
             await streaming
             await asyncio.sleep(0.3)
             for log in logs:
@@ -79,14 +79,6 @@ def test_v2_poses_match_the_v1_ones_within_the_bounds(dev_server: DevServer, uid
             assert new.stats.bad_records == 0
 
     run(main())
-
-
-async def _for(source: pc.ReplaySource, seconds: float) -> Any:
-    end = asyncio.get_running_loop().time() + seconds
-    async for s in source:
-        if asyncio.get_running_loop().time() >= end:
-            return
-        yield s
 
 
 def test_sim_reports_bytes_per_pose(
