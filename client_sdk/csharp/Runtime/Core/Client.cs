@@ -21,48 +21,19 @@
 // Threads: one receive task per connection and one pinger (clock sync: four pings
 // after each join, then one every PingIntervalS) run on the thread pool. Events wait
 // in a bounded queue; a Unity Update drains it with TryGetEvent.
+//
+// Around it: ClientOptions.cs (the options), ConnectChecks.cs (the arguments checked
+// before dialing, connect failures named), Transport.cs (dialing, whole messages
+// read) and EventQueue.cs (the bounded event queue and the error that ended the session).
 
 using System;
-using System.Collections.Generic;
 using System.Diagnostics;
-using System.Net.Sockets;
 using System.Net.WebSockets;
-using System.Security.Authentication;
-using System.Text.RegularExpressions;
 using System.Threading;
 using System.Threading.Tasks;
 
 namespace Posecast.Client
 {
-    /// <summary>The options of a PosecastClient, with their defaults.</summary>
-    public sealed class ClientOptions
-    {
-        /// <summary>
-        /// Called at every join for a fresh token (else the token given to ConnectAsync). One
-        /// that throws gives TokenProviderException (InnerException: what it threw), retried on
-        /// a rejoin like a lost connection; one that returns no token, ConfigInvalidException,
-        /// which ends the session.
-        /// </summary>
-        public Func<string> TokenProvider;
-        /// <summary>Protocol versions offered, best first ({2, 1}); {1} pins posecast.v1.</summary>
-        public int[] Versions = { Protocol.V2, Protocol.V1 };
-        public bool Reconnect = true;
-        public double BackoffInitialS = 0.25;
-        public double BackoffMaxS = 8.0;
-        /// <summary>Give up after this many failed attempts in a row (null: never).</summary>
-        public int? MaxReconnectAttempts;
-        /// <summary>Seconds between clock-sync pings (2; 0 turns pings off).</summary>
-        public double PingIntervalS = 2.0;
-        public double OpenTimeoutS = 5.0;
-        public double JoinTimeoutS = 5.0;
-        /// <summary>Events kept before the oldest are dropped (4096).</summary>
-        public int MaxEvents = 4096;
-        /// <summary>seq of the first frame (0).</summary>
-        public long Seq0;
-        /// <summary>The largest WebSocket message read; beyond it a message is skipped as TOO_LARGE.</summary>
-        public int MaxReceiveBytes = 65536;
-    }
-
     public sealed class PosecastClient : IDisposable
     {
         private static readonly Stopwatch Mono = Stopwatch.StartNew();
@@ -75,18 +46,17 @@ namespace Posecast.Client
         public readonly ClientSession Session;
         private readonly string _token;
         private readonly object _lock = new object();
-        private readonly Queue<ClientEvent> _events = new Queue<ClientEvent>();
+        private readonly EventQueue _events;
         private readonly SemaphoreSlim _sendLock = new SemaphoreSlim(1, 1);
-        private readonly SemaphoreSlim _wake = new SemaphoreSlim(0, int.MaxValue);
         private readonly Random _rng = new Random();
         private readonly CancellationTokenSource _closing = new CancellationTokenSource();
         private ClientWebSocket _ws;
         private int _urlIndex;
         private Func<Hello> _hello;
         private double? _forecastMs;  // v2: the forecast asked for (kept for a reconnect's hello)
-        private Exception _failure;
         private volatile bool _joined;
         private Task _runTask, _pingTask;
+        private readonly Action _tooLarge;  // Transport's report of a message over MaxReceiveBytes
 
         private PosecastClient(string[] urls, string token, ClientOptions options)
         {
@@ -94,6 +64,8 @@ namespace Posecast.Client
             _token = token;
             Options = options ?? new ClientOptions();
             Session = new ClientSession(Options.Seq0);
+            _events = new EventQueue(Options, Session.Stats);
+            _tooLarge = OnTooLarge;
         }
 
         /// <summary>
@@ -111,11 +83,11 @@ namespace Posecast.Client
 
         public static async Task<PosecastClient> ConnectAsync(string[] urls, string token, ClientOptions options = null)
         {
-            if (urls == null || urls.Length == 0) throw new ConfigInvalidException("no server URL", "pass one, such as " + ExampleUrl);
+            if (urls == null || urls.Length == 0) throw new ConfigInvalidException("no server URL", "pass one, such as " + ConnectChecks.ExampleUrl);
             var checkedUrls = new string[urls.Length]; // what the client keeps and dials: trimmed
-            for (int i = 0; i < urls.Length; i++) checkedUrls[i] = CheckUrl(urls[i]);
+            for (int i = 0; i < urls.Length; i++) checkedUrls[i] = ConnectChecks.CheckUrl(urls[i]);
             if ((options == null || options.TokenProvider == null) && string.IsNullOrWhiteSpace(token))
-                throw new ConfigInvalidException("no token (got " + What(token) + ")", TokenHint);
+                throw new ConfigInvalidException("no token (got " + ConnectChecks.What(token) + ")", ConnectChecks.TokenHint);
             var c = new PosecastClient(checkedUrls, token, options);
             for (int i = 0; i < urls.Length; i++)
             {
@@ -126,19 +98,6 @@ namespace Posecast.Client
             return c;
         }
 
-        // --- checking the arguments, naming failures -------------------------------------
-
-        private const string ExampleUrl = "ws://127.0.0.1:8765/";
-        private const string TokenHint = "pass the join token: a string your backend minted (DevTokens.Mint for a dev "
-                                         + "server), or set Options.TokenProvider; an unset environment variable?";
-        private const string RunningHint = "is a posecast server running there, and reachable from here? "
-                                           + "`posecast serve --dev` starts one";
-
-        private static string What(string value)
-        {
-            return value == null ? "null" : value.Length == 0 ? "an empty string" : "a blank string";
-        }
-
         /// <summary>
         /// `url` without leading or trailing whitespace (what the client keeps in Urls and
         /// dials), if the client can dial it: ws:// or wss:// (any case), a host, a port from
@@ -146,85 +105,7 @@ namespace Posecast.Client
         /// Throws ConfigInvalidException otherwise, with a hint (an http:// URL: its ws://
         /// twin; host:port: the ws:// URL).
         /// </summary>
-        public static string CheckUrl(string url)
-        {
-            if (string.IsNullOrWhiteSpace(url))
-                throw new ConfigInvalidException("no server URL (got " + What(url) + ")",
-                    "pass the server's WebSocket URL, such as " + ExampleUrl + "; an unset environment variable?");
-            string text = url.Trim();
-            var m = Regex.Match(text, "^([A-Za-z][A-Za-z0-9+.-]*):(//)?");
-            string scheme = m.Success ? m.Groups[1].Value.ToLowerInvariant() : "";
-            bool slashes = m.Success && m.Groups[2].Success;
-            string quoted = "'" + url + "'";
-            if ((scheme == "http" || scheme == "https") && slashes)
-                throw new ConfigInvalidException(quoted + " is an HTTP URL, not a WebSocket one",
-                    "use " + (scheme == "http" ? "ws" : "wss") + text.Substring(scheme.Length));
-            if ((scheme != "ws" && scheme != "wss") || !slashes)
-            {
-                bool hostPort = !text.Contains("://") && scheme != "ws" && scheme != "wss" && scheme != "http" && scheme != "https";
-                throw new ConfigInvalidException(quoted + " is not a WebSocket URL: it must start with ws:// (wss:// behind TLS)",
-                    hostPort ? "did you mean ws://" + text + (text.Contains("/") ? "" : "/") + "?" : "such as " + ExampleUrl);
-            }
-            string authority = Regex.Match(text.Substring(scheme.Length + 3), "^[^/?#]*").Value;
-            string hostPortText = authority.Substring(authority.LastIndexOf('@') + 1);
-            int bracket = hostPortText.StartsWith("[", StringComparison.Ordinal) ? hostPortText.IndexOf(']') + 1 : 0;
-            int colon = hostPortText.IndexOf(':', bracket);
-            string host = colon < 0 ? hostPortText : hostPortText.Substring(0, colon);
-            string port = colon < 0 ? "" : hostPortText.Substring(colon + 1);
-            if (host.Length == 0 || host == "[]") throw new ConfigInvalidException(quoted + " names no host", "such as " + ExampleUrl);
-            int p;
-            if (port.Length > 0 && !(Regex.IsMatch(port, "^[0-9]{1,5}$") && int.TryParse(port, out p) && p >= 1 && p <= 65535))
-                throw new ConfigInvalidException(quoted + " has a bad port (" + port + ")", "a port is a number from 1 to 65535");
-            if (text.Contains("#"))
-                throw new ConfigInvalidException(quoted + " has a #fragment, which a WebSocket URL may not", "leave out the # and what follows it");
-            Uri uri;
-            if (!Uri.TryCreate(text, UriKind.Absolute, out uri))
-                throw new ConfigInvalidException(quoted + " is not a usable URL", "such as " + ExampleUrl);
-            return text;
-        }
-
-        /// <summary>The ConnectFailedException for what opening `url` threw: reason, hint, HTTP status.</summary>
-        internal static ConnectFailedException ConnectFailure(string url, Exception e, double openTimeoutS)
-        {
-            var socket = Find<SocketException>(e);
-            string text = "";
-            for (var x = e; x != null; x = x.InnerException) text += " " + x.Message;
-            var status = Regex.Match(text, "status code '([0-9]{3})'");
-            if (e is OperationCanceledException || e is TimeoutException)
-                return new ConnectFailedException(url, "no WebSocket handshake within " + openTimeoutS + " s",
-                    "is the host reachable from here (a firewall, a VPN)? Options.OpenTimeoutS allows longer", null, e);
-            if (status.Success)
-            {
-                int code = int.Parse(status.Groups[1].Value);
-                string hint = code == 429 ? "this address connected (or broke the protocol) too often: back off, try again later"
-                            : code == 503 ? "the server is starting, busy or full: try again in a moment, with back-off"
-                            : "is the URL a posecast WebSocket endpoint, such as " + ExampleUrl + "?";
-                return new ConnectFailedException(url, "the server refused the WebSocket upgrade with HTTP " + code, hint, code, e);
-            }
-            if (socket != null && socket.SocketErrorCode == SocketError.ConnectionRefused)
-                return new ConnectFailedException(url, "connection refused (nothing listens at that port)", RunningHint, null, e);
-            if (socket != null && (socket.SocketErrorCode == SocketError.HostNotFound || socket.SocketErrorCode == SocketError.TryAgain
-                                   || socket.SocketErrorCode == SocketError.NoData))
-                return new ConnectFailedException(url, "the host name does not resolve (" + socket.Message + ")",
-                    "check the host in the URL, and this machine's network", null, e);
-            if (Find<AuthenticationException>(e) != null)
-                return new ConnectFailedException(url, "TLS failed (" + Find<AuthenticationException>(e).Message + ")",
-                    "does the server speak TLS at that port, with a certificate trusted here? one without TLS takes ws://", null, e);
-            // Mono says only "Unable to connect to the remote server", for a refused upgrade too.
-            return new ConnectFailedException(url, (socket ?? e).Message, RunningHint + "; a server refusing the upgrade "
-                + "(HTTP 429: this address connects too often, 503: starting or full) ends so here too: back off and retry", null, e);
-        }
-
-        private static void Observe(Task task)
-        {
-            task.ContinueWith(t => t.Exception, TaskContinuationOptions.OnlyOnFaulted);
-        }
-
-        private static TE Find<TE>(Exception e) where TE : Exception
-        {
-            for (var x = e; x != null; x = x.InnerException) if (x is TE) return (TE)x;
-            return null;
-        }
+        public static string CheckUrl(string url) { return ConnectChecks.CheckUrl(url); }
 
         // --- state -------------------------------------------------------------------
 
@@ -249,41 +130,8 @@ namespace Posecast.Client
 
         private async Task<ClientWebSocket> OpenAsync()
         {
-            var ws = new ClientWebSocket();
-            foreach (var v in Options.Versions) ws.Options.AddSubProtocol(Protocol.Subprotocol(v));
-            try
-            {
-                var limit = TimeSpan.FromSeconds(Options.OpenTimeoutS);
-                using (var cts = new CancellationTokenSource(limit))
-                using (var timer = new CancellationTokenSource())
-                {
-                    var connect = ws.ConnectAsync(new Uri(Url), cts.Token);
-                    // Mono's ClientWebSocket stops heeding the token once TCP is up: a server
-                    // that never answers the upgrade would hold ConnectAsync for good. Race a timer.
-                    if (await Task.WhenAny(connect, Task.Delay(limit, timer.Token)).ConfigureAwait(false) != connect)
-                    {
-                        Observe(connect); // it ends when the server hangs up, if ever
-                        throw new TimeoutException("no WebSocket handshake in time");
-                    }
-                    timer.Cancel();
-                    await connect.ConfigureAwait(false);
-                }
-            }
-            catch (Exception e) when (e is WebSocketException || e is System.IO.IOException || e is SocketException
-                                      || e is OperationCanceledException || e is AuthenticationException
-                                      || e is TimeoutException)
-            {
-                ws.Abort();
-                ws.Dispose();
-                throw ConnectFailure(Url, e, Options.OpenTimeoutS);
-            }
-            int version = ws.SubProtocol == Protocol.SubprotocolV2 ? Protocol.V2
-                        : ws.SubProtocol == Protocol.SubprotocolV1 ? Protocol.V1 : 0;
-            if (version == 0 || Array.IndexOf(Options.Versions, version) < 0)
-            {
-                ws.Abort();
-                throw new VersionUnsupportedException("the server selected no posecast subprotocol we offered (" + ws.SubProtocol + ")");
-            }
+            var ws = await Transport.OpenAsync(Url, Options).ConfigureAwait(false);
+            int version = Transport.VersionOf(ws);
             lock (_lock) Session.Connected(version);
             return ws;
         }
@@ -300,7 +148,7 @@ namespace Posecast.Client
                 }
             }
             if (string.IsNullOrWhiteSpace(token))
-                throw new ConfigInvalidException("the TokenProvider returned " + What(token), "it must return the join token, a non-empty string");
+                throw new ConfigInvalidException("the TokenProvider returned " + ConnectChecks.What(token), "it must return the join token, a non-empty string");
             Hello hello;
             lock (_lock) { hello = _hello(); hello.Token = token; }
             try
@@ -311,7 +159,7 @@ namespace Posecast.Client
                     cts.CancelAfter(TimeSpan.FromSeconds(Options.JoinTimeoutS));
                     while (true)
                     {
-                        byte[] data = await ReceiveMessageAsync(ws, cts.Token).ConfigureAwait(false);
+                        byte[] data = await Transport.ReceiveMessageAsync(ws, Options, _tooLarge, cts.Token).ConfigureAwait(false);
                         if (data == null) throw new ConnectionLostException(Url + " closed the connection during the join");
                         Received r;
                         lock (_lock) r = Session.Receive(data, Now);
@@ -319,7 +167,7 @@ namespace Posecast.Client
                         if (reply is Exception) throw (Exception)reply;
                         if (reply is Welcome)
                         {
-                            foreach (var e in r.Events) Push(e);
+                            foreach (var e in r.Events) _events.Push(e);
                             return (Welcome)reply;
                         }
                     }
@@ -380,7 +228,7 @@ namespace Posecast.Client
                 _joined = false;
                 try { ws.Dispose(); } catch (Exception) { }
                 if (_closing.IsCancellationRequested) return;
-                if (!(Options.Reconnect && ClientSession.IsRetryable(cause))) { Fail(cause); return; }
+                if (!(Options.Reconnect && ClientSession.IsRetryable(cause))) { _events.Fail(cause); return; }
                 ws = await ReconnectAsync(cause).ConfigureAwait(false);
                 if (ws == null) return;
                 _ws = ws;
@@ -395,11 +243,11 @@ namespace Posecast.Client
             {
                 while (true)
                 {
-                    byte[] data = await ReceiveMessageAsync(ws, _closing.Token).ConfigureAwait(false);
+                    byte[] data = await Transport.ReceiveMessageAsync(ws, Options, _tooLarge, _closing.Token).ConfigureAwait(false);
                     if (data == null) break;
                     Received r;
                     lock (_lock) r = Session.Receive(data, Now);
-                    foreach (var e in r.Events) Push(e);
+                    foreach (var e in r.Events) _events.Push(e);
                     if (r.Reply != null) await TrySendAsync(ws, r.Reply).ConfigureAwait(false);
                     if (r.End != null && cause == null) cause = r.End; // the server closes right after
                 }
@@ -412,42 +260,11 @@ namespace Posecast.Client
             return cause ?? new ConnectionLostException("connection closed");
         }
 
-        /// <summary>One whole message, or null when the server closed. Oversized ones are skipped.</summary>
-        private async Task<byte[]> ReceiveMessageAsync(ClientWebSocket ws, CancellationToken ct)
+        /// <summary>A message over MaxReceiveBytes was skipped: counted and reported as a Bad event.</summary>
+        private void OnTooLarge()
         {
-            var buf = new byte[8192];
-            while (true)
-            {
-                int len = 0;
-                bool tooLarge = false;
-                WebSocketReceiveResult res;
-                do
-                {
-                    if (len == buf.Length)
-                    {
-                        if (buf.Length < Options.MaxReceiveBytes) Array.Resize(ref buf, Math.Min(buf.Length * 2, Options.MaxReceiveBytes));
-                        else { tooLarge = true; len = 0; } // keep reading, keep nothing
-                    }
-                    res = await ws.ReceiveAsync(new ArraySegment<byte>(buf, len, buf.Length - len), ct).ConfigureAwait(false);
-                    if (res.MessageType == WebSocketMessageType.Close) return null;
-                    len += res.Count;
-                } while (!res.EndOfMessage);
-                if (res.MessageType == WebSocketMessageType.Text)
-                {
-                    try { await ws.CloseOutputAsync(WebSocketCloseStatus.InvalidMessageType, "text", CancellationToken.None).ConfigureAwait(false); }
-                    catch (Exception) { }
-                    throw new WebSocketException("the server sent a text message");
-                }
-                if (tooLarge)
-                {
-                    lock (_lock) Session.Stats.BadMessages++;
-                    Push(new ClientEvent { Kind = EventKind.Bad, Cause = new TooLargeException("a message over " + Options.MaxReceiveBytes + " bytes") });
-                    continue;
-                }
-                var data = new byte[len];
-                Buffer.BlockCopy(buf, 0, data, 0, len);
-                return data;
-            }
+            lock (_lock) Session.Stats.BadMessages++;
+            _events.Push(new ClientEvent { Kind = EventKind.Bad, Cause = new TooLargeException("a message over " + Options.MaxReceiveBytes + " bytes") });
         }
 
         private async Task<ClientWebSocket> ReconnectAsync(Exception cause)
@@ -456,10 +273,10 @@ namespace Posecast.Client
             while (!_closing.IsCancellationRequested)
             {
                 attempt++;
-                if (Options.MaxReconnectAttempts.HasValue && attempt > Options.MaxReconnectAttempts.Value) { Fail(cause); return null; }
+                if (Options.MaxReconnectAttempts.HasValue && attempt > Options.MaxReconnectAttempts.Value) { _events.Fail(cause); return null; }
                 double delay;
                 lock (_lock) delay = ClientSession.BackoffDelay(attempt, Options.BackoffInitialS, Options.BackoffMaxS, _rng);
-                Push(new ClientEvent { Kind = EventKind.Reconnecting, Attempt = attempt, DelayS = delay, Cause = cause });
+                _events.Push(new ClientEvent { Kind = EventKind.Reconnecting, Attempt = attempt, DelayS = delay, Cause = cause });
                 try { await Task.Delay(TimeSpan.FromSeconds(delay), _closing.Token).ConfigureAwait(false); }
                 catch (OperationCanceledException) { return null; }
                 _urlIndex = (_urlIndex + 1) % Urls.Length;
@@ -476,7 +293,7 @@ namespace Posecast.Client
                     if (ws != null) { try { ws.Abort(); ws.Dispose(); } catch (Exception) { } }
                     if (_closing.IsCancellationRequested) return null;
                     if (e is OperationCanceledException) e = new TimeoutException("no welcome in time");
-                    if (!ClientSession.IsRetryable(e)) { Fail(e); return null; }
+                    if (!ClientSession.IsRetryable(e)) { _events.Fail(e); return null; }
                     cause = e;
                 }
             }
@@ -511,27 +328,11 @@ namespace Posecast.Client
             return ws == null ? Task.FromResult(false) : TrySendAsync(ws, new Ping { T0 = Now });
         }
 
-        private void Push(ClientEvent e)
-        {
-            lock (_events)
-            {
-                if (_events.Count >= Options.MaxEvents) { _events.Dequeue(); Session.Stats.EventsDropped++; }
-                _events.Enqueue(e);
-            }
-            _wake.Release();
-        }
-
-        private void Fail(Exception cause)
-        {
-            _failure = cause;
-            _wake.Release();
-        }
-
         // --- the application's side -------------------------------------------------------
 
         private void CheckUsable()
         {
-            if (_failure != null) throw _failure;
+            if (_events.Failure != null) throw _events.Failure;
             if (_closing.IsCancellationRequested) throw new ClientClosedException("the client is closed");
             if (_hello == null) throw new InvalidOperationException("JoinAsync first");
         }
@@ -618,28 +419,12 @@ namespace Posecast.Client
         }
 
         /// <summary>The next event if one is waiting (for a game loop). Throws the error that ended the session.</summary>
-        public bool TryGetEvent(out ClientEvent e)
-        {
-            lock (_events)
-            {
-                if (_events.Count > 0) { e = _events.Dequeue(); return true; }
-            }
-            e = null;
-            if (_failure != null) throw _failure;
-            return false;
-        }
+        public bool TryGetEvent(out ClientEvent e) { return _events.TryGet(out e); }
 
         /// <summary>The next event, waiting for it; null after CloseAsync or when `ct` is cancelled.</summary>
         public async Task<ClientEvent> NextEventAsync(CancellationToken ct = default(CancellationToken))
         {
-            while (true)
-            {
-                ClientEvent e;
-                if (TryGetEvent(out e)) return e;
-                if (_closing.IsCancellationRequested || ct.IsCancellationRequested) return null;
-                try { await _wake.WaitAsync(250, ct).ConfigureAwait(false); }
-                catch (OperationCanceledException) { return null; }
-            }
+            return await _events.NextAsync(_closing.Token, ct).ConfigureAwait(false);
         }
 
         /// <summary>Say bye and close. The server refuses this token afterwards (replay guard).</summary>
@@ -666,7 +451,7 @@ namespace Posecast.Client
                 try { await Task.WhenAny(t, Task.Delay(3000)).ConfigureAwait(false); } catch (Exception) { }
             }
             if (ws != null) { try { ws.Abort(); ws.Dispose(); } catch (Exception) { } }
-            _wake.Release();
+            _events.Wake();
         }
 
         public void Dispose() { CloseAsync().Wait(5000); }
