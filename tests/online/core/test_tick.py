@@ -108,3 +108,45 @@ def test_a_client_faster_than_the_tick_that_never_said_so_gets_its_newest_frame(
     inbox.frame("flush", _frame(seq["flush"]))
     inbox.frame("flush", _frame(seq["flush"] + 1))
     assert inbox.take().frames["flush"].seq == seq["flush"]
+
+
+def test_a_standing_backlog_is_drained_one_frame_after_half_a_second() -> None:
+    """One bunch, then a frame every tick: without a gap every later frame would wait
+    a tick more for good. After STANDING_TICKS takes that left a frame waiting, one
+    take supersedes the oldest and steps the next: back to the newest frame."""
+    from posecast.online.core.tick import STANDING_TICKS
+
+    inbox = EngineInbox()
+    inbox.joined("p", seed=0, layout=Layout.HMD3_WAIST)
+    inbox.frame("p", _frame(0))
+    seq, behind, drained = 1, [], 0
+    for _ in range(2 * STANDING_TICKS + 5):
+        inbox.frame("p", _frame(seq))
+        seq += 1
+        tick = inbox.take()
+        drained += tick.drained
+        behind.append(seq - 1 - tick.frames["p"].seq)
+    assert behind[: STANDING_TICKS - 1] == [1] * (STANDING_TICKS - 1)
+    assert drained == 1 and behind[STANDING_TICKS - 1 :] == [0] * (STANDING_TICKS + 6)
+
+
+def test_a_backlog_that_clears_by_itself_loses_nothing() -> None:
+    """A gap (a frame that came late) just before the backlog has stood
+    STANDING_TICKS takes clears it: the count starts again, nothing is superseded."""
+    from posecast.online.core.tick import STANDING_TICKS
+
+    inbox = EngineInbox()
+    inbox.joined("p", seed=0, layout=Layout.HMD3_WAIST)
+    seq, stepped, drained = 0, [], 0
+    for k in range(4 * STANDING_TICKS):
+        # Every STANDING_TICKS ticks: a bunch of two, a frame a tick, a gap at the end.
+        phase = k % STANDING_TICKS
+        n = 2 if phase == 0 else (0 if phase == STANDING_TICKS - 1 else 1)
+        for _ in range(n):
+            inbox.frame("p", _frame(seq))
+            seq += 1
+        tick = inbox.take()
+        drained += tick.drained
+        if "p" in tick.frames:
+            stepped.append(tick.frames["p"].seq)
+    assert drained == 0 and stepped == list(range(len(stepped)))

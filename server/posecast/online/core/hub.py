@@ -130,6 +130,8 @@ class Hub:
 
     def take_tick_input(self) -> TickInput:
         inp = self.inbox.take()
+        if inp.drained:
+            self.metrics.frames_dropped.labels("superseded").inc(inp.drained)
         inp.horizons = self.router.horizons()
         return inp
 

@@ -13,7 +13,11 @@ in one tick and none in the next; with one slot the older would be lost and the 
 tick would hold: a pose missing from the stream and a hitch on every avatar that
 watches. With two, both are stepped, the second one tick later; the queue drains at
 the next gap. Past its depth the oldest waiting frame is superseded (latest wins,
-counted as dropped), so the added latency is one tick at most. A client that
+counted as dropped). A backlog that stands (a frame still waiting after each take
+for :data:`STANDING_TICKS` ticks in a row: one bunch, then frames one a tick, so
+every later frame waits a tick more until one comes late) is drained: that take
+supersedes the oldest waiting frame and steps the next, one frame for half a second
+of standing delay. A client that
 announces more frames per second than the tick rate (``hello.rate_hz``: a 72, 90 or
 120 Hz headset) would keep the queue full for good, one tick behind: it gets a queue
 of one, the newest frame, as every client did before the queue. So does a client that
@@ -43,6 +47,7 @@ from posecast.tracking.layouts import Layout, PlayerLayout
 
 RATE_WINDOW_TICKS = 60  # the window the arrival rate of unannounced fast clients is read over
 FAST_FRAMES_PER_TICK = 1.1  # 66 Hz at a 60 Hz tick: above any 60 Hz client's jitter or drift
+STANDING_TICKS = 30  # ticks a backlog may stand before a take drains one frame (0.5 s at 60 Hz)
 
 
 class EngineOpKind(StrEnum):
@@ -70,6 +75,7 @@ class EngineOp:
 class TickInput:
     ops: list[EngineOp]
     frames: dict[str, TrackerFrame]  # each player's oldest waiting frame
+    drained: int = 0  # frames superseded by this take: backlogs that stood (STANDING_TICKS)
     # The forecasts its room's clients asked for, per player: frames ahead (none: {}).
     horizons: dict[str, frozenset[int]] = field(default_factory=dict)
 
@@ -101,6 +107,7 @@ class EngineInbox:
         self._window = 0  # ticks taken in this rate window
         self._over: set[str] = set()  # sent faster than the tick over the last window
         self._fast: set[str] = set()  # ... and the one before it
+        self._standing: dict[str, int] = {}  # takes in a row that left a frame waiting
 
     def joined(
         self, player: str, seed: int, layout: PlayerLayout, queue: int | None = None
@@ -133,6 +140,7 @@ class EngineInbox:
         self._frames.pop(player, None)
         self._depth.pop(player, None)
         self._arrived.pop(player, None)
+        self._standing.pop(player, None)
         self._fast.discard(player)
         self._over.discard(player)
         if player in self._in_engine:
@@ -149,11 +157,21 @@ class EngineInbox:
             self._window = 0
         ops, self._ops = self._ops, []
         frames = {}
+        drained = 0
         for player, queue in list(self._frames.items()):
+            if len(queue) > 1:  # a frame will still wait after this take
+                standing = self._standing.get(player, 0) + 1
+                if standing >= STANDING_TICKS:
+                    queue.popleft()
+                    drained += 1
+                    standing = 0
+                self._standing[player] = standing
+            elif player in self._standing:
+                del self._standing[player]
             frames[player] = queue.popleft()
             if not queue:
                 del self._frames[player]
-        return TickInput(ops, frames)
+        return TickInput(ops, frames, drained=drained)
 
     def _enter(self, player: str) -> None:
         waiting = self._waiting.pop(player, None)
