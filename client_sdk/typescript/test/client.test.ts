@@ -11,14 +11,9 @@ import { test } from "node:test";
 
 import WebSocket, { WebSocketServer, type WebSocket as ServerSocket } from "ws";
 
-import {
-  checkUrl,
-  connect,
-  type ConnectOptions,
-  PosecastClient,
-  type WebSocketConstructor,
-} from "../src/client.js";
+import { connect, type ConnectOptions, PosecastClient, type WebSocketConstructor } from "../src/client.js";
 import { decode, encode } from "../src/codec.js";
+import { checkUrl } from "../src/dial.js";
 import {
   ConfigInvalidError,
   ConnectFailedError,
