@@ -1,5 +1,6 @@
-"""The asyncio client: a thin shell that moves bytes between a WebSocket and the
-pure :class:`~posecast_client.session.ClientSession`.
+"""The asyncio client, what an application calls: connect, join, send frames, read
+events, close. With :mod:`posecast_client.link` it is a thin shell that moves bytes
+between a WebSocket and the pure :class:`~posecast_client.session.ClientSession`.
 
 Lifecycle::
 
@@ -39,7 +40,6 @@ import numpy as np
 from numpy.typing import ArrayLike
 from websockets.exceptions import ConnectionClosed, InvalidHandshake
 
-from posecast_client.clock import ClockSync
 from posecast_client.codec import encode
 from posecast_client.dial import EXAMPLE_URL, check_token, check_url, connect_failure
 from posecast_client.errors import ClientClosedError, ConfigInvalidError
@@ -58,7 +58,7 @@ from posecast_client.protocol import (
     Resync,
     Welcome,
 )
-from posecast_client.session import Event, Stats
+from posecast_client.session import Event
 from posecast_client.sites import tracker_set
 from posecast_client.sources.base import TrackerSample
 
@@ -152,43 +152,6 @@ class Client(Link):
             seq0=seq0,
             protocol=protocol,
         )
-
-    # --- state -------------------------------------------------------------------------
-
-    @property
-    def welcome(self) -> Welcome | None:
-        """The latest ``welcome`` (it changes on every rejoin)."""
-        return self.session.welcome
-
-    @property
-    def player(self) -> str | None:
-        """This client's player id, once joined."""
-        return None if self.session.welcome is None else self.session.welcome.player
-
-    @property
-    def connected(self) -> bool:
-        """Joined right now (False while reconnecting)."""
-        return self._joined.is_set()
-
-    @property
-    def version(self) -> int:
-        """The protocol version of the current (or last) connection: 1 or 2."""
-        return self.session.version
-
-    @property
-    def clock(self) -> ClockSync:
-        """Offset between this client's ``time.monotonic()`` and the server's clock."""
-        return self.session.clock
-
-    @property
-    def stats(self) -> Stats:
-        return self.session.stats
-
-    def sent_at(self, seq: int) -> float | None:
-        """``time.monotonic()`` when the frame ``seq`` was sent (the last 1024 frames);
-        a pose with that ``seq`` arriving now took ``time.monotonic() - sent_at`` end to
-        end, the server's look-ahead included."""
-        return self.session.sent_at(seq)
 
     async def join(
         self,

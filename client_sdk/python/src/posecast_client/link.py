@@ -20,9 +20,11 @@ Three tasks run per client: the connection task (reads, decodes, reconnects), th
 pinger (clock sync: four pings right after each join, then one every
 ``ping_interval_s``) and whatever the application runs itself.
 
-:class:`Link` holds that state and runs those tasks; :class:`~posecast_client.client.Client`
-extends it with the application's calls (``join``, ``send_frame``, ``events``,
-``close``...). Dialing one server is :mod:`posecast_client.dial`'s.
+:class:`Link` holds the connection's state (``url``, ``connected``, ``version``,
+``welcome``, ``clock``, ``stats``...) and runs those tasks;
+:class:`~posecast_client.client.Client` extends it with the application's calls
+(``join``, ``send_frame``, ``events``, ``close``...). Dialing one server is
+:mod:`posecast_client.dial`'s.
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ from typing import Any
 from websockets.asyncio.client import ClientConnection
 from websockets.exceptions import ConnectionClosed, InvalidHandshake
 
+from posecast_client.clock import ClockSync
 from posecast_client.codec import decode, encode
 from posecast_client.dial import describe_argument, open_websocket, version_of
 from posecast_client.errors import (
@@ -54,6 +57,7 @@ from posecast_client.session import (
     ClientSession,
     Event,
     Reconnecting,
+    Stats,
     backoff_delay,
     classify_join_reply,
     is_retryable,
@@ -66,8 +70,8 @@ Token = str | Callable[[], str | Awaitable[str]]
 class Link:
     """One server connection (of ``urls``, tried in turn) kept joined across drops: the
     state and the tasks behind a :class:`~posecast_client.client.Client`, whose
-    docstring lists the options. Its underscored state is shared with that subclass
-    and nothing else.
+    docstring lists the options. Its underscored attributes and methods are shared
+    with that subclass and nothing else.
     """
 
     def __init__(
@@ -109,10 +113,47 @@ class Link:
         self._failure: BaseException | None = None
         self._closing = False
 
+    # --- state -------------------------------------------------------------------------
+
     @property
     def url(self) -> str:
         """The URL of the current (or last) connection."""
         return self.urls[self._url_index]
+
+    @property
+    def welcome(self) -> Welcome | None:
+        """The latest ``welcome`` (it changes on every rejoin)."""
+        return self.session.welcome
+
+    @property
+    def player(self) -> str | None:
+        """This client's player id, once joined."""
+        return None if self.session.welcome is None else self.session.welcome.player
+
+    @property
+    def connected(self) -> bool:
+        """Joined right now (False while reconnecting)."""
+        return self._joined.is_set()
+
+    @property
+    def version(self) -> int:
+        """The protocol version of the current (or last) connection: 1 or 2."""
+        return self.session.version
+
+    @property
+    def clock(self) -> ClockSync:
+        """Offset between this client's ``time.monotonic()`` and the server's clock."""
+        return self.session.clock
+
+    @property
+    def stats(self) -> Stats:
+        return self.session.stats
+
+    def sent_at(self, seq: int) -> float | None:
+        """``time.monotonic()`` when the frame ``seq`` was sent (the last 1024 frames);
+        a pose with that ``seq`` arriving now took ``time.monotonic() - sent_at`` end to
+        end, the server's look-ahead included."""
+        return self.session.sent_at(seq)
 
     # --- connecting and joining ----------------------------------------------------------
 
