@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import io
 import json
 import os
@@ -15,10 +16,11 @@ from typing import Any
 import numpy as np
 import pytest
 
+from peer_helpers import peer, url_of
 from posecast_client.bvh import read_bvh
 from posecast_client.cli import record, sim
-from posecast_client.cli.common import describe
-from posecast_client.errors import ConfigInvalidError
+from posecast_client.cli.common import connect_patiently, describe
+from posecast_client.errors import ConfigInvalidError, ConnectFailedError
 from posecast_client.protocol import Pose, Presence, Welcome
 from posecast_client.recording import RecordingWriter, read_recording
 from posecast_client.skeleton import JOINT_NAMES
@@ -475,3 +477,20 @@ def test_a_secret_that_starts_with_a_dash_is_never_echoed_and_gets_the_equals_hi
     assert exit_.value.code == 2, err
     assert value not in err and "Traceback" not in err, err
     assert "(--secret=VALUE)" in err, err
+
+
+def test_connect_patiently_retries_429_and_503_only() -> None:
+    refusals = [503, 429]
+
+    async def main() -> None:
+        async with peer(refuse=lambda: refusals.pop(0) if refusals else None) as server:
+            client = await connect_patiently(url_of(server), "token")
+            await client.close()
+        assert refusals == []  # both refusals were met and retried
+        refusals.append(404)
+        async with peer(refuse=lambda: refusals.pop(0) if refusals else None) as server:
+            with pytest.raises(ConnectFailedError) as info:
+                await connect_patiently(url_of(server), "token")
+        assert info.value.status == 404 and refusals == []  # not retried
+
+    asyncio.run(asyncio.wait_for(main(), 30.0))

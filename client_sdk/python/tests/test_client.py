@@ -1,15 +1,12 @@
 """The asyncio client against a real ``posecast serve --dev``: join, stream, clock
-sync, typed refusals, kicks, and reconnect-and-resume across server restarts."""
+sync, typed refusals, kicks, closing; and the options a client takes (several URLs).
+Reconnect-and-resume across server restarts is ``test_link.py``'s."""
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
-import secrets
-import signal
 import time
 from collections.abc import Callable, Coroutine
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -17,7 +14,8 @@ import pytest
 
 import posecast_client as pc
 from posecast_client import errors
-from sdk_helpers import DevServer, EventLog, start_server
+from posecast_client.errors import ConfigInvalidError
+from sdk_helpers import DevServer, EventLog
 
 
 def run(coro: Coroutine[Any, Any, None], timeout_s: float = 30.0) -> None:
@@ -200,51 +198,15 @@ def test_closed_clients_refuse_to_send(dev_server: DevServer, uid: str) -> None:
     run(main())
 
 
-def newer_than(seq: int) -> Callable[[pc.Event], bool]:
-    return lambda e: isinstance(e, pc.Pose) and e.seq > seq
-
-
-def test_reconnect_and_resume_across_server_restarts(tmp_path: Path, uid: str) -> None:
-    """A graceful restart (bye SERVER_SHUTDOWN) and a crash (SIGKILL): each time the
-    client backs off, rejoins the same room with the same token, and its seqs go on."""
-    log = tmp_path / "server.log"
-    secret = secrets.token_urlsafe(24)
-    first = start_server(log, secret=secret)
-    servers = [first]
-    room, player = f"room-{uid}", f"p-{uid}"
-
-    async def main() -> None:
-        token = first.token(room, player)
-        client = await pc.connect(first.url, token, backoff_initial_s=0.1, backoff_max_s=0.4)
-        async with client:
-            await client.join(room, "P")
-            events = EventLog(client)
-            streaming = asyncio.create_task(client.stream(pc.WalkSource(seconds=30.0, loop=True)))
-            for how, cause in ((signal.SIGTERM, errors.ServerShutdownError),
-                               (signal.SIGKILL, errors.ConnectionLostError)):  # fmt: skip
-                mark = len(events.events)
-                await events.wait_for(lambda e: isinstance(e, pc.Pose), start=mark)
-                last_seq = max(e.seq for e in events.events if isinstance(e, pc.Pose))
-                await asyncio.to_thread(servers[-1].stop, how)  # the client keeps reading
-                lost = await events.wait_for(lambda e: isinstance(e, pc.Reconnecting), start=mark)
-                assert isinstance(lost, pc.Reconnecting) and isinstance(lost.cause, cause)
-                assert not client.connected
-                await asyncio.sleep(0.3)
-                servers.append(
-                    await asyncio.to_thread(start_server, log, port=first.port, secret=secret)
-                )
-                back = await events.wait_for(lambda e: isinstance(e, pc.Welcome), start=mark)
-                assert isinstance(back, pc.Welcome) and back.player == player
-                pose = await events.wait_for(newer_than(last_seq), start=mark)
-                assert isinstance(pose, pc.Pose) and client.sent_at(pose.seq) is not None
-            assert client.stats.reconnects == 2 and client.connected
-            streaming.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await streaming
-            events.stop()
-
-    try:
-        run(main(), 60.0)
-    finally:
-        for s in servers:
-            s.stop()
+def test_several_urls_may_come_as_any_iterable() -> None:
+    """A generator or a set of URLs was taken as one URL and refused as 'a value of
+    type generator'; a multi-URL input is materialised once."""
+    urls = ["ws://a:1/", "ws://b:2/"]
+    assert pc.Client(iter(urls), "token").urls == tuple(urls)
+    assert pc.Client((u for u in urls), "token").urls == tuple(urls)
+    assert pc.Client({"ws://a:1/"}, "token").urls == ("ws://a:1/",)
+    assert pc.Client(dict.fromkeys(urls), "token").urls == tuple(urls)
+    with pytest.raises(ConfigInvalidError, match="no server URL"):
+        pc.Client(iter([]), "token")
+    with pytest.raises(ConfigInvalidError, match="got a value of type bytes"):
+        pc.Client([b"ws://a:1/"], "token")  # type: ignore[list-item]

@@ -171,12 +171,14 @@ def test_client_clock_skew_of_five_seconds(
     (server minus client) is exactly ``-skew``.
     """
     import posecast_client.client as client_mod
+    import posecast_client.link as link_mod
 
     results: dict[float, dict[str, float]] = {}
 
     async def one(skew_s: float) -> None:
         shim = types.SimpleNamespace(monotonic=lambda: time.monotonic() + skew_s)
-        monkeypatch.setattr(client_mod, "time", shim)
+        for mod in (client_mod, link_mod):  # the modules that read the client's clock
+            monkeypatch.setattr(mod, "time", shim)
         name = f"skew{skew_s:+.0f}".replace("+", "p").replace("-", "m")
         frames_before = server.metric("posecast_frames_total")
         client = await pc.connect(

@@ -14,7 +14,8 @@ Quick start (a dev server prints its token secret: ``posecast serve --dev``)::
 
 Layers: :mod:`~posecast_client.codec` (bytes <-> messages, pure),
 :mod:`~posecast_client.session` (protocol state, pure), :mod:`~posecast_client.client`
-(the asyncio shell), :mod:`~posecast_client.sources` (trackers: replay, serial, HID),
+(the asyncio shell, on :mod:`~posecast_client.link` and :mod:`~posecast_client.dial`),
+:mod:`~posecast_client.sources` (trackers: replay, serial, HID),
 :mod:`~posecast_client.recording` (room recordings and BVH export),
 :mod:`~posecast_client.interp` (a jitter buffer: smooth poses at any display rate),
 :mod:`~posecast_client.conventions` (Unity, Unreal and three.js frames; bone names).
