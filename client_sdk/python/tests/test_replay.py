@@ -11,14 +11,14 @@ import pytest
 
 from posecast_client.errors import BvhError
 from posecast_client.sources import RIGS, BvhReplaySource, ReplaySource, TrackerSample, WalkSource
-from posecast_client.sources.replay import _trackers_from_canonical
+from posecast_client.sources.replay import trackers_from_canonical
 from posecast_client.sources.walk import walk_motion, write_walk_bvh
 
 DATA = Path(__file__).resolve().parent / "data"
 
 
 def walk_trackers(seconds: float, fps: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    return _trackers_from_canonical(*walk_motion(seconds, fps, seed))
+    return trackers_from_canonical(*walk_motion(seconds, fps, seed))
 
 
 def same_rotation(a: np.ndarray, b: np.ndarray) -> float:

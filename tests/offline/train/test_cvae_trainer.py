@@ -149,7 +149,7 @@ def test_the_lower_weight_weighs_the_legs_against_the_rest() -> None:
     alone costs ``w / mean(w)`` times as much, one on the rest ``1 / mean(w)``."""
     import torch
 
-    from posecast.offline.train.cvae_trainer import _joint_weights
+    from posecast.offline.train.cvae_trainer import joint_weights
     from posecast.offline.train.losses import position_mse_cm2
     from posecast.skeleton import LOWER_BODY
 
@@ -158,8 +158,8 @@ def test_the_lower_weight_weighs_the_legs_against_the_rest() -> None:
     on_legs, elsewhere = truth.clone(), truth.clone()
     on_legs[..., legs, 0] = 0.01  # 1 cm on each leg joint
     elsewhere[..., [j for j in range(19) if j not in legs], 0] = 0.01
-    assert _joint_weights(1.0, truth) is None
-    w = _joint_weights(3.0, truth)
+    assert joint_weights(1.0, truth) is None
+    w = joint_weights(3.0, truth)
     assert w is not None and float(w.mean()) == pytest.approx((3 * 8 + 11) / 19)
     plain_legs = float(position_mse_cm2(on_legs, truth))
     assert plain_legs == pytest.approx(8 / (19 * 3))  # 1 cm^2 on one of 3 axes

@@ -27,7 +27,7 @@ from posecast.online.protocol.messages import Bye, Error, Hello, Message, Pose, 
 from posecast.online.shell.ticker import TickOutput
 from posecast.testing.poses import of_message
 from posecast.testing.serve import parse_metrics
-from tests.online.cluster.test_memory import _pose
+from tests.online.cluster.test_memory import make_pose
 from tests.online.conftest import make_cfg, token
 
 pytestmark = pytest.mark.timeout(30)
@@ -74,7 +74,7 @@ class Worker:
         return out
 
     def tick(self, *players: str, seq: int = 0) -> None:
-        out = TickOutput([of_message(_pose(p, seq)) for p in players])
+        out = TickOutput([of_message(make_pose(p, seq)) for p in players])
         self.hub.deliver(out, time.monotonic())
 
 

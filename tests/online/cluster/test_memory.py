@@ -50,10 +50,10 @@ class Node:
         return out
 
     def tick(self, *players: str, seq: int = 0) -> None:
-        self.hub.deliver(TickOutput([of_message(_pose(p, seq)) for p in players]), self.now)
+        self.hub.deliver(TickOutput([of_message(make_pose(p, seq)) for p in players]), self.now)
 
 
-def _pose(player: str, seq: int) -> Pose:
+def make_pose(player: str, seq: int) -> Pose:
     f = walk_frame(seq)
     import numpy as np
 
@@ -171,7 +171,7 @@ def test_a_v2_client_gets_a_remote_players_poses_as_records() -> None:
         assert len(poses) == 1, msgs
         (rec,) = records.decode_records(poses[0].data, refs)
         assert rec.recon.seq == seq and rec.keyframe == (seq == 1)
-        want = decode(encode(_pose("pa", seq)))
+        want = decode(encode(make_pose("pa", seq)))
         assert isinstance(want, Pose) and want.rotations is not None
         world = records.items2world(rec.recon.items)
         assert np.abs(np.abs(np.einsum("ij,ij->i", world, want.rotations)) - 1).max() < 1e-4

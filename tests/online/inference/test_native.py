@@ -60,12 +60,14 @@ def test_the_extension_is_built_where_a_compiler_is() -> None:
     assert "generic" in LEVELS
 
 
-def _decoder(name: str) -> tuple[object, ref.Decoder64]:
+def load_decoders(name: str) -> tuple[object, ref.Decoder64]:
     dec, _ = native.load_native(Models(name, "anomaly", None, 2, 10, 0.2))
     return dec, ref.Decoder64.load(name)
 
 
-def _run(dec: object, d64: ref.Decoder64, steps: int, rng: np.random.Generator) -> dict[str, float]:
+def run_decoders(
+    dec: object, d64: ref.Decoder64, steps: int, rng: np.random.Generator
+) -> dict[str, float]:
     G, N = 5, 40
     R = G * N
     eps = rng.standard_normal((R, d64.latent)).astype(np.float32)
@@ -107,8 +109,8 @@ def _run(dec: object, d64: ref.Decoder64, steps: int, rng: np.random.Generator) 
 
 @pytest.mark.parametrize("name", ["cvae_decoder", "cvae_decoder_hmd3"])
 def test_decoder_matches_float64_after_1_and_60_steps(level: str, name: str) -> None:
-    dec, d64 = _decoder(name)
-    w = _run(dec, d64, 60, np.random.default_rng(1))
+    dec, d64 = load_decoders(name)
+    w = run_decoders(dec, d64, 60, np.random.default_rng(1))
     if level == "avx512bf16":
         assert w["pos_p99_last"] < 5e-3, w
         assert w["flips_last"] <= 1e-3, w

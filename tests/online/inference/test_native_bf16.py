@@ -158,13 +158,13 @@ def test_every_level_does_the_bf16_arithmetic_of_the_numpy_reference(
 def test_bf16_holds_the_60_step_bounds_on_every_level(name: str, precision: None) -> None:
     # issue 18's bounds for bf16 against the float64 decoder: 5 mm p99 in joint
     # positions and at most 0.1 % contact flips after 60 recurrent steps
-    from tests.online.inference.test_native import _decoder, _run
+    from tests.online.inference.test_native import load_decoders, run_decoders
 
     for level in LEVELS:
         native.set_native_isa(level)
         native.set_native_precision("bf16")
-        dec, d64 = _decoder(name)
-        w = _run(dec, d64, 60, np.random.default_rng(1))
+        dec, d64 = load_decoders(name)
+        w = run_decoders(dec, d64, 60, np.random.default_rng(1))
         assert w["pos_p99_last"] < 5e-3, (level, w)
         assert w["flips_last"] <= 1e-3, (level, w)
         assert w["h_last"] > 1e-4, (level, w)  # bf16, not fp32, ran

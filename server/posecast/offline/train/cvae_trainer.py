@@ -129,7 +129,7 @@ def _losses(
     out, logits, kl = model(b["x"], b["pose_in"], sample=sample)
     rot, root_mat, root_pos = _roots(out, b)
     pred = fk(rot, root_mat, root_pos)  # (B, T, 19, 3)
-    mse = position_mse_cm2(pred, b["pos"], _joint_weights(cfg.lower_weight, pred))
+    mse = position_mse_cm2(pred, b["pos"], joint_weights(cfg.lower_weight, pred))
     bce = torch.nn.functional.binary_cross_entropy_with_logits(logits, b["contacts"])
     klm = kl.mean()
     total = mse + cfg.kl_weight * klm + cfg.contact_weight * bce
@@ -151,7 +151,7 @@ def _losses(
     return {"loss": total, **parts, "mpjpe_cm": mpjpe}
 
 
-def _joint_weights(lower_weight: float, like: torch.Tensor) -> torch.Tensor | None:
+def joint_weights(lower_weight: float, like: torch.Tensor) -> torch.Tensor | None:
     """Per-joint weights ``(19,)`` of the position term: ``lower_weight`` for the legs,
     1 elsewhere, or ``None`` when all are 1."""
     if lower_weight == 1.0:

@@ -228,7 +228,7 @@ class WalkSource(ReplaySource):
         root, local = walk_motion(seconds, rate_hz, seed)
         ts = as_tracker_set(tracker_set)
         joints = TRACKER_JOINTS if ts is None else ts.joints
-        pos, quat = _trackers_from_canonical(root, local, joints)
+        pos, quat = trackers_from_canonical(root, local, joints)
         inertial = None if ts is None else ts.inertial
         self.tracker_set = ts
         super().__init__(pos, quat, rate_hz, rate_hz=rate_hz, seed=seed, inertial=inertial, **kw)
@@ -292,7 +292,7 @@ class BvhReplaySource(ReplaySource):
         )
 
 
-def _trackers_from_canonical(
+def trackers_from_canonical(
     root: F64, local_quat: F64, joints: Sequence[int] = TRACKER_JOINTS
 ) -> tuple[F64, F64]:
     """Trackers on ``joints`` of the canonical skeleton (the four slots by default):
