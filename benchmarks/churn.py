@@ -3,7 +3,7 @@
 Three processes, as in ``tests/system/reliability/test_hostile_churn.py``: ``posecast serve``
 (:class:`posecast.testing.serve.ServeProcess`), the healthy players
 (``tests/system/reliability/healthy_players.py``: two rooms of two, 60 Hz) and the churner
-(``tests/system/reliability/hostile_helpers.py --kind churn``: join, garbage, cut off,
+(``tests/system/reliability/flooder.py --kind churn``: join, garbage, cut off,
 reconnect at once, from ``--ips`` loopback addresses, at niceness 10). For each
 configuration, in one run, side by side: a baseline window, then a window under
 churn; it prints the healthy players' pose rates (their own process), the server's
@@ -89,7 +89,7 @@ def run(fatal_per_min: int, seconds: float, ips: int, attempts: int) -> dict[str
             tok = mint(SECRET.encode(), room="r1", player="churn", role="player", ttl_s=600,
                        now=time.time())  # fmt: skip
             churner = subprocess.Popen(
-                [sys.executable, "-m", "tests.system.reliability.hostile_helpers",
+                [sys.executable, "-m", "tests.system.reliability.flooder",
                  "--port", str(server.port), "--token", tok, "--kind", "churn",
                  "--seconds", str(seconds), "--ips", str(ips), "--attempts", str(attempts)],
                 cwd=REPO, stdout=subprocess.PIPE, text=True,

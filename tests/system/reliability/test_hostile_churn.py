@@ -3,7 +3,7 @@
 Each such cycle costs the server a WebSocket handshake, a token check, a join (welcome,
 presence to the room) and a leave (presence again). The churner is a process of its
 own rotating over eight loopback addresses (as a small botnet would), the healthy
-players another, the server a third (:class:`~tests.system.reliability.hostile_helpers.Arena`).
+players another, the server a third (:class:`~tests.system.reliability.arena.Arena`).
 
 What protects the tick (``docs/reliability.md``, Churn): a client IP's fatal errors
 spend its budget (``fatal_per_ip_per_min``), after which its connections are turned
@@ -28,14 +28,8 @@ from collections.abc import Iterator
 import pytest
 
 from tests.online.conftest import make_cfg, token
-from tests.system.reliability.hostile_helpers import (
-    Arena,
-    assert_rates_kept,
-    delta,
-    errors_by_code,
-    run_flooder,
-    scrape,
-)
+from tests.system.reliability.arena import Arena, assert_rates_kept, delta, errors_by_code, scrape
+from tests.system.reliability.flooder import run_flooder
 
 pytestmark = pytest.mark.timeout(300)
 

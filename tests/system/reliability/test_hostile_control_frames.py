@@ -29,14 +29,9 @@ from collections.abc import Iterator
 import pytest
 
 from tests.online.conftest import make_cfg
-from tests.system.reliability.hostile_helpers import (
-    ATTACKER_NICE,
-    OTHER_IP,
-    REPO,
-    Arena,
-    assert_rates_kept,
-    scrape,
-)
+from tests.system.reliability.arena import REPO, Arena, assert_rates_kept, scrape
+from tests.system.reliability.flooder import ATTACKER_NICE
+from tests.system.reliability.hostile_helpers import OTHER_IP
 
 pytestmark = pytest.mark.timeout(120)
 FLOOD_S = 2.0

@@ -20,7 +20,8 @@ from prometheus_client.parser import text_string_to_metric_families
 
 from posecast.online.protocol.messages import Error, Pose, Welcome
 from tests.online.conftest import make_cfg, token
-from tests.system.reliability.hostile_helpers import OTHER_IP, Arena, Attacker, http_get
+from tests.system.reliability.arena import Arena, http_get
+from tests.system.reliability.hostile_helpers import OTHER_IP, Attacker
 
 pytestmark = pytest.mark.timeout(120)
 ROOM, PLAYER, NAME = "zq-secret-room", "zq-secret-player", "ZqSecretName"

@@ -20,16 +20,9 @@ from websockets.exceptions import InvalidStatus
 
 from posecast.online.protocol.messages import Error, Message, Welcome
 from tests.online.conftest import make_cfg, token
-from tests.system.reliability.hostile_helpers import (
-    Arena,
-    Attacker,
-    as_attacker,
-    assert_rates_kept,
-    delta,
-    errors_by_code,
-    run_flooder,
-    scrape,
-)
+from tests.system.reliability.arena import Arena, assert_rates_kept, delta, errors_by_code, scrape
+from tests.system.reliability.flooder import as_attacker, run_flooder
+from tests.system.reliability.hostile_helpers import Attacker
 
 pytestmark = pytest.mark.timeout(120)
 FLOOD_S = 1.0

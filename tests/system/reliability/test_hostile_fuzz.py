@@ -39,20 +39,22 @@ from posecast.errors import ProtocolError
 from posecast.online.protocol import decode
 from posecast.online.protocol.messages import DEFAULT_LIMITS, MAX_DEPTH, Welcome
 from tests.online.conftest import token
-from tests.system.reliability.hostile_helpers import (
+from tests.system.reliability.arena import (
     Arena,
-    Attacker,
-    AttackPair,
-    as_attacker,
     assert_rates_kept,
-    base_maps,
     delta,
     errors_by_code,
-    fuzz_arena_cfg,
     http_get,
+    scrape,
+)
+from tests.system.reliability.flooder import as_attacker
+from tests.system.reliability.hostile_helpers import (
+    Attacker,
+    AttackPair,
+    base_maps,
+    fuzz_arena_cfg,
     invalid_vectors,
     schema,
-    scrape,
     valid_encodings,
 )
 

@@ -40,13 +40,8 @@ from posecast.online.protocol import encode
 from posecast.online.protocol.messages import Hello
 from posecast.testing.serve import http_get
 from tests.online.conftest import make_cfg, token
-from tests.system.reliability.hostile_helpers import (
-    ATTACKER_NICE,
-    REPO,
-    Arena,
-    Rates,
-    scrape,
-)
+from tests.system.reliability.arena import REPO, Arena, Rates, scrape
+from tests.system.reliability.flooder import ATTACKER_NICE
 
 pytestmark = pytest.mark.timeout(180)
 FLOOD_S = 10.0

@@ -30,16 +30,16 @@ from posecast.online.auth.tokens import mint
 from posecast.online.protocol import decode, encode
 from posecast.online.protocol.messages import Bye, Error, Hello, Message, Welcome
 from tests.online.conftest import SECRET, make_cfg, token, walk_frame
-from tests.system.reliability.hostile_helpers import (
+from tests.system.reliability.arena import (
     Arena,
-    Attacker,
-    as_attacker,
     assert_rates_kept,
     delta,
     errors_by_code,
     scrape,
     token_refusals,
 )
+from tests.system.reliability.flooder import as_attacker
+from tests.system.reliability.hostile_helpers import Attacker
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -26,17 +26,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from tests.system.reliability.hostile_helpers import (
-    Arena,
-    AttackPair,
-    as_attacker,
-    delta,
-    errors_by_code,
-    fuzz_arena_cfg,
-    http_get,
-    scrape,
-    vectors,
-)
+from tests.system.reliability.arena import Arena, delta, errors_by_code, http_get, scrape
+from tests.system.reliability.flooder import as_attacker
+from tests.system.reliability.hostile_helpers import AttackPair, fuzz_arena_cfg, vectors
 
 pytestmark = pytest.mark.timeout(600)
 
