@@ -81,8 +81,8 @@ int pc_levels_init(void) {
     if (forced && *forced) {
         cap = level_index(forced);
         if (cap < 0) {
-            PyErr_Format(PyExc_ImportError, "POSECAST_NATIVE_ISA=%s is not one of avx512bf16, avx512f, avx2, generic",
-                         forced);
+            PyErr_Format(PyExc_ImportError,
+                         "POSECAST_NATIVE_ISA=%s is not one of avx512bf16, avx512f, avx2, generic", forced);
             return -1;
         }
     }

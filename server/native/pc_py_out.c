@@ -35,7 +35,8 @@ static PyObject *py_upper_body(PyObject *self, PyObject *args) {
     memset(b, 0, sizeof(b));
     Py_ssize_t E = get_poses(o[0], &b[0]);
     if (E < 0) goto fail;
-    if (pc_get_buf(o[1], &b[1], "rotations", F32, E * 76, 0) || pc_get_buf(o[2], &b[2], "tracker_pos", F64, -1, 0))
+    if (pc_get_buf(o[1], &b[1], "rotations", F32, E * 76, 0) ||
+        pc_get_buf(o[2], &b[2], "tracker_pos", F64, -1, 0))
         goto fail;
     a.slots = E ? b[2].view.len / 8 / 3 / E : 3;
     if (a.slots < 3 || a.slots * 3 * E * 8 != b[2].view.len) {
@@ -44,8 +45,10 @@ static PyObject *py_upper_body(PyObject *self, PyObject *args) {
     }
     if (pc_get_buf(o[3], &b[3], "tracker_quat", F64, E * a.slots * 4, 0) ||
         (free_obj != Py_None && pc_get_buf(free_obj, &b[8], "free_root", BOOL, E, 0)) ||
-        pc_get_buf(o[4], &b[4], "offsets", F64, 57, 0) || pc_get_buf(o[5], &b[5], "positions_out", F32, E * 57, 1) ||
-        pc_get_buf(o[6], &b[6], "rotations_out", F32, E * 76, 1) || pc_get_buf(o[7], &b[7], "reach_limited", BOOL, E, 1))
+        pc_get_buf(o[4], &b[4], "offsets", F64, 57, 0) ||
+        pc_get_buf(o[5], &b[5], "positions_out", F32, E * 57, 1) ||
+        pc_get_buf(o[6], &b[6], "rotations_out", F32, E * 76, 1) ||
+        pc_get_buf(o[7], &b[7], "reach_limited", BOOL, E, 1))
         goto fail;
     a.pos_in = b[0].view.buf;
     a.quat_in = b[1].view.buf;
@@ -75,7 +78,9 @@ static PyObject *py_hinge(PyObject *self, PyObject *args) {
     memset(b, 0, sizeof(b));
     Py_ssize_t E = get_poses(o[0], &b[0]);
     if (E < 0) goto fail;
-    if (pc_get_buf(o[1], &b[1], "rotations", F32, E * 76, 1) || pc_get_buf(o[2], &b[2], "limbs", F64, -1, 0)) goto fail;
+    if (pc_get_buf(o[1], &b[1], "rotations", F32, E * 76, 1) ||
+        pc_get_buf(o[2], &b[2], "limbs", F64, -1, 0))
+        goto fail;
     h.limbs = b[2].view.len / 8 / 9;
     if (h.limbs * 9 * 8 != b[2].view.len) {
         PyErr_SetString(PyExc_ValueError, "limbs: not (L, 9)");
@@ -132,7 +137,8 @@ static PyObject *py_encode_deltas(PyObject *self, PyObject *args) {
         pc_get_buf(o[4], &b[4], "ref_items", F64, M * PC_REC_ITEMS * 4, 0) ||
         pc_get_buf(o[5], &b[5], "step_rot", I64, M * PC_REC_ITEMS * 3, 0) ||
         pc_get_buf(o[6], &b[6], "world", F64, M * PC_REC_ITEMS * 4, 0) ||
-        pc_get_buf(o[7], &b[7], "ref_root", I64, M * 3, 0) || pc_get_buf(o[8], &b[8], "step_root", I64, M * 3, 0) ||
+        pc_get_buf(o[7], &b[7], "ref_root", I64, M * 3, 0) ||
+        pc_get_buf(o[8], &b[8], "step_root", I64, M * 3, 0) ||
         pc_get_buf(o[9], &b[9], "root", I64, M * 3, 0) ||
         pc_get_buf(o[10], &b[10], "new_items", F64, M * PC_REC_ITEMS * 4, 1) ||
         pc_get_buf(o[11], &b[11], "d_rot", I64, M * PC_REC_ITEMS * 3, 1) ||

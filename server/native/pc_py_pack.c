@@ -109,7 +109,8 @@ static PyObject *py_pack_pool(PyObject *self, PyObject *args) {
     }
     PcBuf b[3];
     memset(b, 0, sizeof(b));
-    if (pc_get_buf(o_off, &b[0], "offsets", F32, PC_J * 3, 0) || pc_get_buf(o_mean, &b[1], "mean", F32, PC_J * 3, 0) ||
+    if (pc_get_buf(o_off, &b[0], "offsets", F32, PC_J * 3, 0) ||
+        pc_get_buf(o_mean, &b[1], "mean", F32, PC_J * 3, 0) ||
         pc_get_buf(o_std, &b[2], "inv_std", F32, PC_J * 3, 0)) {
         pc_release(b, 3);
         return NULL;

@@ -43,7 +43,8 @@ static PyObject *py_decode(PyObject *self, PyObject *args) {
     }
     if (pc_get_buf(o[1], &b[1], "cache", F32, R * d->H, 0) || pc_get_buf(o[2], &b[2], "h", F32, R * d->H, 0) ||
         pc_get_buf(o[3], &b[3], "rotations", F32, R * d->n_rot, 1) ||
-        pc_get_buf(o[5], &b[5], "contacts", F32, R * 2, 1) || pc_get_buf(o[6], &b[6], "h_out", F32, R * d->H, 1))
+        pc_get_buf(o[5], &b[5], "contacts", F32, R * 2, 1) ||
+        pc_get_buf(o[6], &b[6], "h_out", F32, R * d->H, 1))
         goto fail;
     if (d->n_root) {
         if (o[4] == Py_None) {
@@ -104,9 +105,12 @@ static void emit_fn(void *ctx, int64_t r0, int64_t r1, float *scratch) {
 static int get_pool_bufs(PyObject **o, PcBuf *b, Py_ssize_t R, Py_ssize_t group, int release_frames,
                          double max_drift, int emit, PcPoolArgs *a) {
     Py_ssize_t G = R / group;
-    if (pc_get_buf(o[1], &b[1], "contacts", F32, R * 2, 0) || pc_get_buf(o[2], &b[2], "root_mat", F32, G * 9, 0) ||
-        pc_get_buf(o[3], &b[3], "root_pos", F32, G * 3, 0) || pc_get_buf(o[4], &b[4], "locked", BOOL, R * 2, 1) ||
-        pc_get_buf(o[5], &b[5], "lock_pos", F64, R * 6, 1) || pc_get_buf(o[6], &b[6], "release", I64, R * 2, 1) ||
+    if (pc_get_buf(o[1], &b[1], "contacts", F32, R * 2, 0) ||
+        pc_get_buf(o[2], &b[2], "root_mat", F32, G * 9, 0) ||
+        pc_get_buf(o[3], &b[3], "root_pos", F32, G * 3, 0) ||
+        pc_get_buf(o[4], &b[4], "locked", BOOL, R * 2, 1) ||
+        pc_get_buf(o[5], &b[5], "lock_pos", F64, R * 6, 1) ||
+        pc_get_buf(o[6], &b[6], "release", I64, R * 2, 1) ||
         pc_get_buf(o[7], &b[7], "suppressed", BOOL, R * 2, 1) ||
         pc_get_buf(o[8], &b[8], emit ? "positions" : "world_out", F32, R * 57, 1) ||
         (emit ? pc_get_buf(o[9], &b[9], "rotations_out", F32, R * 76, 1)
