@@ -10,6 +10,12 @@ from setuptools import Extension, setup
 
 SOURCES = [
     "server/native/pc_module.c",
+    "server/native/pc_levels.c",
+    "server/native/pc_threads.c",
+    "server/native/pc_buffers.c",
+    "server/native/pc_py_pack.c",
+    "server/native/pc_py_ssi.c",
+    "server/native/pc_py_out.c",
     "server/native/pc_isa_generic.c",
     "server/native/pc_isa_avx2.c",
     "server/native/pc_isa_avx512.c",
@@ -23,9 +29,8 @@ setup(
         Extension(
             "posecast._native",
             sources=SOURCES,
-            depends=["server/native/pc_kernels.h", "server/native/pc_impl.h", "server/native/pc_upper.h",
-                     "server/native/pc_records.h",
-                     "server/native/pc_geom.h"],
+            depends=["server/native/pc_module.h", "server/native/pc_kernels.h", "server/native/pc_impl.h",
+                     "server/native/pc_upper.h", "server/native/pc_records.h", "server/native/pc_geom.h"],
             include_dirs=["server/native"],
             extra_compile_args=["-O3", "-std=gnu11", "-fno-math-errno", "-Wall", "-Wextra",
                                 "-Wno-unused-parameter", "-Wno-missing-field-initializers"],

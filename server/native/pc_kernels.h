@@ -2,7 +2,7 @@
  *
  * One tick hands the kernels all R = P * N candidate rows. Two kernels, each a
  * function of a contiguous row range [r0, r1) (a tile of at most PC_TILE rows), so
- * the thread pool in pc_module.c can hand tiles to any thread:
+ * the thread pool (pc_threads.c) can hand tiles to any thread:
  *
  *   decode: the CVAE decoder step (first layer from a per-player tracker part and a
  *           per-row latent part, GRU gates, ReLU, pose/root/contact heads);
@@ -11,7 +11,7 @@
  *           swing with the feet), quaternions.
  *
  * The same source (pc_impl.h) is compiled once per instruction-set level, each in
- * its own file with its own target pragma; pc_module.c picks one at load time.
+ * its own file with its own target pragma; pc_levels.c picks one at load time.
  */
 #ifndef PC_KERNELS_H
 #define PC_KERNELS_H

@@ -1,4 +1,4 @@
-# Types of the native SSI kernels (server/native/pc_module.c, built by setup.py).
+# Types of the native SSI kernels (server/native/: the module is pc_module.c; built by setup.py).
 from typing import Any
 
 def isa() -> str: ...

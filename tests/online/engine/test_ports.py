@@ -83,6 +83,6 @@ def test_models_default_to_the_contact_iks_settings_and_backends_are_named() -> 
     assert (m.models_dir, m.threads) == (None, 1)
     assert (m.release_frames, m.max_drift_m) == (RELEASE_FRAMES, MAX_DRIFT_M)
     assert BACKENDS == ("native", "onnx", "torch")
-    native = (ROOT / "server" / "native" / "pc_module.c").read_text("utf-8")
+    native = (ROOT / "server" / "native" / "pc_threads.c").read_text("utf-8")
     found = re.search(r"^#define MAX_THREADS (\d+)$", native, re.M)
     assert found is not None and int(found.group(1)) == MAX_THREADS  # the kernels' pool

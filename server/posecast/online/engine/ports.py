@@ -39,7 +39,7 @@ F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
 
 BACKENDS = ("native", "onnx", "torch")
-MAX_THREADS = 64  # a backend's pool at most: the native kernels' (server/native/pc_module.c)
+MAX_THREADS = 64  # a backend's pool at most: the native kernels' (server/native/pc_threads.c)
 
 
 class StepDecoder(Protocol):
