@@ -46,9 +46,11 @@ NPM_HINT = "cd client_sdk/typescript && npm ci"
 _CLOCK_SLACK_S = 30.0  # a worker's clock at start-up lies within this of its spawn
 
 
-def node_missing(ts_dir: Path = TS_SDK) -> str | None:
+def node_missing(ts_dir: Path | None = None) -> str | None:
     """Why the TypeScript players cannot run here (``None``: they can): no ``node`` on
-    the PATH, no checkout of the SDK, or its ``node_modules`` not installed."""
+    the PATH, no checkout of the SDK (``ts_dir``, default :data:`TS_SDK`), or its
+    ``node_modules`` not installed."""
+    ts_dir = TS_SDK if ts_dir is None else ts_dir
     if shutil.which("node") is None:
         return "no `node` on the PATH (Node 20 or newer runs the TypeScript SDK)"
     if not (ts_dir / "bench" / "latency-worker.ts").is_file():
@@ -61,8 +63,9 @@ def node_missing(ts_dir: Path = TS_SDK) -> str | None:
     return None
 
 
-def build_worker(out_dir: Path, ts_dir: Path = TS_SDK) -> Path:
+def build_worker(out_dir: Path, ts_dir: Path | None = None) -> Path:
     """Bundle the worker into ``out_dir``; the path of the bundle."""
+    ts_dir = TS_SDK if ts_dir is None else ts_dir
     script = ts_dir / "scripts" / "build-bench.mjs"
     done = subprocess.run(
         ["node", str(script), "--out", str(out_dir)],
