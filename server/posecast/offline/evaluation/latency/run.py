@@ -200,8 +200,9 @@ def _report(
     ticks = _delta(m0, m1, "posecast_tick_seconds_count")
     tick_s = _delta(m0, m1, "posecast_tick_seconds_sum") / ticks if ticks else 0.0
     b = budget(displayed, captures, lookahead_s=lookahead_s, tick_s=tick_s, window=window)
-    d = stats_ms(budget(drawn, captures, lookahead_s=lookahead_s, tick_s=tick_s,
-                        window=window).total)  # fmt: skip
+    # The drawing players' poses of the window (``drawn`` holds their warm-up and tail too).
+    bd = budget(drawn, captures, lookahead_s=lookahead_s, tick_s=tick_s, window=window)
+    d = stats_ms(bd.total)
 
     def in_window(sender: str, seq: int) -> bool:
         capture = captures.get(sender, {}).get(seq)
@@ -223,7 +224,7 @@ def _report(
         **summary(b),
         "poses_expected": expected,
         "poses_received_not_displayed": never,
-        "drawn_capture_to_display_ms": {"p50": d["p50"], "p99": d["p99"], "poses": len(drawn)},
+        "drawn_capture_to_display_ms": {"p50": d["p50"], "p99": d["p99"], "poses": bd.count},
         "delivery": round(b.count / expected, 4) if expected else None,
         "lookahead_frames": welcome["lookahead_frames"],
         "rate_hz": welcome["rate_hz"],
