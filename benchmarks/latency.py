@@ -5,8 +5,7 @@ Same as ``posecast bench latency``: SDK players (Python, or TypeScript in Node) 
 loopback against a real ``posecast serve``, 60 Hz frames of a generated walk, every
 room-mate's pose shown through the SDK's interpolator at 90 Hz; capture to first
 display, p50 and p99, split into look-ahead, server queue and tick, transport and
-client buffer, and with
-``--lossy`` again behind the reliability suite's lossy relay
+client buffer, and with ``--lossy`` again behind the reliability suite's lossy relay
 (``docs/latency-benchmark.md``).
 """
 
