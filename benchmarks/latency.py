@@ -1,11 +1,11 @@
 """Latency benchmark: ``python benchmarks/latency.py [--players 16] [--room-size 8]
-[--seconds 10] [--lossy] [--json OUT]``.
+[--seconds 10] [--sdk python|typescript] [--lossy] [--json OUT]``.
 
-Same as ``posecast bench latency``: Python SDK players on loopback against a real
-``posecast serve``, 60 Hz frames of a generated walk, every room-mate's pose shown
-through the SDK's interpolator at 90 Hz; capture to first display, p50 and p99, split
-into look-ahead, server queue and tick, transport and client buffer, and with
-``--lossy`` again behind the reliability suite's lossy relay
+Same as ``posecast bench latency``: SDK players (Python, or TypeScript in Node) on
+loopback against a real ``posecast serve``, 60 Hz frames of a generated walk, every
+room-mate's pose shown through the SDK's interpolator at 90 Hz; capture to first
+display, p50 and p99, split into look-ahead, server queue and tick, transport and
+client buffer, and with ``--lossy`` again behind the reliability suite's lossy relay
 (``docs/latency-benchmark.md``).
 """
 

@@ -85,7 +85,8 @@ class ModelError(PosecastError):
 
 class WorkerError(PosecastError):
     """A serving worker process of ``posecast serve --workers N`` exited before it was
-    ready (its own log says why); ``status`` is its exit status."""
+    ready (its own log says why), or a client process of ``posecast bench latency``
+    failed; ``status`` is its exit status."""
 
     code = "WORKER_FAILED"
 

@@ -1,7 +1,8 @@
 """``posecast bench latency`` (posecast.cli.bench_latency): a real ``posecast serve``,
-SDK players in client processes, the clean and the lossy phase. The figures are not
-checked against any bound (timing is the benchmark's to report, not a unit test's):
-the report's structure, and that each phase's components add up to its total."""
+SDK players in client processes (Python, or the TypeScript SDK in Node), the clean and
+the lossy phase. The figures are not checked against any bound (timing is the
+benchmark's to report, not a unit test's): the report's structure, and that each
+phase's components add up to its total."""
 
 from __future__ import annotations
 
@@ -12,8 +13,11 @@ from typing import Any
 import pytest
 
 from posecast.cli import main
+from posecast.offline.evaluation.latency import node_players
 from posecast.offline.evaluation.latency.budget import COMPONENTS
 from tests.cli.conftest import user_error
+
+NODE_MISSING = node_players.node_missing()
 
 
 @pytest.mark.parametrize(
@@ -32,10 +36,27 @@ from tests.cli.conftest import user_error
         ["--jitter-ms", "-5"],
         ["--down-jitter-ms", "inf"],
         ["--json", "/no/such/dir/latency.json"],
+        ["--sdk", "csharp"],
     ],
 )
 def test_bench_latency_user_error(capsys, extra: list[str]) -> None:
     user_error(capsys, main(["bench", "latency", *extra]), "CONFIG_INVALID")
+
+
+def test_bench_latency_typescript_without_node_modules_says_npm_ci(
+    capsys, monkeypatch, tmp_path: Path
+) -> None:
+    (tmp_path / "bench").mkdir()
+    (tmp_path / "bench" / "latency-worker.ts").touch()  # a checkout, never installed
+    monkeypatch.setattr(node_players, "TS_SDK", tmp_path)
+    err = user_error(capsys, main(["bench", "latency", "--sdk", "typescript"]), "CONFIG_INVALID")
+    assert "node_modules" in err and "hint: cd client_sdk/typescript && npm ci" in err
+
+
+def test_bench_latency_typescript_without_node(capsys, monkeypatch) -> None:
+    monkeypatch.setattr(node_players.shutil, "which", lambda name: None)
+    err = user_error(capsys, main(["bench", "latency", "--sdk", "typescript"]), "CONFIG_INVALID")
+    assert "no `node`" in err
 
 
 def _check_phase(phase: dict[str, Any]) -> None:
@@ -64,16 +85,29 @@ def _check_phase(phase: dict[str, Any]) -> None:
 
 
 @pytest.mark.timeout(180)
-def test_bench_latency_reports_the_budget_clean_and_lossy(capsys, tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    "sdk",
+    [
+        "python",
+        pytest.param(
+            "typescript",
+            marks=pytest.mark.skipif(
+                NODE_MISSING is not None, reason=f"TypeScript players: {NODE_MISSING}"
+            ),
+        ),
+    ],
+)
+def test_bench_latency_reports_the_budget_clean_and_lossy(capsys, tmp_path: Path, sdk: str) -> None:
     out = tmp_path / "latency.json"
     argv = ["bench", "latency", "--players", "3", "--room-size", "3", "--seconds", "2"]
     argv += ["--warmup", "1", "--samples", "8", "--lookahead", "3", "--delayed-emission", "--lossy"]
-    argv += ["--down-jitter-ms", "20"]
+    argv += ["--down-jitter-ms", "20", "--sdk", sdk]
     assert main([*argv, "--json", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "capture to display" in printed and "client buffer" in printed
     report = json.loads(out.read_text())
     assert report["config"]["players"] == 3 and report["lookahead_frames"] == 3
+    assert report["config"]["sdk"] == sdk
     _check_phase(report)
     lossy = report["lossy"]
     _check_phase(lossy)

@@ -1,4 +1,4 @@
-// Transpile src/, test/ and viewer/ with esbuild (type checking is `npm run typecheck`'s job)
+// Transpile src/, test/, viewer/ and bench/ with esbuild (type checking is `npm run typecheck`'s job)
 // into .test-build/, then run them with Node's own test runner.
 //
 //   node scripts/run-tests.mjs                 every test
@@ -19,7 +19,8 @@ const ts = (dir) =>
 
 rmSync(out, { recursive: true, force: true });
 await build({
-  entryPoints: [...ts("src"), ...ts("src/three"), ...ts("test"), ...ts("viewer")], // viewer/: its avatar's tests
+  // viewer/ and bench/: what their tests import
+  entryPoints: [...ts("src"), ...ts("src/three"), ...ts("test"), ...ts("viewer"), ...ts("bench")],
   outdir: out,
   outbase: root,
   format: "esm",

@@ -62,12 +62,19 @@ def cmd_bench_latency(args: argparse.Namespace) -> int:
             "this benchmark runs the Python SDK (posecast_client), which is not installed",
             "pip install -e client_sdk/python (make run and make test install it)",
         )
-    check_json_out(args.json)
-    from posecast.offline.evaluation.latency.run import LatencyConfig, run_latency
+    if args.sdk == "typescript":
+        from posecast.offline.evaluation.latency.node_players import NPM_HINT, node_missing
 
-    # The flags named as the config's fields pass as they are; three are converted.
+        missing = node_missing()
+        if missing is not None:
+            raise config_error(f"--sdk typescript: {missing}", NPM_HINT)
+    check_json_out(args.json)
+    from posecast.offline.evaluation.latency.run import LatencyConfig, Sdk, run_latency
+
+    # The flags named as the config's fields pass as they are; four are converted.
     cfg = LatencyConfig(
-        **given(args, (f.name for f in fields(LatencyConfig))),
+        **given(args, (f.name for f in fields(LatencyConfig) if f.name != "sdk")),
+        sdk=Sdk(args.sdk),
         warmup_s=args.warmup,
         jitter_s=args.jitter_ms / 1000.0,
         down_jitter_s=args.down_jitter_ms / 1000.0,
@@ -150,10 +157,18 @@ def add_parser(bench_sub: argparse._SubParsersAction[Any]) -> None:
     bl = bench_sub.add_parser(
         "latency",
         help="capture-to-display latency with SDK clients on loopback",
-        description="Python SDK players on loopback against a real posecast serve, 60 Hz "
-        "frames of a generated walk, every room-mate's pose shown through the SDK's "
-        "interpolator at 90 Hz: capture to first display, p50 and p99, split into "
-        "look-ahead, server queue and tick, transport and client buffer.",
+        description="SDK players (Python, or TypeScript in Node) on loopback against a real "
+        "posecast serve, 60 Hz frames of a generated walk, every room-mate's pose shown "
+        "through the SDK's interpolator at 90 Hz: capture to first display, p50 and p99, "
+        "split into look-ahead, server queue and tick, transport and client buffer.",
+    )
+    bl.add_argument(
+        "--sdk",
+        choices=("python", "typescript"),  # run.Sdk's values (not imported to build the parser)
+        default="python",
+        help="the players' SDK: the Python SDK in Python client processes, or the TypeScript "
+        "SDK in Node processes (needs node and `npm ci` in client_sdk/typescript) "
+        "(default %(default)s)",
     )
     add_defaulted(bl, "--players", 16, "players")
     add_defaulted(bl, "--room-size", 8, "players per room")

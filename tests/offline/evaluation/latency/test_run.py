@@ -63,6 +63,9 @@ def test_a_phases_report_counts_what_was_expected_shown_and_missed() -> None:
     assert r["max_joint_jump_cm"] == 2.0 and r["display_frames"] == 180
     assert r["display_frames_late_share"] == 0.1 and r["clients_cpu_cores"] == 1.0
     assert r["server_cpu_cores"] == 0.75 and r["errors"] == {"BAD_FIELD": 1}
+    assert r["drawn_capture_to_display_ms"]["poses"] == 0  # no player drew
+    a.drawn = len(a.displayed)  # a drew all its 10 rows: the 9 of the window count (not frame 0)
+    assert _report([a, b], m0, m1, 0.75, window)["drawn_capture_to_display_ms"]["poses"] == 9
     assert r["failures"] == []
 
 

@@ -7,9 +7,11 @@ A run is one or two phases on one server: the clean phase, then (``lossy``) the 
 players, fresh connections, each through the relay (``drop`` of its frames lost and
 every message held ``0..jitter_s`` on the way in, and, if asked, ``0..down_jitter_s``
 on the way out, in order). A phase starts the client
-processes (:mod:`.players`), lets the players join and stream for ``warmup_s``, then
-measures ``seconds``: the frames captured in that window, the poses made from them
-(as every room-mate displayed them), the server's ``/metrics`` and CPU at both ends.
+processes (:mod:`.players`, Python SDK players; or, ``sdk="typescript"``, Node
+processes running the TypeScript SDK, :mod:`.node_players`), lets the players join
+and stream for ``warmup_s``, then measures ``seconds``: the frames captured in that
+window, the poses made from them (as every room-mate displayed them), the server's
+``/metrics`` and CPU at both ends.
 """
 
 from __future__ import annotations
@@ -19,16 +21,25 @@ import contextlib
 import multiprocessing as mp
 import os
 import secrets
+import tempfile
 import threading
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass
+from enum import StrEnum
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from posecast.offline.evaluation.latency.budget import budget, stats_ms, summary
 from posecast.offline.evaluation.latency.display import Displayed
+from posecast.offline.evaluation.latency.node_players import (
+    build_worker,
+    node_workers,
+    walk_seconds,
+    write_walks,
+)
 from posecast.offline.evaluation.latency.players import (
     TAIL_S,
     PlayerPlan,
@@ -40,6 +51,14 @@ from posecast.testing.relay import LossyRelay
 from posecast.testing.serve import Metrics, ServeProcess
 
 START_S = 3.0  # from starting the client processes to the first frame: spawn, connect, join
+
+
+class Sdk(StrEnum):
+    """The SDK the players run: the Python SDK in Python processes, or the TypeScript
+    SDK in Node processes (the same roles, walks, display loop and report)."""
+
+    PYTHON = "python"
+    TYPESCRIPT = "typescript"
 
 
 @dataclass(frozen=True)
@@ -62,6 +81,9 @@ class LatencyConfig:
             are theirs) and the others ask their interpolators only for the times
             they would show (``Interpolator.advance``: the same render delay).
         protocol: the newest protocol the SDK offers (2: ``posecast.v2``).
+        sdk: the players' SDK (:class:`Sdk`): Python (default) or TypeScript, whose
+            client processes are Node processes (``node`` and the SDK's
+            ``node_modules`` needed).
     """
 
     players: int = 16
@@ -81,21 +103,27 @@ class LatencyConfig:
     seed: int = 7
     protocol: int = 2
     draw_all: bool = False
+    sdk: Sdk = Sdk.PYTHON
 
 
-def _plans(cfg: LatencyConfig, url: str, secret: str, prefix: str) -> list[WorkerPlan]:
+def _deal(cfg: LatencyConfig, prefix: str) -> list[tuple[PlayerPlan, ...]]:
+    """The players, dealt into rooms in order and over the client processes round robin."""
     players = [
         PlayerPlan(f"{prefix}{i}", f"{prefix}room{i // cfg.room_size}", i % cfg.room_size, i)
         for i in range(cfg.players)
     ]
     procs = max(1, min(cfg.procs, cfg.players))
+    return [tuple(players[k::procs]) for k in range(procs)]
+
+
+def _plans(cfg: LatencyConfig, url: str, secret: str, prefix: str) -> list[WorkerPlan]:
     start_at = time.monotonic() + START_S + 0.05 * cfg.players
     measure_from = start_at + cfg.warmup_s
     return [
-        WorkerPlan(url, secret, tuple(players[k::procs]), start_at, measure_from,
+        WorkerPlan(url, secret, players, start_at, measure_from,
                    measure_from + cfg.seconds, cfg.display_hz, protocol=cfg.protocol,
                    draw_all=cfg.draw_all)
-        for k in range(procs)
+        for players in _deal(cfg, prefix)
     ]  # fmt: skip
 
 
@@ -103,18 +131,45 @@ def _delta(m0: Metrics, m1: Metrics, series: str) -> float:
     return m1.get(series, 0.0) - m0.get(series, 0.0)
 
 
-def _phase(cfg: LatencyConfig, server: ServeProcess, url: str, secret: str, prefix: str) -> Any:
-    """Run one phase's client processes against ``url``; its figures."""
+Workers = contextlib.AbstractContextManager[Callable[[float], list[WorkerResult]]]
+
+
+@contextlib.contextmanager
+def _python_workers(plans: Sequence[WorkerPlan]) -> Iterator[Callable[[float], list[WorkerResult]]]:
+    """One Python client process per plan; yields ``results(timeout_s)``."""
+    with mp.get_context("spawn").Pool(len(plans)) as pool:
+        pending = pool.map_async(run_worker, plans)
+        yield lambda timeout_s: pending.get(timeout=timeout_s)
+
+
+def _phase(
+    cfg: LatencyConfig,
+    server: ServeProcess,
+    url: str,
+    secret: str,
+    prefix: str,
+    node: Path | None = None,
+) -> Any:
+    """Run one phase's client processes against ``url``; its figures. ``node``: the
+    bundled TypeScript worker (``sdk="typescript"``), its folder the phase's scratch."""
+    walks = None
+    if node is not None:  # the walks first: writing them must not eat into START_S
+        seconds = walk_seconds(cfg.warmup_s, cfg.seconds)
+        walks = [write_walks(players, node.parent / f"{prefix}walks{k}.f64", seconds=seconds)
+                 for k, players in enumerate(_deal(cfg, prefix))]  # fmt: skip
     plans = _plans(cfg, url, secret, prefix)
     measure_from, stop_at = plans[0].measure_from, plans[0].stop_at
-    ctx = mp.get_context("spawn")
-    with ctx.Pool(len(plans)) as pool:
-        pending = pool.map_async(run_worker, plans)
+    workers: Workers = (
+        _python_workers(plans)
+        if node is None or walks is None
+        else node_workers(node, plans, walks, node.parent)
+    )
+    with workers as results_of:
         time.sleep(max(0.0, measure_from - time.monotonic()))
         m0, cpu0, t0 = server.metrics(), server.cpu_seconds(), time.monotonic()
         time.sleep(max(0.0, stop_at - time.monotonic()))
         m1, cpu1, t1 = server.metrics(), server.cpu_seconds(), time.monotonic()
-        results: list[WorkerResult] = pending.get(timeout=START_S + cfg.seconds + 120)
+        results = results_of(START_S + cfg.seconds + 120)
     server_cores = (cpu1 - cpu0) / (t1 - t0)
     return _report(results, m0, m1, server_cores, (measure_from, stop_at))
 
@@ -145,8 +200,9 @@ def _report(
     ticks = _delta(m0, m1, "posecast_tick_seconds_count")
     tick_s = _delta(m0, m1, "posecast_tick_seconds_sum") / ticks if ticks else 0.0
     b = budget(displayed, captures, lookahead_s=lookahead_s, tick_s=tick_s, window=window)
-    d = stats_ms(budget(drawn, captures, lookahead_s=lookahead_s, tick_s=tick_s,
-                        window=window).total)  # fmt: skip
+    # The drawing players' poses of the window (``drawn`` holds their warm-up and tail too).
+    bd = budget(drawn, captures, lookahead_s=lookahead_s, tick_s=tick_s, window=window)
+    d = stats_ms(bd.total)
 
     def in_window(sender: str, seq: int) -> bool:
         capture = captures.get(sender, {}).get(seq)
@@ -168,7 +224,7 @@ def _report(
         **summary(b),
         "poses_expected": expected,
         "poses_received_not_displayed": never,
-        "drawn_capture_to_display_ms": {"p50": d["p50"], "p99": d["p99"], "poses": len(drawn)},
+        "drawn_capture_to_display_ms": {"p50": d["p50"], "p99": d["p99"], "poses": bd.count},
         "delivery": round(b.count / expected, 4) if expected else None,
         "lookahead_frames": welcome["lookahead_frames"],
         "rate_hz": welcome["rate_hz"],
@@ -224,17 +280,20 @@ def run_latency(cfg: LatencyConfig) -> dict[str, Any]:
         "--conn-per-ip-per-min", "100000", "--sockets-per-ip", "100000", *flags,
         secret=secret, samples=cfg.samples, lookahead=cfg.lookahead,
     )  # fmt: skip
+    scratch = tempfile.TemporaryDirectory(prefix="posecast-latency-")
     try:
+        # The TypeScript worker is bundled once, before the server's clock matters.
+        node = build_worker(Path(scratch.name)) if cfg.sdk is Sdk.TYPESCRIPT else None
         server.wait_ready(timeout_s=60.0)
         report: dict[str, Any] = {
             "config": asdict(cfg),
             "machine_cores": os.cpu_count(),
             "tail_s": TAIL_S,
-            **_phase(cfg, server, server.url, secret, "p"),
+            **_phase(cfg, server, server.url, secret, "p", node),
         }
         if cfg.lossy:
             with _relay(server.url, cfg) as relay:
-                lossy = _phase(cfg, server, relay.url, secret, "q")
+                lossy = _phase(cfg, server, relay.url, secret, "q", node)
                 st = relay.stats
             lossy["relay"] = {
                 "drop": cfg.drop,
@@ -253,6 +312,7 @@ def run_latency(cfg: LatencyConfig) -> dict[str, Any]:
             report["lossy"] = lossy
     finally:
         server.stop(timeout_s=15)
+        scratch.cleanup()
     return report
 
 
