@@ -102,7 +102,7 @@ def test_the_summary_and_the_report_judge_by_one_rule(players: list[int], p99: l
     best = max_realtime_players(players, p99)
     assert best == max(fitting, default=0)
     assert (
-        engine_speed._report("onnx", "onnx", results, [], {}, 4, 1, 0.0)["max_realtime_players"]
+        engine_speed.report("onnx", "onnx", results, [], {}, 4, 1, 0.0)["max_realtime_players"]
         == best
     )
     text = realtime_summary(players, p99)

@@ -324,7 +324,7 @@ def run_side_by_side(
         for b in used
     ]
     return [
-        _report(asked, b, results[i], both[i], naive[i], samples, threads, hmd3_share)
+        report(asked, b, results[i], both[i], naive[i], samples, threads, hmd3_share)
         | (_sets_report(mixed_sets[i], results[i]) if sets else {})
         for i, (asked, b) in enumerate(zip(backends, used, strict=True))
     ]
@@ -371,7 +371,7 @@ def _precision(backend: str) -> str:
     return native_precision()
 
 
-def _report(
+def report(
     asked: str,
     backend: str,
     results: list[BenchResult],

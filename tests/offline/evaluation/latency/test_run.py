@@ -10,13 +10,19 @@ from collections import Counter
 import pytest
 
 from posecast.offline.evaluation.latency.players import WorkerResult
-from posecast.offline.evaluation.latency.run import START_S, LatencyConfig, _plans, _ratio, _report
+from posecast.offline.evaluation.latency.run import (
+    START_S,
+    LatencyConfig,
+    ratio,
+    report_of,
+    worker_plans,
+)
 
 
 def test_players_are_dealt_into_rooms_in_order_and_over_processes_round_robin() -> None:
     cfg = LatencyConfig(players=5, room_size=2, procs=2, warmup_s=3.0, seconds=10.0)
     before = time.monotonic()
-    plans = _plans(cfg, "ws://x/", "secret", "p")
+    plans = worker_plans(cfg, "ws://x/", "secret", "p")
     assert [[p.player for p in w.players] for w in plans] == [["p0", "p2", "p4"], ["p1", "p3"]]
     rooms = {p.player: (p.room, p.slot, p.seed) for w in plans for p in w.players}
     assert rooms["p0"] == ("proom0", 0, 0) and rooms["p1"] == ("proom0", 1, 1)
@@ -26,7 +32,7 @@ def test_players_are_dealt_into_rooms_in_order_and_over_processes_round_robin() 
                for x in plans)  # fmt: skip
     assert w.start_at >= before + START_S
     assert (w.measure_from - w.start_at, w.stop_at - w.measure_from) == pytest.approx((3.0, 10.0))
-    assert len(_plans(LatencyConfig(players=1, procs=4), "u", "s", "q")) == 1  # never idle
+    assert len(worker_plans(LatencyConfig(players=1, procs=4), "u", "s", "q")) == 1  # never idle
 
 
 def test_a_phases_report_counts_what_was_expected_shown_and_missed() -> None:
@@ -53,7 +59,7 @@ def test_a_phases_report_counts_what_was_expected_shown_and_missed() -> None:
     m0 = {"posecast_tick_seconds_count": 100.0, "posecast_tick_seconds_sum": 1.0}
     m1 = {"posecast_tick_seconds_count": 160.0, "posecast_tick_seconds_sum": 1.3,
           "posecast_tick_overruns_total": 2.0}  # fmt: skip
-    r = _report([a, b], m0, m1, 0.75, window)
+    r = report_of([a, b], m0, m1, 0.75, window)
     assert r["poses_expected"] == 20 and r["poses_displayed"] == 18
     assert r["delivery"] == 0.9 and r["poses_received_not_displayed"] == 1
     assert r["capture_to_display_ms_p50"] == pytest.approx(50.0, abs=0.01)
@@ -65,10 +71,10 @@ def test_a_phases_report_counts_what_was_expected_shown_and_missed() -> None:
     assert r["server_cpu_cores"] == 0.75 and r["errors"] == {"BAD_FIELD": 1}
     assert r["drawn_capture_to_display_ms"]["poses"] == 0  # no player drew
     a.drawn = len(a.displayed)  # a drew all its 10 rows: the 9 of the window count (not frame 0)
-    assert _report([a, b], m0, m1, 0.75, window)["drawn_capture_to_display_ms"]["poses"] == 9
+    assert report_of([a, b], m0, m1, 0.75, window)["drawn_capture_to_display_ms"]["poses"] == 9
     assert r["failures"] == []
 
 
 def test_ratios_against_the_clean_phase() -> None:
-    assert _ratio(30.0, 20.0) == 1.5
-    assert _ratio(None, 20.0) is None and _ratio(3.0, None) is None and _ratio(3.0, 0.0) is None
+    assert ratio(30.0, 20.0) == 1.5
+    assert ratio(None, 20.0) is None and ratio(3.0, None) is None and ratio(3.0, 0.0) is None

@@ -116,7 +116,7 @@ def _deal(cfg: LatencyConfig, prefix: str) -> list[tuple[PlayerPlan, ...]]:
     return [tuple(players[k::procs]) for k in range(procs)]
 
 
-def _plans(cfg: LatencyConfig, url: str, secret: str, prefix: str) -> list[WorkerPlan]:
+def worker_plans(cfg: LatencyConfig, url: str, secret: str, prefix: str) -> list[WorkerPlan]:
     start_at = time.monotonic() + START_S + 0.05 * cfg.players
     measure_from = start_at + cfg.warmup_s
     return [
@@ -157,7 +157,7 @@ def _phase(
         seconds = walk_seconds(cfg.warmup_s, cfg.seconds)
         walks = [write_walks(players, node.parent / f"{prefix}walks{k}.f64", seconds=seconds)
                  for k, players in enumerate(_deal(cfg, prefix))]  # fmt: skip
-    plans = _plans(cfg, url, secret, prefix)
+    plans = worker_plans(cfg, url, secret, prefix)
     measure_from, stop_at = plans[0].measure_from, plans[0].stop_at
     workers: Workers = (
         _python_workers(plans)
@@ -171,10 +171,10 @@ def _phase(
         m1, cpu1, t1 = server.metrics(), server.cpu_seconds(), time.monotonic()
         results = results_of(START_S + cfg.seconds + 120)
     server_cores = (cpu1 - cpu0) / (t1 - t0)
-    return _report(results, m0, m1, server_cores, (measure_from, stop_at))
+    return report_of(results, m0, m1, server_cores, (measure_from, stop_at))
 
 
-def _report(
+def report_of(
     results: Sequence[WorkerResult],
     m0: Metrics,
     m1: Metrics,
@@ -303,10 +303,10 @@ def run_latency(cfg: LatencyConfig) -> dict[str, Any]:
                 "frames_dropped": st.frames_dropped,
                 "frames_reordered": st.frames_reordered,
             }
-            lossy["p99_vs_clean"] = _ratio(
+            lossy["p99_vs_clean"] = ratio(
                 lossy["capture_to_display_ms_p99"], report["capture_to_display_ms_p99"]
             )
-            lossy["max_joint_jump_vs_clean"] = _ratio(
+            lossy["max_joint_jump_vs_clean"] = ratio(
                 lossy["max_joint_jump_cm"], report["max_joint_jump_cm"]
             )
             report["lossy"] = lossy
@@ -320,5 +320,5 @@ def _round(x: Any) -> float:
     return round(float(x), 2)
 
 
-def _ratio(a: float | None, b: float | None) -> float | None:
+def ratio(a: float | None, b: float | None) -> float | None:
     return None if a is None or not b else round(a / b, 3)
