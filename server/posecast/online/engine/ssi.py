@@ -153,10 +153,13 @@ class Engine:
                 "disp_release": ((2,), np.int64),
                 "disp_suppressed": ((2,), np.bool_),
                 # The rest of the shown pose's state (body.pipeline.ShownState): the
-                # toes' horizontal positions and averaged speeds, the reach's move.
+                # toes' horizontal positions and averaged speeds, the reach's move,
+                # the planted toes' shown positions and offsets.
                 "disp_toe_xz": ((2, 2), np.float64),
                 "disp_toe_speed": ((2,), np.float64),
                 "disp_reach": ((3,), np.float64),
+                "disp_plant_xz": ((2, 2), np.float64),
+                "disp_plant_offset": ((2, 2), np.float64),
                 "ring_h": ((N, self.hidden), np.float32, L),  # hidden state before the frame
                 "ring_rot": ((N, 108), np.float32, L),
                 "ring_con": ((N, 2), np.float32, L),
@@ -590,6 +593,8 @@ _SHOWN = (
     "disp_toe_xz",
     "disp_toe_speed",
     "disp_reach",
+    "disp_plant_xz",
+    "disp_plant_offset",
 )
 # Per-sample shapes of the candidate pool's contact-IK state, in PoolIK's field order.
 _IK_SHAPES: dict[str, tuple[int, ...]] = {
