@@ -12,8 +12,8 @@ The passes, in their order:
    trackers beyond reach (:func:`~posecast.body.upper_ik.lean_root`,
    :func:`~posecast.body.upper_ik.reach_root`), eased frame to frame;
 3. FK and the display contact IK (``Passes.emit``, :mod:`posecast.body.ik`);
-4. a planted toe slides no faster than a bound (:mod:`posecast.body.plant`; with the
-   floor pass);
+4. a planted toe slides no faster than a bound (:mod:`posecast.body.plant`; only
+   with the floor pass);
 5. a held foot the other leg runs into gives way (:mod:`posecast.body.apart`);
 6. the floor pass and the swing clearance (:mod:`posecast.body.clearance`);
 7. a tracker set's feet and knees onto their trackers (:mod:`posecast.body.leg_ik`);
@@ -83,6 +83,8 @@ class Settings(Protocol):
     def floor_ik(self) -> bool: ...
     @property
     def swing_clearance(self) -> bool: ...
+    @property
+    def planted_toes(self) -> bool: ...
     @property
     def upper_body_ik(self) -> bool: ...
     @property
@@ -196,7 +198,7 @@ def show(batch: Decoded, state: ShownState, cfg: Settings, passes: Passes) -> Sh
     if (cfg.reaches or cfg.leans) and free is not None and free.any():
         rot, root_mat, root_pos = _guessed_pelvis(batch, state, cfg, rot, root_mat, root_pos)
     wp, rotations = passes.emit(rot, batch.contacts, root_mat, root_pos, state.ik)
-    if cfg.floor_ik:
+    if cfg.floor_ik and cfg.planted_toes:
         plant_toes(
             wp, rotations, batch.contacts, state.plant_xz, state.plant_offset, batch.first, cfg.fps
         )
