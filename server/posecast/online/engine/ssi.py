@@ -260,7 +260,7 @@ class Engine:
     def set_calibration(self, player: str, calibration: Calibration) -> None:
         """Calibrate ``player`` anew from its next frame on. The frames already in its
         look-ahead, and every tracker-space state of its shown pose (contact locks,
-        the clearance's toes, the reach move), are re-expressed in the new calibration,
+        the clearance's toes, the reach move, the planted toes), are re-expressed in the new calibration,
         so the poses still to come are divided by the scale their positions carry and
         the next frame's velocities are measured from the same calibration."""
         p = self.players[player]
@@ -273,7 +273,14 @@ class Engine:
         if not self.layout.predicts_root:  # the pelvis is the waist tracker's
             s["ring_rootm"][:, k] = quat2mat(q[:, TrackerSlot.WAIST])
         s["ring_pos"][:, k], s["ring_quat"][:, k] = pos, q
-        for name in ("ik_lock_pos", "disp_lock_pos", "disp_toe_xz", "disp_reach"):
+        for name in (
+            "ik_lock_pos",
+            "disp_lock_pos",
+            "disp_toe_xz",
+            "disp_reach",
+            "disp_plant_xz",
+            "disp_plant_offset",
+        ):
             s[name][k] *= ratio
         p.shown = 0  # the forecast's velocities start again in the new calibration
 
