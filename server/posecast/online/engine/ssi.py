@@ -260,9 +260,10 @@ class Engine:
     def set_calibration(self, player: str, calibration: Calibration) -> None:
         """Calibrate ``player`` anew from its next frame on. The frames already in its
         look-ahead, and every tracker-space state of its shown pose (contact locks,
-        the clearance's toes, the reach move, the planted toes), are re-expressed in the new calibration,
-        so the poses still to come are divided by the scale their positions carry and
-        the next frame's velocities are measured from the same calibration."""
+        the clearance's toes, the reach move, the planted toes), are re-expressed in
+        the new calibration, so the poses still to come are divided by the scale their
+        positions carry and the next frame's velocities are measured from the same
+        calibration."""
         p = self.players[player]
         old, p.calibration = p.calibration, calibration
         if old == calibration:
