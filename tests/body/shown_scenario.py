@@ -10,6 +10,10 @@ parent commit of the body pipeline (``d0038e4``), before the passes moved to
     git worktree add /tmp/body-old d0038e4
     PYTHONPATH=/tmp/body-old/server:. python -m tests.body.shown_scenario OUT.npz
 
+A pass that changes the streamed poses on purpose rewrites it on its own tree
+(``PYTHONPATH=server:. python -m tests.body.shown_scenario
+tests/body/data/shown_golden.npz``; last: the planted toes, ``posecast.body.plant``).
+
 What it exercises, per layout (4 points, headset only, tracker sets): transitions and
 their blends (a low outlier factor), the pelvis smoothing, a guessed pelvis's lean and
 reach (with a controller thrown out of reach: ``reach_limited``), feet pushed under

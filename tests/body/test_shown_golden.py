@@ -2,7 +2,9 @@
 (``posecast.body.pipeline.show``, issue 37): the engine's output on a seeded scenario
 that runs every pass (``shown_scenario.py``) against the arrays the parent commit
 ``d0038e4`` streamed (``data/shown_golden.npz``, written by ``shown_scenario.main`` on
-that tree). Positions and rotations are held to 1e-6 (measured on the machine that
+that tree; rewritten on the branch ``skate`` with ``python -m tests.body.shown_scenario
+tests/body/data/shown_golden.npz``, when the planted toes, ``posecast.body.plant``, moved
+the feet on purpose). Positions and rotations are held to 1e-6 (measured on the machine that
 wrote the file: bit for bit), and which sample each pose shows, its blend, hold and
 reach flags, exactly.
 

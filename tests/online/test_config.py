@@ -484,7 +484,7 @@ def test_every_engine_setting_is_a_server_setting_or_left_at_its_default() -> No
     assert set(served) | ENGINE_DEFAULTS_ONLY == engine
     assert not set(served) & ENGINE_DEFAULTS_ONLY
     assert tuple(n for n in ENGINE_SETTINGS if n.startswith("no_")) == ENGINE_SWITCHES
-    assert len(ENGINE_SWITCHES) == 11
+    assert len(ENGINE_SWITCHES) == 12
 
 
 def test_the_servers_engine_defaults_are_the_engines() -> None:

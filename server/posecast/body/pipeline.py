@@ -12,17 +12,19 @@ The passes, in their order:
    trackers beyond reach (:func:`~posecast.body.upper_ik.lean_root`,
    :func:`~posecast.body.upper_ik.reach_root`), eased frame to frame;
 3. FK and the display contact IK (``Passes.emit``, :mod:`posecast.body.ik`);
-4. a held foot the other leg runs into gives way (:mod:`posecast.body.apart`);
-5. the floor pass and the swing clearance (:mod:`posecast.body.clearance`);
-6. a tracker set's feet and knees onto their trackers (:mod:`posecast.body.leg_ik`);
-7. the knees onto their hinges (``Passes.hinge``, :mod:`posecast.body.hinge`);
-8. head and hands onto their trackers (``Passes.upper_body``,
+4. a planted toe slides no faster than a bound (:mod:`posecast.body.plant`; only
+   with the floor pass);
+5. a held foot the other leg runs into gives way (:mod:`posecast.body.apart`);
+6. the floor pass and the swing clearance (:mod:`posecast.body.clearance`);
+7. a tracker set's feet and knees onto their trackers (:mod:`posecast.body.leg_ik`);
+8. the knees onto their hinges (``Passes.hinge``, :mod:`posecast.body.hinge`);
+9. head and hands onto their trackers (``Passes.upper_body``,
    :mod:`posecast.body.upper_ik`);
-9. the elbows onto their hinges.
+10. the elbows onto their hinges.
 
 Each pass has a switch in ``cfg`` (:class:`Settings`: the engine's ``EngineConfig``).
 What a player carries from frame to frame (its contact locks, its toes' speeds, the
-reach's eased move) is a :class:`ShownState`, updated in place. Steps 3, 7 and 8 run in
+reach's eased move) is a :class:`ShownState`, updated in place. Steps 3, 8 and 9 run in
 ``passes`` (:mod:`posecast.body.passes`: numpy, or a backend's C); the rest is numpy.
 Everything is in calibrated canonical-body metres; the caller divides by the user's
 scale.
@@ -45,6 +47,7 @@ from posecast.body.ik import floor_ik_quat, floor_lift
 from posecast.body.leg_ik import senses_legs, solve_legs, tracks_legs
 from posecast.body.passes import Passes, PoolIK
 from posecast.body.pelvis import smooth_pelvis
+from posecast.body.plant import plant_toes
 from posecast.body.upper_ik import (
     LEAN_JOINTS,
     SPAN_SHARE,
@@ -80,6 +83,8 @@ class Settings(Protocol):
     def floor_ik(self) -> bool: ...
     @property
     def swing_clearance(self) -> bool: ...
+    @property
+    def planted_toes(self) -> bool: ...
     @property
     def upper_body_ik(self) -> bool: ...
     @property
@@ -128,28 +133,34 @@ class ShownState:
     """What each of ``E`` players' shown pose carries to its next frame (arrays,
     updated in place): the display contact IK's locks (``ik``), both toes' horizontal
     positions ``toe_xz (E, 2, 2)`` and averaged speeds ``toe_speed (E, 2)`` (the swing
-    clearance), and the eased move of a guessed pelvis ``reach (E, 3)``. A player's
-    first frame reads none of the last three."""
+    clearance), the eased move of a guessed pelvis ``reach (E, 3)``, and the planted
+    toes' shown horizontal positions ``plant_xz (E, 2, 2)`` and offsets from the
+    network's ``plant_offset (E, 2, 2)`` (:mod:`posecast.body.plant`). A player's first
+    frame reads none of the last five."""
 
     ik: PoolIK
     toe_xz: F64
     toe_speed: F64
     reach: F64
+    plant_xz: F64
+    plant_offset: F64
 
     @classmethod
     def zeros(cls, n: int) -> ShownState:
         """The state of ``n`` players before their first frame."""
-        return cls(PoolIK.zeros(n), np.zeros((n, 2, 2)), np.zeros((n, 2)), np.zeros((n, 3)))
+        z = np.zeros
+        return cls(PoolIK.zeros(n), z((n, 2, 2)), z((n, 2)), z((n, 3)), z((n, 2, 2)), z((n, 2, 2)))
 
     @classmethod
     def of(cls, arrays: Sequence[NDArray[Any]]) -> ShownState:
-        """The state made of :meth:`arrays`' seven arrays, in their order."""
-        locked, lock_pos, release, suppressed, toe_xz, toe_speed, reach = arrays
-        return cls(PoolIK(locked, lock_pos, release, suppressed), toe_xz, toe_speed, reach)
+        """The state made of :meth:`arrays`' nine arrays, in their order."""
+        locked, lock_pos, release, suppressed, toe_xz, toe_speed, reach, xz, off = arrays
+        ik = PoolIK(locked, lock_pos, release, suppressed)
+        return cls(ik, toe_xz, toe_speed, reach, xz, off)
 
     def arrays(self) -> tuple[NDArray[Any], ...]:
         """Every array: the contact IK's four (:class:`PoolIK`'s order), then
-        ``toe_xz``, ``toe_speed`` and ``reach``."""
+        ``toe_xz``, ``toe_speed``, ``reach``, ``plant_xz`` and ``plant_offset``."""
         ik = self.ik
         return (
             ik.locked,
@@ -159,6 +170,8 @@ class ShownState:
             self.toe_xz,
             self.toe_speed,
             self.reach,
+            self.plant_xz,
+            self.plant_offset,
         )
 
 
@@ -185,6 +198,10 @@ def show(batch: Decoded, state: ShownState, cfg: Settings, passes: Passes) -> Sh
     if (cfg.reaches or cfg.leans) and free is not None and free.any():
         rot, root_mat, root_pos = _guessed_pelvis(batch, state, cfg, rot, root_mat, root_pos)
     wp, rotations = passes.emit(rot, batch.contacts, root_mat, root_pos, state.ik)
+    if cfg.floor_ik and cfg.planted_toes:
+        plant_toes(
+            wp, rotations, batch.contacts, state.plant_xz, state.plant_offset, batch.first, cfg.fps
+        )
     if cfg.legs_apart:
         keep_apart_quat(wp, rotations, rot, root_mat, root_pos)
     if cfg.floor_ik:

@@ -290,6 +290,12 @@ def add_parsers(sub: argparse._SubParsersAction[Any]) -> None:
         "toes keep at its speed): only feet below y = 0 are lifted",
     )
     ev.add_argument(
+        "--no-planted-toes",
+        action="store_true",
+        help="cvae_ik, ae_ik and cvae_ik_ssi: a toe in predicted contact near the floor "
+        "slides with the network's, not at most 1 m/s (trailing it by up to 4 cm)",
+    )
+    ev.add_argument(
         "--wrist-elbow",
         type=float,
         default=None,

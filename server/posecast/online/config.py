@@ -138,6 +138,12 @@ class ServerConfig:
         "height real toes keep at its speed (the swing clearance)",
         off=True,
     )
+    no_planted_toes: bool = _engine(
+        "planted_toes",
+        "let a toe in predicted contact near the floor slide with the network's, not "
+        "at most 1 m/s (trailing it by up to 4 cm)",
+        off=True,
+    )
     no_knee_hinge: bool = _engine(
         "knee_hinge",
         "stream the knees as the network and the leg passes bend them, partly sideways "

@@ -316,6 +316,26 @@ def test_a_new_calibration_reaches_the_frames_already_in_the_look_ahead(
     assert [p.scale for p in shown] == [1.0] * 11 + [pytest.approx(0.97)] * 25
 
 
+def test_a_new_scale_re_expresses_the_shown_poses_positional_state(
+    make_engine: MakeEngine, walk_frames: WalkFrames
+) -> None:
+    """The shown pose's state in tracker space (contact locks, the clearance's toes,
+    the reach move, the planted toes' positions and trails) is scaled with the
+    calibration, so the next frame measures its steps within one calibration."""
+    engine = make_engine(samples=4)
+    engine.add_player("p", seed=1)
+    for f in walk_frames(0)[:8]:
+        engine.push("p", f)
+        engine.tick()
+    slot = engine.players["p"].slot
+    names = ("disp_lock_pos", "disp_toe_xz", "disp_reach", "disp_plant_xz", "disp_plant_offset")
+    before = {n: engine.slots[n][slot].copy() for n in names}
+    assert np.abs(before["disp_plant_xz"]).max() > 0.01  # the toes stand somewhere
+    engine.set_calibration("p", Calibration(scale=1.25))
+    for n in names:
+        np.testing.assert_allclose(engine.slots[n][slot], 1.25 * before[n], err_msg=n)
+
+
 def test_a_new_calibration_reorients_the_frames_already_held(
     make_engine: MakeEngine, walk_frames: WalkFrames
 ) -> None:

@@ -57,6 +57,10 @@ class EngineConfig:
             horizontal speed (:mod:`posecast.body.clearance`; default on,
             chosen on the validation split, docs/evaluation.md, "Feet"; only with
             ``floor_ik``).
+        planted_toes: a shown toe in predicted contact near the floor slides at most
+            1 m/s, trailing the network's by up to 4 cm (:mod:`posecast.body.plant`;
+            default on, chosen on the validation split, docs/latency.md, "Skating
+            toes"; only with ``floor_ik``).
         wrist_elbow: the share of each shown elbow's placement that comes from its
             controller's rotation (a straight wrist), the rest from the network's
             elbow (0.75, chosen on the validation split; 0 for the network's alone;
@@ -121,6 +125,7 @@ class EngineConfig:
     upper_body_ik: bool = True
     floor_ik: bool = True
     swing_clearance: bool = True
+    planted_toes: bool = True
     knee_hinge: bool = True
     elbow_hinge: bool = True
     wrist_elbow: float = WRIST_ELBOW_SHARE

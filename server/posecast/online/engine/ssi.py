@@ -153,10 +153,13 @@ class Engine:
                 "disp_release": ((2,), np.int64),
                 "disp_suppressed": ((2,), np.bool_),
                 # The rest of the shown pose's state (body.pipeline.ShownState): the
-                # toes' horizontal positions and averaged speeds, the reach's move.
+                # toes' horizontal positions and averaged speeds, the reach's move,
+                # the planted toes' shown positions and offsets.
                 "disp_toe_xz": ((2, 2), np.float64),
                 "disp_toe_speed": ((2,), np.float64),
                 "disp_reach": ((3,), np.float64),
+                "disp_plant_xz": ((2, 2), np.float64),
+                "disp_plant_offset": ((2, 2), np.float64),
                 "ring_h": ((N, self.hidden), np.float32, L),  # hidden state before the frame
                 "ring_rot": ((N, 108), np.float32, L),
                 "ring_con": ((N, 2), np.float32, L),
@@ -257,9 +260,10 @@ class Engine:
     def set_calibration(self, player: str, calibration: Calibration) -> None:
         """Calibrate ``player`` anew from its next frame on. The frames already in its
         look-ahead, and every tracker-space state of its shown pose (contact locks,
-        the clearance's toes, the reach move), are re-expressed in the new calibration,
-        so the poses still to come are divided by the scale their positions carry and
-        the next frame's velocities are measured from the same calibration."""
+        the clearance's toes, the reach move, the planted toes), are re-expressed in
+        the new calibration, so the poses still to come are divided by the scale their
+        positions carry and the next frame's velocities are measured from the same
+        calibration."""
         p = self.players[player]
         old, p.calibration = p.calibration, calibration
         if old == calibration:
@@ -270,7 +274,14 @@ class Engine:
         if not self.layout.predicts_root:  # the pelvis is the waist tracker's
             s["ring_rootm"][:, k] = quat2mat(q[:, TrackerSlot.WAIST])
         s["ring_pos"][:, k], s["ring_quat"][:, k] = pos, q
-        for name in ("ik_lock_pos", "disp_lock_pos", "disp_toe_xz", "disp_reach"):
+        for name in (
+            "ik_lock_pos",
+            "disp_lock_pos",
+            "disp_toe_xz",
+            "disp_reach",
+            "disp_plant_xz",
+            "disp_plant_offset",
+        ):
             s[name][k] *= ratio
         p.shown = 0  # the forecast's velocities start again in the new calibration
 
@@ -590,6 +601,8 @@ _SHOWN = (
     "disp_toe_xz",
     "disp_toe_speed",
     "disp_reach",
+    "disp_plant_xz",
+    "disp_plant_offset",
 )
 # Per-sample shapes of the candidate pool's contact-IK state, in PoolIK's field order.
 _IK_SHAPES: dict[str, tuple[int, ...]] = {
