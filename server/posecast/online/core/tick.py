@@ -75,9 +75,9 @@ class EngineOp:
 class TickInput:
     ops: list[EngineOp]
     frames: dict[str, TrackerFrame]  # each player's oldest waiting frame
-    drained: int = 0  # frames superseded by this take: backlogs that stood (STANDING_TICKS)
     # The forecasts its room's clients asked for, per player: frames ahead (none: {}).
     horizons: dict[str, frozenset[int]] = field(default_factory=dict)
+    drained: int = 0  # frames superseded by this take: backlogs that stood (STANDING_TICKS)
 
 
 @dataclass
