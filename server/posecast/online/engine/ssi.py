@@ -51,7 +51,7 @@ from posecast.body.pipeline import Decoded, ShownState, show
 from posecast.geometry.rotations import quat2mat
 from posecast.online.engine.calibration import Calibration, WaistFilter, recalibrate
 from posecast.online.engine.config import EngineConfig
-from posecast.online.engine.forecasting import HISTORY, step_forecast
+from posecast.online.engine.forecasting import step_forecast
 from posecast.online.engine.ports import Pool, PoolIK, StepDecoder
 from posecast.online.engine.ring import Fed, pelvis_neighbours, rest_frame, write_inputs
 from posecast.online.engine.selectors import (
@@ -62,6 +62,7 @@ from posecast.online.engine.selectors import (
     off_the_floor,
 )
 from posecast.online.engine.slots import SlotArrays
+from posecast.online.engine.state import IK_SHAPES, RESCALED, SHOWN, state_specs
 from posecast.online.engine.types import (
     EngineEvent,
     EngineEventKind,
@@ -133,54 +134,19 @@ class Engine:
         self.latent, self.hidden = int(mc["latent"]), int(mc["hidden"])
         self.layout = spec(decoder.meta.get("layout", Layout.HMD3_WAIST))
         self._sites = self.layout.layout is Layout.SITES
-        n_root = self.layout.root_outputs
-        rows = self.layout.rows
         N = self.cfg.samples
         # Ring rows: tau + 1 frames of history, plus the row the decoder writes the next
         # hidden states into while frame n - d (d <= tau) is still being emitted.
         L = self._ring = self.cfg.lookahead + 2
         self._tick = 0
         self.slots = SlotArrays(
-            {
-                "eps": ((N, self.latent), np.float32),
-                "zc": ((N, decoder.cache_width), np.float32),  # the decoder's latent cache
-                "ik_locked": ((N, 2), np.bool_),
-                "ik_lock_pos": ((N, 2, 3), np.float64),
-                "ik_release": ((N, 2), np.int64),
-                "ik_suppressed": ((N, 2), np.bool_),
-                "disp_locked": ((2,), np.bool_),
-                "disp_lock_pos": ((2, 3), np.float64),
-                "disp_release": ((2,), np.int64),
-                "disp_suppressed": ((2,), np.bool_),
-                # The rest of the shown pose's state (body.pipeline.ShownState): the
-                # toes' horizontal positions and averaged speeds, the reach's move,
-                # the planted toes' shown positions and offsets.
-                "disp_toe_xz": ((2, 2), np.float64),
-                "disp_toe_speed": ((2,), np.float64),
-                "disp_reach": ((3,), np.float64),
-                "disp_plant_xz": ((2, 2), np.float64),
-                "disp_plant_offset": ((2, 2), np.float64),
-                "ring_h": ((N, self.hidden), np.float32, L),  # hidden state before the frame
-                "ring_rot": ((N, 108), np.float32, L),
-                "ring_con": ((N, 2), np.float32, L),
-                "ring_x": ((self.layout.n_features,), np.float32, L),
-                "ring_root": ((N, max(1, n_root)), np.float32, L),  # hmd3: pelvis outputs
-                "ring_pos": ((rows, 3), np.float64, L),  # calibrated tracker positions
-                "ring_quat": ((rows, 4), np.float64, L),
-                "kinds": ((rows,), np.int8),  # sites: each row's Kind (0 elsewhere)
-                "ring_rootm": ((3, 3), np.float32, L),  # the waist's rotation (waist layouts)
-                "ring_seq": ((), np.int64, L),
-                # The last shown poses, newest last, of players with a forecast.
-                "fc_pos": ((HISTORY, NUM_JOINTS, 3), np.float32),
-                "fc_rot": ((HISTORY, NUM_JOINTS, 4), np.float32),
-                "ring_held": ((), np.bool_, L),
-            },
+            state_specs(N, self.latent, decoder.cache_width, self.hidden, self.layout, L),
             capacity,
         )
         self.players: dict[str, _Player] = {}
         self._order: list[str] = []  # player id per slot
         self._world = np.empty((0, NUM_JOINTS, 3), np.float32)  # the pool's output, grown
-        self._rest = rest_frame(rows)
+        self._rest = rest_frame(self.layout.rows)
 
     # --- membership -----------------------------------------------------------------
 
@@ -274,14 +240,7 @@ class Engine:
         if not self.layout.predicts_root:  # the pelvis is the waist tracker's
             s["ring_rootm"][:, k] = quat2mat(q[:, TrackerSlot.WAIST])
         s["ring_pos"][:, k], s["ring_quat"][:, k] = pos, q
-        for name in (
-            "ik_lock_pos",
-            "disp_lock_pos",
-            "disp_toe_xz",
-            "disp_reach",
-            "disp_plant_xz",
-            "disp_plant_offset",
-        ):
+        for name in RESCALED:
             s[name][k] *= ratio
         p.shown = 0  # the forecast's velocities start again in the new calibration
 
@@ -344,7 +303,7 @@ class Engine:
         if len(self._world) < R:
             self._world = np.empty((R, NUM_JOINTS, 3), np.float32)
         world = self._world[:R]
-        ik = PoolIK(*(s.view(f"ik_{n}").reshape(R, *_IK_SHAPES[n]) for n in _IK_SHAPES))
+        ik = PoolIK(*(s.view(f"ik_{n}").reshape(R, *IK_SHAPES[n]) for n in IK_SHAPES))
         scores = self.pool.step(
             outputs["rotations"], outputs["contacts"], pelvis, ik, world
         ).reshape(P, N)
@@ -561,9 +520,9 @@ class Engine:
             kinds=s["kinds"][slots] if self._sites else None,
         )
         # The shown pose's passes, on the players' own state: gathered, stepped, put back.
-        state = ShownState.of([s[n][slots] for n in _SHOWN])
+        state = ShownState.of([s[n][slots] for n in SHOWN])
         shown = show(batch, state, self.cfg, self.pool)
-        for n, a in zip(_SHOWN, state.arrays(), strict=True):
+        for n, a in zip(SHOWN, state.arrays(), strict=True):
             s[n][slots] = a
         wp, rotations, reach_limited = shown.positions, shown.rotations, shown.reach_limited
         limited = reach_limited.tolist()
@@ -590,24 +549,3 @@ class Engine:
             )
             for i, (p, sample, w) in enumerate(emit)
         ]
-
-
-# The shown pose's state per player, in body.pipeline.ShownState.arrays()'s order.
-_SHOWN = (
-    "disp_locked",
-    "disp_lock_pos",
-    "disp_release",
-    "disp_suppressed",
-    "disp_toe_xz",
-    "disp_toe_speed",
-    "disp_reach",
-    "disp_plant_xz",
-    "disp_plant_offset",
-)
-# Per-sample shapes of the candidate pool's contact-IK state, in PoolIK's field order.
-_IK_SHAPES: dict[str, tuple[int, ...]] = {
-    "locked": (2,),
-    "lock_pos": (2, 3),
-    "release": (2,),
-    "suppressed": (2,),
-}
