@@ -16,7 +16,7 @@ the next gap. Past its depth the oldest waiting frame is superseded (latest wins
 counted as dropped). A backlog that stands (a frame still waiting after each take
 for :data:`STANDING_TICKS` ticks in a row: one bunch, then frames one a tick, so
 every later frame waits a tick more until one comes late) is drained: that take
-supersedes the oldest waiting frame and steps the next, one frame for half a second
+supersedes the oldest waiting frame and steps the next, one frame for two seconds
 of standing delay. A client that
 announces more frames per second than the tick rate (``hello.rate_hz``: a 72, 90 or
 120 Hz headset) would keep the queue full for good, one tick behind: it gets a queue
@@ -47,7 +47,7 @@ from posecast.tracking.layouts import Layout, PlayerLayout
 
 RATE_WINDOW_TICKS = 60  # the window the arrival rate of unannounced fast clients is read over
 FAST_FRAMES_PER_TICK = 1.1  # 66 Hz at a 60 Hz tick: above any 60 Hz client's jitter or drift
-STANDING_TICKS = 30  # ticks a backlog may stand before a take drains one frame (0.5 s at 60 Hz)
+STANDING_TICKS = 120  # takes a backlog may stand before one drains a frame (2 s at 60 Hz)
 
 
 class EngineOpKind(StrEnum):
